@@ -1,0 +1,109 @@
+"""Piecewise linear approximation (PLA), section 3.2 of Guo et al. 2023.
+
+The training temperature range ``[T_min, T_max]`` is cut into ``n_intervals`` (10) intervals of
+equal width; in each one an ordinary least-squares line ``U = k T + b`` is fitted to the samples
+whose temperature falls into it. The 9 inner boundaries are the split points.
+
+Applying the model: a temperature selects its interval by the split points, exactly as the paper
+describes, so the segments are *not* forced to join. Outside the trained range the first and last
+intervals' lines continue (linear extrapolation): below the first split point is interval 0, at or
+above the last split point is the last interval. ``out_of_range(T)`` tells the caller when that
+happens, and the checkpoint records the valid range, so firmware can flag it.
+
+An interval holding fewer than two distinct temperatures cannot define a line; it gets a
+constant (the mean drift of its samples, or of its nearest populated neighbour when empty).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Self
+
+import numpy as np
+import torch
+
+from trainer.compensator import Compensator
+from trainer.errors import UserError
+from trainer.recording import Recording
+
+
+class PiecewiseLinear(Compensator):
+    """The paper's PLA baseline: temperature in, drift out, one line per temperature interval."""
+
+    method = "pla"
+
+    def __init__(self, n_intervals: int = 10) -> None:
+        if n_intervals < 1:
+            raise UserError(f"pla: n_intervals must be >= 1, got {n_intervals}")
+        self.n_intervals = n_intervals
+        self.split_points_c = np.empty(0)
+        self.slopes_mg_per_c = np.empty(0)
+        self.intercepts_mg = np.empty(0)
+        self.temp_range_c = (np.nan, np.nan)
+
+    def fit_arrays(self, temp_c: np.ndarray, drift_mg: np.ndarray) -> Self:
+        """Fit from plain arrays (temperature, drift); used by :meth:`fit` and the tests."""
+        t_min, t_max = float(np.min(temp_c)), float(np.max(temp_c))
+        if not t_max > t_min:
+            raise UserError(f"pla: the training temperature does not vary (constant {t_min} degC)")
+        edges = np.linspace(t_min, t_max, self.n_intervals + 1)
+        self.split_points_c = edges[1:-1].copy()
+        index = self.interval_index(temp_c)
+        slopes = np.full(self.n_intervals, np.nan)
+        intercepts = np.full(self.n_intervals, np.nan)
+        for k in range(self.n_intervals):
+            t_k, u_k = temp_c[index == k], drift_mg[index == k]
+            if t_k.size >= 2 and np.ptp(t_k) > 0:
+                slopes[k], intercepts[k] = np.polynomial.polynomial.polyfit(t_k, u_k, 1)[::-1]
+            elif t_k.size:
+                slopes[k], intercepts[k] = 0.0, float(np.mean(u_k))
+        _fill_empty_from_neighbours(slopes, intercepts)
+        self.slopes_mg_per_c, self.intercepts_mg = slopes, intercepts
+        self.temp_range_c = (t_min, t_max)
+        return self
+
+    def fit(self, rec: Recording) -> Self:
+        return self.fit_arrays(rec.temp_c, rec.accel_mg)
+
+    def interval_index(self, temp_c: np.ndarray) -> np.ndarray:
+        """Interval of each temperature by the split points (ends are open: extrapolation)."""
+        return np.searchsorted(self.split_points_c, temp_c, side="right")
+
+    def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
+        index = self.interval_index(temp_c)
+        return self.slopes_mg_per_c[index] * temp_c + self.intercepts_mg[index]
+
+    def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
+        return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
+        return self.drift_at(rec.temp_c)
+
+    def to_payload(self) -> dict[str, Any]:
+        return {
+            "n_intervals": self.n_intervals,
+            "split_points_c": torch.from_numpy(self.split_points_c.copy()),
+            "slopes_mg_per_c": torch.from_numpy(self.slopes_mg_per_c.copy()),
+            "intercepts_mg": torch.from_numpy(self.intercepts_mg.copy()),
+            "temp_range_c": [float(v) for v in self.temp_range_c],
+        }
+
+    @classmethod
+    def from_payload(cls, payload: dict[str, Any]) -> Self:
+        model = cls(int(payload["n_intervals"]))
+        model.split_points_c = payload["split_points_c"].double().numpy()
+        model.slopes_mg_per_c = payload["slopes_mg_per_c"].double().numpy()
+        model.intercepts_mg = payload["intercepts_mg"].double().numpy()
+        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        if model.slopes_mg_per_c.shape != (model.n_intervals,) or model.split_points_c.shape != (
+            model.n_intervals - 1,
+        ):
+            raise ValueError("table sizes do not match n_intervals")
+        return model
+
+
+def _fill_empty_from_neighbours(slopes: np.ndarray, intercepts: np.ndarray) -> None:
+    """Give intervals without samples the line of the nearest populated interval (in place)."""
+    populated = np.flatnonzero(~np.isnan(slopes))
+    for k in np.flatnonzero(np.isnan(slopes)):
+        nearest = populated[np.argmin(np.abs(populated - k))]
+        slopes[k], intercepts[k] = slopes[nearest], intercepts[nearest]

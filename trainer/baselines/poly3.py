@@ -1,0 +1,121 @@
+"""The flight-stack baseline: a cubic of the drift in temperature about a reference temperature.
+
+This follows PX4's ``Tools/process_sensor_caldata.py`` for accelerometers, which is what many
+GNC teams run today (ArduPilot's ``tcal`` is the same idea):
+
+1. median-filter the axis over 31 samples;
+2. ``T_ref = (T_min + T_max) / 2`` of the logged temperature, ``dT = T - T_ref``;
+3. average the samples into 2000 equal-width temperature bins (so a slow part of the ramp does
+   not dominate the fit), then ``numpy.polyfit(dT, drift, 3)``;
+4. when applied, the temperature is clipped to ``[T_min, T_max]`` (the valid range) first.
+
+One deliberate difference, controlled by ``remove_median``: PX4 subtracts the axis median before
+fitting because its separate six-position calibration owns the constant offset. The paper's
+static test defines the drift with a zero reference, so by default the constant term is fitted
+too (``remove_median=False``) and the cubic is compared like-for-like with PLA and the DLSTM.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Self
+
+import numpy as np
+import torch
+from scipy.ndimage import median_filter
+
+from trainer.compensator import Compensator
+from trainer.errors import UserError
+from trainer.recording import Recording
+
+PX4_MEDIAN_KERNEL = 31
+PX4_TEMPERATURE_BINS = 2000
+
+
+def bin_by_temperature(temp: np.ndarray, values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean temperature and mean value of each non-empty equal-width temperature bin."""
+    t_min, t_max = float(np.min(temp)), float(np.max(temp))
+    width = (t_max - t_min) / n_bins
+    index = np.clip(((temp - t_min) / width).astype(np.int64), 0, n_bins - 1)
+    counts = np.bincount(index, minlength=n_bins)
+    sum_t = np.bincount(index, weights=temp, minlength=n_bins)
+    sum_v = np.bincount(index, weights=values, minlength=n_bins)
+    keep = counts > 0
+    return sum_t[keep] / counts[keep], sum_v[keep] / counts[keep]
+
+
+class CubicPolynomial(Compensator):
+    """PX4-style per-axis cubic thermal calibration (offset only)."""
+
+    method = "poly3"
+
+    def __init__(
+        self,
+        *,
+        remove_median: bool = False,
+        median_kernel: int = PX4_MEDIAN_KERNEL,
+        n_bins: int = PX4_TEMPERATURE_BINS,
+    ) -> None:
+        self.remove_median = remove_median
+        self.median_kernel = median_kernel
+        self.n_bins = n_bins
+        self.coefficients = np.zeros(4)  # c0..c3 of dT^0..dT^3, in mg / degC^k
+        self.t_ref_c = 0.0
+        self.temp_range_c = (np.nan, np.nan)
+
+    def fit_arrays(self, temp_c: np.ndarray, drift_mg: np.ndarray) -> Self:
+        t_min, t_max = float(np.min(temp_c)), float(np.max(temp_c))
+        if not t_max > t_min:
+            raise UserError(f"poly3: the training temperature does not vary (constant {t_min} degC)")
+        drift = (
+            median_filter(drift_mg, size=self.median_kernel, mode="nearest")
+            if self.median_kernel > 1
+            else drift_mg
+        )
+        if self.remove_median:
+            drift = drift - np.median(drift)
+        self.t_ref_c = 0.5 * (t_min + t_max)
+        temp_rel = temp_c - self.t_ref_c
+        if self.n_bins > 0:
+            temp_rel, drift = bin_by_temperature(temp_rel, drift, self.n_bins)
+        if np.unique(temp_rel).size < 4:
+            raise UserError("poly3: fewer than 4 distinct temperatures; a cubic is not determined")
+        self.coefficients = np.polynomial.polynomial.polyfit(temp_rel, drift, 3)
+        self.temp_range_c = (t_min, t_max)
+        return self
+
+    def fit(self, rec: Recording) -> Self:
+        return self.fit_arrays(rec.temp_c, rec.accel_mg)
+
+    def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
+        clipped = np.clip(temp_c, *self.temp_range_c)
+        return np.polynomial.polynomial.polyval(clipped - self.t_ref_c, self.coefficients)
+
+    def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
+        return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
+        return self.drift_at(rec.temp_c)
+
+    def to_payload(self) -> dict[str, Any]:
+        return {
+            "coefficients_mg": torch.from_numpy(self.coefficients.copy()),
+            "t_ref_c": float(self.t_ref_c),
+            "temp_range_c": [float(v) for v in self.temp_range_c],
+            "remove_median": bool(self.remove_median),
+            "median_kernel": int(self.median_kernel),
+            "n_bins": int(self.n_bins),
+        }
+
+    @classmethod
+    def from_payload(cls, payload: dict[str, Any]) -> Self:
+        model = cls(
+            remove_median=bool(payload["remove_median"]),
+            median_kernel=int(payload["median_kernel"]),
+            n_bins=int(payload["n_bins"]),
+        )
+        model.coefficients = payload["coefficients_mg"].double().numpy()
+        if model.coefficients.shape != (4,):
+            raise ValueError("coefficients_mg must hold 4 values")
+        model.t_ref_c = float(payload["t_ref_c"])
+        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        return model

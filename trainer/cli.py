@@ -1,0 +1,48 @@
+"""``trainer`` command line: dispatches to one module per sub-command in :mod:`trainer.commands`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from trainer import __version__
+from trainer.errors import UserError, run_cli
+
+# Sub-command name -> module in trainer.commands that defines add_parser() and run().
+COMMANDS: dict[str, str] = {
+    "simulate": "simulate_cmd",
+    "import": "import_cmd",
+    "fit": "fit_cmd",
+    "evaluate": "evaluate_cmd",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UserError(f"{self.prog}: {message}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="trainer", description="Temperature-drift compensation of MEMS accelerometers.")
+    parser.add_argument("--version", action="version", version=f"mems-tdc {__version__}")
+    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for module_name in COMMANDS.values():
+        module = importlib.import_module(f"trainer.commands.{module_name}")
+        module.add_parser(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+def entry() -> None:
+    sys.exit(run_cli(main))
+
+
+if __name__ == "__main__":
+    entry()

@@ -1,0 +1,1 @@
+"""One module per ``trainer`` sub-command: ``add_parser(subparsers)`` registers it, ``run(args)`` runs it."""

@@ -1,0 +1,57 @@
+"""User-facing errors: one line, no traceback, non-zero exit.
+
+Every problem caused by the user's input (a recording, a config, a model file, a CLI argument)
+is raised as :class:`UserError`. The CLI entry points catch it, print ``error: <message>`` on
+stderr and exit with status 2. Anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+EXIT_USER_ERROR = 2
+
+
+class UserError(Exception):
+    """Bad input from the user; the message must name the file, row, column or field."""
+
+
+def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
+    """Run a CLI ``main`` and turn :class:`UserError` into a one-line message and exit code 2."""
+    try:
+        return main(argv)
+    except UserError as exc:
+        message = " ".join(str(exc).split())  # force one line
+        print(f"error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+@contextmanager
+def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
+
+    Guarantees that a failed command leaves no partial output file behind.
+    """
+    target = Path(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UserError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise UserError(f"{target}: output directory {parent} is not writable")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

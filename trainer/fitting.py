@@ -1,0 +1,42 @@
+"""Fit a compensator by method name and describe the training data it saw."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from trainer.compensator import Compensator, registered_methods
+from trainer.errors import UserError
+from trainer.recording import Recording
+
+
+def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:
+    """A fresh, unfitted compensator of ``method`` built with keyword ``options``."""
+    methods = registered_methods()
+    if method not in methods:
+        raise UserError(f"--method: unknown method {method!r}; choose one of {', '.join(sorted(methods))}")
+    try:
+        return methods[method](**(options or {}))
+    except TypeError as exc:
+        raise UserError(f"--method {method}: bad option ({exc})") from None
+
+
+def training_stats(rec: Recording) -> dict[str, Any]:
+    """What the checkpoint records about its training data (plain values only)."""
+    return {
+        "source": rec.source,
+        "n_samples": len(rec),
+        "sample_rate_hz": float(rec.sample_rate_hz),
+        "duration_s": float(rec.time_s[-1] - rec.time_s[0]),
+        "temp_min_c": float(np.min(rec.temp_c)),
+        "temp_max_c": float(np.max(rec.temp_c)),
+        "accel_mean_mg": float(np.mean(rec.accel_mg)),
+        "accel_std_mg": float(np.std(rec.accel_mg)),
+    }
+
+
+def fit_compensator(method: str, train: Recording, options: dict[str, Any] | None = None) -> Compensator:
+    """Fit ``method`` on ``train`` with every ground-truth column hidden from it."""
+    model = make_compensator(method, options)
+    return model.fit(train.without_truth())

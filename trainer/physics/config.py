@@ -1,0 +1,531 @@
+"""Physics configuration: TOML in, validated frozen dataclasses out, and back to TOML.
+
+Every user mistake (unknown table or key, wrong type, out-of-range value) is a one-line
+:class:`~trainer.errors.UserError` naming the file and the field, because a typo that passed
+silently would simulate different physics from the one the user wrote down. ``load_config`` and
+``save_config`` round-trip exactly: ``load_config(p) == cfg`` after ``save_config(cfg, p)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from trainer.errors import UserError, atomic_output
+from trainer.physics.effects import EFFECT_PARAMETERS, MULTI_INSTANCE, EffectConfig, Param
+from trainer.physics.noise import NOISE_PARAMETERS
+from trainer.physics.profiles import BUILTIN_PROTOCOLS, PROTOCOL_NAMES, SEGMENT_LABELS, SegmentSpec
+
+INPUT_KINDS: tuple[str, ...] = ("zero", "constant", "steps", "motion")
+DEFAULT_CONFIG_NAME = "default.toml"
+
+
+@dataclass(frozen=True)
+class RecordingConfig:
+    """Sampling and labelling. ``duration_s`` (optional) time-compresses the protocol to it."""
+
+    sample_rate_hz: float = 200.0
+    sensor: str = "sim-tactical-accel-x"
+    duration_s: float | None = None
+
+
+@dataclass(frozen=True)
+class ProtocolConfig:
+    """``paper-oven``/``extended`` are built in; ``custom`` carries ``start_c`` and ``segments``."""
+
+    name: str = "paper-oven"
+    start_c: float | None = None
+    segments: tuple[SegmentSpec, ...] = ()
+
+    def resolved(self) -> tuple[float, tuple[SegmentSpec, ...]]:
+        """``(start_c, segments)`` of this protocol, built-in or custom."""
+        if self.name in BUILTIN_PROTOCOLS:
+            return BUILTIN_PROTOCOLS[self.name]
+        assert self.start_c is not None
+        return self.start_c, self.segments
+
+
+@dataclass(frozen=True)
+class TemperatureConfig:
+    """Package thermal time constant and thermometer white noise (1-sigma per sample)."""
+
+    case_tau_s: float = 180.0
+    temp_noise_c: float = 0.03
+
+
+@dataclass(frozen=True)
+class Tone:
+    """One sinusoid of a ``motion`` input."""
+
+    amp_mg: float
+    freq_hz: float
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """The true input ``g_in_mg``; only the fields of ``kind`` are meaningful (and written)."""
+
+    kind: str = "zero"
+    value_mg: float = 0.0
+    steps: tuple[tuple[float, float], ...] = ()
+    offset_mg: float = 0.0
+    tones: tuple[Tone, ...] = ()
+    singer_sigma_mg: float = 0.0
+    singer_tau_s: float | None = None
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """One noise term: a catalogue identifier and its coefficient."""
+
+    identifier: str
+    params: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Everything the simulator needs besides the seed. An effect is on iff it is listed."""
+
+    recording: RecordingConfig = RecordingConfig()
+    protocol: ProtocolConfig = ProtocolConfig()
+    temperature: TemperatureConfig = TemperatureConfig()
+    input: InputConfig = InputConfig()
+    effects: tuple[EffectConfig, ...] = ()
+    noise: tuple[NoiseConfig, ...] = ()
+    source: str = field(default="<memory>", compare=False)
+
+    def effect_instances(self, identifier: str) -> list[EffectConfig]:
+        return [e for e in self.effects if e.identifier == identifier]
+
+    def noise_term(self, identifier: str) -> NoiseConfig | None:
+        return next((n for n in self.noise if n.identifier == identifier), None)
+
+
+# ----------------------------------------------------------------------------------- reading
+
+
+class _Table:
+    """A TOML table being validated: typed getters with one-line errors, then ``finish()``."""
+
+    def __init__(self, source: str, where: str, data: Any) -> None:
+        if not isinstance(data, dict):
+            raise UserError(f"{source}: [{where}] must be a table, got {_show(data)}")
+        self.source, self.where, self.data = source, where, data
+        self.used: set[str] = set()
+
+    def fail(self, message: str) -> UserError:
+        return UserError(f"{self.source}: [{self.where}] {message}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str) -> Any:
+        self.used.add(key)
+        return self.data[key]
+
+    def number(self, key: str, rule: str = "finite", default: float | None = None) -> float:
+        if key not in self.data:
+            if default is None:
+                raise self.fail(f"missing {key}")
+            return default
+        return _check_number(self.raw(key), rule, lambda m: self.fail(f"{key} {m}"))
+
+    def string(self, key: str, choices: tuple[str, ...] | None = None, default: str | None = None) -> str:
+        if key not in self.data:
+            if default is None:
+                raise self.fail(f"missing {key}")
+            return default
+        value = self.raw(key)
+        if not isinstance(value, str):
+            raise self.fail(f"{key} must be a string, got {_show(value)}")
+        if choices is not None and value not in choices:
+            raise self.fail(f"{key} must be one of {', '.join(choices)}, got {value!r}")
+        return value
+
+    def only(self, allowed: tuple[str, ...]) -> None:
+        """Reject unknown keys first: a typo is the cause, the "missing" key its symptom."""
+        for key in self.data:
+            if key not in allowed:
+                raise self.fail(f"unknown key {key!r} (expected: {', '.join(allowed)})")
+
+    def finish(self, hint: tuple[str, ...] | None = None) -> None:
+        """Reject keys nobody asked for: typos must not pass silently."""
+        unknown = [k for k in self.data if k not in self.used]
+        if unknown:
+            expected = ", ".join(hint) if hint is not None else ", ".join(sorted(self.used)) or "none"
+            raise self.fail(f"unknown key {unknown[0]!r} (expected: {expected})")
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _check_number(value: Any, rule: str, fail: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise fail(f"must be a number, got {_show(value)}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise fail(f"must be finite, got {_show(value)}")
+    if rule == "positive" and not number > 0:
+        raise fail(f"must be > 0, got {_show(value)}")
+    if rule == "nonnegative" and not number >= 0:
+        raise fail(f"must be >= 0, got {_show(value)}")
+    return number
+
+
+def _read_params(table: _Table, spec: tuple[Param, ...]) -> dict[str, float]:
+    table.only(tuple(p.name for p in spec))
+    params: dict[str, float] = {}
+    for param in spec:
+        if table.has(param.name) or not param.optional:
+            params[param.name] = table.number(param.name, param.rule, param.default)
+    table.finish(tuple(p.name for p in spec))
+    return params
+
+
+def _read_recording(source: str, data: Any) -> RecordingConfig:
+    table = _Table(source, "recording", data)
+    table.only(("sample_rate_hz", "sensor", "duration_s"))
+    sensor = table.string("sensor", default=RecordingConfig.sensor)
+    if not sensor.strip() or any(c in sensor for c in "\r\n"):
+        raise table.fail(f"sensor must be a non-empty single line, got {sensor!r}")
+    duration = table.number("duration_s", "positive") if table.has("duration_s") else None
+    cfg = RecordingConfig(
+        table.number("sample_rate_hz", "positive", RecordingConfig.sample_rate_hz), sensor, duration
+    )
+    table.finish()
+    return cfg
+
+
+def _read_segment(source: str, index: int, data: Any, current_c: float) -> SegmentSpec:
+    table = _Table(source, f"protocol.segments #{index + 1}", data)
+    label = table.string("label", SEGMENT_LABELS)
+    keys = ("label", "duration_s", "rate_c_per_min", "end_c")
+    table.only(keys)
+    if label in ("soak", "hold"):
+        duration = table.number("duration_s", "positive")
+        end_c = table.number("end_c", default=current_c)
+        if table.has("rate_c_per_min"):
+            raise table.fail(f"rate_c_per_min is only for ramps, not {label}")
+        table.finish(keys)
+        return SegmentSpec(label, duration, end_c)
+    end_c = table.number("end_c")
+    if (end_c > current_c) != (label == "ramp_up") or end_c == current_c:
+        direction = "above" if label == "ramp_up" else "below"
+        raise table.fail(
+            f"{label} end_c must be {direction} the previous set-point {current_c:g}, got {end_c:g}"
+        )
+    if table.has("duration_s") == table.has("rate_c_per_min"):
+        raise table.fail("give exactly one of duration_s and rate_c_per_min")
+    if table.has("duration_s"):
+        duration = table.number("duration_s", "positive")
+    else:
+        duration = abs(end_c - current_c) / table.number("rate_c_per_min", "positive") * 60.0
+    table.finish(keys)
+    return SegmentSpec(label, duration, end_c)
+
+
+def _read_protocol(source: str, data: Any) -> ProtocolConfig:
+    table = _Table(source, "protocol", data)
+    table.only(("name", "start_c", "segments"))
+    name = table.string("name", PROTOCOL_NAMES, default=ProtocolConfig.name)
+    if name != "custom":
+        for key in ("start_c", "segments"):
+            if table.has(key):
+                raise table.fail(f"{key} is only allowed with name = 'custom', not {name!r}")
+        table.finish(("name",))
+        return ProtocolConfig(name)
+    start_c = table.number("start_c")
+    raw = table.raw("segments") if table.has("segments") else None
+    if not isinstance(raw, list) or not raw:
+        raise table.fail("custom protocol needs at least one [[protocol.segments]] table")
+    segments: list[SegmentSpec] = []
+    current = start_c
+    for index, item in enumerate(raw):
+        segment = _read_segment(source, index, item, current)
+        segments.append(segment)
+        current = segment.end_c
+    table.finish(("name", "start_c", "segments"))
+    return ProtocolConfig(name, start_c, tuple(segments))
+
+
+def _read_temperature(source: str, data: Any) -> TemperatureConfig:
+    table = _Table(source, "temperature", data)
+    table.only(("case_tau_s", "temp_noise_c"))
+    defaults = TemperatureConfig()
+    cfg = TemperatureConfig(
+        table.number("case_tau_s", "positive", defaults.case_tau_s),
+        table.number("temp_noise_c", "nonnegative", defaults.temp_noise_c),
+    )
+    table.finish()
+    return cfg
+
+
+_INPUT_KEYS: dict[str, tuple[str, ...]] = {
+    "zero": ("kind",),
+    "constant": ("kind", "value_mg"),
+    "steps": ("kind", "steps"),
+    "motion": ("kind", "offset_mg", "tones", "singer_sigma_mg", "singer_tau_s"),
+}
+
+
+def _read_input(source: str, data: Any) -> InputConfig:
+    table = _Table(source, "input", data)
+    table.only(tuple(dict.fromkeys(k for keys in _INPUT_KEYS.values() for k in keys)))
+    kind = table.string("kind", INPUT_KINDS)
+    for key in table.data:
+        if key not in _INPUT_KEYS[kind]:
+            raise table.fail(
+                f"{key} is not used with kind = {kind!r} (allowed: {', '.join(_INPUT_KEYS[kind])})"
+            )
+    cfg = InputConfig(kind)
+    if kind == "constant":
+        cfg = replace(cfg, value_mg=table.number("value_mg"))
+    elif kind == "steps":
+        cfg = replace(cfg, steps=_read_steps(table))
+    elif kind == "motion":
+        tones_raw = table.raw("tones") if table.has("tones") else []
+        if not isinstance(tones_raw, list):
+            raise table.fail("tones must be an array of tables [[input.tones]]")
+        tones = []
+        for index, item in enumerate(tones_raw):
+            tone = _Table(source, f"input.tones #{index + 1}", item)
+            tone.only(("amp_mg", "freq_hz", "phase_rad"))
+            tones.append(
+                Tone(
+                    tone.number("amp_mg"),
+                    tone.number("freq_hz", "positive"),
+                    tone.number("phase_rad", default=0.0),
+                )
+            )
+            tone.finish(("amp_mg", "freq_hz", "phase_rad"))
+        sigma = table.number("singer_sigma_mg", "nonnegative", 0.0)
+        tau = table.number("singer_tau_s", "positive") if table.has("singer_tau_s") or sigma > 0 else None
+        cfg = replace(
+            cfg,
+            offset_mg=table.number("offset_mg", default=0.0),
+            tones=tuple(tones),
+            singer_sigma_mg=sigma,
+            singer_tau_s=tau,
+        )
+    table.finish(_INPUT_KEYS[kind])
+    return cfg
+
+
+def _read_steps(table: _Table) -> tuple[tuple[float, float], ...]:
+    raw = table.raw("steps") if table.has("steps") else None
+    if not isinstance(raw, list) or not raw:
+        raise table.fail("steps must be a non-empty array of [t_s, value_mg] pairs")
+    steps: list[tuple[float, float]] = []
+    for index, pair in enumerate(raw):
+
+        def fail(message: str, index: int = index) -> UserError:
+            return table.fail(f"steps[{index}] {message}")
+
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise fail(f"must be a [t_s, value_mg] pair, got {_show(pair)}")
+        t_s = _check_number(pair[0], "nonnegative", lambda m, f=fail: f(f"t_s {m}"))
+        value = _check_number(pair[1], "finite", lambda m, f=fail: f(f"value_mg {m}"))
+        if steps and t_s <= steps[-1][0]:
+            raise fail(f"t_s must increase, got {t_s:g} after {steps[-1][0]:g}")
+        steps.append((t_s, value))
+    return tuple(steps)
+
+
+def _read_terms(
+    source: str, section: str, data: Any, registry: dict[str, tuple[Param, ...]], multi: frozenset[str]
+) -> list[tuple[str, dict[str, float]]]:
+    if not isinstance(data, dict):
+        raise UserError(f"{source}: [{section}] must be a table of [{section}.<identifier>] tables")
+    terms: list[tuple[str, dict[str, float]]] = []
+    for identifier, body in data.items():
+        if identifier not in registry:
+            raise UserError(
+                f"{source}: [{section}] unknown identifier {identifier!r} (known: {', '.join(registry)})"
+            )
+        if isinstance(body, list):
+            if identifier not in multi:
+                raise UserError(
+                    f"{source}: [[{section}.{identifier}]] may appear only once; use [{section}.{identifier}]"
+                )
+            if not body:
+                raise UserError(f"{source}: [{section}.{identifier}] is an empty array")
+            for index, item in enumerate(body):
+                where = f"{section}.{identifier} #{index + 1}"
+                terms.append((identifier, _read_params(_Table(source, where, item), registry[identifier])))
+        else:
+            terms.append(
+                (
+                    identifier,
+                    _read_params(_Table(source, f"{section}.{identifier}", body), registry[identifier]),
+                )
+            )
+    order = list(registry)
+    terms.sort(key=lambda term: order.index(term[0]))  # stable: instances keep file order
+    return terms
+
+
+_SECTIONS = ("recording", "protocol", "temperature", "input", "effects", "noise")
+
+
+def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
+    """Validate an already-parsed TOML document into a :class:`PhysicsConfig`."""
+    for key, value in data.items():
+        if key not in _SECTIONS:
+            what = f"table [{key}]" if isinstance(value, dict | list) else f"top-level key {key!r}"
+            raise UserError(f"{source}: unknown {what} (expected tables: {', '.join(_SECTIONS)})")
+    effects = tuple(
+        EffectConfig(i, p)
+        for i, p in _read_terms(source, "effects", data.get("effects", {}), EFFECT_PARAMETERS, MULTI_INSTANCE)
+    )
+    noise = tuple(
+        NoiseConfig(i, p)
+        for i, p in _read_terms(source, "noise", data.get("noise", {}), NOISE_PARAMETERS, frozenset())
+    )
+    sf_with_input = [e for e in effects if e.identifier == "scale_factor_tc" and "g_in_mg" in e.params]
+    if sf_with_input and "input" in data:
+        raise UserError(
+            f"{source}: [effects.scale_factor_tc] g_in_mg and [input] both set the true input; give only one"
+        )
+    return PhysicsConfig(
+        recording=_read_recording(source, data.get("recording", {})),
+        protocol=_read_protocol(source, data.get("protocol", {})),
+        temperature=_read_temperature(source, data.get("temperature", {})),
+        input=_read_input(source, data["input"]) if "input" in data else InputConfig(),
+        effects=effects,
+        noise=noise,
+        source=source,
+    )
+
+
+def parse_config_text(text: str, source: str = "<string>") -> PhysicsConfig:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{source}: invalid TOML: {exc}") from None
+    return parse_config(data, source)
+
+
+def default_config_text() -> str:
+    return resources.files("trainer.physics").joinpath(DEFAULT_CONFIG_NAME).read_text(encoding="utf-8")
+
+
+def load_config(path: str | Path | None = None) -> PhysicsConfig:
+    """Load and validate ``path``; ``None`` loads the packaged ``default.toml``.
+
+    A user file stands alone: sections it omits take the dataclass defaults (the same values as
+    ``default.toml``), and effects or noise terms it omits are off.
+    """
+    if path is None:
+        return parse_config_text(default_config_text(), DEFAULT_CONFIG_NAME)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read config: {exc}") from None
+    return parse_config_text(text, str(path))
+
+
+# ----------------------------------------------------------------------------------- writing
+
+
+def config_to_dict(cfg: PhysicsConfig) -> dict[str, Any]:
+    """The TOML document of ``cfg`` (every parameter written explicitly, catalogue order)."""
+    recording: dict[str, Any] = {
+        "sample_rate_hz": cfg.recording.sample_rate_hz,
+        "sensor": cfg.recording.sensor,
+    }
+    if cfg.recording.duration_s is not None:
+        recording["duration_s"] = cfg.recording.duration_s
+    protocol: dict[str, Any] = {"name": cfg.protocol.name}
+    if cfg.protocol.name == "custom":
+        protocol["start_c"] = cfg.protocol.start_c
+        protocol["segments"] = [
+            {"label": s.label, "duration_s": s.duration_s, "end_c": s.end_c} for s in cfg.protocol.segments
+        ]
+    doc: dict[str, Any] = {
+        "recording": recording,
+        "protocol": protocol,
+        "temperature": {
+            "case_tau_s": cfg.temperature.case_tau_s,
+            "temp_noise_c": cfg.temperature.temp_noise_c,
+        },
+    }
+    sf_sets_input = any(e.identifier == "scale_factor_tc" and "g_in_mg" in e.params for e in cfg.effects)
+    if not (sf_sets_input and cfg.input.kind == "zero"):
+        doc["input"] = _input_to_dict(cfg.input)
+    effects: dict[str, Any] = {}
+    for effect in cfg.effects:
+        params = {k: float(v) for k, v in effect.params.items()}
+        if effect.identifier in MULTI_INSTANCE:
+            effects.setdefault(effect.identifier, []).append(params)
+        else:
+            effects[effect.identifier] = params
+    if effects:
+        doc["effects"] = effects
+    if cfg.noise:
+        doc["noise"] = {n.identifier: {k: float(v) for k, v in n.params.items()} for n in cfg.noise}
+    return doc
+
+
+def _input_to_dict(cfg: InputConfig) -> dict[str, Any]:
+    out: dict[str, Any] = {"kind": cfg.kind}
+    if cfg.kind == "constant":
+        out["value_mg"] = cfg.value_mg
+    elif cfg.kind == "steps":
+        out["steps"] = [[float(t), float(v)] for t, v in cfg.steps]
+    elif cfg.kind == "motion":
+        out["offset_mg"] = cfg.offset_mg
+        out["singer_sigma_mg"] = cfg.singer_sigma_mg
+        if cfg.singer_tau_s is not None:
+            out["singer_tau_s"] = cfg.singer_tau_s
+        if cfg.tones:
+            out["tones"] = [
+                {"amp_mg": t.amp_mg, "freq_hz": t.freq_hz, "phase_rad": t.phase_rad} for t in cfg.tones
+            ]
+    return out
+
+
+def config_to_toml(cfg: PhysicsConfig) -> str:
+    return "# mems-tdc physics configuration (docs/simulator.md)\n" + tomli_w.dumps(config_to_dict(cfg))
+
+
+def config_hash(cfg: PhysicsConfig) -> str:
+    """First 16 hex digits of the SHA-256 of the canonical TOML: identifies the physics used."""
+    return hashlib.sha256(config_to_toml(cfg).encode("utf-8")).hexdigest()[:16]
+
+
+def save_config(cfg: PhysicsConfig, path: str | Path) -> None:
+    """Write ``cfg`` as TOML atomically (no partial file on failure)."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(config_to_toml(cfg), encoding="utf-8")
+
+
+def with_overrides(
+    cfg: PhysicsConfig,
+    *,
+    protocol: str | None = None,
+    duration_s: float | None = None,
+    sample_rate_hz: float | None = None,
+) -> PhysicsConfig:
+    """Command-line overrides: a built-in protocol replaces the configured one entirely."""
+    if protocol is not None:
+        if protocol not in BUILTIN_PROTOCOLS:
+            raise ValueError(
+                f"protocol override must be one of {', '.join(BUILTIN_PROTOCOLS)}, got {protocol!r}"
+            )
+        cfg = replace(cfg, protocol=ProtocolConfig(protocol))
+    recording = cfg.recording
+    if duration_s is not None:
+        recording = replace(recording, duration_s=float(duration_s))
+    if sample_rate_hz is not None:
+        recording = replace(recording, sample_rate_hz=float(sample_rate_hz))
+    return replace(cfg, recording=recording)

@@ -1,0 +1,138 @@
+"""Assemble a simulated oven recording from a :class:`PhysicsConfig` and a seed.
+
+Chain (catalogue): set-point ``S`` -> ``T_die = LP(S, case_tau_s)`` -> thermometer column, and
+``accel_mg = g_in (1 + 1e-6 sf (T_pm - T_ref)) + bias + noise``. Ground truth goes into
+``true_*`` columns so that ``accel_mg == true_accel_mg + true_drift_mg + true_noise_mg``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from tqdm import tqdm
+
+from trainer import __version__
+from trainer.errors import UserError
+from trainer.physics.config import PhysicsConfig, config_hash
+from trainer.physics.effects import drift, quantize_temperature
+from trainer.physics.noise import noise_term
+from trainer.physics.profiles import build_profile, format_segments, input_signal
+from trainer.physics.thermal import lowpass
+from trainer.recording import Recording
+
+# One random stream per source, derived by SeedSequence spawning. Indices are permanent: new
+# streams are appended, so switching one term on or adding a new one never changes the others.
+STREAMS: tuple[str, ...] = (
+    "thermometer",
+    "input",
+    "quantization_noise",
+    "white_noise",
+    "bias_instability",
+    "rate_random_walk",
+    "rate_ramp",
+)
+
+
+def stream_rngs(seed: int) -> dict[str, np.random.Generator]:
+    """Independent generators per stream for ``seed``."""
+    children = np.random.SeedSequence(seed).spawn(len(STREAMS))
+    return {name: np.random.default_rng(child) for name, child in zip(STREAMS, children, strict=True)}
+
+
+def _check(cfg: PhysicsConfig, seed: int, n: int, fs: float) -> None:
+    src = cfg.source
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise UserError(f"seed must be a non-negative integer, got {seed!r}")
+    if n < 2:
+        raise UserError(f"{src}: [recording] duration and sample_rate_hz give {n} samples; need at least 2")
+    for index, tone in enumerate(cfg.input.tones if cfg.input.kind == "motion" else ()):
+        if tone.freq_hz >= fs / 2:
+            raise UserError(
+                f"{src}: [input.tones #{index + 1}] freq_hz {tone.freq_hz:g} "
+                f"is not below the Nyquist frequency {fs / 2:g} Hz"
+            )
+    for effect in cfg.effect_instances("periodic"):
+        if effect.params["period_s"] <= 2.0 / fs:
+            raise UserError(
+                f"{src}: [effects.periodic] period_s {effect.params['period_s']:g} "
+                f"is not above two sample periods ({2 / fs:g} s)"
+            )
+    sf_input = [e for e in cfg.effect_instances("scale_factor_tc") if "g_in_mg" in e.params]
+    if sf_input and cfg.input.kind != "zero":
+        raise UserError(
+            f"{src}: [effects.scale_factor_tc] g_in_mg and [input] both set the true input; give only one"
+        )
+
+
+def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Recording:
+    """Simulate one recording; same ``cfg`` and ``seed`` give bit-identical columns.
+
+    ``progress`` shows a tqdm bar on stderr (only when stderr is a terminal).
+    """
+    fs = cfg.recording.sample_rate_hz
+    dt = 1.0 / fs
+    start_c, specs = cfg.protocol.resolved()
+    profile = build_profile(cfg.protocol.name, start_c, specs, cfg.recording.duration_s)
+    n = round(profile.duration_s * fs)
+    _check(cfg, seed, n, fs)
+    rngs = stream_rngs(int(seed))
+    stages = tqdm(total=5, desc="simulate", unit="stage", disable=None if progress else True, leave=False)
+
+    t = np.arange(n) * dt
+    setpoint = profile.setpoint(t)
+    tau = cfg.temperature.case_tau_s
+    T_die = lowpass(setpoint, tau, dt)
+    # Analytic derivative of the continuous LP at the sample instants: dT/dt = (S - T)/tau.
+    rate = (setpoint - T_die) / tau * 60.0
+    stages.update()
+
+    sf_given = [e.params["g_in_mg"] for e in cfg.effect_instances("scale_factor_tc") if "g_in_mg" in e.params]
+    g_in = np.full(n, sf_given[0]) if sf_given else input_signal(cfg.input, t, rngs["input"])
+    stages.update()
+
+    breakdown = drift(cfg.effects, t, T_die, g_in_mg=g_in, dT_die_dt_c_per_min=rate)
+    stages.update()
+
+    temp_c = T_die + rngs["thermometer"].standard_normal(n) * cfg.temperature.temp_noise_c
+    for effect in cfg.effect_instances("temp_quantization"):
+        temp_c = quantize_temperature(temp_c, effect.params["lsb_c"])
+    stages.update()
+
+    noise = np.zeros(n)
+    for term in cfg.noise:
+        noise += noise_term(term.identifier, term.params, n, dt, rngs[term.identifier])
+    stages.update()
+    stages.close()
+
+    total_drift = np.ascontiguousarray(breakdown.total, dtype=np.float64)
+    columns = {
+        "time_s": t,
+        "temp_c": temp_c,
+        "accel_mg": g_in + total_drift + noise,
+        "chamber_c": setpoint,
+        "true_temp_c": T_die,
+        "true_pm_temp_c": np.array(breakdown.T_pm, dtype=np.float64),
+        "true_accel_mg": g_in,
+        "true_drift_mg": total_drift,
+        "true_noise_mg": noise,
+    }
+    meta = {
+        "sample_rate_hz": f"{fs:.12g}",
+        "sensor": cfg.recording.sensor,
+        "seed": str(int(seed)),
+        "protocol": cfg.protocol.name,
+        "segments": format_segments(profile.segments),
+        "effects": ",".join(e.identifier for e in cfg.effects) or "none",
+        "noise": ",".join(term.identifier for term in cfg.noise) or "none",
+        "config_hash": config_hash(cfg),
+        "generator": f"mems-tdc {__version__} trainer simulate",
+    }
+    if cfg.recording.duration_s is not None:
+        meta["time_scale"] = f"{cfg.recording.duration_s / sum(s.duration_s for s in specs):.12g}"
+    return Recording(columns, meta, source=f"simulate(seed={seed})")
+
+
+def nominal_rows(cfg: PhysicsConfig) -> int:
+    """Row count ``simulate`` will produce (for size checks before running)."""
+    _, specs = cfg.protocol.resolved()
+    duration = cfg.recording.duration_s or sum(s.duration_s for s in specs)
+    return round(duration * cfg.recording.sample_rate_hz)

@@ -1,0 +1,73 @@
+"""The in-memory recording: named 1-D float64 columns plus ``key=value`` metadata.
+
+This mirrors ``shared/specs/recording-format.md``. Reading and writing files lives in
+:mod:`trainer.recording_io`; this module only holds the data and the rules every consumer
+shares (required columns, ground-truth columns that fitting must never see).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")
+TRUTH_PREFIX = "true_"
+
+
+@dataclass
+class Recording:
+    """A sensor recording.
+
+    ``columns`` keeps the file's column order (dicts preserve insertion order). ``source`` is a
+    human-readable origin (usually the path) used in error messages.
+    """
+
+    columns: dict[str, np.ndarray]
+    meta: dict[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        lengths = {name: len(values) for name, values in self.columns.items()}
+        if len(set(lengths.values())) > 1:
+            raise ValueError(f"{self.source}: columns have unequal lengths {lengths}")
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.columns["time_s"]
+
+    @property
+    def temp_c(self) -> np.ndarray:
+        return self.columns["temp_c"]
+
+    @property
+    def accel_mg(self) -> np.ndarray:
+        return self.columns["accel_mg"]
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """The ``sample_rate_hz`` metadata when present, else derived from the median step."""
+        if "sample_rate_hz" in self.meta:
+            return float(self.meta["sample_rate_hz"])
+        if len(self.time_s) < 2:
+            raise ValueError(f"{self.source}: cannot derive a sample rate from fewer than 2 rows")
+        return float(1.0 / np.median(np.diff(self.time_s)))
+
+    def has(self, name: str) -> bool:
+        return name in self.columns
+
+    def truth(self, name: str) -> np.ndarray | None:
+        """Ground-truth column ``true_<name>`` for evaluation only, or None when absent."""
+        return self.columns.get(TRUTH_PREFIX + name)
+
+    def without_truth(self) -> Recording:
+        """A view for fitting and diagnosis: every ``true_*`` column removed."""
+        kept = {k: v for k, v in self.columns.items() if not k.startswith(TRUTH_PREFIX)}
+        return Recording(kept, dict(self.meta), self.source)
+
+    def slice(self, start: int, stop: int) -> Recording:
+        """Rows ``start:stop`` (views, not copies)."""
+        return Recording({k: v[start:stop] for k, v in self.columns.items()}, dict(self.meta), self.source)
