@@ -17,14 +17,25 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import time
 from collections.abc import Callable
 
 import torch
 
-from trainer.dlstm import PopulationDLSTM
+from trainer.dlstm import DEFAULT_GROUP_SIZE, PopulationDLSTM
 from trainer.dlstm_train import one_step_ahead, per_individual_loss, population_loss
+
+
+def cpu_model() -> str:
+    """The CPU's model name (Linux /proc/cpuinfo), else whatever platform knows."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
 
 
 def drift_sequence(length: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -35,14 +46,17 @@ def drift_sequence(length: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def timed(fn: Callable[[], object], repeats: int) -> float:
-    """Median seconds of ``repeats`` calls after one warm-up call (oneDNN builds its kernels then)."""
+    """Best of ``repeats`` calls after one warm-up call (oneDNN builds its kernels then).
+
+    The minimum, as timeit recommends: on a shared machine the others only add noise.
+    """
     fn()
     samples = []
     for _ in range(repeats):
         start = time.perf_counter()
         fn()
         samples.append(time.perf_counter() - start)
-    return statistics.median(samples)
+    return min(samples)
 
 
 def training_iteration(
@@ -73,7 +87,7 @@ def main() -> None:
     parser.add_argument("--population", type=int, default=10)
     parser.add_argument("--lengths", type=int, nargs="+", default=[1440, 14400])
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument(
         "--loop-max-length",
         type=int,
@@ -86,12 +100,13 @@ def main() -> None:
     P = args.population
     print(f"platform : {platform.platform()} ({platform.machine()}), python {platform.python_version()}")
     print(
-        f"cpu      : {platform.processor() or 'unknown'}, os.cpu_count()={os.cpu_count()}, "
+        f"cpu      : {cpu_model()}, os.cpu_count()={os.cpu_count()}, "
         f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}"
     )
+    print(f"torch    : {torch.__version__}, mkldnn available={torch.backends.mkldnn.is_available()}")
     print(
-        f"torch    : {torch.__version__}, mkldnn enabled={torch.backends.mkldnn.is_available()}, "
-        f"population P={P}, hidden 2x10, input 1, output 1, float32, repeats={args.repeats} (median)"
+        f"model    : P={P}, 2 layers x 10 units, input 1, output 1, float32, packed group size "
+        f"{DEFAULT_GROUP_SIZE}; best of {args.repeats} (loop backend: best of 2)"
     )
     print()
     columns = ("threads", 7), ("T", 6), ("backend", 7), ("what", 9), ("batched", 10), ("sequential", 11)
@@ -110,9 +125,10 @@ def main() -> None:
                     PopulationDLSTM.from_individuals([batched.individual(k)], backend=backend)
                     for k in range(P)
                 ]
+                repeats = args.repeats if backend == "packed" else min(args.repeats, 2)
                 for what, make in (("train it", training_iteration), ("fitness", fitness)):
-                    t_batched = timed(make([batched], inputs, targets), args.repeats)
-                    t_sequential = timed(make(singles, inputs, targets), args.repeats)
+                    t_batched = timed(make([batched], inputs, targets), repeats)
+                    t_sequential = timed(make(singles, inputs, targets), repeats)
                     print(
                         f"{threads:>7} {length:>6} {backend:>7} {what:>9} {t_batched * 1e3:>8.1f}ms "
                         f"{t_sequential * 1e3:>9.1f}ms {t_sequential / t_batched:>7.2f}x"

@@ -9,15 +9,19 @@ recording carries ground truth the residual drift RMS against ``true_drift_mg`` 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from trainer.allan import AllanCurve, AllanTable, allan_deviation, allan_table
+from trainer.allan import AllanCurve, AllanTable, allan_table, default_taus
 from trainer.recording import Recording
 from trainer.signal import moving_average, window_samples
 
 PAPER_VALIDATION_SMOOTHING_S = 0.5
+# A moving average of width w distorts the Allan deviation for tau up to a few w (the hump in
+# Figure 13 below 1 s); coefficients are read only from tau >= this many windows.
+MIN_TAU_IN_SMOOTHING_WINDOWS = 4.0
 
 
 @dataclass(frozen=True)
@@ -34,7 +38,7 @@ class Evaluation:
     """Everything ``trainer evaluate`` prints and plots."""
 
     table: AllanTable
-    curves: dict[str, AllanCurve]
+    curves: Mapping[str, AllanCurve]
     smoothed: dict[str, np.ndarray]
     drift: dict[str, DriftScore]
     out_of_range_fraction: dict[str, float]
@@ -72,8 +76,9 @@ def evaluate(
     rate = rec.sample_rate_hz
     smoothed = {"raw": smooth_for_scoring(rec.accel_mg, rate, smoothing_s)}
     smoothed.update({name: smooth_for_scoring(x, rate, smoothing_s) for name, x in compensated.items()})
-    table = allan_table(smoothed["raw"], {k: v for k, v in smoothed.items() if k != "raw"}, rate)
-    curves = {name: allan_deviation(x, rate) for name, x in smoothed.items()}
+    taus = default_taus(len(rec), rate)
+    taus = taus[taus >= MIN_TAU_IN_SMOOTHING_WINDOWS * smoothing_s]
+    table = allan_table(smoothed["raw"], {k: v for k, v in smoothed.items() if k != "raw"}, rate, taus=taus)
     drift = {name: s for name, x in compensated.items() if (s := drift_score(rec, x)) is not None}
     fractions = {name: float(np.mean(mask)) for name, mask in (out_of_range or {}).items()}
-    return Evaluation(table, curves, smoothed, drift, fractions, smoothing_s)
+    return Evaluation(table, table.curves, smoothed, drift, fractions, smoothing_s)

@@ -6,12 +6,10 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from trainer.allan import plot_allan
-from trainer.checkpoint import load_model
 from trainer.errors import UserError, atomic_output
-from trainer.evaluate import PAPER_VALIDATION_SMOOTHING_S, Evaluation, evaluate
-from trainer.plots import plot_series
-from trainer.recording_io import read_recording
+
+# Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
+PAPER_VALIDATION_SMOOTHING_S = 0.5  # the paper's validation smoothing; trainer.evaluate keeps the same value
 
 
 def add_parser(subparsers: Any) -> None:
@@ -28,7 +26,7 @@ def add_parser(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def drift_lines(result: Evaluation) -> list[str]:
+def drift_lines(result: Any) -> list[str]:
     lines = []
     for name, score in result.drift.items():
         lines.append(
@@ -46,6 +44,12 @@ def drift_lines(result: Evaluation) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.allan import plot_allan
+    from trainer.checkpoint import load_model
+    from trainer.evaluate import evaluate
+    from trainer.plots import plot_series
+    from trainer.recording_io import read_recording
+
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)

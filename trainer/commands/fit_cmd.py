@@ -5,12 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import numpy as np
-
-from trainer.checkpoint import save_model
-from trainer.fitting import fit_compensator, training_stats
-from trainer.recording_io import read_recording
-
+# Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 BASELINE_METHODS = ("pla", "poly3")
 
 
@@ -30,6 +25,12 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from trainer.checkpoint import save_model
+    from trainer.fitting import fit_compensator, training_stats
+    from trainer.recording_io import read_recording
+
     train = read_recording(args.train)
     options: dict[str, Any] = {}
     if args.method == "pla":

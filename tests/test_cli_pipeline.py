@@ -1,0 +1,144 @@
+"""The foundation's commands end to end: simulate -> fit -> evaluate, and their error behaviour."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trainer.checkpoint import load_model
+from trainer.cli import main
+from trainer.recording_io import read_recording
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    """Run the real entry point in a fresh interpreter, as a user would."""
+    return subprocess.run(
+        [sys.executable, "-m", "trainer.cli", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A short training and validation run of the paper protocol (compressed to 20 min at 50 Hz)."""
+    work = tmp_path_factory.mktemp("pipeline")
+    paths = []
+    for name, seed in (("train", 1), ("valid", 2)):
+        path = work / f"{name}.npz"
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--protocol",
+                    "paper-oven",
+                    "--seed",
+                    str(seed),
+                    "--duration",
+                    "1200",
+                    "--rate",
+                    "50",
+                    "-o",
+                    str(path),
+                ]
+            )
+            == 0
+        )
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+@pytest.mark.parametrize("method", ["pla", "poly3"])
+def test_fit_then_evaluate_removes_most_of_the_true_drift(
+    recordings: tuple[Path, Path], tmp_path: Path, method: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    train, valid = recordings
+    model_path = tmp_path / f"{method}.pt"
+    assert main(["fit", "--method", method, str(train), "-o", str(model_path)]) == 0
+    model, checkpoint = load_model(model_path)
+    rec = read_recording(train)
+    assert checkpoint["valid_temp_range_c"] == [
+        pytest.approx(rec.temp_c.min()),
+        pytest.approx(rec.temp_c.max()),
+    ]
+    assert checkpoint["train_stats"]["n_samples"] == len(rec)
+
+    out_dir = tmp_path / "eval"
+    capsys.readouterr()
+    assert main(["evaluate", str(model_path), str(valid), "--out-dir", str(out_dir)]) == 0
+    printed = capsys.readouterr().out
+    for row in ("B (mg)", "K (mg/s^1/2)", "R (mg/s)", "Aver (%)"):
+        assert row in printed
+    for name in ("report.md", "fig12_compensated.png", "fig13_allan.png"):
+        assert (out_dir / name).stat().st_size > 0
+    # Independent check of the headline metric: compensation must remove most of the true drift.
+    validation = read_recording(valid)
+    residual = validation.truth("drift_mg") - model.predict_drift(validation.without_truth())
+    raw_rms = np.sqrt(np.mean(validation.truth("drift_mg") ** 2))
+    assert np.sqrt(np.mean(residual**2)) < 0.1 * raw_rms
+    assert "residual drift vs true_drift_mg" in printed
+
+
+def test_fit_never_reads_ground_truth(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+    train, _ = recordings
+    rec = read_recording(train)
+    rec.columns["true_drift_mg"] = rec.columns["true_drift_mg"] * 0 + 1e6  # poison the truth
+    from trainer.recording_io import write_recording
+
+    poisoned = tmp_path / "poisoned.npz"
+    write_recording(rec, poisoned)
+    for path, name in ((train, "a.pt"), (poisoned, "b.pt")):
+        assert main(["fit", "--method", "pla", str(path), "-o", str(tmp_path / name)]) == 0
+    a, _ = load_model(tmp_path / "a.pt")
+    b, _ = load_model(tmp_path / "b.pt")
+    np.testing.assert_array_equal(a.slopes_mg_per_c, b.slopes_mg_per_c)
+
+
+def _assert_clean_failure(result: subprocess.CompletedProcess[str], *fragments: str) -> None:
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+def test_fit_missing_recording(tmp_path: Path) -> None:
+    out = tmp_path / "m.pt"
+    _assert_clean_failure(
+        _cli("fit", "--method", "pla", str(tmp_path / "nope.csv"), "-o", str(out)), "nope.csv"
+    )
+    assert not out.exists()
+
+
+def test_fit_bad_recording_leaves_no_model(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,temp_c,accel_mg\n0.0,20.0,1.0\n0.005,abc,1.0\n")
+    out = tmp_path / "m.pt"
+    _assert_clean_failure(_cli("fit", "--method", "poly3", str(bad), "-o", str(out)), "bad.csv", "temp_c")
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [bad]
+
+
+def test_fit_unknown_method_is_a_usage_error(tmp_path: Path) -> None:
+    _assert_clean_failure(_cli("fit", "--method", "magic", "x.csv", "-o", str(tmp_path / "m.pt")), "--method")
+
+
+def test_evaluate_rejects_a_foreign_model_file(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+    fake = tmp_path / "model.pt"
+    fake.write_bytes(b"this is not a checkpoint")
+    out_dir = tmp_path / "eval"
+    _assert_clean_failure(
+        _cli("evaluate", str(fake), str(recordings[1]), "--out-dir", str(out_dir)), "model.pt"
+    )
+    assert not out_dir.exists()
+
+
+def test_evaluate_negative_smoothing_is_rejected(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+    model = tmp_path / "m.pt"
+    assert main(["fit", "--method", "pla", str(recordings[0]), "-o", str(model)]) == 0
+    _assert_clean_failure(
+        _cli("evaluate", str(model), str(recordings[1]), "--smoothing", "-1"), "--smoothing"
+    )
