@@ -142,3 +142,132 @@ def test_evaluate_negative_smoothing_is_rejected(recordings: tuple[Path, Path], 
     _assert_clean_failure(
         _cli("evaluate", str(model), str(recordings[1]), "--smoothing", "-1"), "--smoothing"
     )
+
+
+def test_compare_writes_the_table_figures_report_and_models(
+    recordings: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    train, valid = recordings
+    steps = tmp_path / "steps.npz"
+    assert (
+        main(
+            [
+                "simulate",
+                "--seed",
+                "5",
+                "--duration",
+                "1200",
+                "--rate",
+                "50",
+                "--input",
+                "steps",
+                "-o",
+                str(steps),
+            ]
+        )
+        == 0
+    )
+    out_dir = tmp_path / "cmp"
+    (tmp_path / "cmp").mkdir()
+    keep = out_dir / "notes.txt"
+    keep.write_text("mine")
+    args = ["compare", str(train), str(valid), "--out-dir", str(out_dir), "--input-test", str(steps)]
+    args += ["--population", "2", "--iterations", "5", "--cycles", "3", "--quiet"]
+    capsys.readouterr()
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    for method in ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence", "oracle"):
+        assert f"| {method} |" in printed
+    for name in (
+        "report.md",
+        "table1.txt",
+        "fig10_training_fit.png",
+        "fig11_validation_fit.png",
+        "fig12_compensated.png",
+        "fig13_allan.png",
+        "fig_input_survival_1_steps.png",
+    ):
+        assert (out_dir / name).stat().st_size > 0, name
+    for method in ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence"):
+        model, _ = load_model(out_dir / "models" / f"{method}.pt")
+        assert model.method == method
+    assert keep.read_text() == "mine"  # an existing output directory keeps the user's files
+    report = (out_dir / "report.md").read_text()
+    assert "persistence" in report and "oracle" in report and "How to read the scores" in report
+
+
+def test_compare_survival_separates_temperature_models_from_recursive_ones(
+    recordings: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Independent physics check: a temperature-only model cannot remove a true input step."""
+    from trainer.compare import compare
+    from trainer.fusion import FusionSettings
+
+    train, valid = recordings
+    steps = tmp_path / "steps.npz"
+    assert (
+        main(
+            [
+                "simulate",
+                "--seed",
+                "6",
+                "--duration",
+                "1200",
+                "--rate",
+                "50",
+                "--input",
+                "steps",
+                "-o",
+                str(steps),
+            ]
+        )
+        == 0
+    )
+    result = compare(
+        read_recording(train),
+        read_recording(valid),
+        FusionSettings(population=2, iterations=5, cycles=2),
+        input_tests=(read_recording(steps),),
+        methods=("pla", "poly3", "persistence"),
+        progress=False,
+        log=lambda _: None,
+    )
+    scores = next(iter(result.survival.values()))
+    assert scores["pla"].gain == pytest.approx(1.0, abs=0.02)
+    assert scores["poly3"].gain == pytest.approx(1.0, abs=0.02)
+    assert scores["oracle"].gain == pytest.approx(1.0, abs=2e-3)  # noise correlates by chance only
+    assert scores["persistence"].gain < 0.05
+
+
+def test_fit_dlstm_from_the_cli(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+    out = tmp_path / "issa.pt"
+    assert (
+        main(
+            [
+                "fit",
+                "--method",
+                "dlstm-issa",
+                str(recordings[0]),
+                "-o",
+                str(out),
+                "--population",
+                "2",
+                "--iterations",
+                "3",
+                "--cycles",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    _, checkpoint = load_model(out)
+    assert checkpoint["payload"]["training"]["settings"]["population"] == 2
+    assert checkpoint["payload"]["frontend"]["decimation"] == 50  # 1 s steps at 50 Hz
+
+
+def test_fit_dlstm_rejects_bad_settings(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+    result = _cli(
+        "fit", "--method", "dlstm", str(recordings[0]), "-o", str(tmp_path / "m.pt"), "--population", "0"
+    )
+    _assert_clean_failure(result, "--population")

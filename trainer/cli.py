@@ -15,6 +15,7 @@ COMMANDS: dict[str, str] = {
     "import": "import_cmd",
     "fit": "fit_cmd",
     "evaluate": "evaluate_cmd",
+    "compare": "compare_cmd",
 }
 
 

@@ -58,6 +58,7 @@ class Compensator(ABC):
 def registered_methods() -> dict[str, type[Compensator]]:
     """Method name -> class, after importing every module that defines one."""
     import trainer.baselines.pla
-    import trainer.baselines.poly3  # noqa: F401
+    import trainer.baselines.poly3
+    import trainer.dlstm_compensator  # noqa: F401
 
     return dict(_REGISTRY)

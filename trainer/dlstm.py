@@ -20,7 +20,7 @@ Parameters, for layer l (``in_0 = input_size``, ``in_l = hidden_size`` for l >= 
 
     w_x{l}: (P, 4H, in_l)   w_h{l}: (P, 4H, H)   b{l}: (P, 4H)   w_out: (P, out, H)   b_out: (P, out)
 
-Flat layout (``flatten``/``load_flat``/``forward_flat``; stable, part of the file format):
+Flat layout (``flatten``/``load_flat``/``forward_flat``; stable, the sparrow search's rows):
 row k of the (P, d) matrix is the concatenation, in this order, of
 ``w_x0[k], w_h0[k], b0[k], w_x1[k], w_h1[k], b1[k], ..., w_out[k], b_out[k]``, each flattened
 row-major (matrices: gate block, then unit, then input column). d = sum_l 4H (in_l + H + 1) +
@@ -31,8 +31,10 @@ Two implementations of the same recurrence:
 * ``backend="packed"`` (default, fast): the P networks are packed block-diagonally into one
   ``torch.lstm`` call of hidden size g*H per group of at most ``group_size`` individuals, so the
   time loop runs in ATen/oneDNN instead of Python. Off-diagonal blocks are exact zeros, so each
-  individual only sees its own weights; individuals with non-finite parameters are isolated
-  (zeroed, output NaN) so that 0 * NaN cannot leak into the others.
+  individual only sees its own weights. Because 0 * NaN = NaN would leak through the packed
+  matmul, individuals with non-finite parameters are evaluated as zeros and reported as NaN, and
+  a NaN arising inside a finite individual triggers a re-run with one individual per call.
+  float32 uses oneDNN; its training and no-grad primitives agree to rounding, not bit for bit.
 * ``backend="loop"`` (reference): a Python loop over :func:`dlstm_step`, literal eq. (2)-(7)
   with batched matmuls over the population. It is what the C code reproduces step by step.
 """
@@ -279,25 +281,34 @@ class PopulationDLSTM(nn.Module):
 
     @classmethod
     def from_individuals(
-        cls, individuals: Sequence[Mapping[str, Tensor]], **kwargs: object
+        cls,
+        individuals: Sequence[Mapping[str, Tensor]],
+        *,
+        dtype: torch.dtype | None = None,
+        backend: Backend = "packed",
+        group_size: int = DEFAULT_GROUP_SIZE,
     ) -> PopulationDLSTM:
-        """Rebuild a population from :meth:`individual` dicts (e.g. a loaded model.pt)."""
+        """Rebuild a population from :meth:`individual` dicts (e.g. a loaded model.pt).
+
+        The architecture is read from the shapes; ``dtype`` defaults to the tensors' dtype.
+        """
         if not individuals:
             raise ValueError("from_individuals needs at least one individual")
         first = individuals[0]
         num_layers = sum(1 for name in first if name.startswith("w_h"))
         G, input_size = first["w_x0"].shape
         spec = DLSTMSpec(input_size, G // 4, num_layers, first["w_out"].shape[0])
-        kwargs.setdefault("dtype", first["w_x0"].dtype)
         model = cls(
             len(individuals),
             spec.input_size,
             spec.hidden_size,
             spec.num_layers,
             spec.output_size,
-            seed=0,
-            **kwargs,
-        )  # type: ignore[arg-type]
+            seed=0,  # every weight is overwritten below
+            dtype=dtype or first["w_x0"].dtype,
+            backend=backend,
+            group_size=group_size,
+        )
         with torch.no_grad():
             for k, ind in enumerate(individuals):
                 for name, shape in spec.param_shapes():

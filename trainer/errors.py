@@ -34,6 +34,16 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
         return 130
 
 
+def check_writable(path: str | os.PathLike[str]) -> None:
+    """Fail early (before long work) when ``path`` cannot be written; creates nothing."""
+    target = Path(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UserError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK) or (target.exists() and not os.access(target, os.W_OK)):
+        raise UserError(f"{target}: not writable")
+
+
 def _current_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -47,11 +57,8 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     Guarantees that a failed command leaves no partial output file behind.
     """
     target = Path(path)
+    check_writable(target)
     parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise UserError(f"{target}: output directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise UserError(f"{target}: output directory {parent} is not writable")
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
     os.close(fd)
     tmp = Path(tmp_name)

@@ -82,3 +82,28 @@ def evaluate(
     drift = {name: s for name, x in compensated.items() if (s := drift_score(rec, x)) is not None}
     fractions = {name: float(np.mean(mask)) for name, mask in (out_of_range or {}).items()}
     return Evaluation(table, table.curves, smoothed, drift, fractions, smoothing_s)
+
+
+@dataclass(frozen=True)
+class InputSurvival:
+    """How much of a true input signal a compensator keeps (needs ``true_accel_mg``).
+
+    ``gain`` is the least-squares gain of the compensated output on the true input (1 = kept
+    whole, 0 = destroyed); ``error_rms_mg`` is the RMS of compensated minus true input minus
+    sensor noise, i.e. everything the compensator got wrong (drift left plus signal removed).
+    """
+
+    gain: float
+    error_rms_mg: float
+    input_rms_mg: float
+
+
+def input_survival(rec: Recording, compensated: np.ndarray) -> InputSurvival | None:
+    true_input = rec.truth("accel_mg")
+    if true_input is None or not np.ptp(true_input) > 0:
+        return None
+    centred = true_input - true_input.mean()
+    gain = float(np.dot(compensated - compensated.mean(), centred) / np.dot(centred, centred))
+    noise = rec.truth("noise_mg")
+    error = compensated - true_input - (noise if noise is not None else 0.0)
+    return InputSurvival(gain, float(np.sqrt(np.mean(error**2))), float(np.sqrt(np.mean(centred**2))))

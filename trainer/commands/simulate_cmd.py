@@ -6,8 +6,10 @@ import argparse
 import math
 import sys
 import time
+from dataclasses import replace
 
 from trainer.physics.config import load_config, with_overrides
+from trainer.physics.input_presets import INPUT_PRESETS, input_preset
 from trainer.physics.profiles import BUILTIN_PROTOCOLS
 from trainer.physics.simulate import nominal_rows, simulate
 from trainer.recording_io import recording_format, write_recording
@@ -59,6 +61,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="time-compress the whole protocol to S seconds (short test recordings; ramps get steeper)",
     )
     parser.add_argument("--rate", type=_positive("Hz"), metavar="HZ", help="override sample_rate_hz")
+    parser.add_argument(
+        "--input",
+        choices=INPUT_PRESETS,
+        help="replace the configured true input by a built-in profile (steps: tilt sequence; motion: "
+        "manoeuvres and vibration) to measure how much of a real signal a compensator keeps",
+    )
     parser.set_defaults(func=run)
 
 
@@ -68,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         load_config(args.config), protocol=args.protocol, duration_s=args.duration, sample_rate_hz=args.rate
     )
     rows = nominal_rows(cfg)
+    if args.input:
+        cfg = replace(cfg, input=input_preset(args.input, rows / cfg.recording.sample_rate_hz))
     started = time.perf_counter()
     rec = simulate(cfg, args.seed, progress=True)
     simulated = time.perf_counter() - started

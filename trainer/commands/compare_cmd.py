@@ -1,0 +1,132 @@
+"""``trainer compare TRAIN VALID``: every method, the paper's Table 1, honest scores, figures, report."""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+from trainer.errors import UserError
+
+# Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
+ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")
+
+
+def add_parser(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "compare", help="train every method, score them like the paper's Table 1 and write a report"
+    )
+    parser.add_argument("train", help="training recording (.csv or .npz)")
+    parser.add_argument("valid", help="validation recording (.csv or .npz)")
+    parser.add_argument(
+        "--out-dir", default="comparison", help="report, figures and models go here (comparison/)"
+    )
+    parser.add_argument(
+        "--input-test",
+        action="append",
+        default=[],
+        metavar="REC",
+        help="a recording with a true input (true_accel_mg), to measure how much of it each method keeps; "
+        "repeatable",
+    )
+    parser.add_argument(
+        "--methods",
+        default=",".join(ALL_METHODS),
+        help=f"comma-separated subset of {','.join(ALL_METHODS)}",
+    )
+    parser.add_argument("--smoothing", type=float, default=0.5, help="validation smoothing in s (paper: 0.5)")
+    add_dlstm_options(parser)
+    parser.set_defaults(func=run)
+
+
+def publish(staging: Path, out_dir: Path) -> None:
+    """Move a finished report into ``out_dir``: a rename when it is new, else file by file.
+
+    Existing files of the same names are replaced; nothing else in ``out_dir`` is touched.
+    """
+    if not out_dir.exists():
+        staging.rename(out_dir)
+        return
+    for source in sorted(staging.rglob("*")):
+        if source.is_file():
+            target = out_dir / source.relative_to(staging)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            source.replace(target)
+    shutil.rmtree(staging)
+
+
+def run(args: argparse.Namespace) -> int:
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    unknown = [m for m in methods if m not in ALL_METHODS]
+    if unknown or not methods:
+        raise UserError(
+            f"--methods: unknown {', '.join(unknown) or '(empty)'}; choose from {','.join(ALL_METHODS)}"
+        )
+    if args.smoothing < 0:
+        raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    settings, frontend = settings_from_args(args)
+
+    from trainer.checkpoint import save_model
+    from trainer.compare import compare
+    from trainer.fitting import training_stats
+    from trainer.recording_io import read_recording
+    from trainer.report import headline_table, render_report, write_figures, write_survival_figure
+
+    out_dir = Path(args.out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
+    train = read_recording(args.train)
+    valid = read_recording(args.valid)
+    input_tests = tuple(read_recording(path) for path in args.input_test)
+    for rec in input_tests:
+        if rec.truth("accel_mg") is None:
+            raise UserError(f"{rec.source}: --input-test needs a true_accel_mg column (a simulated input)")
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    comparison = compare(
+        train,
+        valid,
+        settings,
+        input_tests=input_tests,
+        smoothing_s=args.smoothing,
+        methods=methods,
+        progress=not args.quiet,
+        log=log,
+    )
+    # Everything is written into a fresh directory first and moved into place at the end, so a
+    # failure never leaves a half-written report.
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        (staging / "models").mkdir()
+        stats = training_stats(train)
+        for name, model in comparison.models.items():
+            save_model(
+                model,
+                staging / "models" / f"{name}.pt",
+                train_stats=stats,
+                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+            )
+        figures = write_figures(comparison, train, valid, staging)
+        for index, rec in enumerate(input_tests):
+            name = f"fig_input_survival_{index + 1}_{Path(rec.source).stem}.png"
+            write_survival_figure(comparison, rec, staging, name)
+            figures.append(name)
+        report = render_report(comparison, settings, frontend, args, figures)
+        (staging / "report.md").write_text(report, encoding="utf-8")
+        (staging / "table1.txt").write_text(comparison.evaluation.table.to_text() + "\n", encoding="utf-8")
+        publish(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    print(comparison.evaluation.table.to_text())
+    print()
+    print(headline_table(comparison))
+    print(f"\nreport, figures and models written to {out_dir}/")
+    return 0

@@ -1,0 +1,68 @@
+"""Command-line options shared by ``trainer fit`` and ``trainer compare`` for the DLSTM methods."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from trainer.errors import UserError
+
+
+def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("DLSTM and fusion (defaults: the paper's section 4 settings)")
+    group.add_argument("--population", type=int, default=10, help="DLSTMs in the population (10)")
+    group.add_argument("--hidden", type=int, default=10, help="units per LSTM layer (10)")
+    group.add_argument("--layers", type=int, default=2, help="stacked LSTM layers (2)")
+    group.add_argument("--lr", type=float, default=0.02, help="Adam learning rate (0.02)")
+    group.add_argument(
+        "--iterations", type=int, default=500, help="gradient iterations, ending condition one (500)"
+    )
+    group.add_argument("--cycles", type=int, default=200, help="SSA/ISSA cycles, ending condition two (200)")
+    group.add_argument("--target-loss", type=float, default=None, help="stop early at this training MSE")
+    group.add_argument("--seed", type=int, default=0, help="seed of every random step (0)")
+    group.add_argument(
+        "--train-smoothing", type=float, default=5.0, help="training smoothing in s (paper: 5)"
+    )
+    group.add_argument(
+        "--run-smoothing", type=float, default=0.5, help="run-time smoothing in s (paper: 0.5)"
+    )
+    group.add_argument("--temp-smoothing", type=float, default=5.0, help="temperature smoothing in s (5)")
+    group.add_argument("--step", type=float, default=1.0, help="network step (decimation) in s (1)")
+    group.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest for these sizes)")
+    group.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]:
+    """(FusionSettings, front-end seconds) from parsed options, each checked with a clear message."""
+    from trainer.fusion import FusionSettings
+
+    positive_ints = ("population", "hidden", "layers", "threads")
+    for name in positive_ints:
+        if getattr(args, name) < 1:
+            raise UserError(f"--{name} must be >= 1, got {getattr(args, name)}")
+    for name in ("iterations", "cycles"):
+        if getattr(args, name) < 0:
+            raise UserError(f"--{name} must be >= 0, got {getattr(args, name)}")
+    for name in ("lr", "train_smoothing", "run_smoothing", "temp_smoothing", "step"):
+        if not getattr(args, name) > 0:
+            raise UserError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    import torch
+
+    torch.set_num_threads(args.threads)
+    settings = FusionSettings(
+        population=args.population,
+        hidden_size=args.hidden,
+        num_layers=args.layers,
+        lr=args.lr,
+        iterations=args.iterations,
+        cycles=args.cycles,
+        target_loss=args.target_loss,
+        seed=args.seed,
+    )
+    frontend = {
+        "run_smoothing_s": args.run_smoothing,
+        "temp_smoothing_s": args.temp_smoothing,
+        "step_s": args.step,
+        "train_smoothing_s": args.train_smoothing,
+    }
+    return settings, frontend

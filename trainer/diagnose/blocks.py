@@ -1,0 +1,241 @@
+"""Aggregated views of a recording: block means for the drift analysis, a fine grid for spectra.
+
+Block means shrink white noise by sqrt(samples per block), so effects far below the per-sample
+noise become visible, and they keep the generalised least squares of the finder at about a
+thousand observations whatever the sample rate. Everything here reads only ``time_s``,
+``temp_c`` and ``accel_mg`` (``Recording.without_truth()`` is applied by the caller).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from trainer.errors import UserError
+from trainer.recording import Recording
+
+DEFAULT_MAX_BLOCKS = 900
+FINE_STEP_S = 0.5  # fine grid for periodograms: periods down to the catalogue's 5 s stay resolved
+RATE_WINDOW_S = 60.0  # Savitzky-Golay window for dT/dt: below the package time constants of interest
+MIN_BLOCKS = 60
+
+
+def block_means(x: np.ndarray, m: int, nb: int) -> np.ndarray:
+    """Means of ``nb`` consecutive blocks of ``m`` samples (the tail beyond ``nb * m`` is dropped)."""
+    return np.asarray(x[: nb * m], dtype=np.float64).reshape(nb, m).mean(axis=1)
+
+
+def detect_lattice(temp_c: np.ndarray) -> float | None:
+    """The LSB (degC) when the thermometer column lies on a lattice of equal steps, else None.
+
+    A quantised thermometer takes few distinct values, all integer multiples of the LSB apart;
+    a continuous one (the usual float reading) takes nearly as many values as there are samples.
+    """
+    values = np.unique(np.asarray(temp_c, dtype=np.float64))
+    if values.size < 3 or values.size > max(50, temp_c.size // 20):
+        return None
+    steps = np.diff(values)
+    lsb = float(np.min(steps))
+    span = float(values[-1] - values[0])
+    if not (lsb > 1e-4 and span / lsb < 1e6):
+        return None
+    multiples = (values - values[0]) / lsb
+    if np.max(np.abs(multiples - np.round(multiples))) > 1e-3:
+        return None
+    return float(lsb)
+
+
+def dequantize(t: np.ndarray, temp_c: np.ndarray, lsb: float) -> tuple[np.ndarray, np.ndarray]:
+    """Knots ``(t, T)`` of the smooth temperature behind a staircase thermometer column.
+
+    The reading changes level when the true temperature crosses a half-LSB threshold, so each
+    change (or each burst of noise-dithered flips between the same two levels, taken at its
+    median time) pins the true temperature to the midpoint between the levels at that time.
+    Inside plateaus much longer than the typical level duration (holds) the level's own value is
+    used, because the threshold just left is a poor estimate of where the temperature settled.
+    """
+    level = np.round(np.asarray(temp_c) / lsb).astype(np.int64)
+    change = np.flatnonzero(level[1:] != level[:-1]) + 1
+    if change.size == 0:
+        mid = float(level[0] * lsb)
+        return np.array([t[0], t[-1]]), np.array([mid, mid])
+    knots_t: list[float] = []
+    knots_v: list[float] = []
+    pair_prev: tuple[int, int] | None = None
+    burst: list[float] = []
+    for idx in change.tolist():
+        a, b = int(level[idx - 1]), int(level[idx])
+        pair = (min(a, b), max(a, b))
+        when = 0.5 * (t[idx - 1] + t[idx])
+        if pair != pair_prev and burst:
+            knots_t.append(float(np.median(burst)))
+            knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)  # type: ignore[index]
+            burst = []
+        burst.append(when)
+        pair_prev = pair
+    knots_t.append(float(np.median(burst)))
+    knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)  # type: ignore[index]
+    kt = np.array(knots_t)
+    kv = np.array(knots_v)
+    gaps = np.diff(kt)
+    typical = float(np.median(gaps)) if gaps.size else float(t[-1] - t[0])
+    out_t: list[float] = [float(t[0])]
+    out_v: list[float] = [float(level[0] * lsb)]
+    for i in range(kt.size):
+        if i > 0 and gaps[i - 1] > 4.0 * typical:  # a plateau: settle on the level in between
+            plateau = float(level[np.searchsorted(t, 0.5 * (kt[i - 1] + kt[i]))] * lsb)
+            out_t += [kt[i - 1] + 2.0 * typical, kt[i] - 2.0 * typical]
+            out_v += [plateau, plateau]
+        out_t.append(float(kt[i]))
+        out_v.append(float(kv[i]))
+    if t[-1] - kt[-1] > 4.0 * typical:
+        out_t += [kt[-1] + 2.0 * typical]
+        out_v += [float(level[-1] * lsb)]
+    out_t.append(float(t[-1]))
+    out_v.append(float(level[-1] * lsb) if t[-1] - kt[-1] > 4.0 * typical else out_v[-1])
+    order = np.argsort(out_t, kind="stable")
+    return np.asarray(out_t)[order], np.asarray(out_v)[order]
+
+
+def rate_c_per_min(t: np.ndarray, temp: np.ndarray) -> np.ndarray:
+    """Smoothed ``dT/dt`` in degC/min: Savitzky-Golay (quadratic) derivative over ~60 s."""
+    n = temp.size
+    dt = float(t[1] - t[0]) if n > 1 else 1.0
+    window = max(5, int(round(RATE_WINDOW_S / dt)) | 1)
+    window = min(window, n - 1 if (n - 1) % 2 == 1 else n - 2)
+    if window < 5:
+        return np.gradient(temp, t) * 60.0
+    return savgol_filter(temp, window, 2, deriv=1, delta=dt, mode="interp") * 60.0
+
+
+@dataclass
+class BlockData:
+    """Block means of one recording plus what the fitters need around them.
+
+    ``accel`` has the known true input (from the user's simulation) removed. ``temp`` is the
+    block mean of the thermometer column; :meth:`temperature` returns it or its de-quantised
+    version. ``t`` are block centres on the recording's time axis.
+    """
+
+    source: str
+    fs: float
+    samples_per_block: int
+    t: np.ndarray
+    accel: np.ndarray
+    temp: np.ndarray
+    duration_s: float
+    lattice_lsb_c: float | None
+    temp_smooth: np.ndarray | None
+    white_n_mg_rt_s: float
+    fine_t: np.ndarray
+    fine_accel: np.ndarray
+    fine_step_s: float
+    full_t: np.ndarray = field(repr=False)
+    full_accel: np.ndarray = field(repr=False)
+    known_input_block: np.ndarray | None = None
+
+    @property
+    def n(self) -> int:
+        return self.t.size
+
+    @property
+    def block_s(self) -> float:
+        return self.samples_per_block / self.fs
+
+    @property
+    def starts(self) -> np.ndarray:
+        return self.t - 0.5 * self.block_s
+
+    def temperature(self, dequantized: bool) -> np.ndarray:
+        if dequantized and self.temp_smooth is not None:
+            return self.temp_smooth
+        return self.temp
+
+    @cached_property
+    def _rates(self) -> dict[bool, np.ndarray]:
+        return {q: rate_c_per_min(self.t, self.temperature(q)) for q in (False, True)}
+
+    def rate(self, dequantized: bool) -> np.ndarray:
+        return self._rates[dequantized]
+
+    def subset(self, stop: int) -> BlockData:
+        """The first ``stop`` blocks (the held-out check fits on a leading part of the run)."""
+        keep_full = np.searchsorted(self.full_t, self.t[stop - 1] + 0.5 * self.block_s)
+        keep_fine = np.searchsorted(self.fine_t, self.t[stop - 1] + 0.5 * self.block_s)
+        return BlockData(
+            source=self.source,
+            fs=self.fs,
+            samples_per_block=self.samples_per_block,
+            t=self.t[:stop],
+            accel=self.accel[:stop],
+            temp=self.temp[:stop],
+            duration_s=float(self.t[stop - 1] + 0.5 * self.block_s - (self.t[0] - 0.5 * self.block_s)),
+            lattice_lsb_c=self.lattice_lsb_c,
+            temp_smooth=None if self.temp_smooth is None else self.temp_smooth[:stop],
+            white_n_mg_rt_s=self.white_n_mg_rt_s,
+            fine_t=self.fine_t[:keep_fine],
+            fine_accel=self.fine_accel[:keep_fine],
+            fine_step_s=self.fine_step_s,
+            full_t=self.full_t[:keep_full],
+            full_accel=self.full_accel[:keep_full],
+            known_input_block=None if self.known_input_block is None else self.known_input_block[:stop],
+        )
+
+
+def white_noise_density(accel: np.ndarray, fs: float) -> float:
+    """White-noise density ``n`` (mg s^1/2) from robust first differences at the full rate."""
+    diffs = np.diff(np.asarray(accel, dtype=np.float64))
+    if diffs.size < 2:
+        return 0.0
+    mad = float(np.median(np.abs(diffs - np.median(diffs))))
+    return 1.4826 * mad / math.sqrt(2.0) / math.sqrt(fs)
+
+
+def build_blocks(
+    rec: Recording, *, known_input: np.ndarray | None = None, max_blocks: int = DEFAULT_MAX_BLOCKS
+) -> BlockData:
+    """Aggregate ``rec`` (already stripped of ``true_*`` columns) into :class:`BlockData`."""
+    if any(name.startswith("true_") for name in rec.columns):
+        raise ValueError("diagnosis must not see ground truth: pass rec.without_truth()")
+    t = np.asarray(rec.time_s, dtype=np.float64)
+    n = t.size
+    if n < MIN_BLOCKS * 2:
+        raise UserError(f"{rec.source}: {n} rows is too short to diagnose (need at least {MIN_BLOCKS * 2})")
+    fs = float(rec.sample_rate_hz)
+    accel = np.asarray(rec.accel_mg, dtype=np.float64)
+    if known_input is not None:
+        accel = accel - known_input
+    temp = np.asarray(rec.temp_c, dtype=np.float64)
+    m = max(1, n // max_blocks)
+    nb = n // m
+    t0 = float(t[0])
+    tb = block_means(t, m, nb) - t0
+    lsb = detect_lattice(temp)
+    smooth_block = None
+    if lsb is not None:
+        kt, kv = dequantize(t - t0, temp, lsb)
+        smooth_block = np.interp(tb, kt, kv)
+    mf = max(1, int(round(FINE_STEP_S * fs)))
+    nf = n // mf
+    return BlockData(
+        source=rec.source,
+        fs=fs,
+        samples_per_block=m,
+        t=tb,
+        accel=block_means(accel, m, nb),
+        temp=block_means(temp, m, nb),
+        duration_s=nb * m / fs,
+        lattice_lsb_c=lsb,
+        temp_smooth=smooth_block,
+        white_n_mg_rt_s=white_noise_density(accel, fs),
+        fine_t=block_means(t, mf, nf) - t0,
+        fine_accel=block_means(accel, mf, nf),
+        fine_step_s=mf / fs,
+        full_t=t - t0,
+        full_accel=accel,
+        known_input_block=None if known_input is None else block_means(known_input, m, nb),
+    )

@@ -1,0 +1,201 @@
+"""One search per candidate effect, on top of a current model.
+
+Each search profiles the candidate's nonlinear parameter over its plausible range (a grid, then a
+bounded local refinement, all other nonlinear parameters polished jointly) at the current noise
+covariance, with every amplitude and the ``bias_poly`` coefficients solved by GLS inside. Steps
+and periodic components are scanned exhaustively with a vectorised projection (one whitening of
+all candidate columns at once). The noise covariance is re-estimated afterwards by the selector
+for the candidates that look promising.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.locate import fit_sine, spectral_peaks
+from trainer.diagnose.model import (
+    ModelFit,
+    Term,
+    build_design,
+    evaluate,
+    periodic_columns,
+    polish,
+    search_bounds,
+)
+
+GRID_POINTS = {"thermal_lag": 18, "hysteresis": 16, "stress_relaxation": 12, "warmup": 16}
+FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
+
+
+@dataclass
+class Proposal:
+    """A candidate model: current terms plus one effect (or one noise term)."""
+
+    effect: str
+    terms: tuple[Term, ...]
+    noise_terms: tuple[str, ...]
+    fit_fixed_noise: ModelFit | None  # at the current noise ratios (a lower bound on the gain)
+    spectral_evidence: float | None = None  # 2 delta logL of a fast periodic on the fine grid
+    spectral_n: int = 0
+    note: str = ""
+
+
+def _log_grid(lo: float, hi: float, n: int) -> np.ndarray:
+    return np.logspace(math.log10(lo), math.log10(hi), n)
+
+
+def _profile_1d(current: ModelFit, data: BlockData, new: Term) -> ModelFit:
+    """Grid over the new term's single nonlinear parameter, then a joint polish."""
+    (lo, hi), = search_bounds(new.identifier, data)
+    grid = _log_grid(lo, hi, GRID_POINTS[new.identifier])
+    best: ModelFit | None = None
+    for value in grid:
+        fit = evaluate((*current.terms, replace(new, nl=(float(value),))), data, current.gls)
+        if best is None or fit.loglik > best.loglik:
+            best = fit
+    assert best is not None
+    return polish(best.terms, data, current.gls)
+
+
+def _whitened_base(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal basis of the whitened current design and the whitened residual."""
+    design = build_design(current.terms, data)
+    Xw = current.gls.whiten(design.X)
+    yw = current.gls.whiten(data.accel - design.offset)
+    q, _ = np.linalg.qr(Xw)
+    return q, yw - q @ (q.T @ yw)
+
+
+def scan_steps(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray]:
+    """Step times (block boundaries) and the RSS after adding a step at each (GLS, vectorised)."""
+    n = data.n
+    q, r = _whitened_base(current, data)
+    j = np.arange(2, n - 1)
+    steps = (np.arange(n)[:, None] >= j[None, :]).astype(np.float64)
+    zw = current.gls.whiten(steps)
+    zp = zw - q @ (q.T @ zw)
+    norms = np.einsum("ij,ij->j", zp, zp)
+    gain = (r @ zp) ** 2 / np.maximum(norms, 1e-300)
+    return data.starts[j], float(r @ r) - gain
+
+
+def scan_periods(current: ModelFit, data: BlockData, periods: np.ndarray) -> np.ndarray:
+    """RSS after adding a block-averaged sinusoid of each period (GLS, vectorised)."""
+    q, r = _whitened_base(current, data)
+    out = np.empty(periods.size)
+    chunk = 256
+    for k0 in range(0, periods.size, chunk):
+        ps = periods[k0 : k0 + chunk]
+        cols = np.empty((data.n, 2 * ps.size))
+        for i, p in enumerate(ps):
+            cols[:, 2 * i], cols[:, 2 * i + 1] = periodic_columns(data.t, float(p), data.block_s)
+        zw = current.gls.whiten(cols)
+        zp = zw - q @ (q.T @ zw)
+        s, c = zp[:, 0::2], zp[:, 1::2]
+        gss = np.einsum("ij,ij->j", s, s)
+        gcc = np.einsum("ij,ij->j", c, c)
+        gsc = np.einsum("ij,ij->j", s, c)
+        bs, bc = r @ s, r @ c
+        det = np.maximum(gss * gcc - gsc**2, 1e-300)
+        gain = (gcc * bs**2 - 2 * gsc * bs * bc + gss * bc**2) / det
+        out[k0 : k0 + ps.size] = float(r @ r) - gain
+    return out
+
+
+def propose_step(current: ModelFit, data: BlockData) -> Proposal:
+    times, rss = scan_steps(current, data)
+    k = int(np.argmin(rss))
+    start = Term("bias_step", (float(times[k]),))
+    fit = polish((*current.terms, start), data, current.gls)
+    return Proposal("bias_step", fit.terms, current.noise.terms, fit)
+
+
+def propose_slow_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+    lo = FAST_PERIOD_BLOCKS * data.block_s
+    hi = 0.5 * data.duration_s
+    if hi <= lo:
+        return None
+    f = np.arange(1.0 / hi, 1.0 / lo, 1.0 / (4.0 * data.duration_s))
+    periods = 1.0 / f
+    rss = scan_periods(current, data, periods)
+    k = int(np.argmin(rss))
+    start = Term("periodic", (float(periods[k]),))
+    fit = polish((*current.terms, start), data, current.gls)
+    return Proposal("periodic", fit.terms, current.noise.terms, fit)
+
+
+def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
+    """Fine-grid data minus the current model interpolated from the block centres."""
+    return data.fine_accel - np.interp(data.fine_t, data.t, current.prediction)
+
+
+def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+    """A periodic component too fast for the blocks, scored by the spectral test on the fine grid."""
+    lo = max(4.0, 2.5 * data.fine_step_s)
+    hi = FAST_PERIOD_BLOCKS * data.block_s
+    if hi <= lo * 1.05:
+        return None
+    x = fine_residual(current, data)
+    for term in current.terms:  # components already found are removed before looking again
+        if term.identifier == "periodic" and term.offset is not None:
+            amp, phase = term.offset
+            x = x - amp * np.sin(2 * math.pi * data.fine_t / term.nl[0] + phase)
+    peaks = spectral_peaks(x, data.fine_step_s, lo, hi, max_peaks=1, alpha=0.5)
+    if not peaks:
+        return None
+    peak = peaks[0]
+    sine = fit_sine(data.fine_t, x, peak.period_s, data.duration_s)
+    evidence = sine.delta_rss / peak.noise_var
+    term = Term("periodic", (sine.period_s,), fixed=True, offset=(sine.amp_mg, sine.phase_rad))
+    fit = evaluate((*current.terms, term), data, current.gls)
+    return Proposal(
+        "periodic",
+        fit.terms,
+        current.noise.terms,
+        fit,
+        spectral_evidence=evidence,
+        spectral_n=int(x.size),
+        note=f"spectral test on the {data.fine_step_s:g} s grid, peak/background {peak.ratio:.1f}",
+    )
+
+
+def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    """Proposals for adding ``effect`` (empty when it does not apply to the current model)."""
+    present = set(current.identifiers)
+    single = {"thermal_lag", "temp_rate", "hysteresis", "stress_relaxation", "warmup", "temp_quantization"}
+    if effect in single and effect in present:
+        return []
+    if effect in ("thermal_lag", "hysteresis", "stress_relaxation", "warmup"):
+        fit = _profile_1d(current, data, Term(effect, (1.0,)))
+        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+    if effect in ("temp_rate", "rate_ramp", "scale_factor_tc"):
+        if effect in present:
+            return []
+        fit = polish((*current.terms, Term(effect)), data, current.gls)
+        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+    if effect == "temp_quantization":
+        if data.lattice_lsb_c is None:
+            return []
+        term = Term("temp_quantization", (data.lattice_lsb_c,), fixed=True)
+        fit = polish((*current.terms, term), data, current.gls)
+        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+    if effect == "bias_step":
+        if sum(1 for i in current.identifiers if i == "bias_step") >= 3:
+            return []
+        return [propose_step(current, data)]
+    if effect == "periodic":
+        if sum(1 for i in current.identifiers if i == "periodic") >= 3:
+            return []
+        out = [p for p in (propose_slow_periodic(current, data), propose_fast_periodic(current, data)) if p]
+        return out
+    if effect in ("bias_instability", "rate_random_walk"):
+        if effect in current.noise.terms:
+            return []
+        order = ("bias_instability", "rate_random_walk")
+        noise = tuple(t for t in order if t in current.noise.terms or t == effect)
+        return [Proposal(effect, current.terms, noise, None)]
+    raise ValueError(f"no search for {effect!r}")

@@ -1,0 +1,191 @@
+"""Generalised least squares on block means under the IEEE 952 noise model.
+
+Bias instability (flicker) and rate random walk make neighbouring block means correlated; an
+ordinary least-squares BIC would then see structure in pure noise and name effects that are not
+there. The covariance of the block means is modelled as
+
+    C = s^2 (I + rho_b F + rho_k R)
+
+with ``s^2 = n^2 / B`` the white-noise variance of a block mean, ``F`` the flicker covariance for
+``b = 1`` (the simulator's Gauss-Markov bank sampled at the block period, so its Allan deviation is
+flat at 0.664 b) and ``R`` the covariance of block means of a random walk started at the first
+sample (``k = 1``). ``s^2`` is profiled out analytically; the ratios are fitted by maximum
+likelihood. The likelihood of a linear model under ``C`` is computed with one Cholesky factor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.linalg import cho_factor, solve_triangular, toeplitz
+from scipy.optimize import minimize
+
+from trainer.physics.noise import BI_FLAT_UNTIL_S, bias_instability_bank
+
+NOISE_CANDIDATES: tuple[str, ...] = ("bias_instability", "rate_random_walk")
+LOG_RATIO_BOUNDS = (-9.0, 7.0)
+
+
+@lru_cache(maxsize=8)
+def _unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
+    """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
+    tcs, variances = bias_instability_bank(float(block_s), max(BI_FLAT_UNTIL_S, float(duration_s)))
+    lags = np.arange(n, dtype=np.float64)
+    row = np.zeros(n)
+    for tc, var in zip(tcs, variances, strict=True):
+        row += var * np.exp(-lags * block_s / tc)
+    flicker = toeplitz(row)
+    # Block means of a random walk of unit k started at t = 0: cov = B (min(i, j) + 1/2) between
+    # different blocks (the earlier block's mean time) and B (i + 1/3) on the diagonal.
+    idx = np.arange(n, dtype=np.float64)
+    rw = block_s * (np.minimum.outer(idx, idx) + 0.5)
+    rw[np.diag_indices(n)] = block_s * (idx + 1.0 / 3.0)
+    return {"bias_instability": flicker, "rate_random_walk": rw}
+
+
+@dataclass(frozen=True)
+class NoiseState:
+    """Which correlated noise terms are in the model and their ratios to the white variance."""
+
+    terms: tuple[str, ...]
+    log_ratios: tuple[float, ...]
+
+    def ratios(self) -> dict[str, float]:
+        return {term: 10.0**lr for term, lr in zip(self.terms, self.log_ratios, strict=True)}
+
+
+class Gls:
+    """A Cholesky-factored block covariance (up to the profiled scale ``s^2``)."""
+
+    def __init__(self, n: int, block_s: float, duration_s: float, state: NoiseState) -> None:
+        self.n = n
+        self.block_s = block_s
+        self.duration_s = duration_s
+        self.state = state
+        cov = np.eye(n)
+        units = _unit_matrices(n, block_s, duration_s) if state.terms else {}
+        for term, ratio in state.ratios().items():
+            cov += ratio * units[term]
+        self.cov_unit = cov
+        factor, _ = cho_factor(cov, lower=True, check_finite=False)
+        self.chol = np.tril(factor)
+        self.half_logdet = float(np.sum(np.log(np.diag(self.chol))))
+
+    def whiten(self, m: np.ndarray) -> np.ndarray:
+        return solve_triangular(self.chol, m, lower=True, check_finite=False)
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> GlsResult:
+        """GLS coefficients and the profiled log-likelihood of ``y = X beta + e``."""
+        Xw = self.whiten(X)
+        yw = self.whiten(y)
+        return self.fit_whitened(Xw, yw)
+
+    def fit_whitened(self, Xw: np.ndarray, yw: np.ndarray) -> GlsResult:
+        if Xw.shape[1]:
+            beta, *_ = np.linalg.lstsq(Xw, yw, rcond=None)
+            rw = yw - Xw @ beta
+        else:
+            beta = np.zeros(0)
+            rw = yw
+        rss = float(rw @ rw)
+        return GlsResult(beta=beta, rss=rss, loglik=self.loglik_from_rss(rss))
+
+    def loglik_from_rss(self, rss: float) -> float:
+        n = self.n
+        s2 = max(rss / n, 1e-300)
+        return -0.5 * n * (math.log(2.0 * math.pi * s2) + 1.0) - self.half_logdet
+
+    def noise_params(self, rss: float) -> dict[str, float]:
+        """Catalogue noise coefficients implied by the fitted scale and ratios."""
+        s2 = rss / self.n
+        out = {"white_noise": math.sqrt(s2 * self.block_s)}
+        ratios = self.state.ratios()
+        if "bias_instability" in ratios:
+            out["bias_instability"] = math.sqrt(ratios["bias_instability"] * s2)
+        if "rate_random_walk" in ratios:
+            out["rate_random_walk"] = math.sqrt(ratios["rate_random_walk"] * s2)
+        return out
+
+
+@dataclass(frozen=True)
+class GlsResult:
+    beta: np.ndarray
+    rss: float
+    loglik: float
+
+
+def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
+    """Starting ratios: b and k of the simulator's defaults relative to the measured white noise."""
+    s2 = max(white_n, 1e-6) ** 2 / block_s
+    guess = {"bias_instability": 0.02**2 / s2, "rate_random_walk": 5e-4**2 / s2}
+    logs = tuple(float(np.clip(math.log10(guess[t]), *LOG_RATIO_BOUNDS)) for t in terms)
+    return NoiseState(tuple(terms), logs)
+
+
+def fit_noise(
+    X: np.ndarray,
+    y: np.ndarray,
+    n: int,
+    block_s: float,
+    duration_s: float,
+    start: NoiseState,
+    *,
+    max_evals: int = 80,
+) -> tuple[Gls, GlsResult]:
+    """Maximum-likelihood noise ratios for the linear model ``X``; returns the factor and fit."""
+    if not start.terms:
+        gls = Gls(n, block_s, duration_s, start)
+        return gls, gls.fit(X, y)
+    cache: dict[tuple[float, ...], tuple[Gls, GlsResult]] = {}
+
+    def evaluate(logs: np.ndarray) -> tuple[Gls, GlsResult]:
+        key = tuple(np.round(np.clip(logs, *LOG_RATIO_BOUNDS), 4))
+        if key not in cache:
+            gls = Gls(n, block_s, duration_s, NoiseState(start.terms, key))
+            cache[key] = (gls, gls.fit(X, y))
+        return cache[key]
+
+    x0 = np.array(start.log_ratios)
+    # A coarse look along each axis first: ML surfaces of variance ratios are flat far from the
+    # optimum, and Nelder-Mead started on a plateau would stop there.
+    best = x0
+    best_ll = evaluate(x0)[1].loglik
+    for axis in range(x0.size):
+        for delta in (-3.0, -1.5, 1.5, 3.0):
+            trial = best.copy()
+            trial[axis] = np.clip(trial[axis] + delta, *LOG_RATIO_BOUNDS)
+            ll = evaluate(trial)[1].loglik
+            if ll > best_ll:
+                best, best_ll = trial, ll
+    result = minimize(
+        lambda v: -evaluate(v)[1].loglik,
+        best,
+        method="Nelder-Mead",
+        options={"xatol": 0.02, "fatol": 0.01, "maxfev": max_evals, "initial_simplex": _simplex(best)},
+    )
+    return evaluate(result.x if -result.fun >= best_ll else best)
+
+
+def _simplex(x0: np.ndarray) -> np.ndarray:
+    simplex = [x0.copy()]
+    for axis in range(x0.size):
+        point = x0.copy()
+        point[axis] += 0.5
+        simplex.append(point)
+    return np.array(simplex)
+
+
+def window_variances(cov: np.ndarray, width: int, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """Start indices and variances of the sums over windows of ``width`` under ``cov``."""
+    n = cov.shape[0]
+    starts = np.arange(0, n - width + 1, step)
+    cum = np.zeros((n + 1, n + 1))
+    cum[1:, 1:] = cov.cumsum(0).cumsum(1)
+    a = starts
+    b = starts + width
+    var = cum[b, b] - cum[a, b] - cum[b, a] + cum[a, a]
+    return starts, var

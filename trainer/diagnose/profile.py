@@ -1,0 +1,313 @@
+"""What the recording's own temperature profile lets the finder identify, and where things are.
+
+Before searching for a missing effect the finder works out from the temperature alone which
+effects the test could reveal: hysteresis needs a reversal of temperature over a common range,
+a thermal lag and a dT/dt term need ramp corners or a second ramp rate (on one constant-rate
+ramp both are a constant offset the polynomial absorbs), stress relaxation needs a long hold,
+``scale_factor_tc`` needs a second orientation. Effects that cannot show are reported as not
+identifiable, with the test that would make them identifiable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from trainer.diagnose.blocks import BlockData
+from trainer.physics.profiles import parse_segments
+
+BRANCH_NAMES = {1: "heating", -1: "cooling", 0: "hold"}
+
+
+@dataclass(frozen=True)
+class Segment:
+    label: str
+    start_s: float
+    end_s: float
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    identifiable: bool
+    reason: str
+    test: str = ""  # the test that would make it identifiable (or separate it better)
+    weak: bool = False
+
+
+@dataclass
+class Profile:
+    """Branch per block, segments, and the features that decide identifiability."""
+
+    branch: np.ndarray  # +1 heating, -1 cooling, 0 hold, per block
+    rate: np.ndarray  # degC/min per block
+    segments: list[Segment]
+    segments_from: str  # "metadata" or "temperature"
+    reversals: int
+    overlap_c: tuple[float, float] | None  # temperature range seen both heating and cooling
+    hold_s: float  # longest hold (s)
+    holds_after_ramp_s: float  # longest hold that follows a ramp
+    corners: int
+    ramp_rates: list[float]
+    starts_from_rest: bool
+    temp_min_c: float
+    temp_max_c: float
+    duration_s: float
+    lattice_lsb_c: float | None
+    known_input_varies: bool
+    identifiability: dict[str, Identifiability] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "segments": [{"label": s.label, "start_s": s.start_s, "end_s": s.end_s} for s in self.segments],
+            "segments_from": self.segments_from,
+            "temp_range_c": [self.temp_min_c, self.temp_max_c],
+            "reversals": self.reversals,
+            "heating_cooling_overlap_c": None if self.overlap_c is None else list(self.overlap_c),
+            "longest_hold_s": self.hold_s,
+            "longest_hold_after_ramp_s": self.holds_after_ramp_s,
+            "ramp_corners": self.corners,
+            "ramp_rates_c_per_min": self.ramp_rates,
+            "starts_from_rest": self.starts_from_rest,
+            "thermometer_lsb_c": self.lattice_lsb_c,
+        }
+
+
+def _runs(codes: np.ndarray) -> list[tuple[int, int, int]]:
+    """(code, start, stop) of runs of equal values."""
+    if codes.size == 0:
+        return []
+    edges = np.flatnonzero(np.diff(codes)) + 1
+    starts = np.concatenate(([0], edges))
+    stops = np.concatenate((edges, [codes.size]))
+    return [(int(codes[a]), int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
+
+
+def classify_branches(rate: np.ndarray, block_s: float) -> np.ndarray:
+    """+1/-1/0 per block; runs shorter than ~2 min (or 2 % of the run) merge into a neighbour."""
+    scale = float(np.percentile(np.abs(rate), 95)) if rate.size else 0.0
+    threshold = max(0.05, 0.1 * scale)
+    codes = np.where(rate > threshold, 1, np.where(rate < -threshold, -1, 0)).astype(np.int64)
+    min_len = max(2, int(round(max(120.0, 0.02 * rate.size * block_s) / block_s)))
+    for _ in range(4):
+        runs = _runs(codes)
+        if len(runs) <= 1:
+            break
+        changed = False
+        for index, (_, a, b) in enumerate(runs):
+            if b - a >= min_len:
+                continue
+            neighbours = [runs[k] for k in (index - 1, index + 1) if 0 <= k < len(runs)]
+            longest = max(neighbours, key=lambda run: run[2] - run[1])
+            codes[a:b] = longest[0]
+            changed = True
+        if not changed:
+            break
+    return codes
+
+
+def _segments(data: BlockData, meta: dict[str, str], codes: np.ndarray) -> tuple[list[Segment], str]:
+    text = meta.get("segments")
+    if text:
+        try:
+            return [Segment(*item) for item in parse_segments(text)], "metadata"
+        except ValueError:
+            pass
+    segments = []
+    starts = data.starts
+    end = data.t[-1] + 0.5 * data.block_s
+    for index, (code, a, b) in enumerate(_runs(codes)):
+        label = {1: "ramp_up", -1: "ramp_down"}.get(code, "soak" if index == 0 else "hold")
+        stop = starts[b] if b < codes.size else end
+        segments.append(Segment(label, float(starts[a]), float(stop)))
+    return segments, "temperature"
+
+
+def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: bool = False) -> Profile:
+    """Branches, segments and identifiability from the block temperatures."""
+    temp = data.temperature(True)
+    rate = data.rate(True)
+    codes = classify_branches(rate, data.block_s)
+    segments, source = _segments(data, meta, codes)
+    runs = _runs(codes)
+    moving = [(code, a, b) for code, a, b in runs if code != 0]
+    reversals = sum(1 for r0, r1 in zip(moving, moving[1:], strict=False) if r0[0] != r1[0])
+    heat = temp[codes == 1]
+    cool = temp[codes == -1]
+    overlap = None
+    if heat.size and cool.size:
+        lo = max(float(heat.min()), float(cool.min()))
+        hi = min(float(heat.max()), float(cool.max()))
+        if hi > lo:
+            overlap = (lo, hi)
+    hold_lengths = [(b - a) * data.block_s for code, a, b in runs if code == 0]
+    after_ramp = [
+        (b - a) * data.block_s for k, (code, a, b) in enumerate(runs) if code == 0 and k > 0
+    ]
+    ramp_rates: list[float] = []
+    for code, a, b in moving:
+        core = np.abs(rate[a:b])
+        value = float(np.median(core))
+        if not any(abs(value / r - 1.0) < 0.25 for r in ramp_rates):
+            ramp_rates.append(value)
+    first_ramp = moving[0] if moving else None
+    starts_from_rest = bool(
+        first_ramp is not None
+        and first_ramp[1] == 0
+        and abs(rate[0]) < 0.5 * float(np.median(np.abs(rate[first_ramp[1] : first_ramp[2]])))
+    )
+    corners = max(0, len(runs) - 1) + int(starts_from_rest)
+    profile = Profile(
+        branch=codes,
+        rate=rate,
+        segments=segments,
+        segments_from=source,
+        reversals=reversals,
+        overlap_c=overlap,
+        hold_s=max(hold_lengths, default=0.0),
+        holds_after_ramp_s=max(after_ramp, default=0.0),
+        corners=corners,
+        ramp_rates=sorted(ramp_rates),
+        starts_from_rest=starts_from_rest,
+        temp_min_c=float(temp.min()),
+        temp_max_c=float(temp.max()),
+        duration_s=data.duration_s,
+        lattice_lsb_c=data.lattice_lsb_c,
+        known_input_varies=known_input_varies,
+    )
+    profile.identifiability = identifiability(profile)
+    return profile
+
+
+def identifiability(p: Profile) -> dict[str, Identifiability]:
+    """Which catalogue effects this temperature profile can reveal, and what test would help."""
+    out: dict[str, Identifiability] = {}
+    rate_changes = p.corners >= 1 or len(p.ramp_rates) >= 2 or p.reversals >= 1
+    two_rates_or_corners = p.corners >= 2 or len(p.ramp_rates) >= 2 or p.reversals >= 1
+    if rate_changes:
+        weak = not two_rates_or_corners
+        reason = (
+            f"{p.corners} ramp corner(s), {len(p.ramp_rates)} ramp rate(s), {p.reversals} reversal(s)"
+            + ("; only the start of the ramp separates a lag from a dT/dt term" if weak else "")
+        )
+        for effect in ("thermal_lag", "temp_rate"):
+            out[effect] = Identifiability(
+                True, reason, "a second ramp rate or a hold after the ramp (corners)" if weak else "", weak
+            )
+    else:
+        reason = (
+            "one constant-rate ramp: a lag or a dT/dt term is a constant temperature offset that the "
+            "polynomial absorbs (an uneven heating rate in flight would then skew the compensation)"
+        )
+        for effect in ("thermal_lag", "temp_rate"):
+            out[effect] = Identifiability(False, reason, "ramp at two different rates, or add a hold after the ramp")
+    overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
+    if p.reversals >= 1 and overlap_span >= 3.0:
+        out["hysteresis"] = Identifiability(
+            True,
+            f"heating and cooling both cover {p.overlap_c[0]:.1f}..{p.overlap_c[1]:.1f} degC",  # type: ignore[index]
+            "" if p.holds_after_ramp_s >= 600 else "a hold at the turning point separates it from a lag",
+        )
+    else:
+        out["hysteresis"] = Identifiability(
+            False,
+            "no reversal of temperature over a common range: one branch cannot show a branch offset",
+            "add a ramp_down over the same temperature range as the ramp_up (then a hold)",
+        )
+    if p.duration_s >= 1200.0 and (p.holds_after_ramp_s >= 600.0 or p.reversals >= 1):
+        out["stress_relaxation"] = Identifiability(
+            True,
+            f"longest hold after a ramp {p.holds_after_ramp_s:.0f} s, {p.reversals} reversal(s)",
+            "" if p.holds_after_ramp_s >= 1800 else "hold >= 1 h after the ramp to see the creep settle",
+            weak=p.holds_after_ramp_s < 1800,
+        )
+    else:
+        out["stress_relaxation"] = Identifiability(
+            False,
+            "no hold after a ramp or reversal long enough for a 20-min-plus creep to show apart from the polynomial",
+            "hold the temperature for >= 1 h after the ramp",
+        )
+    out["warmup"] = Identifiability(
+        True,
+        "the recording starts at power-on" + ("" if p.segments and p.segments[0].label == "soak" else " (no soak)"),
+        "" if p.segments and p.segments[0].label == "soak" else "power on and soak 30 min before ramping",
+        weak=not (p.segments and p.segments[0].label == "soak"),
+    )
+    out["periodic"] = Identifiability(True, f"{p.duration_s:.0f} s of data: periods up to half of it")
+    out["bias_step"] = Identifiability(True, "a step shows anywhere in the run")
+    if p.lattice_lsb_c is not None:
+        out["temp_quantization"] = Identifiability(
+            True, f"the thermometer column lies on a {p.lattice_lsb_c:g} degC lattice (a staircase)"
+        )
+    else:
+        out["temp_quantization"] = Identifiability(
+            False, "the thermometer column is not quantised (no lattice of equal steps)", "", weak=False
+        )
+    if p.known_input_varies:
+        out["scale_factor_tc"] = Identifiability(True, "the known true input changes (a second orientation)")
+    else:
+        out["scale_factor_tc"] = Identifiability(
+            False,
+            "a single static orientation: the scale-factor tempco times a constant input equals the "
+            "polynomial's linear term (a fixture tilt is a constant c0 the same way)",
+            "a 180 degree turn (+1 g / -1 g) at several temperatures, or a tumble",
+        )
+    monotone = p.reversals == 0 and p.hold_s < 0.1 * p.duration_s
+    out["rate_ramp"] = Identifiability(
+        not monotone,
+        "time and temperature move together on one ramp" if monotone else "holds or reversals decouple time from temperature",
+        "add a hold or a reversal" if monotone else "",
+    )
+    out["rate_random_walk"] = Identifiability(True, f"{p.duration_s:.0f} s of data")
+    out["bias_instability"] = Identifiability(True, f"{p.duration_s:.0f} s of data")
+    return out
+
+
+@dataclass(frozen=True)
+class Region:
+    """Where something shows: a time range, annotated from the temperature profile."""
+
+    t_start_s: float
+    t_end_s: float
+    segment: str
+    temp_min_c: float
+    temp_max_c: float
+    branch: str
+    significance: dict[str, float]
+    kind: str = "residual"
+    note: str = ""
+
+    def to_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "t_start_s": round(self.t_start_s, 3),
+            "t_end_s": round(self.t_end_s, 3),
+            "segment": self.segment,
+            "temp_min_c": round(self.temp_min_c, 3),
+            "temp_max_c": round(self.temp_max_c, 3),
+            "branch": self.branch,
+            "significance": self.significance,
+            "kind": self.kind,
+        }
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+def region(
+    data: BlockData, profile: Profile, a: int, b: int, significance: dict[str, float], kind: str, note: str = ""
+) -> Region:
+    """A :class:`Region` covering blocks ``a:b``."""
+    a = max(0, min(a, data.n - 1))
+    b = max(a + 1, min(b, data.n))
+    t0 = float(data.starts[a])
+    t1 = float(data.starts[b - 1] + data.block_s)
+    temp = data.temperature(True)[a:b]
+    labels = []
+    for seg in profile.segments:
+        if seg.end_s > t0 and seg.start_s < t1 and seg.label not in labels:
+            labels.append(seg.label)
+    codes = profile.branch[a:b]
+    counts = {c: int(np.sum(codes == c)) for c in (1, -1, 0)}
+    top = max(counts, key=lambda c: counts[c])
+    branch = BRANCH_NAMES[top] if counts[top] >= 0.8 * codes.size else "mixed"
+    return Region(t0, t1, "+".join(labels) or "?", float(temp.min()), float(temp.max()), branch, significance, kind, note)

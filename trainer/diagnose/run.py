@@ -1,0 +1,574 @@
+"""The finder end to end: calibrate the user's model, search, locate, and compare before/after."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from trainer.diagnose.baseline import Baseline, build_baseline
+from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
+from trainer.diagnose.candidates import fine_residual, scan_steps
+from trainer.diagnose.gls import window_variances
+from trainer.diagnose.locate import AllanComparison, allan_comparison, scan_regions, spectral_peaks
+from trainer.diagnose.model import (
+    PLAUSIBLE,
+    ModelFit,
+    build_design,
+    catalogue_effects,
+    fit_model,
+)
+from trainer.diagnose.profile import Profile, Region, analyse_profile, region
+from trainer.diagnose.select import Selection, THRESHOLD, baseline_support, final_indices, forward_select, resolve
+from trainer.physics.config import PhysicsConfig
+from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig, drift
+from trainer.recording import Recording
+
+CANDIDATE_ORDER: tuple[str, ...] = (
+    "thermal_lag",
+    "temp_rate",
+    "hysteresis",
+    "stress_relaxation",
+    "warmup",
+    "periodic",
+    "bias_step",
+    "temp_quantization",
+    "scale_factor_tc",
+    "rate_ramp",
+    "bias_instability",
+    "rate_random_walk",
+)
+NOISE_EFFECTS = frozenset({"bias_instability", "rate_random_walk"})
+
+ADVICE: dict[str, str] = {
+    "thermal_lag": (
+        "the proof mass lags the thermometer: a polynomial fitted at one heating rate is skewed when the "
+        "rate changes (uneven heating on the pad or in flight); feed the compensator a low-passed temperature"
+    ),
+    "temp_rate": (
+        "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "
+        "at another; add a dT/dt input or calibrate at the flight's heating rates"
+    ),
+    "hysteresis": (
+        "heating and cooling branches differ: a single polynomial splits the difference; calibrate on both "
+        "branches and track the branch (the offset persists in holds)"
+    ),
+    "stress_relaxation": (
+        "package creep after a temperature change: the bias keeps moving for tens of minutes at a constant "
+        "temperature; hold long enough before calibrating or model the creep"
+    ),
+    "warmup": (
+        "self-heating after power-on: the bias settles over the first minutes; let the board warm up "
+        "(about 3 time constants) before calibration and before flight, or model the warm-up"
+    ),
+    "periodic": "a periodic disturbance (chamber compressor, mains beat, fan): it is not temperature drift",
+    "bias_step": "a bias step (shock, mode hop, reset): the compensation is offset after it",
+    "temp_quantization": (
+        "the temperature reading comes in coarse steps: a polynomial on the staircase leaves a sawtooth; "
+        "interpolate or low-pass the temperature before the compensation"
+    ),
+    "scale_factor_tc": "the scale factor drifts with temperature: a compensation at one orientation is off at another",
+    "rate_ramp": "a linear drift in time independent of temperature (ageing, creep of the mount)",
+    "rate_random_walk": "random wander of the bias beyond the modelled noise: no compensator can remove it",
+    "bias_instability": "flicker noise floor beyond the modelled noise",
+}
+
+
+@dataclass
+class FitSummary:
+    rms_mg: float  # full-rate residual RMS
+    rms_block_mg: float  # residual RMS of the block means (where drift mismatches show)
+    bic: float
+    loglik: float
+    n_params: int
+    per_segment: list[dict[str, Any]]
+    residual_block: np.ndarray
+    residual_full: np.ndarray
+    allan: AllanComparison
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rms_mg": round(self.rms_mg, 6),
+            "rms_block_mg": round(self.rms_block_mg, 6),
+            "bic": round(self.bic, 2),
+            "loglik": round(self.loglik, 2),
+            "n_params": self.n_params,
+            "per_segment": self.per_segment,
+            "allan_departures": self.allan.to_dict()["departures"],
+        }
+
+
+@dataclass
+class Diagnosis:
+    """Everything the report needs; :meth:`to_dict` is the ``--json`` document."""
+
+    source: str
+    data: BlockData
+    profile: Profile
+    baseline: Baseline
+    baseline_fit: ModelFit
+    selection: Selection
+    left_out: list[dict[str, Any]]
+    ambiguous: list[dict[str, Any]]
+    not_identifiable: list[dict[str, Any]]
+    not_supported: list[dict[str, Any]]
+    mismatch: list[Region]
+    unexplained: list[Region]
+    before: FitSummary
+    after: FitSummary
+    tested: list[dict[str, Any]]
+    augmented: PhysicsConfig
+    holdout: dict[str, Any] | None
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.data
+        return {
+            "recording": {
+                "source": self.source,
+                "rows": int(d.full_t.size),
+                "sample_rate_hz": d.fs,
+                "duration_s": round(d.duration_s, 3),
+                "block_s": round(d.block_s, 6),
+                "blocks": d.n,
+                "white_noise_n_mg_rt_s": float(f"{d.white_n_mg_rt_s:.5g}"),
+            },
+            "baseline": list(self.baseline.identifiers),
+            "baseline_calibrated": _effects_dict(catalogue_effects(self.baseline_fit), self.baseline_fit),
+            "profile": self.profile.to_dict(),
+            "criterion": {
+                "name": "BIC of the GLS likelihood of block means, noise (white, flicker, random walk) by ML",
+                "add_threshold": THRESHOLD,
+                "ambiguous_below": 6.0,
+            },
+            "mismatch": [r.to_dict() for r in self.mismatch],
+            "left_out": self.left_out,
+            "ambiguous": self.ambiguous,
+            "not_identifiable": self.not_identifiable,
+            "not_supported": self.not_supported,
+            "tested": self.tested,
+            "fit": {"before": self.before.to_dict(), "after": self.after.to_dict()},
+            "unexplained": [r.to_dict() for r in self.unexplained],
+            "holdout": self.holdout,
+            "notes": self.notes + self.baseline.notes,
+            "seconds": round(self.seconds, 2),
+        }
+
+
+def _effects_dict(effects: list[EffectConfig], fit: ModelFit) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for effect in effects:
+        params = {k: float(f"{v:.6g}") for k, v in effect.params.items()}
+        if effect.identifier in ("periodic", "bias_step"):
+            out.setdefault(effect.identifier, []).append(params)
+        else:
+            out[effect.identifier] = params
+    for term, params in fit.noise_params().items():
+        out[term] = {k: float(f"{v:.6g}") for k, v in params.items()}
+    return out
+
+
+# ------------------------------------------------------------------------------------ helpers
+
+
+def full_rate_model(fit: ModelFit) -> np.ndarray:
+    """The fitted model re-simulated at the full rate with ``physics.effects.drift`` (the rerun)."""
+    data = fit.data
+    dequant = "temp_quantization" in fit.identifiers
+    T_full = np.interp(data.full_t, data.t, data.temperature(dequant))
+    rate_full = np.interp(data.full_t, data.t, data.rate(dequant))
+    effects = catalogue_effects(fit)
+    g_in = 0.0
+    breakdown = drift(effects, data.full_t, T_full, g_in_mg=g_in, dT_die_dt_c_per_min=rate_full)
+    out = np.asarray(breakdown.total, dtype=np.float64).copy()
+    for index, term in enumerate(fit.terms):
+        if term.identifier == "rate_ramp":
+            out += fit.linear(index)["r_mg_per_s"] * data.full_t
+        if term.identifier == "scale_factor_tc" and data.known_input_block is not None:
+            lin = fit.linear(index)
+            if "sf_ppm_per_c" in lin:
+                g = np.interp(data.full_t, data.t, data.known_input_block)
+                out += g * 1e-6 * lin["sf_ppm_per_c"] * (breakdown.T_pm - 25.0)
+    return out
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+def summarise(fit: ModelFit, profile: Profile, noise: dict[str, dict[str, float]] | None = None) -> FitSummary:
+    data = fit.data
+    residual_full = data.full_accel - full_rate_model(fit)
+    residual_full = residual_full - 0.0
+    per_segment = []
+    for seg in profile.segments:
+        mb = (data.t >= seg.start_s) & (data.t < seg.end_s)
+        mf = (data.full_t >= seg.start_s) & (data.full_t < seg.end_s)
+        per_segment.append(
+            {
+                "segment": seg.label,
+                "t_start_s": round(seg.start_s, 3),
+                "t_end_s": round(seg.end_s, 3),
+                "rms_mg": round(_rms(residual_full[mf]), 6),
+                "rms_block_mg": round(_rms(fit.residual[mb]), 6),
+            }
+        )
+    allan = allan_comparison(residual_full, data.fs, data.duration_s, noise or fit.noise_params())
+    return FitSummary(
+        rms_mg=_rms(residual_full),
+        rms_block_mg=_rms(fit.residual),
+        bic=fit.bic,
+        loglik=fit.loglik,
+        n_params=fit.n_params,
+        per_segment=per_segment,
+        residual_block=fit.residual,
+        residual_full=residual_full,
+        allan=allan,
+    )
+
+
+def _cov(fit: ModelFit) -> np.ndarray:
+    return fit.gls.cov_unit * (fit.rss / fit.data.n)
+
+
+def window_z(residual: np.ndarray, cov: np.ndarray, a: int, b: int) -> float:
+    _, var = window_variances(cov[a:b, a:b], b - a, 1)
+    return float(np.sum(residual[a:b]) / math.sqrt(max(float(var[0]), 1e-300)))
+
+
+def where_regions(
+    visible: np.ndarray, data: BlockData, profile: Profile, residual: np.ndarray, cov: np.ndarray
+) -> list[Region]:
+    """Where an effect's visible part (what the rest of the model cannot absorb) is large."""
+    peak = float(np.max(np.abs(visible))) if visible.size else 0.0
+    if peak <= 0:
+        return []
+    mask = np.abs(visible) >= 0.5 * peak
+    # close small gaps so one feature is one region
+    idx = np.flatnonzero(mask)
+    runs: list[list[int]] = []
+    for k in idx.tolist():
+        if runs and k - runs[-1][1] <= 3:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    scored = sorted(runs, key=lambda r: -float(np.sum(np.abs(visible[r[0] : r[1] + 1]))))[:4]
+    out = []
+    for a, b in sorted(scored):
+        z = window_z(residual, cov, a, b + 1)
+        sig = {"z": round(z, 2), "peak_mg": round(float(np.max(np.abs(visible[a : b + 1]))), 5)}
+        out.append(region(data, profile, a, b + 1, sig, "effect"))
+    return out
+
+
+def _param_flags(effect: EffectConfig) -> list[str]:
+    flags = []
+    for name, value in effect.params.items():
+        bounds = PLAUSIBLE.get((effect.identifier, name))
+        if bounds and not (bounds[0] <= abs(value) <= bounds[1]):
+            flags.append(f"{name} = {value:.4g} is outside the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}")
+    return flags
+
+
+# ------------------------------------------------------------------------------------ main
+
+
+def diagnose(
+    rec: Recording,
+    sim: PhysicsConfig | None = None,
+    *,
+    holdout_fraction: float = 0.25,
+    max_blocks: int = DEFAULT_MAX_BLOCKS,
+    progress: bool = False,
+) -> Diagnosis:
+    """Find what the user's simulation ``sim`` leaves out of recording ``rec``.
+
+    ``rec`` may contain ``true_*`` columns; they are removed before anything is read.
+    """
+    started = time.perf_counter()
+    rec = rec.without_truth()
+    stages = tqdm(total=5, desc="diagnose", unit="stage", disable=None if progress else True, leave=False)
+    t_axis = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
+    probe = build_blocks(rec, max_blocks=max_blocks)
+    baseline = build_baseline(sim, t_axis, probe.lattice_lsb_c)
+    data = probe if baseline.known_input is None else build_blocks(
+        rec, known_input=baseline.known_input, max_blocks=max_blocks
+    )
+    profile = analyse_profile(data, rec.meta, baseline.input_varies)
+    ident = profile.identifiability
+    stages.update()
+
+    baseline_fit = fit_model(baseline.terms, baseline.noise_terms, data)
+    stages.update()
+
+    present = set(baseline.identifiers)
+    candidates = [c for c in CANDIDATE_ORDER if c not in present and ident.get(c, None) and ident[c].identifiable]
+    selection = forward_select(baseline_fit, data, candidates, progress=progress)
+    identifiable = {c for c in CANDIDATE_ORDER if ident.get(c) and ident[c].identifiable}
+    resolve(selection, data, identifiable, progress=progress)
+    stages.update()
+
+    final = selection.final
+    cov_final = _cov(final)
+    before = summarise(baseline_fit, profile)
+    after = summarise(final, profile)
+
+    left_out = _left_out(selection, data, profile, baseline_fit, cov_final, before)
+    mismatch = locate_mismatch(baseline_fit, data, profile, cov_final, before.allan)
+    unexplained = locate_mismatch(final, data, profile, cov_final, after.allan)
+    stages.update()
+
+    not_identifiable = [
+        {"effect": effect, "reason": info.reason, "recommended_test": info.test}
+        for effect, info in ident.items()
+        if not info.identifiable and effect not in present and effect != "temp_quantization"
+    ]
+    tested = [
+        {"effect": t.effect, "delta_bic": round(t.delta_bic, 2), "how": t.note} for t in selection.tested_first_round
+    ]
+    for effect, info in ident.items():
+        if info.identifiable and info.weak and effect in candidates:
+            tested.append({"effect": effect, "note": f"weakly identifiable: {info.reason}; {info.test}"})
+    not_supported = baseline_support(baseline_fit, data, baseline.terms)
+    augmented = augmented_config(sim, final, data, profile, rec)
+    holdout = holdout_check(baseline_fit, final, data, holdout_fraction) if holdout_fraction > 0 else None
+    stages.update()
+    stages.close()
+    notes = []
+    if data.lattice_lsb_c is not None and "temp_quantization" not in [e["effect"] for e in left_out]:
+        if "temp_quantization" not in present:
+            notes.append(
+                f"the thermometer column is quantised ({data.lattice_lsb_c:g} degC) but modelling the staircase "
+                "does not improve the fit"
+            )
+    return Diagnosis(
+        source=rec.source,
+        data=data,
+        profile=profile,
+        baseline=baseline,
+        baseline_fit=baseline_fit,
+        selection=selection,
+        left_out=left_out,
+        ambiguous=selection.ambiguous,
+        not_identifiable=not_identifiable,
+        not_supported=not_supported,
+        mismatch=mismatch,
+        unexplained=unexplained,
+        before=before,
+        after=after,
+        tested=tested,
+        augmented=augmented,
+        holdout=holdout,
+        seconds=time.perf_counter() - started,
+        notes=notes,
+    )
+
+
+def _left_out(
+    selection: Selection,
+    data: BlockData,
+    profile: Profile,
+    baseline_fit: ModelFit,
+    cov: np.ndarray,
+    before: FitSummary,
+) -> list[dict[str, Any]]:
+    final = selection.final
+    effects_by_index = {}
+    catalogue = catalogue_effects(final)
+    term_positions = [k for k, term in enumerate(final.terms) if term.identifier in EFFECT_PARAMETERS]
+    for position, effect in zip(term_positions, catalogue, strict=True):
+        effects_by_index[position] = effect
+    noise_params = final.noise_params()
+    out = []
+    seen: dict[str, int] = {}
+    indices = final_indices(selection)
+    for step in selection.steps:
+        occurrence = seen.get(step.effect, 0)
+        seen[step.effect] = occurrence + 1
+        index = indices[(step.effect, occurrence)]
+        importance, reduced = selection.drop_one.get((step.effect, occurrence), (step.delta_bic, baseline_fit))
+        entry: dict[str, Any] = {"effect": step.effect}
+        if index is None:
+            entry["params"] = {k: float(f"{v:.6g}") for k, v in noise_params.get(step.effect, {}).items()}
+            departures = before.allan.departures
+            entry["where"] = [
+                {
+                    "t_start_s": 0.0,
+                    "t_end_s": round(data.duration_s, 3),
+                    "segment": "+".join(dict.fromkeys(s.label for s in profile.segments)),
+                    "temp_min_c": round(profile.temp_min_c, 3),
+                    "temp_max_c": round(profile.temp_max_c, 3),
+                    "branch": "mixed",
+                    "tau_range_s": [round(a, 3), round(b, 3)],
+                    "significance": {"max_adev_ratio": round(r, 3)},
+                    "kind": "allan",
+                }
+                for a, b, r in departures
+            ]
+        else:
+            effect = effects_by_index[index]
+            entry["params"] = {k: float(f"{v:.6g}") for k, v in effect.params.items()}
+            visible = final.prediction - reduced.prediction
+            entry["where"] = [r.to_dict() for r in where_regions(visible, data, profile, baseline_fit.residual, cov)]
+            entry["peak_visible_mg"] = round(float(np.max(np.abs(visible))), 5)
+            flags = _param_flags(effect)
+            if flags:
+                entry["flags"] = flags
+        entry["evidence"] = {
+            "criterion": "BIC",
+            "delta_bic_when_added": round(step.delta_bic, 2),
+            "delta_bic_when_dropped": round(importance, 2),
+            "how": step.evidence,
+        }
+        entry["advice"] = ADVICE.get(step.effect, "")
+        ambiguous_with = [
+            a["effects"][1] for a in selection.ambiguous if a["effects"][0] == step.effect
+        ]
+        if ambiguous_with:
+            entry["ambiguous_with"] = ambiguous_with
+        out.append(entry)
+    out.sort(key=lambda e: -e["evidence"]["delta_bic_when_dropped"])
+    return out
+
+
+def locate_mismatch(
+    fit: ModelFit, data: BlockData, profile: Profile, cov: np.ndarray, allan: AllanComparison
+) -> list[Region]:
+    """Regions, change points, periodic components and Allan departures of ``fit``'s residual."""
+    out = scan_regions(fit.residual, cov, data, profile)
+    times, rss = scan_steps(fit, data)
+    k = int(np.argmin(rss))
+    base_rss = float(np.sum(fit.gls.whiten(fit.residual) ** 2))
+    lr = data.n * math.log(max(base_rss, 1e-300) / max(float(rss[k]), 1e-300))
+    if lr - 2.0 * math.log(data.n) > THRESHOLD:
+        j = int(np.searchsorted(data.starts, times[k]))
+        out.append(
+            region(
+                data,
+                profile,
+                max(0, j - 1),
+                min(data.n, j + 1),
+                {"likelihood_ratio": round(lr, 1), "delta_bic": round(lr - 2.0 * math.log(data.n), 1)},
+                "change_point",
+                f"best single step at t = {times[k]:.1f} s",
+            )
+        )
+    x = fine_residual(fit, data)
+    for term in fit.terms:
+        if term.identifier == "periodic" and term.offset is not None:
+            amp, phase = term.offset
+            x = x - amp * np.sin(2 * math.pi * data.fine_t / term.nl[0] + phase)
+    lo = max(4.0, 2.5 * data.fine_step_s)
+    for peak in spectral_peaks(x, data.fine_step_s, lo, 0.5 * data.duration_s):
+        out.append(
+            region(
+                data,
+                profile,
+                0,
+                data.n,
+                {"p_value": float(f"{peak.p_value:.3g}"), "peak_over_background": round(peak.ratio, 1)},
+                "periodic",
+                f"spectral peak at period {peak.period_s:.2f} s",
+            )
+        )
+    for a, b, ratio in allan.departures:
+        out.append(
+            region(
+                data,
+                profile,
+                0,
+                data.n,
+                {"max_adev_ratio": round(ratio, 3)},
+                "allan",
+                f"Allan deviation above the modelled noise for tau {a:.3g}..{b:.3g} s",
+            )
+        )
+    return out
+
+
+def holdout_check(baseline_fit: ModelFit, final: ModelFit, data: BlockData, fraction: float) -> dict[str, Any] | None:
+    """Fit both models on the leading part of the run and score them on the held-out tail."""
+    n_train = int(round((1.0 - fraction) * data.n))
+    if n_train < 120 or data.n - n_train < 20:
+        return None
+    train = data.subset(n_train)
+    out: dict[str, Any] = {
+        "train_t_end_s": round(float(data.starts[n_train]), 3),
+        "test_t_start_s": round(float(data.starts[n_train]), 3),
+        "test_t_end_s": round(data.duration_s, 3),
+    }
+    for name, fit in (("before", baseline_fit), ("after", final)):
+        refit = fit_model(fit.terms, fit.noise.terms, train, start=fit.noise)
+        design = build_design(refit.terms, data)
+        prediction = design.X @ refit.beta + design.offset
+        residual = data.accel - prediction
+        test = residual[n_train:]
+        out[name] = {
+            "test_rms_block_mg": round(_rms(test), 6),
+            "test_mean_mg": round(float(np.mean(test)), 6),
+            "train_rms_block_mg": round(_rms(residual[:n_train]), 6),
+        }
+    b, a = out["before"]["test_rms_block_mg"], out["after"]["test_rms_block_mg"]
+    out["improvement_percent"] = round(100.0 * (b - a) / b, 2) if b > 0 else None
+    return out
+
+
+# ------------------------------------------------------------------------------------ config
+
+
+def augmented_config(
+    sim: PhysicsConfig | None, final: ModelFit, data: BlockData, profile: Profile, rec: Recording
+) -> PhysicsConfig:
+    """The user's simulation with the fitted (and found) effects, ready for ``trainer simulate``."""
+    from trainer.physics.config import NoiseConfig, ProtocolConfig, RecordingConfig
+
+    effects = catalogue_effects(final)
+    order = list(EFFECT_PARAMETERS)
+    effects = sorted(effects, key=lambda e: order.index(e.identifier))
+    noise_values = final.noise_params()
+    noise = [NoiseConfig("white_noise", {"n_mg_rt_s": noise_values["white_noise"]["n_mg_rt_s"]})]
+    for term in ("bias_instability", "rate_random_walk"):
+        if term in noise_values:
+            noise.append(NoiseConfig(term, dict(noise_values[term])))
+    for index, term in enumerate(final.terms):
+        if term.identifier == "rate_ramp":
+            noise.append(NoiseConfig("rate_ramp", {"r_mg_per_s": final.linear(index)["r_mg_per_s"]}))
+    if sim is not None:
+        if any(n.identifier == "quantization_noise" for n in sim.noise):
+            noise.insert(0, next(n for n in sim.noise if n.identifier == "quantization_noise"))
+        return replace(sim, effects=tuple(effects), noise=tuple(noise))
+    from trainer.physics.profiles import SegmentSpec
+
+    temp = data.temperature(True)
+    chamber = rec.columns.get("chamber_c")
+    specs: list[SegmentSpec] = []
+
+    def temp_at(t_s: float) -> float:
+        if chamber is not None:
+            return float(np.interp(t_s, rec.time_s - rec.time_s[0], chamber))
+        return float(np.interp(t_s, data.t, temp))
+
+    current = temp_at(0.0)
+    start_c = current
+    for seg in profile.segments:
+        duration = seg.end_s - seg.start_s
+        end_c = temp_at(seg.end_s - 1e-6)
+        label = seg.label
+        if label == "ramp_up" and end_c <= current + 0.01 or label == "ramp_down" and end_c >= current - 0.01:
+            label = "hold"
+        if label in ("soak", "hold"):
+            end_c = temp_at(0.5 * (seg.start_s + seg.end_s)) if chamber is None else end_c
+        specs.append(SegmentSpec(label, duration, round(end_c, 4)))
+        current = end_c
+    sensor = rec.meta.get("sensor", "diagnosed").strip() or "diagnosed"
+    return PhysicsConfig(
+        recording=RecordingConfig(sample_rate_hz=data.fs, sensor=sensor.splitlines()[0]),
+        protocol=ProtocolConfig("custom", round(start_c, 4), tuple(specs)),
+        effects=tuple(effects),
+        noise=tuple(noise),
+    )

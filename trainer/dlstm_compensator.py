@@ -1,0 +1,262 @@
+"""DLSTM compensators: the paper's recursive real-time model, its SSA/ISSA fusions, the
+temperature-input variant, and the persistence predictor that the honest scoring needs.
+
+All of them run the streaming front end of :mod:`trainer.realtime` (docs/realtime.md):
+
+- ``dlstm``, ``dlstm-ssa``, ``dlstm-issa`` (kind ``recursive``): the network maps the smoothed
+  output at step k to the one at step k+1 (the paper's ``U(t-1) -> U(t)``) and the compensated
+  output is ``a(n) - F[u_k]``. It removes whatever is predictable from the past output, a true
+  input signal included.
+- ``dlstm-temp`` (kind ``temperature``): the network maps the smoothed temperature and its rate
+  to the drift; it never sees the acceleration at run time, so a true input survives.
+- ``persistence``: ``F`` = identity, the trivial predictor every Allan-based score must beat.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Self
+
+import numpy as np
+import torch
+
+from trainer.compensator import Compensator
+from trainer.dlstm import PopulationDLSTM
+from trainer.errors import UserError
+from trainer.fusion import FusionResult, FusionSettings, Optimiser, TrainedPopulation, fuse, refine_stage
+from trainer.realtime import FrontEnd, Standardiser, hold, smoothed_steps, temperature_steps
+from trainer.recording import Recording
+
+WEIGHT_KEYS = ("w_x0", "w_h0", "b0", "w_x1", "w_h1", "b1", "w_out", "b_out")
+MIN_TRAINING_STEPS = 16
+
+
+def _run_network(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> np.ndarray:
+    """The float reference: one network over a (T, in) sequence in float64, outputs (T,)."""
+    individual = {name: tensor.double() for name, tensor in weights.items()}
+    net = PopulationDLSTM.from_individuals([individual], dtype=torch.float64)
+    x = torch.from_numpy(np.ascontiguousarray(inputs, dtype=np.float64)).reshape(1, 1, len(inputs), -1)
+    with torch.no_grad():
+        y, _ = net(x)
+    return y.reshape(-1).numpy()
+
+
+class _StreamingDLSTM(Compensator):
+    """Shared state and checkpoint layout of the DLSTM compensators."""
+
+    kind: ClassVar[str]
+    optimiser: ClassVar[Optimiser] = "none"
+
+    def __init__(
+        self,
+        *,
+        settings: FusionSettings | None = None,
+        frontend_seconds: dict[str, float] | None = None,
+        progress: bool = True,
+    ) -> None:
+        self.settings = settings or FusionSettings()
+        self.frontend_seconds = frontend_seconds or {}
+        self.progress = progress
+        self.frontend: FrontEnd | None = None
+        self.inputs_norm: Standardiser | None = None
+        self.output_norm: Standardiser | None = None
+        self.weights: dict[str, torch.Tensor] = {}
+        self.training: dict[str, Any] = {}
+
+    # -- what each kind defines ------------------------------------------------------------
+    def training_pairs(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+        """Raw (unstandardised) network inputs (T, in) and targets (T,) from a training recording."""
+        raise NotImplementedError
+
+    def run_inputs(self, rec: Recording) -> np.ndarray:
+        """Raw network inputs (K, in) at the network steps of a recording, as the stream sees them."""
+        raise NotImplementedError
+
+    # -- fitting ---------------------------------------------------------------------------
+    def prepare(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+        """Front end and standardisation from the training recording; standardised pairs."""
+        self.frontend = FrontEnd.from_seconds(rec.sample_rate_hz, **self.frontend_seconds)
+        inputs, targets = self.training_pairs(rec)
+        if len(targets) < MIN_TRAINING_STEPS:
+            raise UserError(
+                f"{rec.source}: only {len(targets)} network steps of {self.frontend.step_s:g} s; "
+                f"at least {MIN_TRAINING_STEPS} are needed to train a DLSTM"
+            )
+        self.inputs_norm = Standardiser.fit(inputs)
+        self.output_norm = Standardiser.fit(targets.reshape(-1, 1))
+        return self.inputs_norm.apply(inputs), self.output_norm.apply(targets.reshape(-1, 1))[:, 0]
+
+    def adopt(self, result: FusionResult) -> Self:
+        self.weights = result.weights
+        self.training = {"settings": self.settings.to_dict(), **result.summary()}
+        return self
+
+    def fit(self, rec: Recording) -> Self:
+        x, y = self.prepare(rec)
+        return self.adopt(fuse(x, y, self.settings, self.optimiser, progress=self.progress))
+
+    def fit_from_population(self, rec: Recording, trained: TrainedPopulation) -> Self:
+        """Refine an already gradient-trained population (``trainer compare`` shares stage one)."""
+        x, y = self.prepare(rec)
+        result = refine_stage(trained, x, y, self.settings, self.optimiser, progress=self.progress)
+        return self.adopt(result)
+
+    # -- running ---------------------------------------------------------------------------
+    def step_estimates(self, rec: Recording) -> np.ndarray:
+        """The held estimate ``h_k`` at every network step (mg)."""
+        assert self.frontend and self.inputs_norm and self.output_norm, "fit the model first"
+        self.frontend.check_rate(rec)
+        y = _run_network(self.weights, self.inputs_norm.apply(self.run_inputs(rec)))
+        return self.output_norm.invert(y.reshape(-1, 1))[:, 0]
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
+        assert self.frontend is not None, "fit the model first"
+        return hold(self.step_estimates(rec), len(rec), self.frontend.decimation)
+
+    # -- checkpoint ------------------------------------------------------------------------
+    def to_payload(self) -> dict[str, Any]:
+        assert self.frontend and self.inputs_norm and self.output_norm, "fit the model first"
+        w_x0 = self.weights["w_x0"]
+        frontend = {"kind": self.kind, **self.frontend.to_dict(), **self._normalisation_fields()}
+        return {
+            "architecture": {
+                "input_size": int(w_x0.shape[1]),
+                "hidden_size": int(w_x0.shape[0] // 4),
+                "num_layers": sum(1 for k in self.weights if k.startswith("w_h")),
+                "output_size": int(self.weights["w_out"].shape[0]),
+                "gate_order": "ifgo",
+            },
+            "weights": {k: v.detach().float().clone() for k, v in self.weights.items()},
+            "frontend": frontend,
+            "normalisation": {
+                "inputs_mean": list(self.inputs_norm.mean),
+                "inputs_std": list(self.inputs_norm.std),
+                "output_mean": self.output_norm.mean[0],
+                "output_std": self.output_norm.std[0],
+            },
+            "training": self.training,
+        }
+
+    def _normalisation_fields(self) -> dict[str, float]:
+        raise NotImplementedError
+
+    @classmethod
+    def from_payload(cls, payload: dict[str, Any]) -> Self:
+        model = cls(progress=False)
+        settings = payload["training"].get("settings", {})
+        model.settings = FusionSettings(**settings) if settings else FusionSettings()
+        model.training = payload["training"]
+        frontend = payload["frontend"]
+        if frontend["kind"] != cls.kind:
+            raise ValueError(f"frontend kind {frontend['kind']!r} does not belong to method {cls.method!r}")
+        model.frontend = FrontEnd.from_dict(frontend)
+        norm = payload["normalisation"]
+        model.inputs_norm = Standardiser(tuple(norm["inputs_mean"]), tuple(norm["inputs_std"]))
+        model.output_norm = Standardiser((float(norm["output_mean"]),), (float(norm["output_std"]),))
+        weights = payload["weights"]
+        missing = [k for k in WEIGHT_KEYS if k not in weights]
+        if missing:
+            raise KeyError(f"weights {missing}")
+        model.weights = {k: weights[k].float() for k in weights}
+        return model
+
+
+class RecursiveDLSTM(_StreamingDLSTM):
+    """The paper's real-time model: ``u_{k+1} = F[u_k]`` on the smoothed output (DLSTM alone)."""
+
+    method = "dlstm"
+    kind = "recursive"
+
+    def training_pairs(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+        assert self.frontend is not None
+        u = smoothed_steps(rec.accel_mg, self.frontend.train_accel_window, self.frontend.decimation)
+        return u[:-1].reshape(-1, 1), u[1:]
+
+    def run_inputs(self, rec: Recording) -> np.ndarray:
+        assert self.frontend is not None
+        return smoothed_steps(rec.accel_mg, self.frontend.accel_window, self.frontend.decimation).reshape(
+            -1, 1
+        )
+
+    def _normalisation_fields(self) -> dict[str, float]:
+        assert self.inputs_norm and self.output_norm
+        return {
+            "accel_mean": self.inputs_norm.mean[0],
+            "accel_std": self.inputs_norm.std[0],
+            "output_mean": self.output_norm.mean[0],
+            "output_std": self.output_norm.std[0],
+        }
+
+
+class RecursiveDLSTMWithSSA(RecursiveDLSTM):
+    """DLSTM + SSA (Xue and Shen 2020) over the trained population."""
+
+    method = "dlstm-ssa"
+    optimiser = "ssa"
+
+
+class RecursiveDLSTMWithISSA(RecursiveDLSTM):
+    """DLSTM + ISSA (adaptive weight, Lévy flight, elitism) over the trained population."""
+
+    method = "dlstm-issa"
+    optimiser = "issa"
+
+
+class TemperatureDLSTM(_StreamingDLSTM):
+    """Physically meaningful variant: smoothed temperature and its rate in, drift out."""
+
+    method = "dlstm-temp"
+    kind = "temperature"
+
+    def _features(self, rec: Recording) -> np.ndarray:
+        assert self.frontend is not None
+        temp_k, rate_k = temperature_steps(rec.temp_c, self.frontend)
+        return np.column_stack([temp_k, rate_k])
+
+    def training_pairs(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+        assert self.frontend is not None
+        u = smoothed_steps(rec.accel_mg, self.frontend.train_accel_window, self.frontend.decimation)
+        return self._features(rec), u
+
+    def run_inputs(self, rec: Recording) -> np.ndarray:
+        return self._features(rec)
+
+    def _normalisation_fields(self) -> dict[str, float]:
+        assert self.inputs_norm and self.output_norm
+        return {
+            "temp_mean": self.inputs_norm.mean[0],
+            "temp_std": self.inputs_norm.std[0],
+            "rate_mean": self.inputs_norm.mean[1],
+            "rate_std": self.inputs_norm.std[1],
+            "drift_mean": self.output_norm.mean[0],
+            "drift_std": self.output_norm.std[0],
+        }
+
+
+class Persistence(Compensator):
+    """``F`` = identity: the held estimate is the last smoothed output (no learning at all)."""
+
+    method = "persistence"
+
+    def __init__(self, frontend_seconds: dict[str, float] | None = None) -> None:
+        self.frontend_seconds = frontend_seconds or {}
+        self.frontend: FrontEnd | None = None
+
+    def fit(self, rec: Recording) -> Self:
+        self.frontend = FrontEnd.from_seconds(rec.sample_rate_hz, **self.frontend_seconds)
+        return self
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
+        assert self.frontend is not None, "fit the model first"
+        self.frontend.check_rate(rec)
+        u = smoothed_steps(rec.accel_mg, self.frontend.accel_window, self.frontend.decimation)
+        return hold(u, len(rec), self.frontend.decimation)
+
+    def to_payload(self) -> dict[str, Any]:
+        assert self.frontend is not None, "fit the model first"
+        return {"frontend": {"kind": "persistence", **self.frontend.to_dict()}}
+
+    @classmethod
+    def from_payload(cls, payload: dict[str, Any]) -> Self:
+        model = cls()
+        model.frontend = FrontEnd.from_dict(payload["frontend"])
+        return model

@@ -1,0 +1,191 @@
+"""The paper's fusion algorithm (section 3.1.4, Figure 8): DLSTM population + SSA/ISSA.
+
+1. ``population`` DLSTMs with random initial weights (seeded per individual).
+2. Gradient training (Adam, ``lr``) of the whole population as one batch until ending condition
+   one: ``iterations`` reached, or every individual's loss at or below ``target_loss``.
+3. The trained parameter vectors are the initial sparrows; SSA or ISSA runs ``cycles`` iterations
+   with the batched training loss as fitness (ending condition two: ``cycles`` or
+   ``target_loss``).
+4. The best vector found is exported.
+
+Stage 2 and stage 3 are separate functions so that ``trainer compare`` trains one population
+and refines it with SSA and with ISSA, exactly as the paper compares them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from trainer.dlstm import PopulationDLSTM
+from trainer.dlstm_train import TrainingHistory, population_loss, train_population
+from trainer.optim import minimize
+
+Optimiser = Literal["none", "ssa", "issa"]
+
+
+@dataclass(frozen=True)
+class FusionSettings:
+    """The paper's section 4 settings, all configurable."""
+
+    population: int = 10
+    hidden_size: int = 10
+    num_layers: int = 2
+    lr: float = 0.02
+    iterations: int = 500
+    cycles: int = 200
+    target_loss: float | None = None
+    seed: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items()}
+
+
+@dataclass
+class TrainedPopulation:
+    """Stage 2's result: the trained population and its per-iteration losses."""
+
+    model: PopulationDLSTM
+    history: TrainingHistory
+    seconds: float
+
+
+@dataclass
+class FusionResult:
+    """What the exported model records about its training."""
+
+    weights: dict[str, torch.Tensor]
+    optimiser: Optimiser
+    train_loss_per_iteration: list[float]  # best individual's loss after each gradient step
+    population_loss_before: list[float]  # (P,) after gradient training
+    best_loss: float
+    optimiser_history: list[float] = field(default_factory=list)  # best fitness per cycle
+    seconds_gradient: float = 0.0
+    seconds_optimiser: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "optimiser": self.optimiser,
+            "best_loss": self.best_loss,
+            "population_loss_after_gradient": self.population_loss_before,
+            "best_loss_after_gradient": float(np.nanmin(self.population_loss_before)),
+            "train_loss_per_iteration": self.train_loss_per_iteration,
+            "optimiser_best_per_cycle": self.optimiser_history,
+            "seconds_gradient": self.seconds_gradient,
+            "seconds_optimiser": self.seconds_optimiser,
+        }
+
+
+def _as_batch(inputs: np.ndarray, targets: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    """(T, in), (T,) numpy -> (1, T, in), (1, T, 1) float32 tensors."""
+    x = torch.from_numpy(np.ascontiguousarray(inputs, dtype=np.float32)).reshape(1, len(inputs), -1)
+    y = torch.from_numpy(np.ascontiguousarray(targets, dtype=np.float32)).reshape(1, len(targets), 1)
+    return x, y
+
+
+def train_stage(
+    inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, *, progress: bool = True
+) -> TrainedPopulation:
+    """Stage 1-2: initialise and gradient-train the population (ending condition one)."""
+    x, y = _as_batch(inputs, targets)
+    torch.manual_seed(settings.seed)
+    model = PopulationDLSTM(
+        settings.population,
+        x.shape[-1],
+        settings.hidden_size,
+        settings.num_layers,
+        1,
+        seed=settings.seed,
+    )
+
+    def reached_target(_: int, losses: torch.Tensor) -> bool:
+        return settings.target_loss is not None and bool(torch.all(losses <= settings.target_loss))
+
+    start = time.perf_counter()
+    history = train_population(
+        model,
+        x,
+        y,
+        lr=settings.lr,
+        iterations=settings.iterations,
+        seed=settings.seed,
+        progress=progress,
+        callback=reached_target,
+    )
+    return TrainedPopulation(model, history, time.perf_counter() - start)
+
+
+def refine_stage(
+    trained: TrainedPopulation,
+    inputs: np.ndarray,
+    targets: np.ndarray,
+    settings: FusionSettings,
+    optimiser: Optimiser,
+    *,
+    progress: bool = True,
+) -> FusionResult:
+    """Stage 3-4: SSA/ISSA over the trained population (or none), export the best vector."""
+    x, y = _as_batch(inputs, targets)
+    model = trained.model
+    with torch.no_grad():
+        losses = population_loss(model, x, y).double().numpy()
+    per_iteration = [float(np.nanmin(row)) for row in trained.history.losses.double().numpy()]
+    result = FusionResult(
+        weights={},
+        optimiser=optimiser,
+        train_loss_per_iteration=per_iteration,
+        population_loss_before=[float(v) for v in losses],
+        best_loss=float(np.nanmin(losses)),
+        seconds_gradient=trained.seconds,
+    )
+    if optimiser == "none" or (settings.target_loss is not None and result.best_loss <= settings.target_loss):
+        best = int(np.nanargmin(losses))
+        result.weights = model.individual(best)
+        return result
+
+    spec = model.spec
+
+    def fitness(population: np.ndarray) -> np.ndarray:
+        theta = torch.from_numpy(population.astype(np.float32))
+        with torch.no_grad():
+            return population_loss(theta, x, y, spec=spec).double().numpy()
+
+    def reached_target(snapshot: Any) -> bool:
+        return settings.target_loss is not None and snapshot.best_fitness <= settings.target_loss
+
+    start = time.perf_counter()
+    outcome = minimize(
+        fitness,
+        model.flatten().detach().double().numpy(),
+        seed=settings.seed,
+        variant=optimiser,
+        iterations=settings.cycles,
+        callback=reached_target,
+        progress=progress,
+    )
+    result.seconds_optimiser = time.perf_counter() - start
+    result.optimiser_history = [float(v) for v in outcome.history]
+    best_theta = torch.from_numpy(np.asarray(outcome.best_x, dtype=np.float32)).reshape(1, -1)
+    single = PopulationDLSTM(1, spec.input_size, spec.hidden_size, spec.num_layers, spec.output_size, seed=0)
+    single.load_flat(best_theta)
+    result.weights = single.individual(0)
+    with torch.no_grad():
+        result.best_loss = float(population_loss(single, x, y)[0])
+    return result
+
+
+def fuse(
+    inputs: np.ndarray,
+    targets: np.ndarray,
+    settings: FusionSettings,
+    optimiser: Optimiser,
+    *,
+    progress: bool = True,
+) -> FusionResult:
+    """The whole fusion algorithm for one optimiser."""
+    trained = train_stage(inputs, targets, settings, progress=progress)
+    return refine_stage(trained, inputs, targets, settings, optimiser, progress=progress)

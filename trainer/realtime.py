@@ -1,0 +1,118 @@
+"""The streaming front end of the DLSTM compensators (docs/realtime.md is the contract).
+
+Per 200 Hz sample: trailing moving averages of acceleration and temperature; a network step at
+every ``n % D == 0`` on the smoothed values; the network's estimate ``h`` held until the next step;
+output ``a(n) - h``. Because the network is causal and only sees the decimated sequence, running
+it once over the whole decimated sequence and repeating each estimate ``D`` times is *exactly*
+the streaming computation, and is what this module does (vectorised).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from trainer.errors import UserError
+from trainer.recording import Recording
+from trainer.signal import moving_average, window_samples
+
+PAPER_TRAIN_SMOOTHING_S = 5.0
+PAPER_RUN_SMOOTHING_S = 0.5
+DEFAULT_TEMP_SMOOTHING_S = 5.0
+DEFAULT_STEP_S = 1.0
+
+
+@dataclass(frozen=True)
+class FrontEnd:
+    """Windows and decimation in samples at ``rate_hz`` (see the table in docs/realtime.md)."""
+
+    rate_hz: float
+    accel_window: int
+    temp_window: int
+    decimation: int
+    train_accel_window: int
+
+    @classmethod
+    def from_seconds(
+        cls,
+        rate_hz: float,
+        *,
+        run_smoothing_s: float = PAPER_RUN_SMOOTHING_S,
+        temp_smoothing_s: float = DEFAULT_TEMP_SMOOTHING_S,
+        step_s: float = DEFAULT_STEP_S,
+        train_smoothing_s: float = PAPER_TRAIN_SMOOTHING_S,
+    ) -> FrontEnd:
+        return cls(
+            rate_hz=float(rate_hz),
+            accel_window=window_samples(run_smoothing_s, rate_hz),
+            temp_window=window_samples(temp_smoothing_s, rate_hz),
+            decimation=window_samples(step_s, rate_hz),
+            train_accel_window=window_samples(train_smoothing_s, rate_hz),
+        )
+
+    @property
+    def step_s(self) -> float:
+        return self.decimation / self.rate_hz
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> FrontEnd:
+        return cls(
+            rate_hz=float(data["rate_hz"]),
+            accel_window=int(data["accel_window"]),
+            temp_window=int(data["temp_window"]),
+            decimation=int(data["decimation"]),
+            train_accel_window=int(data["train_accel_window"]),
+        )
+
+    def check_rate(self, rec: Recording) -> None:
+        """Refuse a recording whose rate differs from the model's by more than 1 %."""
+        rate = rec.sample_rate_hz
+        if abs(rate - self.rate_hz) > 0.01 * self.rate_hz:
+            raise UserError(
+                f"{rec.source}: sample rate {rate:g} Hz, but the model was trained at {self.rate_hz:g} Hz"
+            )
+
+
+def smoothed_steps(x: np.ndarray, window: int, decimation: int) -> np.ndarray:
+    """Trailing mean over ``window`` samples, taken at the network steps ``0, D, 2D, ...``."""
+    return moving_average(np.asarray(x, dtype=np.float64), window, mode="trailing")[::decimation]
+
+
+def temperature_steps(temp_c: np.ndarray, frontend: FrontEnd) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed temperature ``T_k`` and its rate ``r_k`` in degC/min at the network steps (r_0 = 0)."""
+    temp_k = smoothed_steps(temp_c, frontend.temp_window, frontend.decimation)
+    rate_k = np.zeros_like(temp_k)
+    rate_k[1:] = np.diff(temp_k) * (60.0 / frontend.step_s)
+    return temp_k, rate_k
+
+
+def hold(estimates: np.ndarray, n_samples: int, decimation: int) -> np.ndarray:
+    """Zero-order hold: estimate ``k`` applies to samples ``kD .. kD + D - 1``."""
+    return np.repeat(estimates, decimation)[:n_samples]
+
+
+@dataclass(frozen=True)
+class Standardiser:
+    """``(x - mean) / std`` per feature; what the network sees is unit-scale."""
+
+    mean: tuple[float, ...]
+    std: tuple[float, ...]
+
+    @classmethod
+    def fit(cls, features: np.ndarray) -> Standardiser:
+        """From a (T, F) array; a constant feature gets std 1 so that it does not blow up."""
+        mean = features.mean(axis=0)
+        std = features.std(axis=0)
+        std = np.where(std > 0, std, 1.0)
+        return cls(tuple(float(v) for v in mean), tuple(float(v) for v in std))
+
+    def apply(self, features: np.ndarray) -> np.ndarray:
+        return (features - np.asarray(self.mean)) / np.asarray(self.std)
+
+    def invert(self, values: np.ndarray) -> np.ndarray:
+        return values * np.asarray(self.std) + np.asarray(self.mean)
