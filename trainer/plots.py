@@ -42,3 +42,36 @@ def plot_series(
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
+
+
+def plot_fit(
+    time_s: np.ndarray,
+    reference_label: str,
+    reference: np.ndarray,
+    estimates: dict[str, np.ndarray],
+    path: str | os.PathLike[str],
+    *,
+    title: str,
+) -> None:
+    """Figures 10-11: estimates over the reference (top) and their differences from it (bottom).
+
+    At the scale of the drift every good fit looks the same; the lower panel shows where they differ.
+    """
+    step = _thin(len(time_s))
+    minutes = time_s[step] / 60.0
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 7), dpi=110, sharex=True, height_ratios=(3, 2))
+    top.plot(minutes, reference[step], label=reference_label, color="black", linewidth=1.2)
+    for label, values in estimates.items():
+        top.plot(minutes, values[step], label=label, linewidth=0.8)
+        bottom.plot(minutes, (values - reference)[step], label=label, linewidth=0.7)
+    top.set_ylabel("acceleration (mg)")
+    top.set_title(title)
+    top.legend(loc="best", fontsize=8)
+    bottom.set_ylabel("estimate - reference (mg)")
+    bottom.set_xlabel("time (min)")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)

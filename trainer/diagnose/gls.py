@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import cho_factor, solve_triangular, toeplitz
+from scipy.linalg import solve_triangular, toeplitz
+from scipy.linalg.lapack import dpotrf
 from scipy.optimize import minimize
 
 from trainer.physics.noise import BI_FLAT_UNTIL_S, bias_instability_bank
@@ -66,14 +67,22 @@ class Gls:
         self.block_s = block_s
         self.duration_s = duration_s
         self.state = state
-        cov = np.eye(n)
         units = _unit_matrices(n, block_s, duration_s) if state.terms else {}
+        cov: np.ndarray | None = None
         for term, ratio in state.ratios().items():
-            cov += ratio * units[term]
+            if cov is None:
+                cov = units[term] * ratio
+            else:
+                cov += units[term] * ratio
+        if cov is None:
+            cov = np.zeros((n, n))
+        cov[np.diag_indices(n)] += 1.0
         self.cov_unit = cov
-        factor, _ = cho_factor(cov, lower=True, check_finite=False)
-        self.chol = np.tril(factor)
-        self.half_logdet = float(np.sum(np.log(np.diag(self.chol))))
+        chol, info = dpotrf(cov, lower=1, clean=1, overwrite_a=0)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"noise covariance not positive definite (dpotrf info {info})")
+        self.chol = chol
+        self.half_logdet = float(np.sum(np.log(np.diag(chol))))
 
     def whiten(self, m: np.ndarray) -> np.ndarray:
         return solve_triangular(self.chol, m, lower=True, check_finite=False)
@@ -134,7 +143,8 @@ def fit_noise(
     duration_s: float,
     start: NoiseState,
     *,
-    max_evals: int = 80,
+    max_evals: int = 40,
+    explore: bool = True,
 ) -> tuple[Gls, GlsResult]:
     """Maximum-likelihood noise ratios for the linear model ``X``; returns the factor and fit."""
     if not start.terms:
@@ -154,7 +164,7 @@ def fit_noise(
     # optimum, and Nelder-Mead started on a plateau would stop there.
     best = x0
     best_ll = evaluate(x0)[1].loglik
-    for axis in range(x0.size):
+    for axis in range(x0.size if explore else 0):
         for delta in (-3.0, -1.5, 1.5, 3.0):
             trial = best.copy()
             trial[axis] = np.clip(trial[axis] + delta, *LOG_RATIO_BOUNDS)
@@ -165,7 +175,7 @@ def fit_noise(
         lambda v: -evaluate(v)[1].loglik,
         best,
         method="Nelder-Mead",
-        options={"xatol": 0.02, "fatol": 0.01, "maxfev": max_evals, "initial_simplex": _simplex(best)},
+        options={"xatol": 0.03, "fatol": 0.02, "maxfev": max_evals, "initial_simplex": _simplex(best)},
     )
     return evaluate(result.x if -result.fun >= best_ll else best)
 
@@ -174,7 +184,7 @@ def _simplex(x0: np.ndarray) -> np.ndarray:
     simplex = [x0.copy()]
     for axis in range(x0.size):
         point = x0.copy()
-        point[axis] += 0.5
+        point[axis] += 0.3
         simplex.append(point)
     return np.array(simplex)
 

@@ -206,7 +206,10 @@ class ModelFit:
         return [term.identifier for term in self.terms]
 
     def noise_params(self) -> dict[str, dict[str, float]]:
+        """Catalogue noise coefficients. White noise comes from the full-rate first differences:
+        on block means it is barely separable from flicker, at the sample rate it dominates."""
         values = self.gls.noise_params(self.rss)
+        values["white_noise"] = self.data.white_n_mg_rt_s
         names = {
             "white_noise": "n_mg_rt_s",
             "bias_instability": "b_mg",
@@ -303,7 +306,11 @@ def fit_model(
     refit_noise: bool = True,
     rounds: int = 2,
 ) -> ModelFit:
-    """Fit ``terms`` with ``noise_terms``: nonlinear polish and noise ML, alternated ``rounds`` times."""
+    """Fit ``terms`` with ``noise_terms``: nonlinear polish and noise ML, alternated ``rounds`` times.
+
+    A cold start (no ``start`` ratios for these noise terms) explores the noise ratios widely first.
+    """
+    explore = start is None or any(term not in start.terms for term in noise_terms)
     if gls is None:
         if start is None or start.terms != tuple(noise_terms):
             start = _restrict(start, noise_terms, data)
@@ -314,13 +321,14 @@ def fit_model(
     for _ in range(rounds):
         design = build_design(fit.terms, data)
         new_gls, _ = fit_noise(
-            design.X, data.accel - design.offset, data.n, data.block_s, data.duration_s, fit.noise
+            design.X, data.accel - design.offset, data.n, data.block_s, data.duration_s, fit.noise, explore=explore
         )
+        explore = False
         moved = np.max(np.abs(np.subtract(new_gls.state.log_ratios, fit.noise.log_ratios)), initial=0.0)
         fit = polish(fit.terms, data, new_gls) if _free_slots(fit.terms, data) else evaluate(
             fit.terms, data, new_gls
         )
-        if moved < 0.05:
+        if moved < 0.15:
             break
     return fit
 

@@ -23,6 +23,7 @@ from trainer.diagnose.model import (
     fit_model,
 )
 from trainer.diagnose.profile import Profile, Region, analyse_profile, region
+from trainer.diagnose.threads import single_blas_thread
 from trainer.diagnose.select import Selection, THRESHOLD, baseline_support, final_indices, forward_select, resolve
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig, drift
@@ -290,6 +291,13 @@ def diagnose(
 
     ``rec`` may contain ``true_*`` columns; they are removed before anything is read.
     """
+    with single_blas_thread():
+        return _diagnose(rec, sim, holdout_fraction=holdout_fraction, max_blocks=max_blocks, progress=progress)
+
+
+def _diagnose(
+    rec: Recording, sim: PhysicsConfig | None, *, holdout_fraction: float, max_blocks: int, progress: bool
+) -> Diagnosis:
     started = time.perf_counter()
     rec = rec.without_truth()
     stages = tqdm(total=5, desc="diagnose", unit="stage", disable=None if progress else True, leave=False)

@@ -1,0 +1,258 @@
+"""The golden model: numpy, exactly the integer arithmetic of the generated C, state included.
+
+It is written from the same rules as the templates but independently of them, and it is what the
+C is compared with bit for bit (``codegen verify``, the tests). Streams can be fed in chunks of
+any length, with resets in between, and the state (``state()``) has the C struct's fields.
+
+Speed: the front end is vectorised over a whole chunk (exact int64 cumulative sums of the clamped
+samples give every window sum the C's running sum holds); only the network, which runs once every
+``D`` samples, is a Python loop over steps (numpy over the units).
+
+The C accumulates MACs in int32 with saturating adds; :mod:`codegen.quantize` proves every partial
+sum stays below the row bound <= INT32_MAX, so those saturations are no-ops and the exact int64
+dot products here are the same numbers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from codegen.activations import ACT_FRAC, sigmoid_q15, tanh_q15
+from codegen.fixedpoint import INT32_MAX, INT32_MIN, rdiv_round, rshift_round, sat32
+from codegen.quantize import (
+    C_FRAC,
+    FLAG_INPUT_CLAMPED,
+    FLAG_SATURATED,
+    FLAG_TEMP_OUT_OF_RANGE,
+    MEAN_FRAC,
+    X_MAX,
+    Z_FRAC,
+    QPla,
+    QPoly3,
+    QStream,
+    QuantModel,
+)
+
+UINT32_MAX = (1 << 32) - 1
+
+
+def _as_int64(values: np.ndarray) -> np.ndarray:
+    arr = np.asarray(values)
+    if arr.ndim != 1:
+        raise ValueError("streams are 1-D arrays")
+    if arr.size and (arr.min() < INT32_MIN or arr.max() > INT32_MAX):
+        raise ValueError("inputs must be int32 values")
+    return arr.astype(np.int64)
+
+
+class _Golden:
+    """Common state (flags, sample counter) and the input flags every method shares."""
+
+    def __init__(self, model: QuantModel) -> None:
+        self.model = model
+        self.flags = 0
+        self.samples = 0
+
+    def init(self) -> None:
+        self.flags = 0
+        self.samples = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Restart the stream; flags and the sample counter survive (like the C ``_reset``)."""
+
+    def _range_flag(self, temp: np.ndarray) -> None:
+        lim = self.model.limits
+        if np.any((temp < lim.valid_lo_mdegc) | (temp > lim.valid_hi_mdegc)):
+            self.flags |= FLAG_TEMP_OUT_OF_RANGE
+
+    def _clamp(self, x: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        clamped = np.clip(x, lo, hi)
+        if np.any(clamped != x):
+            self.flags |= FLAG_INPUT_CLAMPED
+        return clamped
+
+    def _sat(self, x: np.ndarray) -> np.ndarray:
+        out = sat32(x)
+        if np.any(out != x):
+            self.flags |= FLAG_SATURATED
+        return out
+
+    def _output(self, accel: np.ndarray, estimate: np.ndarray) -> np.ndarray:
+        self.samples = min(self.samples + accel.size, UINT32_MAX)
+        return self._sat(accel - estimate)
+
+    def run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        """Compensated int32 samples (as int64) of one chunk of raw int32 samples."""
+        accel, temp = _as_int64(accel), _as_int64(temp)
+        if accel.shape != temp.shape:
+            raise ValueError("accel and temp must have the same length")
+        self._range_flag(temp)
+        return self._run(accel, temp)
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def state(self) -> dict[str, np.ndarray | int]:
+        return {"flags": self.flags, "samples": self.samples}
+
+
+class GoldenPla(_Golden):
+    model: QPla
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        t = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
+        k = np.searchsorted(np.asarray(m.splits_mdegc, dtype=np.int64), t, side="right")
+        slopes = np.asarray(m.slopes_q, dtype=np.int64)
+        intercepts = np.asarray(m.intercepts_q, dtype=np.int64)
+        drift = self._sat(rshift_round(slopes[k] * t + intercepts[k], m.frac))
+        return self._output(accel, drift)
+
+
+class GoldenPoly3(_Golden):
+    model: QPoly3
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        u = np.clip(temp, m.clip_lo_mdegc, m.clip_hi_mdegc) - m.t_ref_mdegc
+        d0, d1, d2, d3 = m.coefficients_q
+        acc = np.full(u.shape, d3, dtype=np.int64)
+        for coefficient in (d2, d1, d0):
+            acc = rshift_round(acc * u, m.u_shift) + coefficient
+        drift = self._sat(rshift_round(acc, m.frac))
+        return self._output(accel, drift)
+
+
+class GoldenStream(_Golden):
+    """DLSTM methods and persistence: ring-buffer means, decimated network, zero-order hold."""
+
+    model: QStream
+
+    def reset(self) -> None:
+        m = self.model
+        L, H = len(m.layers), m.hidden_size
+        self.window = np.zeros(m.window, dtype=np.int64)
+        self.window_sum = 0
+        self.window_pos = 0
+        self.window_fill = 0
+        self.phase = 0
+        self.steps = 0
+        self.estimate_ug = 0
+        self.prev_mean = 0
+        self.h = np.zeros((L, H), dtype=np.int64)
+        self.c = np.zeros((L, H), dtype=np.int64)
+
+    def state(self) -> dict[str, np.ndarray | int]:
+        out: dict[str, np.ndarray | int] = {
+            **super().state(),
+            "window": self.window.copy(),
+            "window_sum": self.window_sum,
+            "window_pos": self.window_pos,
+            "window_fill": self.window_fill,
+            "phase": self.phase,
+            "steps": self.steps,
+            "estimate_ug": self.estimate_ug,
+        }
+        if self.model.kind == "temperature":
+            out["prev_mean"] = self.prev_mean
+        if self.model.layers:
+            out["h"], out["c"] = self.h.copy(), self.c.copy()
+        return out
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        n, W, D = accel.size, m.window, m.frontend.decimation
+        if m.kind == "temperature":
+            signal = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
+        else:
+            signal = self._clamp(accel, -m.limits.accel_ug, m.limits.accel_ug)
+        fill0, pos0 = self.window_fill, self.window_pos
+        history = self.window[:fill0] if fill0 < W else np.roll(self.window, -pos0)
+        extended = np.concatenate((history, signal))
+        sums = np.concatenate(([0], np.cumsum(extended)))  # exact: |sum| < 2**52
+        step_at = np.arange((D - self.phase) % D, n, D)  # chunk indices where phase == 0
+        position = fill0 + step_at
+        count = np.minimum(position + 1, W)
+        window_sums = sums[position + 1] - sums[position + 1 - count]
+        estimates = self._steps(window_sums, count)
+
+        held = np.full(n, self.estimate_ug, dtype=np.int64)
+        if step_at.size:
+            index = np.cumsum(np.isin(np.arange(n), step_at)) - 1
+            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate_ug)
+            self.estimate_ug = int(estimates[-1])
+        # Ring buffer, as the C leaves it: sample i of the chunk went to slot (pos0 + i) % W.
+        last = min(n, W)
+        self.window[(pos0 + np.arange(n - last, n)) % W] = signal[n - last :]
+        self.window_pos = (pos0 + n) % W
+        self.window_fill = min(fill0 + n, W)
+        self.window_sum = int(sums[fill0 + n] - sums[fill0 + n - self.window_fill])
+        self.phase = (self.phase + n) % D
+        self.steps = min(self.steps + step_at.size, UINT32_MAX)
+        return self._output(accel, held)
+
+    def _steps(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
+        """The held estimate (ug) produced at each network step of the chunk."""
+        m = self.model
+        if not m.layers:  # persistence: the mean itself
+            return rdiv_round(window_sums, count)
+        means = rdiv_round(window_sums << MEAN_FRAC, count)
+        if m.kind == "temperature":
+            previous = np.concatenate(([self.prev_mean], means[:-1]))
+            delta = means - previous
+            if self.steps == 0 and delta.size:
+                delta[0] = 0  # r = 0 at the first step after a reset
+            features = [means, delta]
+            if means.size:
+                self.prev_mean = int(means[-1])
+        else:
+            features = [means]
+        x = np.stack(
+            [rshift_round((v - q.mu_q) * q.inv_q, q.shift) for v, q in zip(features, m.inputs, strict=True)],
+            axis=1,
+        )
+        clamped = np.clip(x, -X_MAX, X_MAX)
+        if np.any(clamped != x):
+            self.flags |= FLAG_SATURATED
+        return np.array([self._network(row) for row in clamped], dtype=np.int64)
+
+    def _network(self, x: np.ndarray) -> int:
+        m = self.model
+        H = m.hidden_size
+        inp = x
+        for layer_index, layer in enumerate(m.layers):
+            h, c = self.h[layer_index], self.c[layer_index]
+            zx = rshift_round(layer.wx.q @ inp, layer.wx.shift)
+            zh = rshift_round(layer.wh.q @ h, layer.wh.shift)
+            z = sat32(sat32(zx + zh) + layer.b)
+            i = sigmoid_q15(z[0:H], Z_FRAC)
+            f = sigmoid_q15(z[H : 2 * H], Z_FRAC)
+            g = tanh_q15(z[2 * H : 3 * H], Z_FRAC)
+            o = sigmoid_q15(z[3 * H :], Z_FRAC)
+            # f*c is Q(15+24); i*g is Q30, lifted to Q39 by a multiplication (no signed shift).
+            wide = rshift_round(f * c + (i * g) * (1 << (C_FRAC - ACT_FRAC)), ACT_FRAC)
+            c_new = sat32(wide)
+            if np.any(c_new != wide):
+                self.flags |= FLAG_SATURATED
+            h_new = rshift_round(o * tanh_q15(c_new, C_FRAC), ACT_FRAC)
+            self.c[layer_index], self.h[layer_index] = c_new, h_new
+            inp = h_new
+        head = m.head
+        assert head is not None
+        acc = int(head.w.q[0] @ inp)
+        estimate = rshift_round(acc + head.bias_q, head.shift)
+        return int(self._sat(estimate))
+
+
+def golden_for(model: QuantModel) -> _Golden:
+    """A fresh golden model, initialised like ``NAME_init``."""
+    golden: _Golden
+    if isinstance(model, QPla):
+        golden = GoldenPla(model)
+    elif isinstance(model, QPoly3):
+        golden = GoldenPoly3(model)
+    else:
+        golden = GoldenStream(model)
+    golden.init()
+    return golden

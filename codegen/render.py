@@ -1,0 +1,296 @@
+"""Render the C module (Jinja2 templates shipped in ``codegen/templates``) and its manifest.
+
+Everything is a pure function of the quantised model, the NAME and the model's hash: no time,
+no paths, sorted JSON keys, so the same model always gives byte-identical files.
+"""
+
+from __future__ import annotations
+
+import json
+import keyword  # noqa: F401  (documentation: C keywords are listed below, Python's do not apply)
+import re
+from dataclasses import dataclass
+
+import jinja2
+import numpy as np
+
+from codegen import __version__
+from codegen.activations import TABLE_STEP_BITS, TANH_TABLE, activation_errors
+from codegen.quantize import (
+    C_FRAC,
+    FLAG_INPUT_CLAMPED,
+    FLAG_SATURATED,
+    FLAG_TEMP_OUT_OF_RANGE,
+    MEAN_FRAC,
+    X_MAX,
+    Z_FRAC,
+    QPla,
+    QPoly3,
+    QStream,
+    QuantModel,
+)
+from trainer.errors import UserError
+
+MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
+C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if inline "
+    "int long register restrict return short signed sizeof static struct switch typedef union unsigned "
+    "void volatile while _Bool _Complex _Imaginary".split()
+)
+_IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+FLAGS = {
+    "temp_out_of_range": FLAG_TEMP_OUT_OF_RANGE,
+    "input_clamped": FLAG_INPUT_CLAMPED,
+    "saturated": FLAG_SATURATED,
+}
+_SIZES = {"int64_t": 8, "int32_t": 4, "uint32_t": 4, "int16_t": 2, "uint16_t": 2}
+
+
+def default_name(method: str) -> str:
+    return "tdc_" + method.replace("-", "_")
+
+
+def validate_name(name: str) -> str:
+    """NAME must be a C identifier that is neither a keyword nor reserved, short enough for C99."""
+    if not _IDENTIFIER.match(name):
+        raise UserError(
+            f"--name {name!r}: not a valid C identifier (a letter, then letters, digits or '_')"
+        )
+    if name in C_KEYWORDS:
+        raise UserError(f"--name {name!r}: is a C keyword")
+    if len(name) > MAX_NAME_LENGTH:
+        raise UserError(f"--name {name!r}: longer than {MAX_NAME_LENGTH} characters (C99 portability)")
+    return name
+
+
+@dataclass(frozen=True)
+class Field:
+    ctype: str
+    name: str
+    dims: tuple[int, ...]
+    doc: str
+
+    @property
+    def size(self) -> int:
+        return _SIZES[self.ctype] * int(np.prod(self.dims, dtype=np.int64))
+
+
+def state_fields(model: QuantModel) -> list[Field]:
+    """State struct members, widest alignment first (no interior padding)."""
+    common = [
+        Field("uint32_t", "flags", (), "sticky FLAG_* bits"),
+        Field("uint32_t", "samples", (), "samples since init (saturating)"),
+    ]
+    if not isinstance(model, QStream):
+        return common
+    unit = "mdegC" if model.kind == "temperature" else "ug"
+    fields = [
+        Field("int64_t", "window_sum", (), f"exact sum of the window, {unit}"),
+        Field("int32_t", "window", (model.window,), f"ring buffer of clamped inputs, {unit}"),
+    ]
+    L, H = len(model.layers), model.hidden_size
+    if L:
+        fields.append(Field("int32_t", "c", (L, H), "cell states, Q7.24"))
+    fields.append(Field("int32_t", "estimate_ug", (), "held drift estimate, ug"))
+    if model.kind == "temperature":
+        fields.append(Field("int32_t", "prev_mean", (), "window mean at the previous step, Q8 mdegC"))
+    fields += [
+        Field("uint32_t", "window_pos", (), "next ring slot"),
+        Field("uint32_t", "window_fill", (), "samples in the window"),
+        Field("uint32_t", "phase", (), "n mod decimation; the network steps at 0"),
+        Field("uint32_t", "steps", (), "network steps since reset (saturating)"),
+        *common,
+    ]
+    if L:
+        fields.append(Field("int16_t", "h", (L, H), "hidden states, Q0.15"))
+    return fields
+
+
+def state_bytes(fields: list[Field]) -> int:
+    """sizeof the struct with natural alignment (what gcc/clang give on x86-64 and ARM EABI)."""
+    offset, align = 0, 1
+    for field in fields:
+        a = _SIZES[field.ctype]
+        offset = (offset + a - 1) // a * a + field.size
+        align = max(align, a)
+    return (offset + align - 1) // align * align
+
+
+def table_bytes(model: QuantModel) -> dict[str, int]:
+    """Flash used by the const tables (code and immediates not included)."""
+    sizes = {"model_id_string": len("sha256:") + 64 + 1}
+    if isinstance(model, QStream):
+        if model.layers:
+            sizes["tanh_table"] = 2 * len(TANH_TABLE)
+            sizes["weights"] = sum(2 * (lay.wx.q.size + lay.wh.q.size) for lay in model.layers) + 2 * (
+                model.hidden_size
+            )
+            sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
+    elif isinstance(model, QPla):
+        sizes["pla_tables"] = 4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
+    else:
+        sizes["poly3_coefficients"] = 16
+    return sizes
+
+
+def _c_int(value: int, width: int = 32) -> str:
+    value = int(value)
+    if width == 64:
+        return f"INT64_C({value})"
+    return str(value)
+
+
+def _rows(values: np.ndarray | list[int] | tuple[int, ...], *, width: int = 32, per_line: int = 12) -> str:
+    items = [_c_int(v, width) for v in np.asarray(values, dtype=np.int64).ravel()]
+    lines = [", ".join(items[k : k + per_line]) + "," for k in range(0, len(items), per_line)]
+    return "\n".join("    " + line for line in lines)
+
+
+def _matrix_rows(q: np.ndarray) -> str:
+    return "\n".join("    { " + ", ".join(str(int(v)) for v in row) + " }," for row in np.atleast_2d(q))
+
+
+def _range_test(model: QuantModel) -> str:
+    lim = model.limits
+    return f"temp_mdegc < {lim.valid_lo_mdegc} || temp_mdegc > {lim.valid_hi_mdegc}"
+
+
+def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
+    lim = model.limits
+    ctx: dict[str, object] = {
+        "name": name,
+        "NAME": name.upper(),
+        "p": f"{name}_",
+        "guard": f"{name.upper()}_H_INCLUDED",
+        "version": __version__,
+        "method": model.method,
+        "sha256": sha256,
+        "flags": FLAGS,
+        "fields": state_fields(model),
+        "range_test": _range_test(model),
+        "valid_range_text": f"{lim.valid_lo_mdegc / 1000:g} .. {lim.valid_hi_mdegc / 1000:g} degC",
+        "temp_lo": lim.temp_lo_mdegc,
+        "temp_hi": lim.temp_hi_mdegc,
+        "accel_limit": lim.accel_ug,
+    }
+    macros: list[tuple[str, object]] = [
+        ("VALID_TEMP_MIN_MDEGC", lim.valid_lo_mdegc),
+        ("VALID_TEMP_MAX_MDEGC", lim.valid_hi_mdegc),
+    ]
+    if isinstance(model, QStream):
+        fe = model.frontend
+        ctx.update(
+            family="stream",
+            kind=model.kind,
+            rate_hz=f"{fe.rate_hz:g}",
+            decimation=fe.decimation,
+            step_hz=f"{fe.rate_hz / fe.decimation:g}",
+            window=model.window,
+            mean_scale=1 << MEAN_FRAC,
+            layers=[
+                {
+                    "rows": lay.wx.q.shape[0],
+                    "n_in": lay.wx.q.shape[1],
+                    "wx_frac": lay.wx.frac,
+                    "wh_frac": lay.wh.frac,
+                    "wx": _matrix_rows(lay.wx.q),
+                    "wh": _matrix_rows(lay.wh.q),
+                    "b": _rows(lay.b),
+                    "sx": lay.wx.shift,
+                    "sh": lay.wh.shift,
+                }
+                for lay in model.layers
+            ],
+            hidden=model.hidden_size,
+            inputs=[
+                {
+                    "mu": _c_int(q.mu_q, 64),
+                    "inv": _c_int(q.inv_q, 64),
+                    "shift": q.shift,
+                    "doc": f"({q.name} - {q.mean:.6g} {q.unit}) / {q.std:.6g} {q.unit}",
+                }
+                for q in model.inputs
+            ],
+            x_max=X_MAX,
+            tanh_table=_rows(TANH_TABLE),
+            tanh_shift=Z_FRAC - TABLE_STEP_BITS,
+            sigmoid_shift=Z_FRAC + 1 - TABLE_STEP_BITS,
+            cell_tanh_shift=C_FRAC - TABLE_STEP_BITS,
+            cell_lift=1 << (C_FRAC - 15),
+        )
+        if model.head is not None:
+            ctx["head"] = {
+                "w": _rows(model.head.w.q),
+                "frac": model.head.w.frac,
+                "shift": model.head.shift,
+                "bias": _c_int(model.head.bias_q, 64),
+            }
+        macros += [
+            ("SAMPLE_RATE_HZ", f"{fe.rate_hz:g}"),
+            ("DECIMATION", f"{fe.decimation}u"),
+            ("WINDOW", f"{model.window}u"),
+        ]
+    elif isinstance(model, QPla):
+        ctx.update(
+            family="pla",
+            splits=_rows(model.splits_mdegc) if model.splits_mdegc else "",
+            n_splits=len(model.splits_mdegc),
+            n_intervals=len(model.slopes_q),
+            slopes=_rows(model.slopes_q),
+            intercepts=_rows(model.intercepts_q, width=64, per_line=4),
+            frac=model.frac,
+        )
+    else:
+        ctx.update(
+            family="poly3",
+            coefficients=_rows(model.coefficients_q),
+            frac=model.frac,
+            u_shift=model.u_shift,
+            t_ref=model.t_ref_mdegc,
+            clip_lo=model.clip_lo_mdegc,
+            clip_hi=model.clip_hi_mdegc,
+        )
+    ctx["macros"] = macros
+    return ctx
+
+
+def _environment() -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("codegen", "templates"),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+
+
+def render_sources(model: QuantModel, name: str, sha256: str) -> dict[str, str]:
+    """``{NAME.h: text, NAME.c: text}``."""
+    env = _environment()
+    ctx = _context(model, validate_name(name), sha256)
+    return {
+        f"{name}.h": env.get_template("module.h.j2").render(ctx),
+        f"{name}.c": env.get_template("module.c.j2").render(ctx),
+    }
+
+
+def render_template(template: str, model: QuantModel, name: str, sha256: str, **extra: object) -> str:
+    """Render one of the shipped auxiliary templates (the test and benchmark harnesses)."""
+    ctx = _context(model, name, sha256)
+    ctx.update(extra)
+    return _environment().get_template(template).render(ctx)
+
+
+def manifest_json(manifest: dict[str, object]) -> str:
+    return json.dumps(manifest, indent=2, sort_keys=True) + "\n"
+
+
+def activation_summary() -> dict[str, object]:
+    errors = activation_errors(Z_FRAC, C_FRAC)
+    return {
+        "method": "tanh table of 1025 int16-range entries (step 1/128, inputs 0..8) with linear "
+        "interpolation; sigmoid(z) = (1 + tanh(z/2)) / 2",
+        "table_bytes": 2 * len(TANH_TABLE),
+        **{kind: err.to_dict() for kind, err in errors.items()},
+    }

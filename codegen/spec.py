@@ -1,0 +1,273 @@
+"""Read a checkpoint's payload into plain float specs, with one-line errors naming the field.
+
+The checkpoint itself is loaded and validated by :func:`trainer.checkpoint.load_checkpoint`; this
+module only checks what the code generator relies on (shapes, finiteness, orderings, positive
+scales) so that a malformed payload is a :class:`UserError`, never a traceback or silent garbage.
+
+DLSTM payloads follow ``trainer/dlstm_compensator.py``: weights named as
+``PopulationDLSTM.individual`` (``w_x0, w_h0, b0, ..., w_out, b_out``; the ``layer0.w_x`` /
+``head.w`` names of docs/realtime.md are accepted too), ``frontend`` (kind, rate, windows,
+decimation) and ``normalisation`` (``inputs_mean``, ``inputs_std``, ``output_mean``,
+``output_std``, in mg, degC and degC/min).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from trainer.errors import UserError
+
+RECURSIVE_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa")
+TEMPERATURE_METHODS = ("dlstm-temp",)
+DLSTM_METHODS = RECURSIVE_METHODS + TEMPERATURE_METHODS
+SUPPORTED_METHODS = (*DLSTM_METHODS, "persistence", "pla", "poly3")
+MAX_WINDOW = 1 << 20  # keeps window sums times 2**8 inside int64
+
+
+@dataclass(frozen=True)
+class FrontEndSpec:
+    """Streaming front end of docs/realtime.md, in samples."""
+
+    kind: str  # "recursive" | "temperature"
+    rate_hz: float
+    accel_window: int
+    temp_window: int
+    decimation: int
+    inputs_mean: tuple[float, ...]
+    inputs_std: tuple[float, ...]
+    output_mean: float  # mg
+    output_std: float  # mg
+
+
+@dataclass(frozen=True)
+class LayerSpec:
+    w_x: np.ndarray  # (4H, in) float64
+    w_h: np.ndarray  # (4H, H)
+    b: np.ndarray  # (4H,)
+
+
+@dataclass(frozen=True)
+class DlstmSpec:
+    method: str
+    frontend: FrontEndSpec
+    layers: tuple[LayerSpec, ...]
+    head_w: np.ndarray  # (H,)
+    head_b: float
+
+    @property
+    def hidden_size(self) -> int:
+        return self.layers[0].w_h.shape[1]
+
+    @property
+    def input_size(self) -> int:
+        return self.layers[0].w_x.shape[1]
+
+
+@dataclass(frozen=True)
+class PersistenceSpec:
+    method: str
+    frontend: FrontEndSpec
+
+
+@dataclass(frozen=True)
+class PlaSpec:
+    method: str
+    split_points_c: np.ndarray
+    slopes_mg_per_c: np.ndarray
+    intercepts_mg: np.ndarray
+
+
+@dataclass(frozen=True)
+class Poly3Spec:
+    method: str
+    coefficients_mg: np.ndarray  # c0..c3 of (T - t_ref)^k, mg / degC^k
+    t_ref_c: float
+    temp_range_c: tuple[float, float]
+
+
+ModelSpec = DlstmSpec | PersistenceSpec | PlaSpec | Poly3Spec
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """What the generator needs from a loaded checkpoint."""
+
+    method: str
+    model: ModelSpec
+    valid_temp_range_c: tuple[float, float]
+
+
+class _Fields:
+    """Typed access to a nested dict that names the dotted field in every error."""
+
+    def __init__(self, source: str, data: Any, prefix: str) -> None:
+        self.source, self.data, self.prefix = source, data, prefix
+        if not isinstance(data, dict):
+            self.fail(f"field '{prefix}' must be a dict, got {type(data).__name__}")
+
+    def fail(self, message: str) -> None:
+        raise UserError(f"{self.source}: {message}")
+
+    def name(self, key: str) -> str:
+        return f"{self.prefix}.{key}" if self.prefix else key
+
+    def raw(self, key: str) -> Any:
+        if key not in self.data:
+            self.fail(f"field '{self.name(key)}' is missing")
+        return self.data[key]
+
+    def sub(self, key: str) -> _Fields:
+        return _Fields(self.source, self.raw(key), self.name(key))
+
+    def number(self, key: str, *, positive: bool = False) -> float:
+        value = self.raw(key)
+        try:
+            result = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"field '{self.name(key)}' must be a number, got {value!r}")
+        if not math.isfinite(result) or (positive and result <= 0):
+            self.fail(f"field '{self.name(key)}' must be a finite{' positive' if positive else ''} number, "
+                      f"got {result!r}")
+        return result
+
+    def integer(self, key: str, lo: int, hi: int) -> int:
+        value = self.number(key)
+        if value != int(value) or not lo <= value <= hi:
+            self.fail(f"field '{self.name(key)}' must be an integer in [{lo}, {hi}], got {value!r}")
+        return int(value)
+
+    def array(self, key: str, shape: tuple[int, ...]) -> np.ndarray:
+        value = self.raw(key)
+        try:
+            arr = np.asarray(value.detach().cpu().double().numpy() if hasattr(value, "detach") else value,
+                             dtype=np.float64)
+        except (TypeError, ValueError):
+            self.fail(f"field '{self.name(key)}' must be an array of numbers")
+        if arr.shape != shape:
+            self.fail(f"field '{self.name(key)}' must have shape {shape}, got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            self.fail(f"field '{self.name(key)}' holds NaN or inf")
+        return arr.copy()
+
+    def numbers(self, key: str, count: int, *, positive: bool = False) -> tuple[float, ...]:
+        arr = self.array(key, (count,))
+        if positive and np.any(arr <= 0):
+            self.fail(f"field '{self.name(key)}' must be positive, got {arr.tolist()}")
+        return tuple(float(v) for v in arr)
+
+
+def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:
+    fe = payload.sub("frontend")
+    kind = fe.raw("kind")
+    expected = "temperature" if method in TEMPERATURE_METHODS else "recursive"
+    if method == "persistence":
+        expected = "persistence"
+    if kind != expected:
+        root.fail(f"field 'payload.frontend.kind' is {kind!r}; method {method!r} needs {expected!r}")
+    n_inputs = 2 if kind == "temperature" else 1
+    common = {
+        "rate_hz": fe.number("rate_hz", positive=True),
+        "accel_window": fe.integer("accel_window", 1, MAX_WINDOW),
+        "temp_window": fe.integer("temp_window", 1, MAX_WINDOW),
+        "decimation": fe.integer("decimation", 1, MAX_WINDOW),
+    }
+    if kind == "persistence":
+        return FrontEndSpec("recursive", **common, inputs_mean=(0.0,), inputs_std=(1.0,),
+                            output_mean=0.0, output_std=1.0)
+    norm = payload.sub("normalisation")
+    return FrontEndSpec(
+        kind,
+        **common,
+        inputs_mean=norm.numbers("inputs_mean", n_inputs),
+        inputs_std=norm.numbers("inputs_std", n_inputs, positive=True),
+        output_mean=norm.number("output_mean"),
+        output_std=norm.number("output_std", positive=True),
+    )
+
+
+_DOC_NAMES = {"head.w": "w_out", "head.b": "b_out"}
+
+
+def _weight_names(weights: dict[str, Any]) -> dict[str, Any]:
+    """Accept docs/realtime.md's ``layer0.w_x`` names as well as the trainer's ``w_x0``."""
+    renamed = {}
+    for key, value in weights.items():
+        if key in _DOC_NAMES:
+            key = _DOC_NAMES[key]
+        elif key.startswith("layer") and "." in key:
+            layer, _, leaf = key[len("layer") :].partition(".")
+            key = f"{leaf}{layer}"
+        renamed[key] = value
+    return renamed
+
+
+def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmSpec:
+    frontend = _frontend(root, payload, method)
+    arch = payload.sub("architecture")
+    n_in = 2 if frontend.kind == "temperature" else 1
+    input_size = arch.integer("input_size", n_in, n_in)
+    hidden = arch.integer("hidden_size", 1, 256)
+    num_layers = arch.integer("num_layers", 1, 16)
+    arch.integer("output_size", 1, 1)
+    if arch.data.get("gate_order", "ifgo") != "ifgo":
+        root.fail(f"field 'payload.architecture.gate_order' is {arch.data['gate_order']!r}, expected 'ifgo'")
+    raw_weights = payload.raw("weights")
+    if not isinstance(raw_weights, dict):
+        root.fail("field 'payload.weights' must be a dict of tensors")
+    weights = _Fields(root.source, _weight_names(raw_weights), "payload.weights")
+    layers = []
+    for layer in range(num_layers):
+        n = input_size if layer == 0 else hidden
+        layers.append(
+            LayerSpec(
+                weights.array(f"w_x{layer}", (4 * hidden, n)),
+                weights.array(f"w_h{layer}", (4 * hidden, hidden)),
+                weights.array(f"b{layer}", (4 * hidden,)),
+            )
+        )
+    head_w = weights.array("w_out", (1, hidden))[0]
+    head_b = float(weights.array("b_out", (1,))[0])
+    return DlstmSpec(method, frontend, tuple(layers), head_w, head_b)
+
+
+def _pla(root: _Fields, payload: _Fields, method: str) -> PlaSpec:
+    n = payload.integer("n_intervals", 1, 4096)
+    splits = payload.array("split_points_c", (n - 1,))
+    if np.any(np.diff(splits) < 0):
+        root.fail("field 'payload.split_points_c' must be in ascending order")
+    return PlaSpec(method, splits, payload.array("slopes_mg_per_c", (n,)), payload.array("intercepts_mg", (n,)))
+
+
+def _poly3(root: _Fields, payload: _Fields, method: str) -> Poly3Spec:
+    lo, hi = payload.numbers("temp_range_c", 2)
+    if not lo < hi:
+        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
+    return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
+
+
+def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
+    """Typed specs of a checkpoint already validated by ``load_checkpoint``."""
+    root = _Fields(source, checkpoint, "")
+    method = checkpoint.get("method")
+    if method not in SUPPORTED_METHODS:
+        root.fail(
+            f"method {method!r} has no code generator (supported: {', '.join(SUPPORTED_METHODS)})"
+        )
+    lo, hi = root.numbers("valid_temp_range_c", 2)
+    if not lo <= hi:
+        root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
+    payload = root.sub("payload")
+    model: ModelSpec
+    if method in DLSTM_METHODS:
+        model = _dlstm(root, payload, method)
+    elif method == "persistence":
+        model = PersistenceSpec(method, _frontend(root, payload, method))
+    elif method == "pla":
+        model = _pla(root, payload, method)
+    else:
+        model = _poly3(root, payload, method)
+    return Checkpoint(method, model, (lo, hi))
