@@ -138,7 +138,7 @@ class GoldenStream(_Golden):
         self.window_fill = 0
         self.phase = 0
         self.steps = 0
-        self.estimate_ug = 0
+        self.estimate = 0
         self.prev_mean = 0
         self.h = np.zeros((L, H), dtype=np.int64)
         self.c = np.zeros((L, H), dtype=np.int64)
@@ -152,7 +152,7 @@ class GoldenStream(_Golden):
             "window_fill": self.window_fill,
             "phase": self.phase,
             "steps": self.steps,
-            "estimate_ug": self.estimate_ug,
+            "estimate": self.estimate,
         }
         if self.model.kind == "temperature":
             out["prev_mean"] = self.prev_mean
@@ -166,7 +166,7 @@ class GoldenStream(_Golden):
         if m.kind == "temperature":
             signal = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
         else:
-            signal = self._clamp(accel, -m.limits.accel_ug, m.limits.accel_ug)
+            signal = self._clamp(accel, -m.limits.accel, m.limits.accel)
         fill0, pos0 = self.window_fill, self.window_pos
         history = self.window[:fill0] if fill0 < W else np.roll(self.window, -pos0)
         extended = np.concatenate((history, signal))
@@ -177,11 +177,11 @@ class GoldenStream(_Golden):
         window_sums = sums[position + 1] - sums[position + 1 - count]
         estimates = self._steps(window_sums, count)
 
-        held = np.full(n, self.estimate_ug, dtype=np.int64)
+        held = np.full(n, self.estimate, dtype=np.int64)
         if step_at.size:
             index = np.cumsum(np.isin(np.arange(n), step_at)) - 1
-            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate_ug)
-            self.estimate_ug = int(estimates[-1])
+            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate)
+            self.estimate = int(estimates[-1])
         # Ring buffer, as the C leaves it: sample i of the chunk went to slot (pos0 + i) % W.
         last = min(n, W)
         self.window[(pos0 + np.arange(n - last, n)) % W] = signal[n - last :]
@@ -193,7 +193,7 @@ class GoldenStream(_Golden):
         return self._output(accel, held)
 
     def _steps(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
-        """The held estimate (ug) produced at each network step of the chunk."""
+        """The held estimate (accel LSB) produced at each network step of the chunk."""
         m = self.model
         if not m.layers:  # persistence: the mean itself
             return rdiv_round(window_sums, count)
@@ -223,7 +223,7 @@ class GoldenStream(_Golden):
         inp = x
         for layer_index, layer in enumerate(m.layers):
             h, c = self.h[layer_index], self.c[layer_index]
-            zx = rshift_round(layer.wx.q @ inp, layer.wx.shift)
+            zx = sat32(rshift_round(layer.wx.q @ inp, layer.wx.shift))  # a no-op except for wide rows
             zh = rshift_round(layer.wh.q @ h, layer.wh.shift)
             z = sat32(sat32(zx + zh) + layer.b)
             i = sigmoid_q15(z[0:H], Z_FRAC)

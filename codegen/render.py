@@ -7,7 +7,6 @@ no paths, sorted JSON keys, so the same model always gives byte-identical files.
 from __future__ import annotations
 
 import json
-import keyword  # noqa: F401  (documentation: C keywords are listed below, Python's do not apply)
 import re
 from dataclasses import dataclass
 
@@ -83,7 +82,7 @@ def state_fields(model: QuantModel) -> list[Field]:
     ]
     if not isinstance(model, QStream):
         return common
-    unit = "mdegC" if model.kind == "temperature" else "ug"
+    unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
     fields = [
         Field("int64_t", "window_sum", (), f"exact sum of the window, {unit}"),
         Field("int32_t", "window", (model.window,), f"ring buffer of clamped inputs, {unit}"),
@@ -91,7 +90,7 @@ def state_fields(model: QuantModel) -> list[Field]:
     L, H = len(model.layers), model.hidden_size
     if L:
         fields.append(Field("int32_t", "c", (L, H), "cell states, Q7.24"))
-    fields.append(Field("int32_t", "estimate_ug", (), "held drift estimate, ug"))
+    fields.append(Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug"))
     if model.kind == "temperature":
         fields.append(Field("int32_t", "prev_mean", (), "window mean at the previous step, Q8 mdegC"))
     fields += [
@@ -171,7 +170,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         "valid_range_text": f"{lim.valid_lo_mdegc / 1000:g} .. {lim.valid_hi_mdegc / 1000:g} degC",
         "temp_lo": lim.temp_lo_mdegc,
         "temp_hi": lim.temp_hi_mdegc,
-        "accel_limit": lim.accel_ug,
+        "accel_limit": lim.accel,
     }
     macros: list[tuple[str, object]] = [
         ("VALID_TEMP_MIN_MDEGC", lim.valid_lo_mdegc),

@@ -18,7 +18,7 @@ from scipy.signal import savgol_filter
 from trainer.errors import UserError
 from trainer.recording import Recording
 
-DEFAULT_MAX_BLOCKS = 900
+DEFAULT_MAX_BLOCKS = 600  # dense GLS: Cholesky cost ~ N^3, a few ms at 600
 FINE_STEP_S = 0.5  # fine grid for periodograms: periods down to the catalogue's 5 s stay resolved
 RATE_WINDOW_S = 60.0  # Savitzky-Golay window for dT/dt: below the package time constants of interest
 MIN_BLOCKS = 60
@@ -49,20 +49,24 @@ def detect_lattice(temp_c: np.ndarray) -> float | None:
     return float(lsb)
 
 
-def dequantize(t: np.ndarray, temp_c: np.ndarray, lsb: float) -> tuple[np.ndarray, np.ndarray]:
-    """Knots ``(t, T)`` of the smooth temperature behind a staircase thermometer column.
+def dequantize(
+    t: np.ndarray, temp_c: np.ndarray, lsb: float
+) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float]]]:
+    """Knots ``(t, T)`` of the smooth temperature behind a staircase thermometer column, and plateaus.
 
     The reading changes level when the true temperature crosses a half-LSB threshold, so each
     change (or each burst of noise-dithered flips between the same two levels, taken at its
     median time) pins the true temperature to the midpoint between the levels at that time.
     Inside plateaus much longer than the typical level duration (holds) the level's own value is
-    used, because the threshold just left is a poor estimate of where the temperature settled.
+    used, because the threshold just left is a poor estimate of where the temperature settled; the
+    true value there is only known within +-LSB/2, so the plateaus are returned as ``(t0, t1)``
+    intervals for the model to give each an unknown offset.
     """
     level = np.round(np.asarray(temp_c) / lsb).astype(np.int64)
     change = np.flatnonzero(level[1:] != level[:-1]) + 1
     if change.size == 0:
         mid = float(level[0] * lsb)
-        return np.array([t[0], t[-1]]), np.array([mid, mid])
+        return np.array([t[0], t[-1]]), np.array([mid, mid]), [(float(t[0]), float(t[-1]))]
     knots_t: list[float] = []
     knots_v: list[float] = []
     pair_prev: tuple[int, int] | None = None
@@ -85,20 +89,27 @@ def dequantize(t: np.ndarray, temp_c: np.ndarray, lsb: float) -> tuple[np.ndarra
     typical = float(np.median(gaps)) if gaps.size else float(t[-1] - t[0])
     out_t: list[float] = [float(t[0])]
     out_v: list[float] = [float(level[0] * lsb)]
+    plateaus: list[tuple[float, float]] = []
+    if kt[0] - t[0] > 4.0 * typical:
+        plateaus.append((float(t[0]), float(kt[0] - 2.0 * typical)))
+        out_t.append(float(kt[0] - 2.0 * typical))
+        out_v.append(float(level[0] * lsb))
     for i in range(kt.size):
         if i > 0 and gaps[i - 1] > 4.0 * typical:  # a plateau: settle on the level in between
             plateau = float(level[np.searchsorted(t, 0.5 * (kt[i - 1] + kt[i]))] * lsb)
             out_t += [kt[i - 1] + 2.0 * typical, kt[i] - 2.0 * typical]
             out_v += [plateau, plateau]
+            plateaus.append((float(kt[i - 1] + 2.0 * typical), float(kt[i] - 2.0 * typical)))
         out_t.append(float(kt[i]))
         out_v.append(float(kv[i]))
     if t[-1] - kt[-1] > 4.0 * typical:
         out_t += [kt[-1] + 2.0 * typical]
         out_v += [float(level[-1] * lsb)]
+        plateaus.append((float(kt[-1] + 2.0 * typical), float(t[-1])))
     out_t.append(float(t[-1]))
     out_v.append(float(level[-1] * lsb) if t[-1] - kt[-1] > 4.0 * typical else out_v[-1])
     order = np.argsort(out_t, kind="stable")
-    return np.asarray(out_t)[order], np.asarray(out_v)[order]
+    return np.asarray(out_t)[order], np.asarray(out_v)[order], plateaus
 
 
 def rate_c_per_min(t: np.ndarray, temp: np.ndarray) -> np.ndarray:
@@ -137,6 +148,7 @@ class BlockData:
     full_t: np.ndarray = field(repr=False)
     full_accel: np.ndarray = field(repr=False)
     known_input_block: np.ndarray | None = None
+    plateaus: list[tuple[float, float]] = field(default_factory=list)  # quantised holds, see dequantize
 
     @property
     def n(self) -> int:
@@ -183,6 +195,7 @@ class BlockData:
             full_t=self.full_t[:keep_full],
             full_accel=self.full_accel[:keep_full],
             known_input_block=None if self.known_input_block is None else self.known_input_block[:stop],
+            plateaus=[p for p in self.plateaus if p[0] < self.t[stop - 1]],
         )
 
 
@@ -216,8 +229,9 @@ def build_blocks(
     tb = block_means(t, m, nb) - t0
     lsb = detect_lattice(temp)
     smooth_block = None
+    plateaus: list[tuple[float, float]] = []
     if lsb is not None:
-        kt, kv = dequantize(t - t0, temp, lsb)
+        kt, kv, plateaus = dequantize(t - t0, temp, lsb)
         smooth_block = np.interp(tb, kt, kv)
     mf = max(1, int(round(FINE_STEP_S * fs)))
     nf = n // mf
@@ -238,4 +252,5 @@ def build_blocks(
         full_t=t - t0,
         full_accel=accel,
         known_input_block=None if known_input is None else block_means(known_input, m, nb),
+        plateaus=plateaus,
     )

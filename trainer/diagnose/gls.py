@@ -143,7 +143,7 @@ def fit_noise(
     duration_s: float,
     start: NoiseState,
     *,
-    max_evals: int = 40,
+    max_evals: int = 30,
     explore: bool = True,
 ) -> tuple[Gls, GlsResult]:
     """Maximum-likelihood noise ratios for the linear model ``X``; returns the factor and fit."""
@@ -175,7 +175,7 @@ def fit_noise(
         lambda v: -evaluate(v)[1].loglik,
         best,
         method="Nelder-Mead",
-        options={"xatol": 0.03, "fatol": 0.02, "maxfev": max_evals, "initial_simplex": _simplex(best)},
+        options={"xatol": 0.05, "fatol": 0.05, "maxfev": max_evals, "initial_simplex": _simplex(best)},
     )
     return evaluate(result.x if -result.fun >= best_ll else best)
 

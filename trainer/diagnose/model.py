@@ -162,6 +162,13 @@ def build_design(terms: Sequence[Term], data: BlockData) -> Design:
             extra.append((index, "step_mg", np.clip((t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0)))
         elif ident == "rate_ramp":
             extra.append((index, "r_mg_per_s", t))
+        elif ident == "temp_quantization":
+            # In a quantised hold the true temperature is only known within +-LSB/2: an unknown
+            # offset per plateau (the polynomial's slope times that temperature error).
+            for k, (p0, p1) in enumerate(data.plateaus):
+                inside = ((t >= p0) & (t < p1)).astype(np.float64)
+                if inside.sum() >= 2:
+                    extra.append((index, f"plateau{k}", inside))
         elif ident == "scale_factor_tc" and data.known_input_block is not None:
             extra.append((index, "sf_ppm_per_c", data.known_input_block * 1e-6 * (T_pm - T_REF_C)))
     poly_index = ids.index("bias_poly")  # always present: the finder's models all start from it

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from trainer.diagnose.baseline import Baseline, build_baseline
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
-from trainer.diagnose.candidates import fine_residual, scan_steps
+from trainer.diagnose.candidates import FAST_PERIOD_BLOCKS, fine_residual, scan_periods, scan_steps
 from trainer.diagnose.gls import window_variances
 from trainer.diagnose.locate import AllanComparison, allan_comparison, scan_regions, spectral_peaks
 from trainer.diagnose.model import (
@@ -245,26 +245,54 @@ def window_z(residual: np.ndarray, cov: np.ndarray, a: int, b: int) -> float:
 def where_regions(
     visible: np.ndarray, data: BlockData, profile: Profile, residual: np.ndarray, cov: np.ndarray
 ) -> list[Region]:
-    """Where an effect's visible part (what the rest of the model cannot absorb) is large."""
-    peak = float(np.max(np.abs(visible))) if visible.size else 0.0
-    if peak <= 0:
+    """Where an effect's visible part (what the rest of the model cannot absorb) is large.
+
+    The visible part is the final model's prediction minus that of the model without the effect.
+    Its envelope (moving RMS over ~2 % of the run) above half its peak gives the regions, so a
+    sawtooth or a branch offset is one region, not many single blocks.
+    """
+    if visible.size == 0 or float(np.max(np.abs(visible))) <= 0:
         return []
-    mask = np.abs(visible) >= 0.5 * peak
-    # close small gaps so one feature is one region
+    width = max(3, int(round(0.02 * data.n)) | 1)
+    kernel = np.ones(width) / width
+    envelope = np.sqrt(np.convolve(visible * visible, kernel, mode="same"))
+    mask = envelope >= 0.5 * float(np.max(envelope))
     idx = np.flatnonzero(mask)
     runs: list[list[int]] = []
     for k in idx.tolist():
-        if runs and k - runs[-1][1] <= 3:
+        if runs and k - runs[-1][1] <= width:
             runs[-1][1] = k
         else:
             runs.append([k, k])
-    scored = sorted(runs, key=lambda r: -float(np.sum(np.abs(visible[r[0] : r[1] + 1]))))[:4]
+    scored = sorted(runs, key=lambda r: -float(np.sum(envelope[r[0] : r[1] + 1])))[:4]
     out = []
     for a, b in sorted(scored):
         z = window_z(residual, cov, a, b + 1)
         sig = {"z": round(z, 2), "peak_mg": round(float(np.max(np.abs(visible[a : b + 1]))), 5)}
         out.append(region(data, profile, a, b + 1, sig, "effect"))
     return out
+
+
+def _special_where(
+    effect: EffectConfig, data: BlockData, profile: Profile, residual: np.ndarray, cov: np.ndarray, step: str
+) -> list[Region] | None:
+    """Effects whose location is a parameter: a step's time, a warm-up's start, a period."""
+    p = effect.params
+    if effect.identifier == "bias_step":
+        j = int(np.clip(np.searchsorted(data.starts, p["t_s"]), 1, data.n - 1))
+        a, b = max(0, j - 1), min(data.n, j + 1)
+        before_z = window_z(residual, cov, max(0, j - 10), j)
+        after_z = window_z(residual, cov, j, min(data.n, j + 10))
+        sig = {"z_before": round(before_z, 2), "z_after": round(after_z, 2)}
+        return [region(data, profile, a, b, sig, "change_point", f"step of {p['step_mg']:.4g} mg at {p['t_s']:.1f} s")]
+    if effect.identifier == "warmup":
+        b = int(np.clip(np.searchsorted(data.starts, 3.0 * p["tau_s"]), 2, data.n))
+        sig = {"z": round(window_z(residual, cov, 0, b), 2)}
+        return [region(data, profile, 0, b, sig, "effect", "first three warm-up time constants")]
+    if effect.identifier == "periodic":
+        sig = {"evidence": step}  # type: ignore[dict-item]
+        return [region(data, profile, 0, data.n, sig, "periodic", f"period {p['period_s']:.4g} s, whole run")]
+    return None
 
 
 def _param_flags(effect: EffectConfig) -> list[str]:
@@ -419,10 +447,13 @@ def _left_out(
                 for a, b, r in departures
             ]
         else:
-            effect = effects_by_index[index]
+            effect = effects_by_index.get(index) or _rate_ramp_effect(final, index)
             entry["params"] = {k: float(f"{v:.6g}") for k, v in effect.params.items()}
             visible = final.prediction - reduced.prediction
-            entry["where"] = [r.to_dict() for r in where_regions(visible, data, profile, baseline_fit.residual, cov)]
+            where = _special_where(effect, data, profile, baseline_fit.residual, cov, step.evidence)
+            if where is None:
+                where = where_regions(visible, data, profile, baseline_fit.residual, cov)
+            entry["where"] = [r.to_dict() for r in where]
             entry["peak_visible_mg"] = round(float(np.max(np.abs(visible))), 5)
             flags = _param_flags(effect)
             if flags:
@@ -442,6 +473,11 @@ def _left_out(
         out.append(entry)
     out.sort(key=lambda e: -e["evidence"]["delta_bic_when_dropped"])
     return out
+
+
+def _rate_ramp_effect(final: ModelFit, index: int) -> EffectConfig:
+    """``rate_ramp`` is a catalogue noise term with a deterministic trend; report it like an effect."""
+    return EffectConfig("rate_ramp", {"r_mg_per_s": final.linear(index)["r_mg_per_s"]})
 
 
 def locate_mismatch(
@@ -466,13 +502,31 @@ def locate_mismatch(
                 f"best single step at t = {times[k]:.1f} s",
             )
         )
+    lo_slow = FAST_PERIOD_BLOCKS * data.block_s
+    if 0.5 * data.duration_s > lo_slow:
+        freqs = np.arange(2.0 / data.duration_s, 1.0 / lo_slow, 1.0 / (4.0 * data.duration_s))
+        rss_p = scan_periods(fit, data, 1.0 / freqs)
+        k = int(np.argmin(rss_p))
+        lr = data.n * math.log(max(base_rss, 1e-300) / max(float(rss_p[k]), 1e-300))
+        if lr - 3.0 * math.log(data.n) > THRESHOLD:
+            out.append(
+                region(
+                    data,
+                    profile,
+                    0,
+                    data.n,
+                    {"likelihood_ratio": round(lr, 1), "delta_bic": round(lr - 3.0 * math.log(data.n), 1)},
+                    "periodic",
+                    f"slow periodic component near {1.0 / freqs[k]:.0f} s (GLS scan)",
+                )
+            )
     x = fine_residual(fit, data)
     for term in fit.terms:
         if term.identifier == "periodic" and term.offset is not None:
             amp, phase = term.offset
             x = x - amp * np.sin(2 * math.pi * data.fine_t / term.nl[0] + phase)
     lo = max(4.0, 2.5 * data.fine_step_s)
-    for peak in spectral_peaks(x, data.fine_step_s, lo, 0.5 * data.duration_s):
+    for peak in spectral_peaks(x, data.fine_step_s, lo, lo_slow):
         out.append(
             region(
                 data,

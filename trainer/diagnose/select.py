@@ -22,7 +22,7 @@ from trainer.diagnose.model import ModelFit, Term, fit_model
 
 THRESHOLD = 10.0
 AMBIGUOUS = 6.0
-TOP_REFIT = 4
+TOP_REFIT = 3
 MAX_ADDED = 4
 
 CONFUSABLE: dict[str, tuple[str, ...]] = {
@@ -30,7 +30,8 @@ CONFUSABLE: dict[str, tuple[str, ...]] = {
     "temp_rate": ("thermal_lag", "hysteresis"),
     "hysteresis": ("thermal_lag", "temp_rate"),
     "stress_relaxation": ("thermal_lag", "warmup"),
-    "warmup": ("stress_relaxation",),
+    "warmup": ("stress_relaxation", "bias_step"),
+    "bias_step": ("warmup",),
     "rate_ramp": ("rate_random_walk",),
     "rate_random_walk": ("rate_ramp",),
 }
@@ -49,6 +50,10 @@ SEPARATING_SIGNATURE: dict[frozenset[str], str] = {
     ),
     frozenset({"thermal_lag", "stress_relaxation"}): (
         "the time constant: a lag settles within minutes (10-900 s), package creep over 20 min to hours"
+    ),
+    frozenset({"bias_step", "warmup"}): (
+        "a step is instantaneous and permanent; a warm-up decays exponentially from power-on (a longer "
+        "soak after power-on, or a higher sample rate at the start, shows the shape)"
     ),
     frozenset({"stress_relaxation", "warmup"}): (
         "creep follows each temperature change; warm-up happens once after power-on"

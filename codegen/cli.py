@@ -1,0 +1,85 @@
+"""``codegen`` command line: ``export`` a model.pt to C99, ``verify`` the C against the golden model."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from codegen import __version__
+from trainer.errors import UserError, run_cli
+
+EXIT_MISMATCH = 1
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UserError(f"{self.prog}: {message}")
+
+
+def _export(args: argparse.Namespace) -> int:
+    from codegen.export import export, manifest_name
+
+    model, files = export(args.model, args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
+    name = next(f for f in files if f.endswith(".h"))[:-2]
+    import json
+
+    sizes = json.loads(files[manifest_name(name)])["sizes"]
+    print(
+        f"wrote {args.out_dir}/{{{name}.h, {name}.c, {manifest_name(name)}}}: method {model.checkpoint.method}, "
+        f"flash tables {sizes['flash_table_bytes']} B, state RAM {sizes['ram_state_bytes']} B, "
+        f"model sha256:{model.sha256[:16]}..."
+    )
+    return 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from codegen.verify import report_lines, verify
+
+    result = verify(args.model, args.out_dir, args.recording, name=args.name, cc=args.cc, table1=not args.no_table)
+    for line in report_lines(result):
+        print(line)
+    if result.mismatches or not result.state_equal:
+        print(f"error: the generated C differs from the golden model ({result.mismatches} samples)", file=sys.stderr)
+        return EXIT_MISMATCH
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="codegen", description="Fixed-point C99 export of mems-tdc compensators.")
+    parser.add_argument("--version", action="version", version=f"mems-tdc codegen {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    exp = sub.add_parser("export", help="quantise a model.pt and render NAME.h, NAME.c and a manifest")
+    exp.add_argument("model", help="checkpoint written by 'trainer fit' (model.pt)")
+    exp.add_argument("-o", "--out-dir", required=True, help="output directory (created; its parent must exist)")
+    exp.add_argument("--name", help="C prefix and file name (default tdc_<method>); a C identifier")
+    exp.add_argument(
+        "--accel-limit-g", type=float, default=16.0,
+        help="acceleration full scale in g; the front end clamps beyond it (default 16)",
+    )
+    exp.set_defaults(func=_export)
+
+    ver = sub.add_parser("verify", help="compile OUTDIR's C and compare it with the golden model on a recording")
+    ver.add_argument("model", help="the model.pt the module was exported from")
+    ver.add_argument("out_dir", help="directory written by 'codegen export'")
+    ver.add_argument("recording", help="recording (.csv or .npz) to stream through both")
+    ver.add_argument("--name", help="module name when OUTDIR holds several")
+    ver.add_argument("--cc", help="C compiler (default $CC, cc, gcc or clang)")
+    ver.add_argument("--no-table", action="store_true", help="skip the Table 1 comparison (saves a few s)")
+    ver.set_defaults(func=_verify)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+def entry() -> None:
+    sys.exit(run_cli(main))
+
+
+if __name__ == "__main__":
+    entry()

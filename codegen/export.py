@@ -1,0 +1,109 @@
+"""``codegen export``: model.pt -> NAME.h, NAME.c, NAME.manifest.json, all or nothing.
+
+Everything is computed in memory first; the files are then written into a staging directory and
+moved into place, so a failure (bad model, unwritable directory) leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from codegen.manifest import build_manifest
+from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, QuantModel, quantise_checkpoint
+from codegen.render import default_name, manifest_json, render_sources, validate_name
+from codegen.spec import Checkpoint, parse_checkpoint
+from trainer.checkpoint import load_checkpoint
+from trainer.errors import UserError
+
+
+@dataclass(frozen=True)
+class LoadedModel:
+    """A checkpoint as the generator sees it: parsed specs, quantised model, file hash."""
+
+    path: Path
+    sha256: str
+    checkpoint: Checkpoint
+    quantised: QuantModel
+
+
+def load_for_codegen(path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> LoadedModel:
+    """Validate (``load_checkpoint``), parse and quantise; every failure is a one-line UserError."""
+    p = Path(path)
+    raw = load_checkpoint(p)
+    sha256 = hashlib.sha256(p.read_bytes()).hexdigest()
+    ckpt = parse_checkpoint(raw, str(p))
+    try:
+        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
+    except UserError as exc:
+        raise UserError(f"{p}: {exc}") from None
+    return LoadedModel(p, sha256, ckpt, quantised)
+
+
+def manifest_name(name: str) -> str:
+    return f"{name}.manifest.json"
+
+
+def generate(model: LoadedModel, name: str) -> dict[str, str]:
+    """File name -> content of the three output files (pure; nothing touches the disk)."""
+    name = validate_name(name)
+    files = render_sources(model.quantised, name, model.sha256)
+    manifest = build_manifest(
+        model.quantised, name=name, sha256=model.sha256, valid_temp_range_c=model.checkpoint.valid_temp_range_c
+    )
+    files[manifest_name(name)] = manifest_json(manifest)
+    return files
+
+
+def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str]) -> None:
+    """Write ``files`` into ``out_dir`` (created if absent, parent must exist), all or nothing."""
+    target = Path(out_dir)
+    parent = target.parent if str(target.parent) else Path(".")
+    if target.exists() and not target.is_dir():
+        raise UserError(f"{target}: exists and is not a directory")
+    if not parent.is_dir():
+        raise UserError(f"{target}: parent directory {parent} does not exist")
+    base = target if target.is_dir() else parent
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise UserError(f"{target}: {'output' if base == target else 'parent'} directory {base} is not writable")
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
+    except OSError as exc:
+        raise UserError(f"{target}: cannot write ({exc.strerror})") from None
+    try:
+        for file_name, text in files.items():
+            (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
+            os.chmod(staging / file_name, 0o644)
+        if base == target:
+            for file_name in files:
+                os.replace(staging / file_name, target / file_name)
+            staging.rmdir()
+        else:
+            os.chmod(staging, 0o755)
+            os.rename(staging, target)
+    except OSError as exc:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise UserError(f"{target}: cannot write ({exc.strerror})") from None
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def export(
+    model_path: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+) -> tuple[LoadedModel, dict[str, str]]:
+    """Load, quantise, render and write; returns the model and the written files."""
+    if name is not None:
+        validate_name(name)
+    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    files = generate(model, name or default_name(model.checkpoint.method))
+    write_files_atomically(files, out_dir)
+    return model, files

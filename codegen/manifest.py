@@ -1,0 +1,211 @@
+"""The manifest (JSON) of a generated module: hash, formats, rates, ranges, bounds, sizes.
+
+The bounds are the generation-time proofs of :mod:`codegen.quantize`, stated with their headroom
+in bits (log2 of limit / worst case), so that every saturation the C can reach is documented.
+"""
+
+from __future__ import annotations
+
+import math
+
+from codegen import __version__
+from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
+from codegen.quantize import (
+    ACCEL_PER_MG,
+    C_FRAC,
+    MEAN_FRAC,
+    X_FRAC,
+    Z_FRAC,
+    QLayer,
+    QMatrix,
+    QPla,
+    QPoly3,
+    QStream,
+    QuantModel,
+)
+from codegen.render import FLAGS, activation_summary, state_bytes, state_fields, table_bytes
+
+FORMAT = "mems-tdc-codegen-manifest"
+FORMAT_VERSION = 1
+CELL_LIMIT = INT32_MAX / 2.0**C_FRAC
+
+
+def _num(value: float) -> float | str:
+    """Six significant digits (stable JSON); infinities as strings."""
+    if math.isinf(value):
+        return "inf"
+    return float(f"{value:.6g}")
+
+
+def _matrix(m: QMatrix) -> dict[str, object]:
+    return {
+        "frac_bits": m.frac,
+        "shift_to_q15_16": m.shift,
+        "accumulator": "int64" if m.wide else "int32",
+        "acc_bound": m.acc_bound,
+        "acc_headroom_bits": _num(m.headroom),
+    }
+
+
+def _layer(layer: QLayer) -> dict[str, object]:
+    z_real = layer.z_bound / 2.0**Z_FRAC
+    return {
+        "w_x": _matrix(layer.wx),
+        "w_h": _matrix(layer.wh),
+        "bias_format": "int32 Q15.16",
+        "z_bound": _num(z_real),
+        "z_headroom_bits": _num(headroom_bits(layer.z_bound, INT32_MAX)),
+        "forget_gate_max": _num(layer.forget_max_q15 / 32768.0),
+        "cell_bound": _num(layer.cell_bound),
+        "cell_limit": _num(CELL_LIMIT),
+        "cell_headroom_bits": _num(headroom_bits(layer.cell_bound, CELL_LIMIT)),
+        "cell_saturation_reachable": bool(layer.cell_bound > CELL_LIMIT),
+    }
+
+
+def _stream(model: QStream) -> dict[str, object]:
+    fe = model.frontend
+    out: dict[str, object] = {
+        "rates": {
+            "sample_rate_hz": fe.rate_hz,
+            "decimation": fe.decimation,
+            "network_step_hz": _num(fe.rate_hz / fe.decimation),
+        },
+        "frontend": {
+            "kind": "persistence" if not model.layers else model.kind,
+            "smoothed_signal": "temperature" if model.kind == "temperature" else "acceleration",
+            "window_samples": model.window,
+            "accel_window": fe.accel_window,
+            "temp_window": fe.temp_window,
+            "mean": f"exact int64 running sum, one rounding division per step to Q{MEAN_FRAC}",
+        },
+    }
+    if not model.layers:
+        out["quantisation"] = {"rounding": "half away from zero", "estimate": "window mean, accel LSB"}
+        out["macs_per_network_step"] = 0
+        return out
+    head = model.head
+    assert head is not None
+    out["quantisation"] = {
+        "rounding": "half away from zero (on unsigned magnitudes in C)",
+        "formats": {
+            "inputs_x": f"int32 Q4.{X_FRAC}, clamped to +-16 (flagged)",
+            "weights": "int16, per-matrix power-of-two scale",
+            "accumulators": "int32 with saturating adds (int64 for the layer-0 input MACs), bounded below",
+            "pre_activation_z": f"int32 Q15.{Z_FRAC}",
+            "gates_tanh_sigmoid_h": "Q0.15",
+            "cell_state": f"int32 Q7.{C_FRAC}, saturated at +-128 (flagged)",
+            "window_mean": f"int64 Q{MEAN_FRAC} of the input unit (1/16 ug or mdegC)",
+        },
+        "inputs": [
+            {
+                "name": q.name,
+                "mean": q.mean,
+                "std": q.std,
+                "unit": q.unit,
+                "mu_q": q.mu_q,
+                "inv_q": q.inv_q,
+                "shift": q.shift,
+                "product_headroom_bits": _num(q.product_headroom),
+            }
+            for q in model.inputs
+        ],
+        "layers": [_layer(layer) for layer in model.layers],
+        "head": {
+            "w": _matrix(head.w),
+            "shift": head.shift,
+            "bias_q": head.bias_q,
+            "estimate_bound_lsb": _num(head.estimate_bound),
+            "estimate_headroom_bits": _num(headroom_bits(head.estimate_bound, INT32_MAX)),
+            "output_mean_mg": model.frontend.output_mean,
+            "output_std_mg": model.frontend.output_std,
+        },
+    }
+    out["activations"] = activation_summary()
+    out["architecture"] = {
+        "input_size": len(model.inputs),
+        "hidden_size": model.hidden_size,
+        "num_layers": len(model.layers),
+    }
+    out["macs_per_network_step"] = model.macs_per_step()
+    return out
+
+
+def _pla(model: QPla) -> dict[str, object]:
+    return {
+        "rates": {"sample_rate_hz": None, "memoryless": True},
+        "quantisation": {
+            "rounding": "half away from zero",
+            "split_points_mdegc": list(model.splits_mdegc),
+            "slopes": f"int32 Q{model.frac} accel LSB per mdegC",
+            "intercepts": f"int64 Q{model.frac} accel LSB",
+            "frac_bits": model.frac,
+            "bound": model.bound,
+            "headroom_bits": _num(headroom_bits(model.bound, INT64_MAX)),
+        },
+        "macs_per_sample": 1,
+    }
+
+
+def _poly3(model: QPoly3) -> dict[str, object]:
+    return {
+        "rates": {"sample_rate_hz": None, "memoryless": True},
+        "quantisation": {
+            "rounding": "half away from zero",
+            "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],
+            "t_ref_mdegc": model.t_ref_mdegc,
+            "u": f"(T - T_ref) / 2^{model.u_shift}",
+            "coefficients": f"int32 Q{model.frac} accel LSB, of u^0..u^3",
+            "coefficients_q": list(model.coefficients_q),
+            "frac_bits": model.frac,
+            "horner_bound": model.bound,
+            "horner_headroom_bits": _num(headroom_bits(model.bound * 2.0**model.u_shift, INT64_MAX)),
+        },
+        "macs_per_sample": 3,
+    }
+
+
+def build_manifest(
+    model: QuantModel, *, name: str, sha256: str, valid_temp_range_c: tuple[float, float]
+) -> dict[str, object]:
+    lim = model.limits
+    tables = table_bytes(model)
+    body = _stream(model) if isinstance(model, QStream) else _pla(model) if isinstance(model, QPla) else (
+        _poly3(model)
+    )
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "generator": f"mems-tdc codegen {__version__}",
+        "name": name,
+        "method": model.method,
+        "files": {"header": f"{name}.h", "source": f"{name}.c"},
+        "model": {"sha256": sha256, "id": f"sha256:{sha256}"},
+        "api": {
+            "init": f"void {name}_init({name}_state_t *state)",
+            "reset": f"void {name}_reset({name}_state_t *state)",
+            "step": f"int32_t {name}_step({name}_state_t *state, int32_t accel_q4ug, int32_t temp_mdegc)",
+            "run": f"void {name}_run({name}_state_t *state, const int32_t *accel_q4ug, "
+            "const int32_t *temp_mdegc, int32_t *out_q4ug, size_t n)",
+            "model_id": f"const char *{name}_model_id(void)",
+        },
+        "units": {
+            "accel_in": "int32, 1/16 micro-g (16000 LSB = 1 mg)",
+            "temp_in": "int32 milli-degC",
+            "out": "int32, 1/16 micro-g, compensated = raw - drift estimate, saturated",
+        },
+        "valid_temp_range_c": list(valid_temp_range_c),
+        "valid_temp_range_mdegc": [lim.valid_lo_mdegc, lim.valid_hi_mdegc],
+        "input_limits": {
+            "accel_lsb": [-lim.accel, lim.accel],
+            "accel_g": [-lim.accel / ACCEL_PER_MG / 1000, lim.accel / ACCEL_PER_MG / 1000],
+            "temp_mdegc": [lim.temp_lo_mdegc, lim.temp_hi_mdegc],
+        },
+        "flags": dict(FLAGS),
+        "sizes": {
+            "flash_table_bytes": sum(tables.values()),
+            "flash_tables": tables,
+            "ram_state_bytes": state_bytes(state_fields(model)),
+        },
+        **body,
+    }

@@ -1,0 +1,213 @@
+"""``codegen verify``: the generated C equals the golden model on a whole recording, bit for bit.
+
+The recording is converted once to the step API's integers (``round(accel_mg * 16000)`` in 1/16 ug,
+``round(temp_c * 1000)`` mdegC, round half to even: the "ADC"), streamed through the compiled
+``NAME_run`` in one call and through the golden model; every output sample and the final state
+must be identical. The golden output is then compared with the float model of the trainer on the
+float recording (the error budget, in mg), and optionally the paper's Table 1 of both.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from codegen.export import LoadedModel, load_for_codegen, manifest_name
+from codegen.fixedpoint import INT32_MAX, INT32_MIN
+from codegen.golden import golden_for
+from codegen.hostbuild import load_module
+from codegen.quantize import ACCEL_PER_MG, QStream
+from trainer.errors import UserError
+from trainer.recording import Recording
+
+
+@dataclass(frozen=True)
+class ErrorBudget:
+    """Golden minus float, mg, over every sample of the recording."""
+
+    rms_mg: float
+    max_abs_mg: float
+    noise_mg: float  # the sensor's white noise per sample, for scale
+
+    @property
+    def noise_ratio(self) -> float:
+        return self.noise_mg / self.rms_mg if self.rms_mg > 0 else float("inf")
+
+
+@dataclass(frozen=True)
+class VerifyResult:
+    name: str
+    method: str
+    samples: int
+    mismatches: int
+    first_mismatch: int | None
+    state_equal: bool
+    budget: ErrorBudget
+    table1: Table1Check | None
+
+
+def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """The recording as the step function's int32 inputs (1/16 ug, mdegC)."""
+
+    def convert(values: np.ndarray, scale: float) -> np.ndarray:
+        return np.clip(np.rint(values * scale), INT32_MIN, INT32_MAX).astype(np.int32)
+
+    return convert(rec.accel_mg, ACCEL_PER_MG), convert(rec.temp_c, 1000.0)
+
+
+def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, object]]:
+    if not out_dir.is_dir():
+        raise UserError(f"{out_dir}: no such directory")
+    if name is None:
+        found = sorted(out_dir.glob("*.manifest.json"))
+        if len(found) != 1:
+            what = "no" if not found else f"{len(found)}"
+            raise UserError(f"{out_dir}: {what} generated modules (*.manifest.json) found; pass --name")
+        name = found[0].name[: -len(".manifest.json")]
+    path = out_dir / manifest_name(name)
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise UserError(f"{path}: cannot read the manifest ({exc})") from None
+    return name, manifest
+
+
+def sensor_noise_mg(accel_mg: np.ndarray) -> float:
+    """White noise per sample from successive differences (drift cancels out)."""
+    return float(np.std(np.diff(accel_mg)) / np.sqrt(2.0))
+
+
+def error_budget(golden: np.ndarray, float_mg: np.ndarray, accel_mg: np.ndarray) -> ErrorBudget:
+    err = golden / ACCEL_PER_MG - float_mg
+    return ErrorBudget(float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err))), sensor_noise_mg(accel_mg))
+
+
+@dataclass(frozen=True)
+class Table1Check:
+    """Table 1 of the quantised model against the float model's, figure by figure.
+
+    A figure "matches" when it prints the same, or when the two unrounded values differ by less
+    than half a unit in the last printed place: then only a rounding boundary lies between them,
+    which no finite precision can exclude (the float value may sit exactly on it).
+    """
+
+    figures: int
+    identical: int
+    within_half_unit: int
+    text: str
+
+    @property
+    def ok(self) -> bool:
+        return self.identical + self.within_half_unit == self.figures
+
+
+def _half_unit_sci(value: float) -> float:
+    """Half a unit in the last place of ``f"{value:.2e}"``."""
+    exponent = int(f"{value:.2e}".split("e")[1])
+    return 0.5 * 10.0 ** (exponent - 2)
+
+
+def compare_table1(rec: Recording, method: str, float_mg: np.ndarray, golden_mg: np.ndarray) -> Table1Check:
+    from trainer.evaluate import evaluate
+
+    ref = evaluate(rec, {method: float_mg}).table
+    got = evaluate(rec, {method: golden_mg}).table
+    pairs: list[tuple[float, float, str]] = []
+    for key in ref.improvement_pct[method]:  # the table's rows: B, K, R
+        pairs.append((ref.compensated[method].fits[key].value, got.compensated[method].fits[key].value, "sci"))
+        pairs.append((ref.improvement_pct[method][key], got.improvement_pct[method][key], "pct"))
+    pairs.append((ref.average_improvement_pct[method], got.average_improvement_pct[method], "pct"))
+    identical = near = 0
+    for a, b, kind in pairs:
+        if not (np.isfinite(a) and np.isfinite(b)):
+            identical += int(np.isfinite(a) == np.isfinite(b))
+            continue
+        text = (lambda v: f"{v:.2e}") if kind == "sci" else (lambda v: f"{v:.2f}")
+        half = _half_unit_sci(a) if kind == "sci" else 0.005
+        if text(a) == text(b):
+            identical += 1
+        elif abs(a - b) < half:
+            near += 1
+    return Table1Check(len(pairs), identical, near, got.to_text())
+
+
+def verify(
+    model_path: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    recording: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    cc: str | None = None,
+    table1: bool = True,
+) -> VerifyResult:
+    from trainer.checkpoint import load_model
+    from trainer.recording_io import read_recording
+
+    out = Path(out_dir)
+    name, manifest = find_manifest(out, name)
+    try:
+        accel_limit_g = float(manifest["input_limits"]["accel_g"][1])  # type: ignore[index]
+    except (KeyError, TypeError, IndexError, ValueError):
+        raise UserError(f"{out / manifest_name(name)}: field 'input_limits.accel_g' is missing") from None
+    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    stamped = manifest.get("model", {}).get("sha256")  # type: ignore[union-attr]
+    if stamped != model.sha256:
+        raise UserError(f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})")
+    rec = read_recording(recording)
+    q = model.quantised
+    if isinstance(q, QStream) and abs(rec.sample_rate_hz - q.frontend.rate_hz) > 0.01 * q.frontend.rate_hz:
+        raise UserError(f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model runs at {q.frontend.rate_hz:g} Hz")
+    accel, temp = to_step_units(rec)
+
+    host = load_module(out, name, cc=cc)
+    if host.model_id() != f"sha256:{model.sha256}":
+        raise UserError(f"{out / name}.c carries model id {host.model_id()}, not sha256:{model.sha256}")
+    state = host.new_state()
+    c_out = host.run(state, accel, temp)
+    golden = golden_for(q)
+    g_out = golden.run(accel, temp)
+    differ = np.flatnonzero(c_out.astype(np.int64) != g_out)
+    c_state, g_state = host.read_state(state), golden.state()
+    state_equal = c_state.keys() == g_state.keys() and all(
+        np.array_equal(np.asarray(c_state[k]), np.asarray(g_state[k])) for k in c_state
+    )
+
+    float_model, _ = load_model(model_path)
+    float_out = float_model.compensate(rec.without_truth())
+    budget = error_budget(g_out, float_out, rec.accel_mg)
+    table = compare_table1(rec, model.checkpoint.method, float_out, g_out / ACCEL_PER_MG) if table1 else None
+    return VerifyResult(
+        name,
+        model.checkpoint.method,
+        int(accel.size),
+        int(differ.size),
+        int(differ[0]) if differ.size else None,
+        state_equal,
+        budget,
+        table,
+    )
+
+
+def report_lines(result: VerifyResult) -> list[str]:
+    b = result.budget
+    lines = [
+        f"samples compared: {result.samples}",
+        f"mismatches: {result.mismatches}"
+        + (f" (first at sample {result.first_mismatch})" if result.first_mismatch is not None else ""),
+        f"final state identical: {'yes' if result.state_equal else 'NO'}",
+        f"error budget (golden - float, {result.method}): RMS {b.rms_mg:.3g} mg, max {b.max_abs_mg:.3g} mg "
+        f"(sensor noise {b.noise_mg:.3g} mg per sample, {b.noise_ratio:.3g} x the RMS)",
+    ]
+    t = result.table1
+    if t is not None:
+        lines.append(
+            f"Table 1 (quantised vs float): {t.identical} of {t.figures} figures print identically"
+            + (f", {t.within_half_unit} differ by less than half a unit in the last place (rounding boundary)"
+               if t.within_half_unit else "")
+            + ("" if t.ok else "; SOME DIFFER MORE")
+        )
+    return lines
