@@ -19,8 +19,10 @@ import os
 import platform
 import subprocess
 import sys
-import time
-from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_population import timed
 
 FIT_SCRIPT = """
 import json, sys, time, torch
@@ -51,16 +53,6 @@ def run_fit(iterations: int, cycles: int) -> tuple[dict, float]:
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit("the fusion run failed")
     return json.loads(output.strip().splitlines()[-1]), usage.ru_maxrss / 1024.0
-
-
-def best_of(fn: Callable[[], object], repeats: int) -> float:
-    fn()  # warm-up: oneDNN builds its kernels on the first call of a new shape
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        samples.append(time.perf_counter() - start)
-    return min(samples)
 
 
 def batched_vs_sequential(repeats: int) -> dict[str, float]:
@@ -111,10 +103,10 @@ def batched_vs_sequential(repeats: int) -> dict[str, float]:
 
     return {
         "steps": x.shape[1],
-        "iteration_batched_s": best_of(batched_iteration, repeats),
-        "iteration_sequential_s": best_of(sequential_iteration, repeats),
-        "fitness_batched_s": best_of(batched_fitness, repeats),
-        "fitness_sequential_s": best_of(sequential_fitness, repeats),
+        "iteration_batched_s": timed(batched_iteration, repeats),
+        "iteration_sequential_s": timed(sequential_iteration, repeats),
+        "fitness_batched_s": timed(batched_fitness, repeats),
+        "fitness_sequential_s": timed(sequential_fitness, repeats),
     }
 
 
@@ -135,19 +127,27 @@ def main() -> None:
         f"DLSTM+ISSA full fit: 10 individuals x {args.iterations} iterations + {args.cycles} ISSA cycles "
         f"on {fit['steps']} network steps (2 h at 200 Hz, 1 s steps)"
     )
-    print(f"  wall time {fit['elapsed_s']:.1f} s (gradient {fit['gradient_s']:.1f} s, ISSA {fit['issa_s']:.1f} s)")
+    print(
+        f"  wall time {fit['elapsed_s']:.1f} s (gradient {fit['gradient_s']:.1f} s, ISSA {fit['issa_s']:.1f} s)"
+    )
     print(f"  peak RSS {rss_mb:.0f} MB")
-    print(f"  training MSE (standardised): best after gradient {fit['best_after_gradient']:.3e}, "
-          f"after ISSA {fit['best_after_issa']:.3e}")
+    print(
+        f"  training MSE (standardised): best after gradient {fit['best_after_gradient']:.3e}, "
+        f"after ISSA {fit['best_after_issa']:.3e}"
+    )
     timing = batched_vs_sequential(args.repeats)
     it_b, it_s = timing["iteration_batched_s"], timing["iteration_sequential_s"]
     fit_b, fit_s = timing["fitness_batched_s"], timing["fitness_sequential_s"]
     print(f"batched population vs one network at a time ({timing['steps']} steps, best of {args.repeats}):")
     print(f"  training iteration: {it_b * 1e3:.1f} ms vs {it_s * 1e3:.1f} ms -> speed-up {it_s / it_b:.2f}x")
-    print(f"  fitness evaluation: {fit_b * 1e3:.1f} ms vs {fit_s * 1e3:.1f} ms -> speed-up {fit_s / fit_b:.2f}x")
+    print(
+        f"  fitness evaluation: {fit_b * 1e3:.1f} ms vs {fit_s * 1e3:.1f} ms -> speed-up {fit_s / fit_b:.2f}x"
+    )
     full_b = args.iterations * it_b + args.cycles * fit_b
     full_s = args.iterations * it_s + args.cycles * fit_s
-    print(f"  full configuration from these: {full_b:.0f} s vs {full_s:.0f} s -> speed-up {full_s / full_b:.2f}x")
+    print(
+        f"  full configuration from these: {full_b:.0f} s vs {full_s:.0f} s -> speed-up {full_s / full_b:.2f}x"
+    )
 
 
 if __name__ == "__main__":

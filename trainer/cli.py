@@ -16,6 +16,7 @@ COMMANDS: dict[str, str] = {
     "fit": "fit_cmd",
     "evaluate": "evaluate_cmd",
     "compare": "compare_cmd",
+    "diagnose": "diagnose_cmd",
 }
 
 

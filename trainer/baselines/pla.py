@@ -21,12 +21,11 @@ from typing import Any, Self
 import numpy as np
 import torch
 
-from trainer.compensator import Compensator
+from trainer.baselines.base import TemperatureCompensator
 from trainer.errors import UserError
-from trainer.recording import Recording
 
 
-class PiecewiseLinear(Compensator):
+class PiecewiseLinear(TemperatureCompensator):
     """The paper's PLA baseline: temperature in, drift out, one line per temperature interval."""
 
     method = "pla"
@@ -61,9 +60,6 @@ class PiecewiseLinear(Compensator):
         self.temp_range_c = (t_min, t_max)
         return self
 
-    def fit(self, rec: Recording) -> Self:
-        return self.fit_arrays(rec.temp_c, rec.accel_mg)
-
     def interval_index(self, temp_c: np.ndarray) -> np.ndarray:
         """Interval of each temperature by the split points (ends are open: extrapolation)."""
         return np.searchsorted(self.split_points_c, temp_c, side="right")
@@ -71,12 +67,6 @@ class PiecewiseLinear(Compensator):
     def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
         index = self.interval_index(temp_c)
         return self.slopes_mg_per_c[index] * temp_c + self.intercepts_mg[index]
-
-    def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
-        return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
-
-    def predict_drift(self, rec: Recording) -> np.ndarray:
-        return self.drift_at(rec.temp_c)
 
     def to_payload(self) -> dict[str, Any]:
         return {

@@ -23,9 +23,8 @@ import numpy as np
 import torch
 from scipy.ndimage import median_filter
 
-from trainer.compensator import Compensator
+from trainer.baselines.base import TemperatureCompensator
 from trainer.errors import UserError
-from trainer.recording import Recording
 
 PX4_MEDIAN_KERNEL = 31
 PX4_TEMPERATURE_BINS = 2000
@@ -43,7 +42,7 @@ def bin_by_temperature(temp: np.ndarray, values: np.ndarray, n_bins: int) -> tup
     return sum_t[keep] / counts[keep], sum_v[keep] / counts[keep]
 
 
-class CubicPolynomial(Compensator):
+class CubicPolynomial(TemperatureCompensator):
     """PX4-style per-axis cubic thermal calibration (offset only)."""
 
     method = "poly3"
@@ -83,18 +82,9 @@ class CubicPolynomial(Compensator):
         self.temp_range_c = (t_min, t_max)
         return self
 
-    def fit(self, rec: Recording) -> Self:
-        return self.fit_arrays(rec.temp_c, rec.accel_mg)
-
     def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
         clipped = np.clip(temp_c, *self.temp_range_c)
         return np.polynomial.polynomial.polyval(clipped - self.t_ref_c, self.coefficients)
-
-    def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
-        return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
-
-    def predict_drift(self, rec: Recording) -> np.ndarray:
-        return self.drift_at(rec.temp_c)
 
     def to_payload(self) -> dict[str, Any]:
         return {

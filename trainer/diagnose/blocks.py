@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 from scipy.signal import savgol_filter
 
 from trainer.errors import UserError
@@ -55,61 +56,79 @@ def dequantize(
     """Knots ``(t, T)`` of the smooth temperature behind a staircase thermometer column, and plateaus.
 
     The reading changes level when the true temperature crosses a half-LSB threshold, so each
-    change (or each burst of noise-dithered flips between the same two levels, taken at its
-    median time) pins the true temperature to the midpoint between the levels at that time.
-    Inside plateaus much longer than the typical level duration (holds) the level's own value is
-    used, because the threshold just left is a poor estimate of where the temperature settled; the
-    true value there is only known within +-LSB/2, so the plateaus are returned as ``(t0, t1)``
-    intervals for the model to give each an unknown offset.
+    crossing (a burst of noise-dithered flips between two levels, taken at its median time) pins
+    the true temperature to the threshold at that time. A shape-preserving (PCHIP) curve through
+    these knots follows ramps and the slowing approach to a hold. Where no crossing happens for
+    long (holds, the start and the end) the temperature is only known within one LSB, so those
+    plateaus are returned as ``(t0, t1)`` intervals for the model to give each an unknown offset
+    (the bias slope times that temperature error).
     """
-    level = np.round(np.asarray(temp_c) / lsb).astype(np.int64)
+    temp_c = np.asarray(temp_c, dtype=np.float64)
+    level = np.round(temp_c / lsb).astype(np.int64)
     change = np.flatnonzero(level[1:] != level[:-1]) + 1
+    t_end = float(t[-1])
     if change.size == 0:
         mid = float(level[0] * lsb)
-        return np.array([t[0], t[-1]]), np.array([mid, mid]), [(float(t[0]), float(t[-1]))]
+        return np.array([t[0], t_end]), np.array([mid, mid]), [(float(t[0]), t_end + 1.0)]
+    # Seconds per level on the fastest ramp: noise-dithered flips around one threshold come in
+    # bursts far shorter than that, a longer pause is a new crossing.
+    step = max(1, int(round(10.0 / max(float(t[1] - t[0]), 1e-9))))
+    coarse_t, coarse_T = t[::step], temp_c[::step]
+    fastest = float(np.percentile(np.abs(rate_c_per_min(coarse_t, coarse_T)), 95)) / 60.0 if coarse_t.size >= 7 else 0.0
+    typical = lsb / fastest if fastest > 0 else t_end - float(t[0])
     knots_t: list[float] = []
     knots_v: list[float] = []
-    pair_prev: tuple[int, int] | None = None
+    pair_prev: tuple[int, int] = (0, 0)
     burst: list[float] = []
     for idx in change.tolist():
         a, b = int(level[idx - 1]), int(level[idx])
         pair = (min(a, b), max(a, b))
         when = 0.5 * (t[idx - 1] + t[idx])
-        if pair != pair_prev and burst:
+        if burst and (pair != pair_prev or when - burst[-1] > 0.3 * typical):
             knots_t.append(float(np.median(burst)))
-            knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)  # type: ignore[index]
+            knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)
             burst = []
         burst.append(when)
         pair_prev = pair
     knots_t.append(float(np.median(burst)))
-    knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)  # type: ignore[index]
-    kt = np.array(knots_t)
-    kv = np.array(knots_v)
-    gaps = np.diff(kt)
-    typical = float(np.median(gaps)) if gaps.size else float(t[-1] - t[0])
-    out_t: list[float] = [float(t[0])]
-    out_v: list[float] = [float(level[0] * lsb)]
+    knots_v.append(0.5 * (pair_prev[0] + pair_prev[1]) * lsb)
+    # Runs of crossings of the same threshold (hovering in a hold): keep the first and the last.
+    kt: list[float] = []
+    kv: list[float] = []
+    for i, (tk, vk) in enumerate(zip(knots_t, knots_v, strict=True)):
+        same_prev = i > 0 and knots_v[i - 1] == vk
+        same_next = i + 1 < len(knots_v) and knots_v[i + 1] == vk
+        if not (same_prev and same_next):
+            kt.append(tk)
+            kv.append(vk)
+    # Gaps between crossings grow geometrically on the approach to a hold (PCHIP follows that);
+    # only a gap much longer than that is a hold whose level is unknown within the LSB. There the
+    # last crossing's value is held (the approach from it is exact) until shortly before the next
+    # crossing, and the model gives the plateau an unknown offset.
+    long_gap = max(10.0 * typical, 0.05 * (t_end - float(t[0])))
     plateaus: list[tuple[float, float]] = []
-    if kt[0] - t[0] > 4.0 * typical:
-        plateaus.append((float(t[0]), float(kt[0] - 2.0 * typical)))
-        out_t.append(float(kt[0] - 2.0 * typical))
-        out_v.append(float(level[0] * lsb))
-    for i in range(kt.size):
-        if i > 0 and gaps[i - 1] > 4.0 * typical:  # a plateau: settle on the level in between
-            plateau = float(level[np.searchsorted(t, 0.5 * (kt[i - 1] + kt[i]))] * lsb)
-            out_t += [kt[i - 1] + 2.0 * typical, kt[i] - 2.0 * typical]
-            out_v += [plateau, plateau]
-            plateaus.append((float(kt[i - 1] + 2.0 * typical), float(kt[i] - 2.0 * typical)))
-        out_t.append(float(kt[i]))
-        out_v.append(float(kv[i]))
-    if t[-1] - kt[-1] > 4.0 * typical:
-        out_t += [kt[-1] + 2.0 * typical]
-        out_v += [float(level[-1] * lsb)]
-        plateaus.append((float(kt[-1] + 2.0 * typical), float(t[-1])))
-    out_t.append(float(t[-1]))
-    out_v.append(float(level[-1] * lsb) if t[-1] - kt[-1] > 4.0 * typical else out_v[-1])
-    order = np.argsort(out_t, kind="stable")
-    return np.asarray(out_t)[order], np.asarray(out_v)[order], plateaus
+    points: list[tuple[float, float]] = []
+    if kt[0] - t[0] > long_gap:
+        points += [(float(t[0]), float(level[0] * lsb)), (kt[0] - 2.0 * typical, float(level[0] * lsb))]
+        plateaus.append((float(t[0]), kt[0] - typical))
+    else:
+        points.append((float(t[0]), float(level[0] * lsb)))
+    for i in range(len(kt)):
+        if i > 0 and kt[i] - kt[i - 1] > long_gap:
+            points.append((kt[i] - 2.0 * typical, kv[i - 1]))
+            plateaus.append((kt[i - 1] + typical, kt[i] - typical))
+        points.append((kt[i], kv[i]))
+    if t_end - kt[-1] > long_gap:
+        plateaus.append((kt[-1] + typical, t_end + 1.0))
+    if t_end > kt[-1]:
+        points.append((t_end, kv[-1]))
+    out_t: list[float] = []
+    out_v: list[float] = []
+    for tp, vp in points:
+        if not out_t or tp > out_t[-1]:
+            out_t.append(tp)
+            out_v.append(vp)
+    return np.asarray(out_t), np.asarray(out_v), plateaus
 
 
 def rate_c_per_min(t: np.ndarray, temp: np.ndarray) -> np.ndarray:
@@ -232,7 +251,7 @@ def build_blocks(
     plateaus: list[tuple[float, float]] = []
     if lsb is not None:
         kt, kv, plateaus = dequantize(t - t0, temp, lsb)
-        smooth_block = np.interp(tb, kt, kv)
+        smooth_block = PchipInterpolator(kt, kv, extrapolate=True)(tb) if kt.size > 2 else np.interp(tb, kt, kv)
     mf = max(1, int(round(FINE_STEP_S * fs)))
     nf = n // mf
     return BlockData(

@@ -312,6 +312,7 @@ def fit_model(
     gls: Gls | None = None,
     refit_noise: bool = True,
     rounds: int = 2,
+    optimise: bool = True,
 ) -> ModelFit:
     """Fit ``terms`` with ``noise_terms``: nonlinear polish and noise ML, alternated ``rounds`` times.
 
@@ -322,7 +323,7 @@ def fit_model(
         if start is None or start.terms != tuple(noise_terms):
             start = _restrict(start, noise_terms, data)
         gls = Gls(data.n, data.block_s, data.duration_s, start)
-    fit = polish(terms, data, gls)
+    fit = polish(terms, data, gls) if optimise else evaluate(terms, data, gls)
     if not refit_noise:
         return fit
     for _ in range(rounds):
@@ -332,7 +333,7 @@ def fit_model(
         )
         explore = False
         moved = np.max(np.abs(np.subtract(new_gls.state.log_ratios, fit.noise.log_ratios)), initial=0.0)
-        fit = polish(fit.terms, data, new_gls) if _free_slots(fit.terms, data) else evaluate(
+        fit = polish(fit.terms, data, new_gls) if optimise and _free_slots(fit.terms, data) else evaluate(
             fit.terms, data, new_gls
         )
         if moved < 0.15:

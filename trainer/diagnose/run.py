@@ -83,7 +83,9 @@ ADVICE: dict[str, str] = {
 class FitSummary:
     rms_mg: float  # full-rate residual RMS
     rms_block_mg: float  # residual RMS of the block means (where drift mismatches show)
-    bic: float
+    bic: float  # at the common reference noise covariance (what the selection compared)
+    bic_own_noise: float  # with the model's own ML noise estimate
+    noise: dict[str, dict[str, float]]
     loglik: float
     n_params: int
     per_segment: list[dict[str, Any]]
@@ -96,6 +98,8 @@ class FitSummary:
             "rms_mg": round(self.rms_mg, 6),
             "rms_block_mg": round(self.rms_block_mg, 6),
             "bic": round(self.bic, 2),
+            "bic_own_noise": round(self.bic_own_noise, 2),
+            "noise": {k: {n: float(f"{v:.5g}") for n, v in p.items()} for k, p in self.noise.items()},
             "loglik": round(self.loglik, 2),
             "n_params": self.n_params,
             "per_segment": self.per_segment,
@@ -140,10 +144,13 @@ class Diagnosis:
                 "white_noise_n_mg_rt_s": float(f"{d.white_n_mg_rt_s:.5g}"),
             },
             "baseline": list(self.baseline.identifiers),
-            "baseline_calibrated": _effects_dict(catalogue_effects(self.baseline_fit), self.baseline_fit),
+            "baseline_calibrated": _effects_dict(catalogue_effects(self.baseline_fit), self.before.noise),
             "profile": self.profile.to_dict(),
             "criterion": {
-                "name": "BIC of the GLS likelihood of block means, noise (white, flicker, random walk) by ML",
+                "name": (
+                    "BIC of the GLS likelihood of block means under a reference noise covariance "
+                    "(white, flicker, random walk; ML on the saturated, then on the chosen model)"
+                ),
                 "add_threshold": THRESHOLD,
                 "ambiguous_below": 6.0,
             },
@@ -161,7 +168,7 @@ class Diagnosis:
         }
 
 
-def _effects_dict(effects: list[EffectConfig], fit: ModelFit) -> dict[str, Any]:
+def _effects_dict(effects: list[EffectConfig], noise: dict[str, dict[str, float]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for effect in effects:
         params = {k: float(f"{v:.6g}") for k, v in effect.params.items()}
@@ -169,7 +176,7 @@ def _effects_dict(effects: list[EffectConfig], fit: ModelFit) -> dict[str, Any]:
             out.setdefault(effect.identifier, []).append(params)
         else:
             out[effect.identifier] = params
-    for term, params in fit.noise_params().items():
+    for term, params in noise.items():
         out[term] = {k: float(f"{v:.6g}") for k, v in params.items()}
     return out
 
@@ -202,10 +209,13 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
 
 
-def summarise(fit: ModelFit, profile: Profile, noise: dict[str, dict[str, float]] | None = None) -> FitSummary:
+def summarise(
+    fit: ModelFit, profile: Profile, noise: dict[str, dict[str, float]], own: ModelFit
+) -> FitSummary:
+    """Residuals of ``fit``; ``noise`` is the noise model its Allan deviation is compared with,
+    ``own`` the same terms with their own ML noise (for the own-noise BIC)."""
     data = fit.data
     residual_full = data.full_accel - full_rate_model(fit)
-    residual_full = residual_full - 0.0
     per_segment = []
     for seg in profile.segments:
         mb = (data.t >= seg.start_s) & (data.t < seg.end_s)
@@ -219,11 +229,13 @@ def summarise(fit: ModelFit, profile: Profile, noise: dict[str, dict[str, float]
                 "rms_block_mg": round(_rms(fit.residual[mb]), 6),
             }
         )
-    allan = allan_comparison(residual_full, data.fs, data.duration_s, noise or fit.noise_params())
+    allan = allan_comparison(residual_full, data.fs, data.duration_s, noise)
     return FitSummary(
         rms_mg=_rms(residual_full),
         rms_block_mg=_rms(fit.residual),
         bic=fit.bic,
+        bic_own_noise=own.bic,
+        noise=noise,
         loglik=fit.loglik,
         n_params=fit.n_params,
         per_segment=per_segment,
@@ -351,11 +363,14 @@ def _diagnose(
 
     final = selection.final
     cov_final = _cov(final)
-    before = summarise(baseline_fit, profile)
-    after = summarise(final, profile)
+    # Both models at the same (reference) noise covariance: their BICs compare, and the baseline's
+    # residual is not distorted by a noise fit that absorbed the missing effect.
+    baseline_common = fit_model(baseline_fit.terms, final.noise.terms, data, gls=final.gls, refit_noise=False)
+    before = summarise(baseline_common, profile, baseline_fit.noise_params(), own=baseline_fit)
+    after = summarise(final, profile, selection.final_ml.noise_params(), own=selection.final_ml)
 
-    left_out = _left_out(selection, data, profile, baseline_fit, cov_final, before)
-    mismatch = locate_mismatch(baseline_fit, data, profile, cov_final, before.allan)
+    left_out = _left_out(selection, data, profile, baseline_common, cov_final, before)
+    mismatch = locate_mismatch(baseline_common, data, profile, cov_final, before.allan)
     unexplained = locate_mismatch(final, data, profile, cov_final, after.allan)
     stages.update()
 
@@ -370,9 +385,9 @@ def _diagnose(
     for effect, info in ident.items():
         if info.identifiable and info.weak and effect in candidates:
             tested.append({"effect": effect, "note": f"weakly identifiable: {info.reason}; {info.test}"})
-    not_supported = baseline_support(baseline_fit, data, baseline.terms)
-    augmented = augmented_config(sim, final, data, profile, rec)
-    holdout = holdout_check(baseline_fit, final, data, holdout_fraction) if holdout_fraction > 0 else None
+    not_supported = baseline_support(baseline_common, data)
+    augmented = augmented_config(sim, selection.final_ml, data, profile, rec)
+    holdout = holdout_check(baseline_common, final, data, holdout_fraction) if holdout_fraction > 0 else None
     stages.update()
     stages.close()
     notes = []
@@ -387,7 +402,7 @@ def _diagnose(
         data=data,
         profile=profile,
         baseline=baseline,
-        baseline_fit=baseline_fit,
+        baseline_fit=baseline_common,
         selection=selection,
         left_out=left_out,
         ambiguous=selection.ambiguous,
@@ -419,7 +434,7 @@ def _left_out(
     term_positions = [k for k, term in enumerate(final.terms) if term.identifier in EFFECT_PARAMETERS]
     for position, effect in zip(term_positions, catalogue, strict=True):
         effects_by_index[position] = effect
-    noise_params = final.noise_params()
+    noise_params = selection.final_ml.noise_params()
     out = []
     seen: dict[str, int] = {}
     indices = final_indices(selection)
@@ -553,6 +568,17 @@ def locate_mismatch(
     return out
 
 
+def predict(fit: ModelFit, data: BlockData) -> np.ndarray:
+    """``fit``'s terms and coefficients evaluated on (possibly longer) ``data``, matching columns by role.
+
+    Columns that the fitting data did not have (a quantised hold that only starts later) get 0.
+    """
+    design = build_design(fit.terms, data)
+    coef = dict(zip(fit.roles, fit.beta, strict=True))
+    beta = np.array([coef.get(role, 0.0) for role in design.roles])
+    return design.X @ beta + design.offset
+
+
 def holdout_check(baseline_fit: ModelFit, final: ModelFit, data: BlockData, fraction: float) -> dict[str, Any] | None:
     """Fit both models on the leading part of the run and score them on the held-out tail."""
     n_train = int(round((1.0 - fraction) * data.n))
@@ -564,10 +590,16 @@ def holdout_check(baseline_fit: ModelFit, final: ModelFit, data: BlockData, frac
         "test_t_start_s": round(float(data.starts[n_train]), 3),
         "test_t_end_s": round(data.duration_s, 3),
     }
+    cut = float(data.starts[n_train])
+    dropped = sorted(
+        {t.identifier for t in final.terms if t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s}
+    )
+    if dropped:
+        out["note"] = "a bias_step inside the held-out part cannot be learned from the fitting part; left out of both"
     for name, fit in (("before", baseline_fit), ("after", final)):
-        refit = fit_model(fit.terms, fit.noise.terms, train, start=fit.noise)
-        design = build_design(refit.terms, data)
-        prediction = design.X @ refit.beta + design.offset
+        terms = [t for t in fit.terms if not (t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s)]
+        refit = fit_model(terms, fit.noise.terms, train, start=fit.noise)
+        prediction = predict(refit, data)
         residual = data.accel - prediction
         test = residual[n_train:]
         out[name] = {

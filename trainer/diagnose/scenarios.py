@@ -109,7 +109,7 @@ def _draw_effect(effect: str, rng: np.random.Generator, protocol: ProtocolConfig
             effect, {"t_s": float(rng.uniform(0.25, 0.8) * duration), "step_mg": sign * float(rng.uniform(0.15, 0.4))}
         )
     if effect == "temp_quantization":
-        return EffectConfig(effect, {"lsb_c": float(rng.choice([0.25, 0.5, 1.0]))})
+        return EffectConfig(effect, {"lsb_c": float(rng.choice([0.5, 0.625]))})
     return None
 
 
@@ -120,6 +120,8 @@ def make_scenario(effects: Sequence[str], seed: int, *, rates: Sequence[float] =
     protocol = _protocol(rng, reversal)
     fs = float(rng.choice(list(rates)))
     slope = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 0.25))
+    if "temp_quantization" in effects:  # a staircase matters only on a steep enough bias curve
+        slope = math.copysign(max(abs(slope), 0.12), slope)
     poly = EffectConfig(
         "bias_poly",
         {

@@ -1,11 +1,18 @@
 """Choosing the left-out effects: forward selection by BIC, then telling confounded ones apart.
 
-The criterion is the BIC of the GLS likelihood with the noise covariance re-estimated for every
-model (so correlated noise does not pass for an effect): an effect joins when it lowers the BIC
-by at least ``THRESHOLD`` (10, "very strong" on the Kass-Raftery scale), one at a time, best first,
-until nothing passes. Afterwards every chosen effect is swapped for each effect it is known to be
-confounded with (thermal_lag with temp_rate, hysteresis or stress_relaxation, ...); when the swap
-costs less than ``AMBIGUOUS`` (6) in BIC, the data cannot tell them apart and both are reported.
+The criterion is the BIC of the GLS likelihood of the block means under a *reference* noise
+covariance (white + flicker + random walk). The reference is estimated by maximum likelihood on
+a saturated model (the starting model plus every identifiable candidate at its best), because
+the starting model's own noise fit would soak a large missing effect up as a huge random walk,
+after which the GLS is blind to any slow structure (seen on the real chamber run). Against that
+fixed covariance an effect joins when it lowers the BIC by at least ``THRESHOLD`` (10, "very
+strong" on the Kass-Raftery scale), best first, until nothing passes; the noise is then
+re-estimated on the chosen model and the selection repeated once with it. Noise terms missing
+from the starting model (random walk, flicker) are scored by ML refits with and without them.
+
+Every chosen effect is then swapped for each effect it is known to be confounded with
+(thermal_lag with temp_rate, hysteresis or stress_relaxation, ...); when the swap costs less than
+``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported.
 """
 
 from __future__ import annotations
@@ -14,24 +21,27 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
 from tqdm import tqdm
 
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.candidates import Proposal, propose
+from trainer.diagnose.gls import Gls, NoiseState
 from trainer.diagnose.model import ModelFit, Term, fit_model
 
 THRESHOLD = 10.0
 AMBIGUOUS = 6.0
-TOP_REFIT = 3
 MAX_ADDED = 4
+NOISE_EFFECTS = frozenset({"bias_instability", "rate_random_walk"})
 
 CONFUSABLE: dict[str, tuple[str, ...]] = {
-    "thermal_lag": ("temp_rate", "hysteresis", "stress_relaxation"),
-    "temp_rate": ("thermal_lag", "hysteresis"),
+    "thermal_lag": ("temp_rate", "hysteresis", "stress_relaxation", "temp_quantization"),
+    "temp_rate": ("thermal_lag", "hysteresis", "stress_relaxation"),
     "hysteresis": ("thermal_lag", "temp_rate"),
-    "stress_relaxation": ("thermal_lag", "warmup"),
+    "stress_relaxation": ("thermal_lag", "temp_rate", "warmup"),
     "warmup": ("stress_relaxation", "bias_step"),
     "bias_step": ("warmup",),
+    "temp_quantization": ("thermal_lag",),
     "rate_ramp": ("rate_random_walk",),
     "rate_random_walk": ("rate_ramp",),
 }
@@ -39,7 +49,7 @@ CONFUSABLE: dict[str, tuple[str, ...]] = {
 SEPARATING_SIGNATURE: dict[frozenset[str], str] = {
     frozenset({"thermal_lag", "temp_rate"}): (
         "a lag scales with the local slope of the bias curve and settles with its own time constant "
-        "after a ramp corner; a dT/dt term follows the rate itself"
+        "after a ramp corner; a dT/dt term follows the rate itself (two ramp rates or a hold separate them)"
     ),
     frozenset({"thermal_lag", "hysteresis"}): (
         "a lag offset decays during a hold and grows with the ramp rate; a hysteresis offset "
@@ -51,12 +61,20 @@ SEPARATING_SIGNATURE: dict[frozenset[str], str] = {
     frozenset({"thermal_lag", "stress_relaxation"}): (
         "the time constant: a lag settles within minutes (10-900 s), package creep over 20 min to hours"
     ),
+    frozenset({"temp_rate", "stress_relaxation"}): (
+        "on ramps both give an offset that follows the rate; a dT/dt term vanishes as soon as the temperature "
+        "stops, creep keeps settling for tens of minutes in a hold"
+    ),
     frozenset({"bias_step", "warmup"}): (
         "a step is instantaneous and permanent; a warm-up decays exponentially from power-on (a longer "
         "soak after power-on, or a higher sample rate at the start, shows the shape)"
     ),
     frozenset({"stress_relaxation", "warmup"}): (
         "creep follows each temperature change; warm-up happens once after power-on"
+    ),
+    frozenset({"temp_quantization", "thermal_lag"}): (
+        "a staircase error is a sawtooth of one LSB period on every ramp and an unknown offset in holds; "
+        "a lag offset is proportional to the rate (a finer thermometer reading settles it)"
     ),
     frozenset({"rate_ramp", "rate_random_walk"}): (
         "a ramp is a straight line in time; a random walk wanders (its Allan slope is +1/2, the ramp's +1)"
@@ -85,32 +103,13 @@ class Tested:
 @dataclass
 class Selection:
     steps: list[Step]
-    final: ModelFit
+    final: ModelFit  # at the reference noise (ratios fixed, scale profiled)
+    final_ml: ModelFit  # same terms, noise re-estimated by ML
     tested_first_round: list[Tested]
+    reference: NoiseState
     # (effect, occurrence) -> (BIC lost when the effect is dropped from the final model, that model)
     drop_one: dict[tuple[str, int], tuple[float, ModelFit]] = field(default_factory=dict)
     ambiguous: list[dict[str, object]] = field(default_factory=list)
-
-
-def _score_fixed(current: ModelFit, proposal: Proposal) -> float:
-    if proposal.spectral_evidence is not None:
-        return proposal.spectral_evidence - 3.0 * math.log(max(proposal.spectral_n, 2))
-    if proposal.fit_fixed_noise is None:
-        return math.inf  # a noise term: only the ML refit can score it
-    return current.bic - proposal.fit_fixed_noise.bic
-
-
-def refit(current: ModelFit, proposal: Proposal, data: BlockData) -> tuple[ModelFit, float, str]:
-    """The proposal with its noise ML-refitted; returns (fit, delta BIC vs current, evidence text)."""
-    if proposal.spectral_evidence is not None:
-        fit = proposal.fit_fixed_noise
-        assert fit is not None
-        delta = proposal.spectral_evidence - 3.0 * math.log(max(proposal.spectral_n, 2))
-        fit = fit_model(fit.terms, fit.noise.terms, data, gls=current.gls, refit_noise=False)
-        return fit, delta, f"BIC improvement {delta:.1f} ({proposal.note})"
-    fit = fit_model(proposal.terms, proposal.noise_terms, data, start=current.noise)
-    delta = current.bic - fit.bic
-    return fit, delta, f"BIC improvement {delta:.1f} (GLS, noise re-estimated)"
 
 
 def _new_term_index(before: ModelFit, after: ModelFit) -> int | None:
@@ -119,80 +118,120 @@ def _new_term_index(before: ModelFit, after: ModelFit) -> int | None:
     return len(after.terms) - 1
 
 
-def forward_select(
-    baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
-) -> Selection:
-    """Add the best candidate while the BIC improves by ``THRESHOLD`` or more."""
-    current = baseline
+def _at(gls: Gls, terms: Sequence[Term], data: BlockData, optimise: bool = True) -> ModelFit:
+    return fit_model(terms, gls.state.terms, data, gls=gls, refit_noise=False, optimise=optimise)
+
+
+def reference_noise(baseline: ModelFit, data: BlockData, candidates: Sequence[str]) -> NoiseState:
+    """ML noise of the saturated model: the baseline plus each deterministic candidate's best term."""
+    terms = list(baseline.terms)
+    for effect in candidates:
+        if effect in NOISE_EFFECTS:
+            continue
+        for proposal in propose(baseline, data, effect):
+            if proposal.spectral_evidence is None and proposal.fit_fixed_noise is not None:
+                terms.append(proposal.fit_fixed_noise.terms[-1])
+    saturated = fit_model(terms, baseline.noise.terms, data, start=baseline.noise, optimise=False)
+    return saturated.noise
+
+
+def _score(current: ModelFit, proposal: Proposal, data: BlockData) -> tuple[float, ModelFit, str]:
+    """(delta BIC, new fit, evidence text) of one proposal against ``current``."""
+    if proposal.spectral_evidence is not None:
+        assert proposal.fit_fixed_noise is not None
+        delta = proposal.spectral_evidence - 3.0 * math.log(max(proposal.spectral_n, 2))
+        return delta, proposal.fit_fixed_noise, f"BIC improvement {delta:.1f} ({proposal.note})"
+    if proposal.fit_fixed_noise is None:  # a noise term: ML with against ML without
+        without = fit_model(current.terms, current.noise.terms, data, start=current.noise)
+        with_term = fit_model(current.terms, proposal.noise_terms, data, start=current.noise)
+        delta = without.bic - with_term.bic
+        return delta, with_term, f"BIC improvement {delta:.1f} (noise ML with and without {proposal.effect})"
+    delta = current.bic - proposal.fit_fixed_noise.bic
+    return delta, proposal.fit_fixed_noise, f"BIC improvement {delta:.1f} (GLS at the reference noise)"
+
+
+def _select_once(
+    baseline_terms: Sequence[Term], data: BlockData, candidates: Sequence[str], gls: Gls, bar: tqdm
+) -> tuple[list[Step], ModelFit, list[Tested]]:
+    current = _at(gls, baseline_terms, data)
     steps: list[Step] = []
-    first_round: list[Tested] = []
-    bar = tqdm(total=MAX_ADDED, desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
+    first: list[Tested] = []
     for round_index in range(MAX_ADDED):
         proposals = [p for effect in candidates for p in propose(current, data, effect)]
-        scored = sorted(proposals, key=lambda p: -_score_fixed(current, p))
-        results: list[tuple[float, ModelFit, Proposal, str]] = []
-        refits = 0
-        for proposal in scored:
-            score = _score_fixed(current, proposal)
-            is_noise = proposal.fit_fixed_noise is None
-            if proposal.spectral_evidence is None and not is_noise and refits >= TOP_REFIT and score < THRESHOLD:
-                if round_index == 0:
-                    first_round.append(Tested(proposal.effect, score, "fixed-noise BIC (not refitted)"))
-                continue
-            fit, delta, text = refit(current, proposal, data)
-            refits += 0 if is_noise or proposal.spectral_evidence is not None else 1
-            results.append((delta, fit, proposal, text))
-            if round_index == 0:
-                first_round.append(Tested(proposal.effect, delta, text))
+        scored = [(*_score(current, p, data), p) for p in proposals]
         bar.update()
-        if not results:
+        if round_index == 0:
+            first = [Tested(p.effect, delta, text) for delta, _, text, p in scored]
+        if not scored:
             break
-        delta, fit, proposal, text = max(results, key=lambda item: item[0])
+        delta, fit, text, proposal = max(scored, key=lambda item: item[0])
         if delta < THRESHOLD:
             break
         steps.append(Step(proposal.effect, fit, delta, text, _new_term_index(current, fit)))
         current = fit
+    return steps, current, first
+
+
+def forward_select(
+    baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
+) -> Selection:
+    """Add the best candidate while the BIC improves by ``THRESHOLD`` or more (see module doc)."""
+    bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
+    reference = reference_noise(baseline, data, candidates)
+    previous: list[str] | None = None
+    for _ in range(2):
+        gls = Gls(data.n, data.block_s, data.duration_s, reference)
+        steps, final, first = _select_once(baseline.terms, data, candidates, gls, bar)
+        final_ml = fit_model(final.terms, final.noise.terms, data, start=final.noise)
+        found = [s.effect for s in steps]
+        moved = np.max(np.abs(np.subtract(final_ml.noise.log_ratios, final.noise.log_ratios)), initial=0.0)
+        if found == previous or moved < 0.3:
+            break
+        previous = found
+        reference = final_ml.noise
     bar.close()
     best_first: dict[str, Tested] = {}
-    for item in first_round:
+    for item in first:
         if item.effect not in best_first or item.delta_bic > best_first[item.effect].delta_bic:
             best_first[item.effect] = item
-    return Selection(steps, current, sorted(best_first.values(), key=lambda t: -t.delta_bic))
+    tested = sorted(best_first.values(), key=lambda t: -t.delta_bic)
+    return Selection(steps, final, final_ml, tested, final.noise)
 
 
 def drop_term(final: ModelFit, index: int | None, effect: str, data: BlockData) -> ModelFit:
-    """The final model without one term (or noise term), refitted."""
+    """The final model without one term (at the same noise), or without a noise term (ML)."""
     if index is None:
         noise = tuple(t for t in final.noise.terms if t != effect)
         return fit_model(final.terms, noise, data, start=final.noise)
     terms = tuple(t for k, t in enumerate(final.terms) if k != index)
-    return fit_model(terms, final.noise.terms, data, start=final.noise)
+    return _at(final.gls, terms, data)
 
 
 def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, progress: bool = False) -> None:
     """Importance of each chosen effect (BIC lost when dropped) and ambiguity with confounders."""
     final = selection.final
-    indices = _final_indices(selection)
-    items = list(indices.items())
-    bar = tqdm(items, desc="diagnose: confounders", unit="effect", disable=None if progress else True, leave=False)
+    indices = final_indices(selection)
+    bar = tqdm(list(indices.items()), desc="diagnose: confounders", unit="effect", disable=None if progress else True, leave=False)
     for (effect, occurrence), index in bar:
         reduced = drop_term(final, index, effect, data)
-        if index is not None and final.terms[index].offset is not None:
-            step = next(s for s in selection.steps if s.term_index == index)
-            importance = step.delta_bic
+        if index is None:
+            importance = reduced.bic - fit_model(final.terms, final.noise.terms, data, start=final.noise).bic
+        elif final.terms[index].offset is not None:
+            importance = next(s.delta_bic for s in selection.steps if s.term_index == index)
         else:
             importance = reduced.bic - final.bic
         selection.drop_one[(effect, occurrence)] = (importance, reduced)
+        if index is None:
+            continue
         for alternative in CONFUSABLE.get(effect, ()):
-            if alternative not in identifiable or alternative in final.identifiers:
+            if alternative not in identifiable or alternative in final.identifiers or alternative in NOISE_EFFECTS:
                 continue
-            if alternative in final.noise.terms:
-                continue
-            proposals = propose(reduced, data, alternative)
+            proposals = [p for p in propose(reduced, data, alternative) if p.fit_fixed_noise is not None]
             if not proposals:
                 continue
-            swapped = [refit(reduced, p, data)[0] for p in proposals]
-            best = min(swapped, key=lambda f: f.bic)
+            best = min((p.fit_fixed_noise for p in proposals if p.spectral_evidence is None), key=lambda f: f.bic, default=None)
+            if best is None:
+                continue
             gap = best.bic - final.bic
             if gap < AMBIGUOUS:
                 selection.ambiguous.append(
@@ -210,7 +249,7 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
     bar.close()
 
 
-def _final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
+def final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
     """(effect, occurrence) -> term index in the final model for every accepted step."""
     final = selection.final
     out: dict[tuple[str, int], int | None] = {}
@@ -218,7 +257,7 @@ def _final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
     for step in selection.steps:
         occurrence = seen.get(step.effect, 0)
         seen[step.effect] = occurrence + 1
-        if step.effect in final.noise.terms and step.term_index is None:
+        if step.term_index is None:
             out[(step.effect, occurrence)] = None
             continue
         positions = [k for k, term in enumerate(final.terms) if term.identifier == step.effect]
@@ -226,15 +265,11 @@ def _final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
     return out
 
 
-def final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
-    return _final_indices(selection)
-
-
-def baseline_support(baseline: ModelFit, data: BlockData, user_terms: Sequence[Term]) -> list[dict[str, object]]:
+def baseline_support(baseline: ModelFit, data: BlockData) -> list[dict[str, object]]:
     """Effects of the user's simulation that the data do not support (dropping them lowers the BIC)."""
     out = []
     for index, term in enumerate(baseline.terms):
-        if term.identifier == "bias_poly" or term not in user_terms:
+        if term.identifier == "bias_poly":  # the only term the finder adds itself
             continue
         reduced = drop_term(baseline, index, term.identifier, data)
         gain = baseline.bic - reduced.bic
@@ -247,5 +282,3 @@ def baseline_support(baseline: ModelFit, data: BlockData, user_terms: Sequence[T
                 }
             )
     return out
-
-

@@ -1,0 +1,102 @@
+"""``trainer diagnose RECORDING``: name the physics a simulation leaves out of a recording."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0.0 <= value < 0.5):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a fraction in [0, 0.5)")
+    return value
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``trainer diagnose``."""
+    parser = subparsers.add_parser(
+        "diagnose",
+        help="find the physics a simulation leaves out of a recording (mismatch finder)",
+        description=(
+            "Calibrate a simulation (--sim, default: bias_poly plus noise) to a recording, locate where the "
+            "residual is structured, name the catalogue effects that were left out and show the improvement. "
+            "See docs/diagnose.md."
+        ),
+    )
+    parser.add_argument("recording", help="recording, .csv or .npz (true_* columns are ignored)")
+    parser.add_argument("--sim", metavar="CONFIG.toml", help="the simulation you believe in (physics TOML)")
+    parser.add_argument("--json", metavar="OUT.json", help="write the machine-readable result")
+    parser.add_argument("--report", metavar="DIR", help="write a report directory (Markdown, plots, augmented TOML)")
+    parser.add_argument(
+        "--holdout",
+        type=_fraction,
+        default=0.25,
+        metavar="F",
+        help="score both models on the last fraction F of the run after fitting on the rest (default 0.25; 0: off)",
+    )
+    parser.set_defaults(func=run)
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse bad output paths before a long analysis."""
+    from pathlib import Path
+
+    from trainer.errors import UserError
+
+    if args.json:
+        parent = Path(args.json).parent
+        if not parent.is_dir():
+            raise UserError(f"{args.json}: output directory {parent} does not exist")
+    if args.report:
+        parent = Path(args.report).parent
+        if not parent.is_dir():
+            raise UserError(f"{args.report}: parent directory {parent} does not exist")
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer.diagnose import diagnose
+    from trainer.diagnose.report import write_json, write_report
+    from trainer.physics.config import load_config
+    from trainer.recording_io import read_recording
+
+    _check_outputs(args)
+    sim = load_config(args.sim) if args.sim else None
+    rec = read_recording(args.recording)
+    result = diagnose(rec, sim, holdout_fraction=args.holdout, progress=True)
+    if args.json:
+        write_json(result, args.json)
+    if args.report:
+        write_report(result, args.report)
+    print(summary(result))
+    return 0
+
+
+def summary(result: object) -> str:
+    """A few lines for the terminal."""
+    doc = result.to_dict()  # type: ignore[attr-defined]
+    fit = doc["fit"]
+    lines = [f"baseline: {', '.join(doc['baseline'])}"]
+    if doc["left_out"]:
+        for e in doc["left_out"]:
+            params = ", ".join(f"{k}={v:.4g}" for k, v in e["params"].items())
+            extra = f" (ambiguous with {', '.join(e['ambiguous_with'])})" if e.get("ambiguous_with") else ""
+            lines.append(f"left out: {e['effect']} [{params}] BIC -{e['evidence']['delta_bic_when_added']:.1f}{extra}")
+    else:
+        lines.append("left out: nothing found beyond the simulation")
+    for n in doc["not_identifiable"]:
+        lines.append(f"not identifiable: {n['effect']} ({n['recommended_test'] or n['reason']})")
+    lines.append(
+        f"fit: block RMS {fit['before']['rms_block_mg']:.4g} -> {fit['after']['rms_block_mg']:.4g} mg, "
+        f"BIC {fit['before']['bic']:.1f} -> {fit['after']['bic']:.1f}"
+    )
+    if doc["holdout"]:
+        h = doc["holdout"]
+        lines.append(
+            f"held-out tail: block RMS {h['before']['test_rms_block_mg']:.4g} -> {h['after']['test_rms_block_mg']:.4g} mg"
+        )
+    lines.append(f"({doc['seconds']:.1f} s)")
+    return "\n".join(lines)

@@ -1,0 +1,259 @@
+"""The diagnosis as files: JSON (machine-readable), Markdown (for people), PNG plots, augmented TOML.
+
+A report directory is built in a temporary sibling directory and renamed into place only when
+every file is written, so a failure never leaves a half-written report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trainer.diagnose.run import Diagnosis
+from trainer.errors import UserError, atomic_output
+from trainer.physics.config import config_to_toml
+
+REPORT_MARKER = "diagnosis.json"
+BRANCH_COLOURS = {1: ("tab:red", "heating"), -1: ("tab:blue", "cooling"), 0: ("0.55", "hold")}
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        number = float(value)
+        return number if math.isfinite(number) else None
+    return value
+
+
+def json_text(diagnosis: Diagnosis) -> str:
+    return json.dumps(_json_safe(diagnosis.to_dict()), indent=2) + "\n"
+
+
+def write_json(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
+    with atomic_output(path) as tmp:
+        tmp.write_text(json_text(diagnosis), encoding="utf-8")
+
+
+# ------------------------------------------------------------------------------------ Markdown
+
+
+def _fmt_params(params: dict[str, float]) -> str:
+    return ", ".join(f"`{k}` = {v:.4g}" for k, v in params.items())
+
+
+def _fmt_where(where: list[dict[str, Any]]) -> str:
+    parts = []
+    for w in where:
+        if "tau_range_s" in w:
+            parts.append(f"Allan tau {w['tau_range_s'][0]:.3g}..{w['tau_range_s'][1]:.3g} s")
+            continue
+        parts.append(
+            f"{w['t_start_s']:.0f}..{w['t_end_s']:.0f} s ({w['segment']}, {w['branch']}, "
+            f"{w['temp_min_c']:.1f}..{w['temp_max_c']:.1f} degC)"
+        )
+    return "; ".join(parts) or "-"
+
+
+def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
+    doc = diagnosis.to_dict()
+    rec = doc["recording"]
+    lines = [
+        f"# Physics mismatch report: {Path(str(rec['source'])).name}",
+        "",
+        f"{rec['rows']} rows at {rec['sample_rate_hz']:g} Hz, {rec['duration_s']:.0f} s; analysed as {rec['blocks']} "
+        f"block means of {rec['block_s']:.3g} s. Starting model: {', '.join(doc['baseline'])}.",
+        "",
+        "Criterion: " + doc["criterion"]["name"] + f"; an effect is added when the BIC drops by at least "
+        f"{doc['criterion']['add_threshold']:g}.",
+        "",
+        "## What was left out",
+        "",
+    ]
+    if not doc["left_out"]:
+        lines.append("Nothing: the recording shows no structure beyond the calibrated simulation.")
+    for entry in doc["left_out"]:
+        ev = entry["evidence"]
+        lines.append(
+            f"- **{entry['effect']}**: {_fmt_params(entry['params'])}. Evidence: BIC -{ev['delta_bic_when_added']:.1f} "
+            f"when added, +{ev['delta_bic_when_dropped']:.1f} when dropped from the final model. "
+            f"Where: {_fmt_where(entry['where'])}."
+        )
+        if entry.get("ambiguous_with"):
+            lines.append(f"  Could also be: {', '.join(entry['ambiguous_with'])} (see below).")
+        if entry.get("flags"):
+            lines.append("  Note: " + "; ".join(entry["flags"]) + ".")
+        if entry.get("advice"):
+            lines.append(f"  In practice: {entry['advice']}.")
+    lines += ["", "## Ambiguous", ""]
+    lines += [f"- {' vs '.join(a['effects'])}: {a['reason']}" for a in doc["ambiguous"]] or ["None."]
+    lines += ["", "## Not identifiable from this temperature profile", ""]
+    lines += [
+        f"- {n['effect']}: {n['reason']}." + (f" Test that would identify it: {n['recommended_test']}." if n["recommended_test"] else "")
+        for n in doc["not_identifiable"]
+    ] or ["None."]
+    if doc["not_supported"]:
+        lines += ["", "## In the simulation but not supported by the data", ""]
+        lines += [f"- {n['effect']}: {n['reason']}" for n in doc["not_supported"]]
+    before, after = doc["fit"]["before"], doc["fit"]["after"]
+    lines += [
+        "",
+        "## Fit before and after",
+        "",
+        "| | before | after |",
+        "|---|---:|---:|",
+        f"| residual RMS, full rate (mg) | {before['rms_mg']:.5f} | {after['rms_mg']:.5f} |",
+        f"| residual RMS, block means (mg) | {before['rms_block_mg']:.5f} | {after['rms_block_mg']:.5f} |",
+        f"| BIC | {before['bic']:.1f} | {after['bic']:.1f} |",
+    ]
+    for b_seg, a_seg in zip(before["per_segment"], after["per_segment"], strict=True):
+        lines.append(
+            f"| {b_seg['segment']} {b_seg['t_start_s']:.0f}..{b_seg['t_end_s']:.0f} s, block RMS (mg) | "
+            f"{b_seg['rms_block_mg']:.5f} | {a_seg['rms_block_mg']:.5f} |"
+        )
+    if doc["holdout"]:
+        h = doc["holdout"]
+        lines += [
+            "",
+            f"Held-out check (both models fitted on 0..{h['train_t_end_s']:.0f} s, scored on "
+            f"{h['test_t_start_s']:.0f}..{h['test_t_end_s']:.0f} s): block RMS {h['before']['test_rms_block_mg']:.5f} -> "
+            f"{h['after']['test_rms_block_mg']:.5f} mg ({h['improvement_percent']} % better).",
+        ]
+    lines += ["", "## Where the starting model's residual is structured", ""]
+    lines += [_region_line(r) for r in doc["mismatch"]] or ["Nowhere beyond the modelled noise."]
+    lines += ["", "## Still unexplained after the additions", ""]
+    lines += [_region_line(r) for r in doc["unexplained"]] or ["Nothing."]
+    if doc["notes"]:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in doc["notes"]]
+    if files:
+        lines += ["", "## Files", ""] + [f"- `{name}`: {what}" for name, what in files.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _region_line(r: dict[str, Any]) -> str:
+    sig = ", ".join(f"{k} {v}" for k, v in r["significance"].items())
+    note = f" {r['note']}." if r.get("note") else ""
+    return (
+        f"- {r['kind']}: {r['t_start_s']:.0f}..{r['t_end_s']:.0f} s ({r['segment']}, {r['branch']}, "
+        f"{r['temp_min_c']:.1f}..{r['temp_max_c']:.1f} degC), {sig}.{note}"
+    )
+
+
+# ------------------------------------------------------------------------------------ plots
+
+
+def _scatter_by_branch(ax: Any, x: np.ndarray, y: np.ndarray, branch: np.ndarray) -> None:
+    for code, (colour, label) in BRANCH_COLOURS.items():
+        mask = branch == code
+        if np.any(mask):
+            ax.plot(x[mask], y[mask], ".", ms=2.5, color=colour, label=label)
+
+
+def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
+    """Residual over time and over temperature, before and after, branches coloured."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data, profile = diagnosis.data, diagnosis.profile
+    t_min = data.t / 60.0
+    temp = data.temperature(True)
+    pairs = (("before", diagnosis.before.residual_block), ("after", diagnosis.after.residual_block))
+    files = {}
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), dpi=110, sharex=True, sharey=True)
+    for ax, (name, res) in zip(axes, pairs, strict=True):
+        _scatter_by_branch(ax, t_min, res, profile.branch)
+        for entry in diagnosis.left_out:
+            for w in entry["where"]:
+                if "tau_range_s" not in w and name == "before":
+                    ax.axvspan(w["t_start_s"] / 60.0, w["t_end_s"] / 60.0, color="gold", alpha=0.15)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(f"residual {name} (mg)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=7, markerscale=3)
+    axes[-1].set_xlabel("time (min)")
+    found = ", ".join(e["effect"] for e in diagnosis.left_out) or "nothing"
+    axes[0].set_title(f"Block-mean residual ({data.block_s:.3g} s blocks); added: {found}")
+    fig.tight_layout()
+    fig.savefig(directory / "residual_time.png")
+    plt.close(fig)
+    files["residual_time.png"] = "block-mean residual over time, before and after (found regions shaded)"
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110, sharey=True)
+    for ax, (name, res) in zip(axes, pairs, strict=True):
+        _scatter_by_branch(ax, temp, res, profile.branch)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel("temperature (degC)")
+        ax.set_title(f"residual {name}")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=7, markerscale=3)
+    axes[0].set_ylabel("block-mean residual (mg)")
+    fig.tight_layout()
+    fig.savefig(directory / "residual_temperature.png")
+    plt.close(fig)
+    files["residual_temperature.png"] = "residual over temperature, heating red, cooling blue, holds grey"
+    fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
+    for name, summary, colour in (("before", diagnosis.before, "tab:orange"), ("after", diagnosis.after, "tab:green")):
+        a = summary.allan
+        ax.errorbar(a.taus_s, a.adev, yerr=a.adev_err, fmt="o-", ms=3, lw=1, color=colour, label=f"residual {name}")
+        ax.loglog(a.taus_s, a.model, "--", color=colour, lw=1, label=f"modelled noise ({name})")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("tau (s)")
+    ax.set_ylabel("Allan deviation (mg)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(directory / "allan.png")
+    plt.close(fig)
+    files["allan.png"] = "Allan deviation of the residual before/after against the modelled noise"
+    return files
+
+
+# ------------------------------------------------------------------------------------ directory
+
+
+def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> None:
+    """Write the report directory atomically (build beside it, then rename into place).
+
+    An existing directory is replaced only if it is an earlier diagnosis report (it holds
+    ``diagnosis.json``) or empty; anything else is refused so a typo cannot delete user files.
+    """
+    target = Path(directory)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UserError(f"{target}: parent directory {parent} does not exist")
+    if target.exists() and not target.is_dir():
+        raise UserError(f"{target}: exists and is not a directory")
+    if target.is_dir() and any(target.iterdir()) and not (target / REPORT_MARKER).is_file():
+        raise UserError(f"{target}: directory exists and is not an earlier diagnosis report; choose another --report")
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=parent))
+    try:
+        files = {"diagnosis.json": "the machine-readable result (same as --json)"}
+        (staging / "diagnosis.json").write_text(json_text(diagnosis), encoding="utf-8")
+        (staging / "augmented.toml").write_text(config_to_toml(diagnosis.augmented), encoding="utf-8")
+        files["augmented.toml"] = "the simulation with the fitted and found effects: `trainer simulate --config augmented.toml`"
+        files.update(plot_residuals(diagnosis, staging))
+        (staging / "report.md").write_text(markdown(diagnosis, files), encoding="utf-8")
+        os.chmod(staging, 0o755)
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=parent))
+            os.rename(target, old / "report")
+            os.rename(staging, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
