@@ -13,6 +13,7 @@ worst case, and the model's multiply-accumulates as the lower bound to compare w
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import shutil
 import subprocess
@@ -33,7 +34,13 @@ def callgrind_instructions(binary: Path, function: str, work: Path) -> int:
     """Instructions executed inside ``function`` (inclusive) during the whole run."""
     out = work / f"callgrind.{function}.out"
     subprocess.run(
-        ["valgrind", "--tool=callgrind", f"--toggle-collect={function}*", f"--callgrind-out-file={out}", str(binary)],
+        [
+            "valgrind",
+            "--tool=callgrind",
+            f"--toggle-collect={function}*",
+            f"--callgrind-out-file={out}",
+            str(binary),
+        ],
         check=True,
         capture_output=True,
     )
@@ -49,19 +56,33 @@ def bench_model(model_path: Path, work: Path, samples: int, cc: str) -> dict[str
     harness.write_text(render_template("harness_bench.c.j2", q, "bench", model.sha256, samples=samples))
     binary = work / "bench"
     flags = [f for f in STRICT_FLAGS if f != "-Werror"]
-    subprocess.run([cc, *flags, "-O2", "-g", f"-I{work / 'out'}", str(work / "out" / "bench.c"), str(harness), "-o",
-                    str(binary)], check=True)
+    subprocess.run(
+        [
+            cc,
+            *flags,
+            "-O2",
+            "-gdwarf-4",  # valgrind 3.19 cannot read clang's DWARF 5
+            f"-I{work / 'out'}",
+            str(work / "out" / "bench.c"),
+            str(harness),
+            "-o",
+            str(binary),
+        ],
+        check=True,
+    )
     counts = subprocess.run([str(binary)], capture_output=True, text=True, check=True).stdout.split()
     n_network = int(counts[3])
     plain = callgrind_instructions(binary, "bench_plain_sample", work)
     network = callgrind_instructions(binary, "bench_network_sample", work) if n_network else 0
     obj = work / "bench.o"
     subprocess.run([cc, "-std=c99", "-O2", "-c", str(work / "out" / "bench.c"), "-o", str(obj)], check=True)
-    size = subprocess.run(["size", str(obj)], capture_output=True, text=True, check=True).stdout.splitlines()[1].split()
+    size = (
+        subprocess.run(["size", str(obj)], capture_output=True, text=True, check=True)
+        .stdout.splitlines()[1]
+        .split()
+    )
     macs_step = q.macs_per_step() if isinstance(q, QStream) else (1 if q.method == "pla" else 3)
     decimation = q.frontend.decimation if isinstance(q, QStream) else 1
-    import json
-
     manifest = json.loads(files["bench.manifest.json"])
     return {
         "method": q.method,
@@ -95,7 +116,9 @@ def default_models(work: Path) -> list[Path]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=20_000, help="samples streamed (default 20000 = 100 s)")
+    parser.add_argument(
+        "--samples", type=int, default=20_000, help="samples streamed (default 20000 = 100 s)"
+    )
     parser.add_argument("--model", action="append", type=Path, help="model.pt to measure (repeatable)")
     parser.add_argument("--cc", default=None, help="C compiler (default $CC, cc, gcc)")
     args = parser.parse_args()
@@ -112,15 +135,23 @@ def main() -> int:
             sub.mkdir()
             rows.append(bench_model(path, sub, args.samples, cc))
     print(f"instructions per 200 Hz sample ({cc} -O2, x86-64, valgrind callgrind, {args.samples} samples)")
-    header = (f"{'method':<12} {'avg instr':>10} {'worst instr':>12} {'plain instr':>12} {'MAC/step':>9} "
-              f"{'MAC/sample':>11} {'flash B':>8} {'RAM B':>6} {'.text B':>8}")
+    header = (
+        f"{'method':<12} {'avg instr':>10} {'worst instr':>12} {'plain instr':>12} {'MAC/step':>9} "
+        f"{'MAC/sample':>11} {'flash B':>8} {'RAM B':>6} {'.text B':>8}"
+    )
     print(header)
     print("-" * len(header))
     for r in rows:
-        print(f"{r['method']:<12} {r['avg']:>10.1f} {r['worst']:>12.0f} {r['plain']:>12.1f} {r['macs_step']:>9} "
-              f"{r['macs_avg']:>11.2f} {r['flash']:>8} {r['ram']:>6} {r['text']:>8}")
-    print("worst = a sample on which the network steps; MAC = multiply-accumulates of the model (lower bound);")
-    print("flash = const tables + model id (manifest); RAM = the caller's state struct; .text = host object code.")
+        print(
+            f"{r['method']:<12} {r['avg']:>10.1f} {r['worst']:>12.0f} {r['plain']:>12.1f} {r['macs_step']:>9} "
+            f"{r['macs_avg']:>11.2f} {r['flash']:>8} {r['ram']:>6} {r['text']:>8}"
+        )
+    print(
+        "worst = a sample on which the network steps; MAC = multiply-accumulates of the model (lower bound);"
+    )
+    print(
+        "flash = const tables + model id (manifest); RAM = the caller's state struct; .text = host object code."
+    )
     return 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from codegen import __version__
@@ -23,8 +24,6 @@ def _export(args: argparse.Namespace) -> int:
 
     model, files = export(args.model, args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
     name = next(f for f in files if f.endswith(".h"))[:-2]
-    import json
-
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
         f"wrote {args.out_dir}/{{{name}.h, {name}.c, {manifest_name(name)}}}: method {model.checkpoint.method}, "
@@ -37,11 +36,16 @@ def _export(args: argparse.Namespace) -> int:
 def _verify(args: argparse.Namespace) -> int:
     from codegen.verify import report_lines, verify
 
-    result = verify(args.model, args.out_dir, args.recording, name=args.name, cc=args.cc, table1=not args.no_table)
+    result = verify(
+        args.model, args.out_dir, args.recording, name=args.name, cc=args.cc, table1=not args.no_table
+    )
     for line in report_lines(result):
         print(line)
     if result.mismatches or not result.state_equal:
-        print(f"error: the generated C differs from the golden model ({result.mismatches} samples)", file=sys.stderr)
+        print(
+            f"error: the generated C differs from the golden model ({result.mismatches} samples)",
+            file=sys.stderr,
+        )
         return EXIT_MISMATCH
     return 0
 
@@ -53,15 +57,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     exp = sub.add_parser("export", help="quantise a model.pt and render NAME.h, NAME.c and a manifest")
     exp.add_argument("model", help="checkpoint written by 'trainer fit' (model.pt)")
-    exp.add_argument("-o", "--out-dir", required=True, help="output directory (created; its parent must exist)")
+    exp.add_argument(
+        "-o", "--out-dir", required=True, help="output directory (created; its parent must exist)"
+    )
     exp.add_argument("--name", help="C prefix and file name (default tdc_<method>); a C identifier")
     exp.add_argument(
-        "--accel-limit-g", type=float, default=16.0,
+        "--accel-limit-g",
+        type=float,
+        default=16.0,
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
     )
     exp.set_defaults(func=_export)
 
-    ver = sub.add_parser("verify", help="compile OUTDIR's C and compare it with the golden model on a recording")
+    ver = sub.add_parser(
+        "verify", help="compile OUTDIR's C and compare it with the golden model on a recording"
+    )
     ver.add_argument("model", help="the model.pt the module was exported from")
     ver.add_argument("out_dir", help="directory written by 'codegen export'")
     ver.add_argument("recording", help="recording (.csv or .npz) to stream through both")

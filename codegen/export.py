@@ -31,7 +31,9 @@ class LoadedModel:
     quantised: QuantModel
 
 
-def load_for_codegen(path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> LoadedModel:
+def load_for_codegen(
+    path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G
+) -> LoadedModel:
     """Validate (``load_checkpoint``), parse and quantise; every failure is a one-line UserError."""
     p = Path(path)
     raw = load_checkpoint(p)
@@ -53,7 +55,10 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
     name = validate_name(name)
     files = render_sources(model.quantised, name, model.sha256)
     manifest = build_manifest(
-        model.quantised, name=name, sha256=model.sha256, valid_temp_range_c=model.checkpoint.valid_temp_range_c
+        model.quantised,
+        name=name,
+        sha256=model.sha256,
+        valid_temp_range_c=model.checkpoint.valid_temp_range_c,
     )
     files[manifest_name(name)] = manifest_json(manifest)
     return files
@@ -69,7 +74,9 @@ def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str
         raise UserError(f"{target}: parent directory {parent} does not exist")
     base = target if target.is_dir() else parent
     if not os.access(base, os.W_OK | os.X_OK):
-        raise UserError(f"{target}: {'output' if base == target else 'parent'} directory {base} is not writable")
+        raise UserError(
+            f"{target}: {'output' if base == target else 'parent'} directory {base} is not writable"
+        )
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
     except OSError as exc:

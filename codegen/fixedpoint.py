@@ -59,7 +59,7 @@ def rdiv_round(num: np.ndarray | int, den: np.ndarray | int) -> np.ndarray:
 
 
 def saturate(x: np.ndarray | int, lo: int, hi: int) -> np.ndarray:
-    return np.clip(np.asarray(x, dtype=np.int64), lo, hi)
+    return np.minimum(np.maximum(np.asarray(x, dtype=np.int64), lo), hi)
 
 
 def sat32(x: np.ndarray | int) -> np.ndarray:

@@ -209,7 +209,10 @@ class GoldenStream(_Golden):
         else:
             features = [means]
         x = np.stack(
-            [rshift_round((v - q.mu_q) * q.inv_q, q.shift) for v, q in zip(features, m.inputs, strict=True)],
+            [
+                rshift_round(np.clip(v - q.mu_q, -q.d_max, q.d_max) * q.inv_q, q.shift)
+                for v, q in zip(features, m.inputs, strict=True)
+            ],
             axis=1,
         )
         clamped = np.clip(x, -X_MAX, X_MAX)
@@ -226,10 +229,9 @@ class GoldenStream(_Golden):
             zx = sat32(rshift_round(layer.wx.q @ inp, layer.wx.shift))  # a no-op except for wide rows
             zh = rshift_round(layer.wh.q @ h, layer.wh.shift)
             z = sat32(sat32(zx + zh) + layer.b)
-            i = sigmoid_q15(z[0:H], Z_FRAC)
-            f = sigmoid_q15(z[H : 2 * H], Z_FRAC)
+            gates = sigmoid_q15(z, Z_FRAC)  # all rows at once; the g rows are replaced by tanh
+            i, f, o = gates[0:H], gates[H : 2 * H], gates[3 * H :]
             g = tanh_q15(z[2 * H : 3 * H], Z_FRAC)
-            o = sigmoid_q15(z[3 * H :], Z_FRAC)
             # f*c is Q(15+24); i*g is Q30, lifted to Q39 by a multiplication (no signed shift).
             wide = rshift_round(f * c + (i * g) * (1 << (C_FRAC - ACT_FRAC)), ACT_FRAC)
             c_new = sat32(wide)

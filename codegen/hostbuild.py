@@ -23,7 +23,12 @@ import numpy as np
 from trainer.errors import UserError
 
 STRICT_FLAGS = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Werror")
-SANITIZER_FLAGS = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g")
+SANITIZER_FLAGS = (
+    "-fsanitize=address,undefined",
+    "-fno-sanitize-recover=all",
+    "-fno-omit-frame-pointer",
+    "-g",
+)
 
 
 def find_compiler(preferred: str | None = None) -> str:
@@ -149,12 +154,16 @@ def load_modules(
         sources.append(source)
     with tempfile.TemporaryDirectory(prefix="codegen-host-") as tmp:
         library = Path(tmp) / "libgenerated.so"
-        compile_c(sources, library, include_dirs=sorted({d for d, _ in modules}), cc=cc, flags=flags, shared=True)
+        compile_c(
+            sources, library, include_dirs=sorted({d for d, _ in modules}), cc=cc, flags=flags, shared=True
+        )
         lib = ffi.dlopen(str(library))
     return [HostModule(ffi, lib, name) for _, name in modules]
 
 
-def load_module(directory: Path, name: str, *, cc: str | None = None, flags: tuple[str, ...] = ("-O2",)) -> HostModule:
+def load_module(
+    directory: Path, name: str, *, cc: str | None = None, flags: tuple[str, ...] = ("-O2",)
+) -> HostModule:
     return load_modules([(directory, name)], cc=cc, flags=flags)[0]
 
 
@@ -170,7 +179,12 @@ def write_vectors(path: Path, accel: np.ndarray, temp: np.ndarray, commands: np.
 
 
 def build_harness(
-    directory: Path, name: str, harness_source: str, output: Path, *, cc: str | None = None,
+    directory: Path,
+    name: str,
+    harness_source: str,
+    output: Path,
+    *,
+    cc: str | None = None,
     flags: tuple[str, ...] = ("-O1", *SANITIZER_FLAGS),
 ) -> Path:
     """Compile the generated module with a rendered harness (``harness_vectors.c.j2``)."""
@@ -183,7 +197,9 @@ def build_harness(
 def run_harness(binary: Path, vectors: Path, outputs: Path) -> bytes:
     """Run the harness; returns the dumped state bytes. A sanitizer report fails loudly."""
     env = dict(os.environ, UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1", ASAN_OPTIONS="detect_leaks=1")
-    result = subprocess.run([str(binary), str(vectors), str(outputs)], capture_output=True, env=env, check=False)
+    result = subprocess.run(
+        [str(binary), str(vectors), str(outputs)], capture_output=True, env=env, check=False
+    )
     stderr = result.stderr.decode(errors="replace")
     if result.returncode != 0 or re.search(r"runtime error|AddressSanitizer|LeakSanitizer", stderr):
         raise AssertionError(f"harness failed (exit {result.returncode}):\n{stderr[-4000:]}")

@@ -106,6 +106,7 @@ def _stream(model: QStream) -> dict[str, object]:
                 "mu_q": q.mu_q,
                 "inv_q": q.inv_q,
                 "shift": q.shift,
+                "d_max": q.d_max,
                 "product_headroom_bits": _num(q.product_headroom),
             }
             for q in model.inputs
@@ -170,8 +171,12 @@ def build_manifest(
 ) -> dict[str, object]:
     lim = model.limits
     tables = table_bytes(model)
-    body = _stream(model) if isinstance(model, QStream) else _pla(model) if isinstance(model, QPla) else (
-        _poly3(model)
+    body = (
+        _stream(model)
+        if isinstance(model, QStream)
+        else _pla(model)
+        if isinstance(model, QPla)
+        else (_poly3(model))
     )
     return {
         "format": FORMAT,

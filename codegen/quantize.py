@@ -105,20 +105,24 @@ class QMatrix:
 
 @dataclass(frozen=True)
 class QInput:
-    """``x_q = clamp(rshift_round((v - mu_q) * inv_q, shift), +-32767)`` for one network input."""
+    """``x_q = clamp(rshift_round(clamp(v - mu_q, +-d_max) * inv_q, shift), +-X_MAX)``, one input.
+
+    ``d_max`` is where x saturates anyway; clamping there first keeps the product inside int64
+    whatever the scale, without changing any result.
+    """
 
     name: str
     mu_q: int
     inv_q: int
     shift: int
-    v_bound: int  # worst-case |v - mu_q|
+    d_max: int
     mean: float
     std: float
     unit: str
 
     @property
     def product_headroom(self) -> float:
-        return headroom_bits(self.v_bound * self.inv_q, INT64_MAX)
+        return headroom_bits(self.d_max * self.inv_q, INT64_MAX)
 
 
 @dataclass(frozen=True)
@@ -203,7 +207,9 @@ def _choose_weight_frac(
     """Largest fractional bits such that weights fit int16 and no row's MACs can overflow."""
     w = np.atleast_2d(np.asarray(w, dtype=np.float64))
     largest = float(np.max(np.abs(w))) if w.size else 0.0
-    frac = MAX_WEIGHT_FRAC if largest == 0 else min(MAX_WEIGHT_FRAC, math.floor(math.log2(INT16_MAX / largest)))
+    frac = (
+        MAX_WEIGHT_FRAC if largest == 0 else min(MAX_WEIGHT_FRAC, math.floor(math.log2(INT16_MAX / largest)))
+    )
     while frac >= min_frac:
         q = quantise_array(w, frac)
         if np.max(np.abs(q), initial=0) <= INT16_MAX and _row_bound(q, input_max) <= acc_limit:
@@ -220,7 +226,9 @@ def _row_bound(q: np.ndarray, input_max: int) -> int:
 
 
 def _matrix(w: np.ndarray, what: str, in_frac: int, input_max: int, acc_limit: int) -> QMatrix:
-    q, frac = _choose_weight_frac(w, what, input_max=input_max, min_frac=Z_FRAC - in_frac, acc_limit=acc_limit)
+    q, frac = _choose_weight_frac(
+        w, what, input_max=input_max, min_frac=Z_FRAC - in_frac, acc_limit=acc_limit
+    )
     return QMatrix(q, frac, frac + in_frac - Z_FRAC, np.sum(np.abs(q), axis=1) * input_max, acc_limit)
 
 
@@ -240,8 +248,10 @@ def _layer(spec_w_x: np.ndarray, spec_w_h: np.ndarray, spec_b: np.ndarray, index
         raise UserError(f"layer {index} bias: |b| = {float(np.max(np.abs(spec_b))):.4g} does not fit Q15.16")
     rows_x, rows_h = wx.row_bounds, wh.row_bounds
     z_rows = np.array(
-        [_ceil_shift(int(rx), wx.shift) + _ceil_shift(int(rh), wh.shift) + abs(int(bb))
-         for rx, rh, bb in zip(rows_x, rows_h, b, strict=True)],
+        [
+            _ceil_shift(int(rx), wx.shift) + _ceil_shift(int(rh), wh.shift) + abs(int(bb))
+            for rx, rh, bb in zip(rows_x, rows_h, b, strict=True)
+        ],
         dtype=np.int64,
     )
     z_rows = np.minimum(z_rows, INT32_MAX)  # z saturates there; the activations are flat long before
@@ -257,18 +267,17 @@ def _layer(spec_w_x: np.ndarray, spec_w_h: np.ndarray, spec_b: np.ndarray, index
 def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str) -> QInput:
     mu_q = round_half_away(Fraction(mean) / unit_per_lsb)
     gain = unit_per_lsb / Fraction(std) * (1 << X_FRAC)  # x_q per LSB of v
-    shift = 23 - math.floor(math.log2(gain))
-    if shift < 1:
-        raise UserError(f"input '{name}': std {std:g} {unit} is below the input resolution")
-    v_bound = v_max + abs(mu_q)
-    while True:
+    shift = max(0, 23 - math.floor(math.log2(gain)))  # inv_q gets 24 significant bits when possible
+    while shift <= 62:
         inv_q = round_half_away(gain * (1 << shift))
-        if v_bound * inv_q < INT64_SAFE:
-            break
+        saturating = -(-(X_MAX + 1) * (1 << shift) // inv_q)  # ceil: from here on x clamps anyway
+        d_max = min(v_max + abs(mu_q), saturating)
+        if d_max * inv_q < INT64_SAFE:
+            return QInput(name, mu_q, inv_q, shift, d_max, mean, std, unit)
         shift -= 1
-        if shift < 1 or inv_q < 256:
-            raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
-    return QInput(name, mu_q, inv_q, shift, v_bound, mean, std, unit)
+        if shift < 0 or inv_q < 256:
+            break
+    raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
 
 def _head(spec: DlstmSpec) -> QHead:
@@ -276,8 +285,11 @@ def _head(spec: DlstmSpec) -> QHead:
     scale = fe.output_std * ACCEL_PER_MG  # accel LSB per unit of y
     q, frac = _choose_weight_frac(spec.head_w * scale, "head", input_max=H_MAX, min_frac=1 - H_FRAC)
     shift = frac + H_FRAC
-    bias_q = round_half_away((Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean))
-                             * ACCEL_PER_MG * Fraction(2) ** shift)
+    bias_q = round_half_away(
+        (Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean))
+        * ACCEL_PER_MG
+        * Fraction(2) ** shift
+    )
     w = QMatrix(q, frac, 0, np.sum(np.abs(q), axis=1) * H_MAX, INT32_MAX)
     acc_bound = w.acc_bound
     if abs(bias_q) + acc_bound >= INT64_SAFE:
@@ -292,7 +304,9 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
     clip = (-(1 << 31) + 1, INT32_MAX)
     valid_lo = min(max(math.ceil(Fraction(lo) * 1000), clip[0]), clip[1])
     valid_hi = min(max(math.floor(Fraction(hi) * 1000), clip[0]), clip[1])
-    return Limits(round(accel_limit_g * 1000 * ACCEL_PER_MG), valid_lo_mdegc=valid_lo, valid_hi_mdegc=valid_hi)
+    return Limits(
+        round(accel_limit_g * 1000 * ACCEL_PER_MG), valid_lo_mdegc=valid_lo, valid_hi_mdegc=valid_hi
+    )
 
 
 def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
@@ -302,27 +316,40 @@ def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
     mean_lsb = 1 << MEAN_FRAC
     if fe.kind == "recursive":
         inputs = (
-            _input("accel", limits.accel * mean_lsb, Fraction(1, ACCEL_PER_MG * mean_lsb),
-                   fe.inputs_mean[0], fe.inputs_std[0], "mg"),
+            _input(
+                "accel",
+                limits.accel * mean_lsb,
+                Fraction(1, ACCEL_PER_MG * mean_lsb),
+                fe.inputs_mean[0],
+                fe.inputs_std[0],
+                "mg",
+            ),
         )
     else:
         t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
         span = limits.temp_hi_mdegc - limits.temp_lo_mdegc
-        rate_unit = Fraction(60) * Fraction(fe.rate_hz) / (fe.decimation * 1000 * mean_lsb)  # degC/min per LSB
+        rate_unit = (
+            Fraction(60) * Fraction(fe.rate_hz) / (fe.decimation * 1000 * mean_lsb)
+        )  # degC/min per LSB
         inputs = (
-            _input("temp", t_max * mean_lsb, Fraction(1, 1000 * mean_lsb),
-                   fe.inputs_mean[0], fe.inputs_std[0], "degC"),
+            _input(
+                "temp",
+                t_max * mean_lsb,
+                Fraction(1, 1000 * mean_lsb),
+                fe.inputs_mean[0],
+                fe.inputs_std[0],
+                "degC",
+            ),
             _input("rate", span * mean_lsb, rate_unit, fe.inputs_mean[1], fe.inputs_std[1], "degC/min"),
         )
-    layers = tuple(
-        _layer(layer.w_x, layer.w_h, layer.b, k)
-        for k, layer in enumerate(spec.layers)
-    )
+    layers = tuple(_layer(layer.w_x, layer.w_h, layer.b, k) for k, layer in enumerate(spec.layers))
     return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec))
 
 
 def _pla(spec: PlaSpec, limits: Limits) -> QPla:
-    splits = tuple(math.ceil(Fraction(s) * 1000) for s in spec.split_points_c)  # T_q >= s*1000 <=> T_q >= ceil
+    splits = tuple(
+        math.ceil(Fraction(s) * 1000) for s in spec.split_points_c
+    )  # T_q >= s*1000 <=> T_q >= ceil
     splits = tuple(min(max(s, -INT32_MAX), INT32_MAX) for s in splits)
     t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
     slopes_lsb = [Fraction(v) * ACCEL_PER_MG / 1000 for v in spec.slopes_mg_per_c]  # accel LSB per mdegC

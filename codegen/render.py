@@ -24,7 +24,6 @@ from codegen.quantize import (
     X_MAX,
     Z_FRAC,
     QPla,
-    QPoly3,
     QStream,
     QuantModel,
 )
@@ -32,9 +31,45 @@ from trainer.errors import UserError
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
 C_KEYWORDS = frozenset(
-    "auto break case char const continue default do double else enum extern float for goto if inline "
-    "int long register restrict return short signed sizeof static struct switch typedef union unsigned "
-    "void volatile while _Bool _Complex _Imaginary".split()
+    [
+        "auto",
+        "break",
+        "case",
+        "char",
+        "const",
+        "continue",
+        "default",
+        "do",
+        "double",
+        "else",
+        "enum",
+        "extern",
+        "float",
+        "for",
+        "goto",
+        "if",
+        "inline",
+        "int",
+        "long",
+        "register",
+        "restrict",
+        "return",
+        "short",
+        "signed",
+        "sizeof",
+        "static",
+        "struct",
+        "switch",
+        "typedef",
+        "union",
+        "unsigned",
+        "void",
+        "volatile",
+        "while",
+        "_Bool",
+        "_Complex",
+        "_Imaginary",
+    ]
 )
 _IDENTIFIER = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 FLAGS = {
@@ -52,9 +87,7 @@ def default_name(method: str) -> str:
 def validate_name(name: str) -> str:
     """NAME must be a C identifier that is neither a keyword nor reserved, short enough for C99."""
     if not _IDENTIFIER.match(name):
-        raise UserError(
-            f"--name {name!r}: not a valid C identifier (a letter, then letters, digits or '_')"
-        )
+        raise UserError(f"--name {name!r}: not a valid C identifier (a letter, then letters, digits or '_')")
     if name in C_KEYWORDS:
         raise UserError(f"--name {name!r}: is a C keyword")
     if len(name) > MAX_NAME_LENGTH:
@@ -126,7 +159,9 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
             )
             sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
     elif isinstance(model, QPla):
-        sizes["pla_tables"] = 4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
+        sizes["pla_tables"] = (
+            4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
+        )
     else:
         sizes["poly3_coefficients"] = 16
     return sizes
@@ -205,6 +240,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 {
                     "mu": _c_int(q.mu_q, 64),
                     "inv": _c_int(q.inv_q, 64),
+                    "d_max": _c_int(q.d_max, 64),
                     "shift": q.shift,
                     "doc": f"({q.name} - {q.mean:.6g} {q.unit}) / {q.std:.6g} {q.unit}",
                 }

@@ -130,8 +130,10 @@ class _Fields:
         except (TypeError, ValueError):
             self.fail(f"field '{self.name(key)}' must be a number, got {value!r}")
         if not math.isfinite(result) or (positive and result <= 0):
-            self.fail(f"field '{self.name(key)}' must be a finite{' positive' if positive else ''} number, "
-                      f"got {result!r}")
+            self.fail(
+                f"field '{self.name(key)}' must be a finite{' positive' if positive else ''} number, "
+                f"got {result!r}"
+            )
         return result
 
     def integer(self, key: str, lo: int, hi: int) -> int:
@@ -143,8 +145,9 @@ class _Fields:
     def array(self, key: str, shape: tuple[int, ...]) -> np.ndarray:
         value = self.raw(key)
         try:
-            arr = np.asarray(value.detach().cpu().double().numpy() if hasattr(value, "detach") else value,
-                             dtype=np.float64)
+            arr = np.asarray(
+                value.detach().cpu().double().numpy() if hasattr(value, "detach") else value, dtype=np.float64
+            )
         except (TypeError, ValueError):
             self.fail(f"field '{self.name(key)}' must be an array of numbers")
         if arr.shape != shape:
@@ -176,8 +179,9 @@ def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:
         "decimation": fe.integer("decimation", 1, MAX_WINDOW),
     }
     if kind == "persistence":
-        return FrontEndSpec("recursive", **common, inputs_mean=(0.0,), inputs_std=(1.0,),
-                            output_mean=0.0, output_std=1.0)
+        return FrontEndSpec(
+            "recursive", **common, inputs_mean=(0.0,), inputs_std=(1.0,), output_mean=0.0, output_std=1.0
+        )
     norm = payload.sub("normalisation")
     return FrontEndSpec(
         kind,
@@ -239,7 +243,9 @@ def _pla(root: _Fields, payload: _Fields, method: str) -> PlaSpec:
     splits = payload.array("split_points_c", (n - 1,))
     if np.any(np.diff(splits) < 0):
         root.fail("field 'payload.split_points_c' must be in ascending order")
-    return PlaSpec(method, splits, payload.array("slopes_mg_per_c", (n,)), payload.array("intercepts_mg", (n,)))
+    return PlaSpec(
+        method, splits, payload.array("slopes_mg_per_c", (n,)), payload.array("intercepts_mg", (n,))
+    )
 
 
 def _poly3(root: _Fields, payload: _Fields, method: str) -> Poly3Spec:
@@ -254,9 +260,7 @@ def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
     root = _Fields(source, checkpoint, "")
     method = checkpoint.get("method")
     if method not in SUPPORTED_METHODS:
-        root.fail(
-            f"method {method!r} has no code generator (supported: {', '.join(SUPPORTED_METHODS)})"
-        )
+        root.fail(f"method {method!r} has no code generator (supported: {', '.join(SUPPORTED_METHODS)})")
     lo, hi = root.numbers("valid_temp_range_c", 2)
     if not lo <= hi:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")

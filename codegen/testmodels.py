@@ -105,7 +105,9 @@ def dlstm_payload(
     }
 
 
-def checkpoint_dict(method: str, payload: dict[str, Any], valid_temp_range_c: tuple[float, float]) -> dict[str, Any]:
+def checkpoint_dict(
+    method: str, payload: dict[str, Any], valid_temp_range_c: tuple[float, float]
+) -> dict[str, Any]:
     return {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,

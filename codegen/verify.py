@@ -32,6 +32,8 @@ class ErrorBudget:
     rms_mg: float
     max_abs_mg: float
     noise_mg: float  # the sensor's white noise per sample, for scale
+    arithmetic_rms_mg: float  # golden minus float on the same integer inputs: the generator's share
+    arithmetic_max_abs_mg: float
 
     @property
     def noise_ratio(self) -> float:
@@ -81,9 +83,24 @@ def sensor_noise_mg(accel_mg: np.ndarray) -> float:
     return float(np.std(np.diff(accel_mg)) / np.sqrt(2.0))
 
 
-def error_budget(golden: np.ndarray, float_mg: np.ndarray, accel_mg: np.ndarray) -> ErrorBudget:
-    err = golden / ACCEL_PER_MG - float_mg
-    return ErrorBudget(float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err))), sensor_noise_mg(accel_mg))
+def _rms_max(err: np.ndarray) -> tuple[float, float]:
+    return float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err)))
+
+
+def error_budget(
+    golden: np.ndarray, float_mg: np.ndarray, float_on_ints_mg: np.ndarray, accel_mg: np.ndarray
+) -> ErrorBudget:
+    """Golden minus float on the float recording (total), and on the integer inputs (arithmetic)."""
+    golden_mg = golden / ACCEL_PER_MG
+    return ErrorBudget(
+        *_rms_max(golden_mg - float_mg), sensor_noise_mg(accel_mg), *_rms_max(golden_mg - float_on_ints_mg)
+    )
+
+
+def integer_recording(rec: Recording, accel: np.ndarray, temp: np.ndarray) -> Recording:
+    """``rec`` with the step API's integers converted back to mg and degC (what the C saw)."""
+    columns = {**rec.without_truth().columns, "accel_mg": accel / ACCEL_PER_MG, "temp_c": temp / 1000.0}
+    return Recording(columns, dict(rec.meta), rec.source)
 
 
 @dataclass(frozen=True)
@@ -118,7 +135,9 @@ def compare_table1(rec: Recording, method: str, float_mg: np.ndarray, golden_mg:
     got = evaluate(rec, {method: golden_mg}).table
     pairs: list[tuple[float, float, str]] = []
     for key in ref.improvement_pct[method]:  # the table's rows: B, K, R
-        pairs.append((ref.compensated[method].fits[key].value, got.compensated[method].fits[key].value, "sci"))
+        pairs.append(
+            (ref.compensated[method].fits[key].value, got.compensated[method].fits[key].value, "sci")
+        )
         pairs.append((ref.improvement_pct[method][key], got.improvement_pct[method][key], "pct"))
     pairs.append((ref.average_improvement_pct[method], got.average_improvement_pct[method], "pct"))
     identical = near = 0
@@ -156,11 +175,15 @@ def verify(
     model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
     stamped = manifest.get("model", {}).get("sha256")  # type: ignore[union-attr]
     if stamped != model.sha256:
-        raise UserError(f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})")
+        raise UserError(
+            f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})"
+        )
     rec = read_recording(recording)
     q = model.quantised
     if isinstance(q, QStream) and abs(rec.sample_rate_hz - q.frontend.rate_hz) > 0.01 * q.frontend.rate_hz:
-        raise UserError(f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model runs at {q.frontend.rate_hz:g} Hz")
+        raise UserError(
+            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model runs at {q.frontend.rate_hz:g} Hz"
+        )
     accel, temp = to_step_units(rec)
 
     host = load_module(out, name, cc=cc)
@@ -178,7 +201,8 @@ def verify(
 
     float_model, _ = load_model(model_path)
     float_out = float_model.compensate(rec.without_truth())
-    budget = error_budget(g_out, float_out, rec.accel_mg)
+    float_on_ints = float_model.compensate(integer_recording(rec, accel, temp))
+    budget = error_budget(g_out, float_out, float_on_ints, rec.accel_mg)
     table = compare_table1(rec, model.checkpoint.method, float_out, g_out / ACCEL_PER_MG) if table1 else None
     return VerifyResult(
         name,
@@ -201,13 +225,18 @@ def report_lines(result: VerifyResult) -> list[str]:
         f"final state identical: {'yes' if result.state_equal else 'NO'}",
         f"error budget (golden - float, {result.method}): RMS {b.rms_mg:.3g} mg, max {b.max_abs_mg:.3g} mg "
         f"(sensor noise {b.noise_mg:.3g} mg per sample, {b.noise_ratio:.3g} x the RMS)",
+        f"  of which integer arithmetic (golden - float on the same integer inputs): RMS "
+        f"{b.arithmetic_rms_mg:.3g} mg, max {b.arithmetic_max_abs_mg:.3g} mg",
     ]
     t = result.table1
     if t is not None:
         lines.append(
             f"Table 1 (quantised vs float): {t.identical} of {t.figures} figures print identically"
-            + (f", {t.within_half_unit} differ by less than half a unit in the last place (rounding boundary)"
-               if t.within_half_unit else "")
+            + (
+                f", {t.within_half_unit} differ by less than half a unit in the last place (rounding boundary)"
+                if t.within_half_unit
+                else ""
+            )
             + ("" if t.ok else "; SOME DIFFER MORE")
         )
     return lines
