@@ -1,0 +1,344 @@
+"""Cost of the generated module on the target: instructions per 200 Hz sample on a Cortex-M4F (QEMU
+mps2-an386, -icount shift=0), flash and RAM (arm-none-eabi-size, -fstack-usage), next to the
+multiply-accumulate lower bound counted from the architecture.
+
+Models (default): the paper's 2x10 recursive DLSTM, *trained quickly* with the real trainer
+(dlstm-issa, population 2, 5 iterations, 2 sparrow cycles: the instruction count does not depend on
+the weight values, only on the architecture and the path through the saturations), the
+temperature-input DLSTM (2x10, trained the same way), PLA and the PX4-style cubic, all on a
+simulated 10-minute oven run (seed 1). The timed stream is another simulated run (seed 2, 5 minutes
+at 200 Hz, the whole temperature ramp), loaded into the target's RAM before anything is timed.
+
+How it counts: QEMU's -icount shift=0 advances the virtual clock by 1 ns per executed instruction;
+SysTick, clocked at 25 MHz, then ticks once per 40 instructions (checked by a calibration loop).
+The bench app times every network-step sample alone and the other samples of each period as one
+batch, and repeats every timed loop with an empty function of the same signature: the difference
+is the cost of the NAME_step calls (call and return included). QEMU counts instructions, not
+cycles (no wait states, no pipeline effects).
+
+    python bench/bench_cortex_m.py [--model model.pt ...] [--proposal]
+
+--proposal additionally measures a hand-patched copy of each generated network (the change proposed
+for codegen's templates: plain int32 accumulation of the MACs whose bounds the quantiser proves,
+32-bit rounding shifts, and an optional SMLAD/QADD path under -DTDC_USE_DSP), after checking on
+the target that the patched module is bit-exact against the golden model.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import platform
+import re
+import shutil
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from codegen.export import LoadedModel, export
+from codegen.golden import golden_for
+from codegen.hostbuild import write_vectors
+from codegen.quantize import QPla, QPoly3, QStream
+from codegen.verify import to_step_units
+from trainer.cli import main as trainer_main
+from trainer.recording_io import read_recording
+
+ROOT = Path(__file__).resolve().parents[1]
+CLOCK_MHZ = 168.0  # a typical Cortex-M4F flight computer (STM32F4): time per sample at 1 instruction/cycle
+FIT_QUICK = ["--population", "2", "--iterations", "5", "--cycles", "2", "--quiet"]
+
+
+def _load_driver() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("cortex_m", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+cm = _load_driver()
+
+
+@dataclass(frozen=True)
+class LowerBound:
+    """Multiply-accumulates of the model, counted from its architecture."""
+
+    per_step: int  # weight MACs of one network step (or of one sample for memoryless models)
+    bias_adds: int
+    per_sample: float  # averaged over the decimation
+    text: str
+
+
+def lower_bound(model: LoadedModel) -> LowerBound:
+    q = model.quantised
+    if isinstance(q, QStream) and q.layers:
+        H = q.hidden_size
+        rows = [(lay.wx.q.shape[0], lay.wx.q.shape[1]) for lay in q.layers]
+        macs = sum(r * (n_in + H) for r, n_in in rows) + H
+        assert macs == q.macs_per_step(), "architecture count disagrees with the quantiser's"
+        text = " + ".join(f"4x{H}x({n_in}+{H})" for _, n_in in rows) + f" + {H}"
+        D = q.frontend.decimation
+        return LowerBound(macs, sum(r for r, _ in rows) + 1, macs / D, text)
+    if isinstance(q, QPla):
+        return LowerBound(1, 1, 1.0, "slope x T + intercept")
+    if isinstance(q, QPoly3):
+        return LowerBound(3, 3, 3.0, "Horner, degree 3")
+    return LowerBound(0, 0, 0.0, "window mean only")
+
+
+def stack_bound(build: Any, name: str) -> int:
+    """Sum of the frames of every function in the module (-fstack-usage): no recursion, so this
+    bounds the deepest call chain from NAME_step."""
+    su = Path(build.out) / f"{name}.su"
+    return sum(int(line.split("\t")[1]) for line in su.read_text().splitlines() if line.strip())
+
+
+def bit_exact_on_target(
+    build: Any, model: LoadedModel, accel: np.ndarray, temp: np.ndarray, work: Path
+) -> tuple[int, int]:
+    """Mismatches against the golden model over the stream on the target, and sizeof(NAME_state_t) there."""
+    result = cm.stream(build, accel, temp, np.zeros(accel.size, dtype=np.int64), work)
+    golden = golden_for(model.quantised).run(accel, temp)
+    return int(np.count_nonzero(result.outputs.astype(np.int64) != golden)), result.state_bytes
+
+
+# ------------------------------------------------------------------------- the proposed change
+
+
+def propose(source: str) -> str | None:
+    """The proposed template change applied to generated C (None if the code no longer matches)."""
+    m = re.search(r"static int32_t (\w+)network\(", source)
+    if m is None:
+        return None
+    p = m.group(1)
+    out, n_plain = re.subn(rf"(\w+) = {p}sat_add32\(\1, (\(int32_t\)[^;]*)\);", r"\1 += \2;", source)
+    round32 = re.compile(
+        rf"static int32_t {p}rshift_round32\(int32_t x, unsigned s\)\n\{{\n    return \(int32_t\){p}rshift_round64\(\(int64_t\)x, s\);\n\}}"
+    )
+    sat_add = re.compile(
+        rf"static int32_t {p}sat_add32\(int32_t a, int32_t b\)\n\{{\n    return {p}sat32\(\(int64_t\)a \+ \(int64_t\)b\);\n\}}"
+    )
+    dot = re.compile(
+        r"for \(j = 0u; j < (\d+)u; \+\+j\) \{\n\s*(\w+) \+= \(int32_t\)(\w+)(\[r\])?\[j\] \* \(int32_t\)([^;]*?)\[j\];\n\s*\}"
+    )
+    if n_plain == 0 or not round32.search(out) or not sat_add.search(out):
+        return None
+    out = round32.sub(
+        f"""static int32_t {p}rshift_round32(int32_t x, unsigned s)
+{{
+    uint32_t mag = (x < 0) ? (0u - (uint32_t)x) : (uint32_t)x; /* <= 2^31: adding 2^(s-1) cannot wrap */
+    if (s == 0u) {{
+        return x;
+    }}
+    mag = (mag + (1u << (s - 1u))) >> s;
+    return (x < 0) ? -(int32_t)mag : (int32_t)mag;
+}}""",
+        out,
+    )
+    out = sat_add.sub(
+        f"""static int32_t {p}sat_add32(int32_t a, int32_t b)
+{{
+#if TDC_DSP
+    return __qadd(a, b);
+#else
+    return {p}sat32((int64_t)a + (int64_t)b);
+#endif
+}}
+
+/* acc + sum_j w[j] v[j], int16 x int16 into int32: the quantiser bounds every row's partial sums
+ * below INT32_MAX, so the accumulation is exact; SMLAD does two of them per instruction. */
+static int32_t {p}dot_q15(const int16_t *w, const int16_t *v, uint32_t n, int32_t acc)
+{{
+    uint32_t j = 0u;
+#if TDC_DSP
+    for (; j + 1u < n; j += 2u) {{
+        int32_t a;
+        int32_t b;
+        __builtin_memcpy(&a, &w[j], sizeof a);
+        __builtin_memcpy(&b, &v[j], sizeof b);
+        acc = __smlad(a, b, acc);
+    }}
+#endif
+    for (; j < n; ++j) {{
+        acc += (int32_t)w[j] * (int32_t)v[j];
+    }}
+    return acc;
+}}""",
+        out,
+    )
+    out = dot.sub(lambda g: f"{g[2]} = {p}dot_q15({g[3]}{g[4] or ''}, {g[5]}, {g[1]}u, {g[2]});", out)
+    header = (
+        "\n#if defined(TDC_USE_DSP) && defined(__ARM_FEATURE_DSP)\n#include <arm_acle.h>\n#define TDC_DSP 1\n"
+        "#else\n#define TDC_DSP 0\n#endif\n"
+    )
+    return re.sub(r'(#include "\w+\.h"\n)', lambda g: g[1] + header, out, count=1)
+
+
+# ------------------------------------------------------------------------------------ models
+
+
+def default_models(work: Path) -> list[tuple[str, Path]]:
+    train = work / "train.npz"
+    assert trainer_main(["simulate", "--seed", "1", "--duration", "600", "-o", str(train)]) == 0
+    models = []
+    for label, method, extra in (
+        ("DLSTM 2x10 (recursive)", "dlstm-issa", FIT_QUICK),
+        ("DLSTM 2x10 (temperature)", "dlstm-temp", FIT_QUICK),
+        ("PLA (10 intervals)", "pla", ["--quiet"]),
+        ("poly3 (cubic)", "poly3", ["--quiet"]),
+    ):
+        path = work / f"{method}.pt"
+        assert trainer_main(["fit", "--method", method, str(train), "-o", str(path), *extra]) == 0
+        models.append((label, path))
+    return models
+
+
+@dataclass(frozen=True)
+class Row:
+    label: str
+    variant: str
+    counts: Any  # cm.BenchCounts
+    bound: LowerBound
+    module: Any  # cm.Size of NAME.o
+    state_bytes: int
+    stack_bytes: int
+    mismatches: int
+
+
+def measure(
+    label: str,
+    variant: str,
+    model: LoadedModel,
+    build: Any,
+    vectors: Path,
+    stream: tuple[np.ndarray, np.ndarray],
+    work: Path,
+) -> Row:
+    """Bit-exactness, instruction counts, sizes of one build."""
+    build.make("module")
+    mismatches, state_bytes = bit_exact_on_target(build, model, *stream, work / "exact")
+    counts = cm.bench(build, work / "bench", vectors)
+    (module,) = cm.sizes(Path(build.out) / f"{build.name}.o")
+    return Row(
+        label,
+        variant,
+        counts,
+        lower_bound(model),
+        module,
+        state_bytes,
+        stack_bound(build, build.name),
+        mismatches,
+    )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", action="append", type=Path, help="model.pt to measure (repeatable)")
+    parser.add_argument("--proposal", action="store_true", help="also measure the proposed template change")
+    args = parser.parse_args()
+    reason = cm.ensure_toolchain()
+    if reason is not None:
+        print(f"bench_cortex_m: {reason}", file=sys.stderr)
+        return 1
+    rows: list[Row] = []
+    apps: list[Path] = []
+    with tempfile.TemporaryDirectory(prefix="bench-cortex-m-") as tmp:
+        work = Path(tmp)
+        models = [(p.name, p) for p in args.model] if args.model else default_models(work)
+        stream_path = work / "stream.npz"
+        assert trainer_main(["simulate", "--seed", "2", "--duration", "300", "-o", str(stream_path)]) == 0
+        accel, temp = (v.astype(np.int64) for v in to_step_units(read_recording(stream_path)))
+        vectors = work / "vectors.bin"
+        write_vectors(vectors, accel, temp, np.zeros(accel.size, dtype=np.int64))
+        for k, (label, path) in enumerate(models):
+            name = f"bench{k}"
+            model, files = export(path, work / f"m{k}", name=name)
+            build = cm.Build(work / f"m{k}", name, work / f"build{k}")
+            rows.append(measure(label, "as generated", model, build, vectors, (accel, temp), work / f"r{k}"))
+            build.make("test-app", "bench-app")
+            apps += [build.elf("test_app"), build.elf("bench_app")] if k == 0 else []
+            patched = (
+                propose(files[f"{name}.c"])
+                if args.proposal and isinstance(model.quantised, QStream)
+                else None
+            )
+            if (
+                args.proposal
+                and isinstance(model.quantised, QStream)
+                and model.quantised.layers
+                and patched is None
+            ):
+                print(
+                    f"{label}: the proposal no longer matches the generated code (codegen changed)",
+                    file=sys.stderr,
+                )
+            if patched is not None and model.quantised.layers:
+                folder = work / f"p{k}"
+                folder.mkdir()
+                shutil.copy(work / f"m{k}" / f"{name}.h", folder)
+                (folder / f"{name}.c").write_text(patched)
+                for variant, flags in (("proposal, portable", ""), ("proposal, SMLAD", "-DTDC_USE_DSP")):
+                    pb = cm.Build(folder, name, work / f"pb{k}{bool(flags)}", extra_cflags=flags)
+                    rows.append(
+                        measure(
+                            label, variant, model, pb, vectors, (accel, temp), work / f"pr{k}{bool(flags)}"
+                        )
+                    )
+        app_sizes = cm.sizes(*apps) if apps else []
+    report(rows, app_sizes, accel.size)
+    return 0 if all(r.mismatches == 0 for r in rows) else 1
+
+
+def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
+    print("Cortex-M4F (-mcpu=cortex-m4 -mthumb -mfloat-abi=hard -O2) under QEMU mps2-an386, -icount shift=0;")
+    print(f"{cm.build_env_note()}; {platform.platform()}")
+    print(f"stream: {stream_samples} samples (5 min at 200 Hz, simulated oven run, seed 2); "
+          "instructions per call of NAME_step, call and return included\n")  # fmt: skip
+    head = (f"{'model':<25} {'variant':<19} {'avg':>7} {'worst':>7} {'plain':>6} {'MAC/step':>9} {'MAC/smp':>8} "
+            f"{'instr/MAC':>9} {'us@168':>7} {'flash B':>8} {'state B':>8} {'stack B':>8} {'exact':>6}")  # fmt: skip
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        c = r.counts
+        ratio = c.worst / r.bound.per_step if r.bound.per_step else float("nan")
+        print(
+            f"{r.label:<25} {r.variant:<19} {c.average:>7.1f} {c.worst:>7.0f} {c.plain:>6.1f} "
+            f"{r.bound.per_step:>9} {r.bound.per_sample:>8.2f} {ratio:>9.1f} {c.worst / CLOCK_MHZ:>7.1f} "
+            f"{r.module.flash:>8} {r.state_bytes:>8} {r.stack_bytes:>8} {'yes' if r.mismatches == 0 else 'NO':>6}"
+        )
+    print()
+    print("avg   = instructions per sample averaged over the stream (streaming models: whole 1 s periods)")
+    print(
+        "worst = a sample on which the network steps (streaming), the costliest batch of 250 samples (PLA, poly3)"
+    )
+    print("plain = a sample without network step; MAC/step = weight multiply-accumulates of one network step")
+    print(
+        "        (PLA, poly3: per sample), the lower bound: one MAC per instruction (SMLABB), two with SMLAD;"
+    )
+    for r in rows:
+        if r.variant == "as generated" and r.bound.per_step > 1:
+            print(
+                f"        {r.label}: {r.bound.text} = {r.bound.per_step} MACs (+ {r.bound.bias_adds} bias adds)"
+            )
+    print(
+        "us@168 = worst-case sample in microseconds at 168 MHz, assuming 1 instruction per cycle (QEMU counts"
+    )
+    print("        instructions, not cycles: flash wait states and multi-cycle instructions add to it)")
+    print("flash = text + data of the module object NAME.o (code and const tables); state = the caller's")
+    print(
+        "        NAME_state_t (RAM, one per instance); stack = sum of all the module's frames (upper bound)"
+    )
+    print("exact = the module on the target equals the golden model on every sample of the stream\n")
+    for s in app_sizes:
+        print(f"whole app {s.path.name:<14} text {s.text:>7} data {s.data:>6} bss {s.bss:>7}  (newlib stdio and "
+              "semihosting included; bss holds the I/O buffers)")  # fmt: skip
+
+
+if __name__ == "__main__":
+    sys.exit(main())
