@@ -34,11 +34,14 @@ def quantise(value: float, frac_bits: int) -> int:
 
 
 def quantise_array(values: np.ndarray, frac_bits: int) -> np.ndarray:
-    """Element-wise :func:`quantise` (exact: scaling by a power of two does not round in float64)."""
+    """Element-wise :func:`quantise`, exact: scaling by a power of two does not round in float64,
+    ``|x| + 1/2`` is exact below 2**52, and from 2**52 on every float64 is already an integer."""
     scaled = np.asarray(values, dtype=np.float64) * math.ldexp(1.0, frac_bits)
-    if np.any(np.abs(scaled) >= 2.0**52):
-        raise ValueError("value too large to quantise exactly")
-    return (np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)).astype(np.int64)
+    magnitude = np.abs(scaled)
+    if np.any(magnitude >= 2.0**63):
+        raise ValueError("value too large for int64")
+    rounded = np.where(magnitude >= 2.0**52, magnitude, np.floor(magnitude + 0.5)).astype(np.int64)
+    return np.where(scaled < 0, -rounded, rounded)
 
 
 def rshift_round(x: np.ndarray | int, shift: int) -> np.ndarray:

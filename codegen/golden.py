@@ -8,23 +8,28 @@ Speed: the front end is vectorised over a whole chunk (exact int64 cumulative su
 samples give every window sum the C's running sum holds); only the network, which runs once every
 ``D`` samples, is a Python loop over steps (numpy over the units).
 
-The C accumulates MACs in int32 with saturating adds; :mod:`codegen.quantize` proves every partial
-sum stays below the row bound <= INT32_MAX, so those saturations are no-ops and the exact int64
-dot products here are the same numbers.
+The C accumulates each gate row in int64 starting from the bias; :mod:`codegen.quantize` proves
+every partial sum stays below the row bound < 2**62, so the C never wraps and the exact int64 dot
+products here are the same numbers.
+
+For the error budget the model also keeps, per network step, the estimate before its final
+rounding to the output LSB (``fine_estimates``): that rounding is part of the API's unit, not of
+the network's arithmetic, and ``codegen verify`` reports both.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from codegen.activations import ACT_FRAC, sigmoid_q15, tanh_q15
+from codegen.activations import ACT_FRAC, sigmoid_act, tanh_act
 from codegen.fixedpoint import INT32_MAX, INT32_MIN, rdiv_round, rshift_round, sat32
 from codegen.quantize import (
     C_FRAC,
+    EST_FRAC,
+    EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
-    MEAN_FRAC,
     X_MAX,
     Z_FRAC,
     QPla,
@@ -34,6 +39,7 @@ from codegen.quantize import (
 )
 
 UINT32_MAX = (1 << 32) - 1
+EST_ONE = 1 << EST_FRAC
 
 
 def _as_int64(values: np.ndarray) -> np.ndarray:
@@ -128,6 +134,7 @@ class GoldenStream(_Golden):
     """DLSTM methods and persistence: ring-buffer means, decimated network, zero-order hold."""
 
     model: QStream
+    fine_estimates: list[float] | None = None  # set to [] to record (accel LSB, before rounding)
 
     def reset(self) -> None:
         m = self.model
@@ -138,7 +145,8 @@ class GoldenStream(_Golden):
         self.window_fill = 0
         self.phase = 0
         self.steps = 0
-        self.estimate = 0
+        self.estimate_q16 = 0  # the held estimate, Q16 accel LSB (C: estimate + estimate_frac / 2**16)
+        self.shaper = 0
         self.prev_mean = 0
         self.h = np.zeros((L, H), dtype=np.int64)
         self.c = np.zeros((L, H), dtype=np.int64)
@@ -152,7 +160,9 @@ class GoldenStream(_Golden):
             "window_fill": self.window_fill,
             "phase": self.phase,
             "steps": self.steps,
-            "estimate": self.estimate,
+            "estimate": self.estimate_q16 >> EST_FRAC,  # floor (Python's >> on ints)
+            "estimate_frac": self.estimate_q16 & (EST_ONE - 1),
+            "shaper": self.shaper,
         }
         if self.model.kind == "temperature":
             out["prev_mean"] = self.prev_mean
@@ -177,11 +187,18 @@ class GoldenStream(_Golden):
         window_sums = sums[position + 1] - sums[position + 1 - count]
         estimates = self._steps(window_sums, count)
 
-        held = np.full(n, self.estimate, dtype=np.int64)
+        held = np.full(n, self.estimate_q16, dtype=np.int64)
         if step_at.size:
             index = np.cumsum(np.isin(np.arange(n), step_at)) - 1
-            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate)
-            self.estimate = int(estimates[-1])
+            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate_q16)
+            self.estimate_q16 = int(estimates[-1])
+        # Output rounding with error feedback: sample i adds the fraction to the shaper and carries
+        # one LSB when it reaches 2**16; the carries are the steps of floor(cumulative sum / 2**16).
+        whole, fraction = held >> EST_FRAC, held & (EST_ONE - 1)  # floor and remainder (numpy: exact)
+        cumulative = self.shaper + np.cumsum(fraction)  # < 2**16 (n + 1): exact
+        carries = np.diff(cumulative >> EST_FRAC, prepend=0)
+        if n:
+            self.shaper = int(cumulative[-1] & (EST_ONE - 1))
         # Ring buffer, as the C leaves it: sample i of the chunk went to slot (pos0 + i) % W.
         last = min(n, W)
         self.window[(pos0 + np.arange(n - last, n)) % W] = signal[n - last :]
@@ -190,14 +207,16 @@ class GoldenStream(_Golden):
         self.window_sum = int(sums[fill0 + n] - sums[fill0 + n - self.window_fill])
         self.phase = (self.phase + n) % D
         self.steps = min(self.steps + step_at.size, UINT32_MAX)
-        return self._output(accel, held)
+        return self._output(accel, whole + carries)
 
     def _steps(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
-        """The held estimate (accel LSB) produced at each network step of the chunk."""
+        """The held estimate (Q16 accel LSB) produced at each network step of the chunk."""
         m = self.model
         if not m.layers:  # persistence: the mean itself
-            return rdiv_round(window_sums, count)
-        means = rdiv_round(window_sums << MEAN_FRAC, count)
+            if self.fine_estimates is not None:
+                self.fine_estimates.extend((window_sums / count).tolist())
+            return rdiv_round(window_sums * (1 << m.mean_frac), count) * (1 << (EST_FRAC - m.mean_frac))
+        means = rdiv_round(window_sums * (1 << m.mean_frac), count)
         if m.kind == "temperature":
             previous = np.concatenate(([self.prev_mean], means[:-1]))
             delta = means - previous
@@ -210,7 +229,9 @@ class GoldenStream(_Golden):
             features = [means]
         x = np.stack(
             [
-                rshift_round(np.clip(v - q.mu_q, -q.d_max, q.d_max) * q.inv_q, q.shift)
+                rshift_round(
+                    np.clip(rshift_round(v - q.mu_q, q.pre_shift), -q.d_max, q.d_max) * q.inv_q, q.shift
+                )
                 for v, q in zip(features, m.inputs, strict=True)
             ],
             axis=1,
@@ -226,25 +247,30 @@ class GoldenStream(_Golden):
         inp = x
         for layer_index, layer in enumerate(m.layers):
             h, c = self.h[layer_index], self.c[layer_index]
-            zx = sat32(rshift_round(layer.wx.q @ inp, layer.wx.shift))  # a no-op except for wide rows
-            zh = rshift_round(layer.wh.q @ h, layer.wh.shift)
-            z = sat32(sat32(zx + zh) + layer.b)
-            gates = sigmoid_q15(z, Z_FRAC)  # all rows at once; the g rows are replaced by tanh
+            # |w_q| < 2**31, |in| < 2**31: products < 2**62 and row sums < 2**62 (proved), exact in int64
+            acc = layer.b + layer.wx.q @ inp + layer.wh.q @ h
+            z = sat32(rshift_round(acc, layer.z_shift))  # harmless saturation: activations flat there
+            gates = sigmoid_act(z, Z_FRAC)  # all rows at once; the g rows are replaced by tanh
             i, f, o = gates[0:H], gates[H : 2 * H], gates[3 * H :]
-            g = tanh_q15(z[2 * H : 3 * H], Z_FRAC)
-            # f*c is Q(15+24); i*g is Q30, lifted to Q39 by a multiplication (no signed shift).
-            wide = rshift_round(f * c + (i * g) * (1 << (C_FRAC - ACT_FRAC)), ACT_FRAC)
+            g = tanh_act(z[2 * H : 3 * H], Z_FRAC)
+            # f*c is Q(30+24) < 2**61; i*g is Q60, rounded to Q54 first (it would overflow lifted)
+            wide = rshift_round(f * c + rshift_round(i * g, ACT_FRAC - C_FRAC), ACT_FRAC)
             c_new = sat32(wide)
             if np.any(c_new != wide):
                 self.flags |= FLAG_SATURATED
-            h_new = rshift_round(o * tanh_q15(c_new, C_FRAC), ACT_FRAC)
+            h_new = rshift_round(o * tanh_act(c_new, C_FRAC), ACT_FRAC)
             self.c[layer_index], self.h[layer_index] = c_new, h_new
             inp = h_new
         head = m.head
         assert head is not None
-        acc = int(head.w.q[0] @ inp)
-        estimate = rshift_round(acc + head.bias_q, head.shift)
-        return int(self._sat(estimate))
+        acc = head.bias_q + int(head.w.q[0] @ inp)
+        if self.fine_estimates is not None:
+            self.fine_estimates.append(acc / 2.0**head.shift)
+        estimate = int(rshift_round(acc, head.shift - EST_FRAC))
+        if abs(estimate) > EST_LIMIT:
+            self.flags |= FLAG_SATURATED
+            estimate = EST_LIMIT if estimate > 0 else -EST_LIMIT
+        return estimate
 
 
 def golden_for(model: QuantModel) -> _Golden:

@@ -9,11 +9,12 @@ from __future__ import annotations
 import math
 
 from codegen import __version__
+from codegen.activations import ACT_ERROR_LSB, ACT_FRAC, ONE
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
 from codegen.quantize import (
     ACCEL_PER_MG,
     C_FRAC,
-    MEAN_FRAC,
+    INT64_SAFE,
     X_FRAC,
     Z_FRAC,
     QLayer,
@@ -26,7 +27,7 @@ from codegen.quantize import (
 from codegen.render import FLAGS, activation_summary, state_bytes, state_fields, table_bytes
 
 FORMAT = "mems-tdc-codegen-manifest"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 CELL_LIMIT = INT32_MAX / 2.0**C_FRAC
 
 
@@ -39,11 +40,11 @@ def _num(value: float) -> float | str:
 
 def _matrix(m: QMatrix) -> dict[str, object]:
     return {
+        "storage": "int32",
         "frac_bits": m.frac,
-        "shift_to_q15_16": m.shift,
-        "accumulator": "int64" if m.wide else "int32",
-        "acc_bound": m.acc_bound,
-        "acc_headroom_bits": _num(m.headroom),
+        "input_frac_bits": m.input_frac,
+        "input_max": m.input_max,
+        "acc_share_bound": m.acc_bound,
     }
 
 
@@ -52,10 +53,17 @@ def _layer(layer: QLayer) -> dict[str, object]:
     return {
         "w_x": _matrix(layer.wx),
         "w_h": _matrix(layer.wh),
-        "bias_format": "int32 Q15.16",
+        "bias_format": f"int64 Q{layer.acc_frac}",
+        "accumulator": f"int64 Q{layer.acc_frac}, initialised with the bias",
+        "acc_frac_bits": layer.acc_frac,
+        "acc_bound": layer.acc_bound,
+        "acc_limit": INT64_SAFE,
+        "acc_headroom_bits": _num(headroom_bits(layer.acc_bound, INT64_MAX)),
+        "z_shift": layer.z_shift,
         "z_bound": _num(z_real),
-        "z_headroom_bits": _num(headroom_bits(layer.z_bound, INT32_MAX)),
-        "forget_gate_max": _num(layer.forget_max_q15 / 32768.0),
+        "z_saturation_reachable": bool(layer.z_bound >= INT32_MAX),
+        "z_saturation_note": "z saturates at +-32, where both activations are already constant (exact)",
+        "forget_gate_max": _num(layer.forget_max_q / ONE),
         "cell_bound": _num(layer.cell_bound),
         "cell_limit": _num(CELL_LIMIT),
         "cell_headroom_bits": _num(headroom_bits(layer.cell_bound, CELL_LIMIT)),
@@ -77,7 +85,8 @@ def _stream(model: QStream) -> dict[str, object]:
             "window_samples": model.window,
             "accel_window": fe.accel_window,
             "temp_window": fe.temp_window,
-            "mean": f"exact int64 running sum, one rounding division per step to Q{MEAN_FRAC}",
+            "mean": "exact int64 running sum, one rounding division per step"
+            + (f" to Q{model.mean_frac}" if model.layers else " (the estimate, accel LSB)"),
         },
     }
     if not model.layers:
@@ -90,13 +99,15 @@ def _stream(model: QStream) -> dict[str, object]:
         "rounding": "half away from zero (on unsigned magnitudes in C)",
         "formats": {
             "inputs_x": f"int32 Q4.{X_FRAC}, clamped to +-16 (flagged)",
-            "weights": "int16, per-matrix power-of-two scale",
-            "accumulators": "int32 with saturating adds (int64 for the layer-0 input MACs), bounded below",
-            "pre_activation_z": f"int32 Q15.{Z_FRAC}",
-            "gates_tanh_sigmoid_h": "Q0.15",
+            "weights": f"int32; per layer Q(A - {X_FRAC}) for the layer-0 input, Q(A - {ACT_FRAC}) otherwise",
+            "accumulators": "int64 Q(A) per gate row, initialised with the int64 bias; bounded below 2^62",
+            "pre_activation_z": f"int32 Q5.{Z_FRAC}, saturated at +-32 (activations constant there)",
+            "gates_tanh_sigmoid_h": f"int32 Q{ACT_FRAC}",
             "cell_state": f"int32 Q7.{C_FRAC}, saturated at +-128 (flagged)",
-            "window_mean": f"int64 Q{MEAN_FRAC} of the input unit (1/16 ug or mdegC)",
+            "head": "int32 weights, int64 bias and accumulator, estimate int32 accel LSB (flagged)",
+            "window_mean": f"int64 Q{model.mean_frac} of the input unit (1/16 ug or mdegC)",
         },
+        "activation_error_bound_lsb": ACT_ERROR_LSB,
         "inputs": [
             {
                 "name": q.name,
@@ -104,6 +115,7 @@ def _stream(model: QStream) -> dict[str, object]:
                 "std": q.std,
                 "unit": q.unit,
                 "mu_q": q.mu_q,
+                "pre_shift": q.pre_shift,
                 "inv_q": q.inv_q,
                 "shift": q.shift,
                 "d_max": q.d_max,
@@ -116,6 +128,8 @@ def _stream(model: QStream) -> dict[str, object]:
             "w": _matrix(head.w),
             "shift": head.shift,
             "bias_q": head.bias_q,
+            "acc_bound": head.acc_bound,
+            "acc_headroom_bits": _num(headroom_bits(head.acc_bound, INT64_MAX)),
             "estimate_bound_lsb": _num(head.estimate_bound),
             "estimate_headroom_bits": _num(headroom_bits(head.estimate_bound, INT32_MAX)),
             "output_mean_mg": model.frontend.output_mean,

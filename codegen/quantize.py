@@ -7,27 +7,37 @@ quantity               storage      format
 =====================  ===========  ======================================================
 acceleration in/out    int32        Q4 micro-g: 1 LSB = 1/16 ug (62.5 ng), range +-134 g
 temperature in         int32        milli-degC
-window means           int64        Q8 of the input unit (exact running sums, one rounding division)
+window means           int64        Q24 of the input unit (fewer bits only when W * range needs it)
 network inputs x       int32        Q4.27, clamped to +-16 standard deviations
-weights                int16        per matrix Q(f), f chosen per matrix (see below)
-layer-0 input MACs     int64        int16 w x int32 x: at most 2 per row, exact
-gate pre-activation z  int32        Q15.16, bias int32 Q15.16
-gates, h, tanh, sigma  int16/int32  Q0.15
+weights                int32        per layer: Q(A - 27) for the layer-0 input, Q(A - 30) for h
+MAC accumulators       int64        Q(A), one per gate row, initialised with the bias (int64 Q(A))
+gate pre-activation z  int32        Q5.26 (one rounding from Q(A); saturation at +-32 is harmless)
+gates, h, tanh, sigma  int32        Q30
 cell state c           int32        Q7.24, explicit saturation at +-128 (flagged)
-head weights           int16        accel LSB per unit of h, Q(f_head); estimate int32 accel LSB
+head                   int32/int64  weights in accel LSB per unit of h, Q(f); bias, accumulator Q(f+30)
+held estimate          int64        Q16 accel LSB, saturated at +-(2**31 - 1) LSB (flagged)
 PLA slopes/intercepts  int32/int64  accel LSB per mdegC and accel LSB, Q(f_pla)
 cubic coefficients     int32        accel LSB, of u^k with u = (T - T_ref) / 2**p, Q(f_poly)
 =====================  ===========  ======================================================
 
-A weight matrix's ``f`` is the largest number of fractional bits such that every weight fits
-int16 *and* the worst-case accumulator of every row, ``sum_j |w_q| * max|input_q|``, fits its
-accumulator (int32 for the recurrent and upper-layer MACs, int64 for the layer-0 input MACs): the
-MACs can then never saturate, which is proved here, not hoped for. The sum is then rounded once
-to Q15.16. The manifest records each bound and its headroom in bits.
+A layer's accumulator format Q(A) is the largest such that every weight fits int32 *and* the
+worst case of every row, ``|b_q| + sum_j |w_q| * max|input_q|``, stays below 2**62: the int64
+MACs can then never overflow, which is proved here, not hoped for. Both matrices of a layer share
+the accumulator (the layer-0 input is Q27, h is Q30: their weight formats differ by 3 bits), so
+each gate row is one chain of int32 x int32 -> int64 multiply-accumulates (an SMLAL each on a
+Cortex-M4) rounded once to Q5.26. The manifest records each bound and its headroom in bits.
 
-Why the network input is int32 Q4.27 rather than int16: the input's resolution feeds straight
-through the network to the estimate; Q4.11 cost 0.2 .. 0.5 ug RMS on trained models (measured),
-Q4.27 costs nothing measurable, and the layer-0 input has only 1 or 2 columns.
+Why this precision: a recursive model whitens the residual to a few micro-g, and the paper's
+Table 1 prints its Allan coefficients to three digits; with int16 weights and Q15 gates the
+quantised network's slowly varying error (0.2 ug RMS) moved the last digit. Here every stage
+resolves 2**-24 or better: A = 57 .. 59 on trained 2x10 models, so the weights are exact copies of
+the float32 ones for |w| >= 2**-4; z resolves 2**-26, gates and h 2**-30, c 2**-24, the
+activations 1e-8, the normalisation gain 2**-31. The network's own error is 0.2 ng RMS on a
+trained 2x10 model (docs/codegen.md, "Error budget").
+
+Why the window mean is Q24: the temperature model's rate input differentiates two 5 s means 1 s
+apart, and Q8 cost 0.13 ug RMS there. A fine mean unit is shifted right (``pre_shift``, rounding)
+before the normalisation multiply so that the multiplier keeps 31 significant bits in int64.
 """
 
 from __future__ import annotations
@@ -38,9 +48,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from codegen.activations import ONE_Q15, sigmoid_q15, tanh_q15
+from codegen.activations import ACT_ERROR_LSB, ACT_FRAC, ACT_MAX, ONE
 from codegen.fixedpoint import (
-    INT16_MAX,
     INT32_MAX,
     INT64_MAX,
     headroom_bits,
@@ -51,15 +60,17 @@ from codegen.spec import Checkpoint, DlstmSpec, FrontEndSpec, PersistenceSpec, P
 from trainer.errors import UserError
 
 X_FRAC = 27
-H_FRAC = 15
-Z_FRAC = 16
+H_FRAC = ACT_FRAC
+Z_FRAC = 26
 C_FRAC = 24
-MEAN_FRAC = 8
+EST_FRAC = 16  # the held estimate: Q16 accel LSB, rounded per sample with error feedback
+EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
+MAX_MEAN_FRAC = 24  # window means: Q24 of the input unit when the window allows (the rate input needs it)
 ACCEL_FRAC = 4  # the step API's acceleration unit is 2**-4 ug
 ACCEL_PER_MG = 1000 << ACCEL_FRAC
-MAX_WEIGHT_FRAC = 30
+MAX_ACC_FRAC = 60  # accumulator fractional bits when the weights are tiny (z shift <= 34)
 X_MAX = INT32_MAX  # |x_q| clamp: 16 standard deviations
-H_MAX = INT16_MAX
+H_MAX = ACT_MAX  # |h_q| = |o * tanh(c)| < 1
 INT64_SAFE = 1 << 62  # every int64 intermediate stays below this (one bit of margin)
 DEFAULT_ACCEL_LIMIT_G = 16.0
 MAX_ACCEL_LIMIT_G = 128.0  # 128 g * 16e6 LSB/g < 2**31
@@ -82,30 +93,26 @@ class Limits:
 
 @dataclass(frozen=True)
 class QMatrix:
-    """An int16 weight matrix, its fractional bits, and the shift of its products to Q15.16."""
+    """An int32 weight matrix, its fractional bits, and its share of the accumulator bound."""
 
-    q: np.ndarray  # int64 values within int16
+    q: np.ndarray  # int64 values within int32
     frac: int
-    shift: int
-    row_bounds: np.ndarray  # worst-case |accumulator| of each row, integer units
-    acc_limit: int  # INT32_MAX, or the int64 limit for the layer-0 input MACs
+    input_max: int  # largest |input_q| it multiplies
+    input_frac: int
+
+    @property
+    def row_bounds(self) -> np.ndarray:
+        """Worst-case |sum_j w_q x_q| of each row (Python ints: exact)."""
+        return np.array([sum(abs(int(v)) for v in row) * self.input_max for row in np.atleast_2d(self.q)])
 
     @property
     def acc_bound(self) -> int:
         return int(np.max(self.row_bounds, initial=0))
 
-    @property
-    def wide(self) -> bool:
-        return self.acc_limit > INT32_MAX
-
-    @property
-    def headroom(self) -> float:
-        return headroom_bits(self.acc_bound, self.acc_limit)
-
 
 @dataclass(frozen=True)
 class QInput:
-    """``x_q = clamp(rshift_round(clamp(v - mu_q, +-d_max) * inv_q, shift), +-X_MAX)``, one input.
+    """``x_q = clamp(rshift_round(clamp(rshift_round(v - mu_q, pre_shift), +-d_max) * inv_q, shift), +-X_MAX)``.
 
     ``d_max`` is where x saturates anyway; clamping there first keeps the product inside int64
     whatever the scale, without changing any result.
@@ -113,6 +120,7 @@ class QInput:
 
     name: str
     mu_q: int
+    pre_shift: int
     inv_q: int
     shift: int
     d_max: int
@@ -127,23 +135,36 @@ class QInput:
 
 @dataclass(frozen=True)
 class QLayer:
+    """One LSTM layer: ``z = rshift_round(b + W_x in + W_h h, acc_frac - 26)`` per gate row."""
+
     wx: QMatrix
     wh: QMatrix
-    b: np.ndarray  # Q15.16
-    z_bound: int  # Q15.16
+    b: np.ndarray  # int64, Q(acc_frac): the accumulators' initial values
+    acc_frac: int
+    acc_bound: int  # worst-case |accumulator| over the rows, Q(acc_frac)
+    z_bound: int  # Q5.26, capped at INT32_MAX (where z saturates)
     cell_bound: float  # worst-case |c| (real units) from the gate bounds
-    forget_max_q15: int
+    forget_max_q: int  # Q30
 
     @property
     def hidden_size(self) -> int:
         return self.wh.q.shape[1]
 
+    @property
+    def z_shift(self) -> int:
+        return self.acc_frac - Z_FRAC
+
+    @property
+    def acc_headroom(self) -> float:
+        return headroom_bits(self.acc_bound, INT64_MAX)
+
 
 @dataclass(frozen=True)
 class QHead:
     w: QMatrix  # (1, H), accel LSB per unit of h
-    shift: int  # frac + 15
-    bias_q: int  # int64, Q(shift) accel LSB (head bias * std + mean)
+    shift: int  # frac + 30
+    bias_q: int  # int64, Q(shift) accel LSB (head bias * std + mean): the accumulator's initial value
+    acc_bound: int  # worst-case |accumulator|
     estimate_bound: float  # accel LSB
 
 
@@ -158,6 +179,7 @@ class QStream:
     inputs: tuple[QInput, ...]
     layers: tuple[QLayer, ...]
     head: QHead | None
+    mean_frac: int  # the window mean is Q(mean_frac) of the input unit (network models)
 
     @property
     def window(self) -> int:
@@ -201,35 +223,16 @@ class QPoly3:
 QuantModel = QStream | QPla | QPoly3
 
 
-def _choose_weight_frac(
-    w: np.ndarray, what: str, *, input_max: int, min_frac: int, acc_limit: int = INT32_MAX
-) -> tuple[np.ndarray, int]:
-    """Largest fractional bits such that weights fit int16 and no row's MACs can overflow."""
-    w = np.atleast_2d(np.asarray(w, dtype=np.float64))
-    largest = float(np.max(np.abs(w))) if w.size else 0.0
-    frac = (
-        MAX_WEIGHT_FRAC if largest == 0 else min(MAX_WEIGHT_FRAC, math.floor(math.log2(INT16_MAX / largest)))
-    )
-    while frac >= min_frac:
-        q = quantise_array(w, frac)
-        if np.max(np.abs(q), initial=0) <= INT16_MAX and _row_bound(q, input_max) <= acc_limit:
-            return q, frac
-        frac -= 1
-    raise UserError(
-        f"{what}: weights too large for int16 with a safe accumulator "
-        f"(max |w| = {largest:.4g}, row sum of |w| = {float(np.max(np.sum(np.abs(w), axis=1))):.4g})"
-    )
+def _fits_int32(q: np.ndarray) -> bool:
+    return int(np.max(np.abs(q), initial=0)) <= INT32_MAX
 
 
-def _row_bound(q: np.ndarray, input_max: int) -> int:
-    return int(np.max(np.sum(np.abs(q), axis=1), initial=0)) * input_max
-
-
-def _matrix(w: np.ndarray, what: str, in_frac: int, input_max: int, acc_limit: int) -> QMatrix:
-    q, frac = _choose_weight_frac(
-        w, what, input_max=input_max, min_frac=Z_FRAC - in_frac, acc_limit=acc_limit
-    )
-    return QMatrix(q, frac, frac + in_frac - Z_FRAC, np.sum(np.abs(q), axis=1) * input_max, acc_limit)
+def _quantise_or_none(values: np.ndarray, frac: int) -> np.ndarray | None:
+    """``quantise_array``, or None when a value does not fit int64 at this scale."""
+    try:
+        return quantise_array(values, frac)
+    except ValueError:
+        return None
 
 
 def _ceil_shift(value: int, shift: int) -> int:
@@ -237,64 +240,95 @@ def _ceil_shift(value: int, shift: int) -> int:
     return (value + (1 << shift) - 1) >> shift if shift else value
 
 
+def _act_bound(exact: np.ndarray) -> np.ndarray:
+    """Upper bound (Q30) of an integer activation whose exact value is at most ``exact``."""
+    return np.minimum(np.ceil(exact * ONE) + ACT_ERROR_LSB + 1, ACT_MAX).astype(np.int64)
+
+
 def _layer(spec_w_x: np.ndarray, spec_w_h: np.ndarray, spec_b: np.ndarray, index: int) -> QLayer:
-    if index == 0:
-        wx = _matrix(spec_w_x, "layer 0 w_x", X_FRAC, X_MAX, INT64_SAFE)
+    in_frac, in_max = (X_FRAC, X_MAX) if index == 0 else (H_FRAC, H_MAX)
+    w_x = np.atleast_2d(np.asarray(spec_w_x, dtype=np.float64))
+    w_h = np.atleast_2d(np.asarray(spec_w_h, dtype=np.float64))
+    b = np.asarray(spec_b, dtype=np.float64)
+    for acc_frac in range(
+        MAX_ACC_FRAC, Z_FRAC - 1, -1
+    ):  # the largest A that fits; 57 .. 59 on trained 2x10 models
+        qx = _quantise_or_none(w_x, acc_frac - in_frac)
+        qh = _quantise_or_none(w_h, acc_frac - H_FRAC)
+        b_q = _quantise_or_none(b, acc_frac)
+        if qx is None or qh is None or b_q is None or not (_fits_int32(qx) and _fits_int32(qh)):
+            continue
+        wx = QMatrix(qx, acc_frac - in_frac, in_max, in_frac)
+        wh = QMatrix(qh, acc_frac - H_FRAC, H_MAX, H_FRAC)
+        rows = [
+            int(rx) + int(rh) + abs(int(bb))
+            for rx, rh, bb in zip(wx.row_bounds, wh.row_bounds, b_q, strict=True)
+        ]
+        bound = max(rows, default=0)
+        if bound < INT64_SAFE:
+            break
     else:
-        wx = _matrix(spec_w_x, f"layer {index} w_x", H_FRAC, H_MAX, INT32_MAX)
-    wh = _matrix(spec_w_h, f"layer {index} w_h", H_FRAC, H_MAX, INT32_MAX)
-    b = quantise_array(spec_b, Z_FRAC)
-    if np.max(np.abs(b), initial=0) > INT32_MAX:
-        raise UserError(f"layer {index} bias: |b| = {float(np.max(np.abs(spec_b))):.4g} does not fit Q15.16")
-    rows_x, rows_h = wx.row_bounds, wh.row_bounds
-    z_rows = np.array(
-        [
-            _ceil_shift(int(rx), wx.shift) + _ceil_shift(int(rh), wh.shift) + abs(int(bb))
-            for rx, rh, bb in zip(rows_x, rows_h, b, strict=True)
-        ],
-        dtype=np.int64,
-    )
-    z_rows = np.minimum(z_rows, INT32_MAX)  # z saturates there; the activations are flat long before
+        real = np.sum(np.abs(w_x), axis=1) * 16.0 + np.sum(np.abs(w_h), axis=1) + np.abs(b)
+        raise UserError(
+            f"layer {index}: weights too large for int32 with a safe int64 accumulator "
+            f"(largest row sum of 16 |w_x| + |w_h| + |b| = {float(np.max(real)):.4g})"
+        )
+    shift = acc_frac - Z_FRAC
+    z_rows = np.array([min(_ceil_shift(int(r), shift), INT32_MAX) for r in rows], dtype=np.int64)
     H = wh.q.shape[1]
-    i_max = sigmoid_q15(z_rows[0:H], Z_FRAC) / ONE_Q15
-    f_max_q = sigmoid_q15(z_rows[H : 2 * H], Z_FRAC)
-    g_max = tanh_q15(z_rows[2 * H : 3 * H], Z_FRAC) / ONE_Q15
-    # |c'| <= f |c| + i |g| + 2**-25 (one rounding) -> geometric bound; f <= 32767/32768 < 1 always.
-    cell = (i_max * g_max + 2.0**-25) / (1.0 - f_max_q / ONE_Q15)
-    return QLayer(wx, wh, b, int(np.max(z_rows)), float(np.max(cell)), int(np.max(f_max_q)))
+    z_real = z_rows / 2.0**Z_FRAC
+    i_max = _act_bound(0.5 * (1 + np.tanh(0.5 * z_real[0:H]))) / ONE
+    f_max_q = _act_bound(0.5 * (1 + np.tanh(0.5 * z_real[H : 2 * H])))
+    g_max = _act_bound(np.tanh(z_real[2 * H : 3 * H])) / ONE
+    # |c'| <= f |c| + i |g| + 2**-25 + 2**-55 (two roundings) -> geometric bound; f <= 1 - 2**-30 always.
+    cell = (i_max * g_max + 2.0**-24) / (1.0 - f_max_q / ONE)
+    return QLayer(
+        wx, wh, b_q, acc_frac, bound, int(np.max(z_rows)), float(np.max(cell)), int(np.max(f_max_q))
+    )
 
 
 def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str) -> QInput:
     mu_q = round_half_away(Fraction(mean) / unit_per_lsb)
+    if abs(mu_q) >= INT64_SAFE // 2:
+        raise UserError(f"input '{name}': mean {mean:g} {unit} is far outside the input range")
     gain = unit_per_lsb / Fraction(std) * (1 << X_FRAC)  # x_q per LSB of v
-    shift = max(0, 23 - math.floor(math.log2(gain)))  # inv_q gets 24 significant bits when possible
-    while shift <= 62:
-        inv_q = round_half_away(gain * (1 << shift))
-        saturating = -(-(X_MAX + 1) * (1 << shift) // inv_q)  # ceil: from here on x clamps anyway
-        d_max = min(v_max + abs(mu_q), saturating)
-        if d_max * inv_q < INT64_SAFE:
-            return QInput(name, mu_q, inv_q, shift, d_max, mean, std, unit)
-        shift -= 1
-        if shift < 0 or inv_q < 256:
+    # inv_q gets 31 significant bits: the product d_max * inv_q is then about 2**(31 + shift), so
+    # shift <= 30 keeps it in int64; a fine input unit (gain < 1) is first shifted right by
+    # pre_shift (rounding), which costs nothing measurable and leaves inv_q its 31 bits.
+    wanted = 30 - math.floor(math.log2(gain))
+    pre_shift, shift = max(0, wanted - 30), min(30, max(0, wanted))
+    gain_d = gain * (1 << pre_shift)  # x_q per LSB of d
+    v_span = _ceil_shift(v_max + abs(mu_q), pre_shift)
+    while shift >= 0:
+        inv_q = round_half_away(gain_d * (1 << shift))
+        if inv_q < 1:
             break
+        saturating = -(-(X_MAX + 1) * (1 << shift) // inv_q)  # ceil: from here on x clamps anyway
+        d_max = min(v_span, saturating)
+        if d_max * inv_q < INT64_SAFE:
+            return QInput(name, mu_q, pre_shift, inv_q, shift, d_max, mean, std, unit)
+        shift -= 1
     raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
 
 def _head(spec: DlstmSpec) -> QHead:
+    """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 30)``: y * std + mean folded in, int64."""
     fe = spec.frontend
-    scale = fe.output_std * ACCEL_PER_MG  # accel LSB per unit of y
-    q, frac = _choose_weight_frac(spec.head_w * scale, "head", input_max=H_MAX, min_frac=1 - H_FRAC)
-    shift = frac + H_FRAC
-    bias_q = round_half_away(
-        (Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean))
-        * ACCEL_PER_MG
-        * Fraction(2) ** shift
+    scale = Fraction(fe.output_std) * ACCEL_PER_MG  # accel LSB per unit of y
+    w_real = np.asarray(spec.head_w, dtype=np.float64) * float(scale)
+    bias = (Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean)) * ACCEL_PER_MG
+    for frac in range(MAX_ACC_FRAC - H_FRAC, EST_FRAC - H_FRAC - 1, -1):
+        q = _quantise_or_none(w_real[None, :], frac)
+        if q is None or not _fits_int32(q):
+            continue
+        w = QMatrix(q, frac, H_MAX, H_FRAC)
+        bias_q = round_half_away(bias * Fraction(2) ** (frac + H_FRAC))
+        acc_bound = w.acc_bound + abs(bias_q)
+        if acc_bound < INT64_SAFE:
+            return QHead(w, frac + H_FRAC, bias_q, acc_bound, acc_bound / 2.0 ** (frac + H_FRAC))
+    raise UserError(
+        f"head: output mean {fe.output_mean:g} mg / std {fe.output_std:g} mg cannot be represented"
     )
-    w = QMatrix(q, frac, 0, np.sum(np.abs(q), axis=1) * H_MAX, INT32_MAX)
-    acc_bound = w.acc_bound
-    if abs(bias_q) + acc_bound >= INT64_SAFE:
-        raise UserError(f"head: output mean {fe.output_mean:g} mg cannot be represented")
-    return QHead(w, shift, bias_q, (acc_bound + abs(bias_q)) / 2.0**shift)
 
 
 def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
@@ -309,12 +343,22 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
     )
 
 
+def _mean_frac(window: int, v_max: int) -> int:
+    """Fractional bits of the window mean: up to 24, as long as sum * 2**F stays below 2**62."""
+    frac = MAX_MEAN_FRAC
+    while frac > 0 and window * v_max << frac >= INT64_SAFE:
+        frac -= 1
+    return frac
+
+
 def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
     fe = spec.frontend
-    if isinstance(spec, PersistenceSpec):
-        return QStream(spec.method, "recursive", fe, limits, (), (), None)
-    mean_lsb = 1 << MEAN_FRAC
+    if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
+        frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
+        return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)
     if fe.kind == "recursive":
+        frac = _mean_frac(fe.accel_window, limits.accel)
+        mean_lsb = 1 << frac
         inputs = (
             _input(
                 "accel",
@@ -328,6 +372,8 @@ def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
     else:
         t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
         span = limits.temp_hi_mdegc - limits.temp_lo_mdegc
+        frac = _mean_frac(fe.temp_window, t_max)
+        mean_lsb = 1 << frac
         rate_unit = (
             Fraction(60) * Fraction(fe.rate_hz) / (fe.decimation * 1000 * mean_lsb)
         )  # degC/min per LSB
@@ -343,7 +389,7 @@ def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
             _input("rate", span * mean_lsb, rate_unit, fe.inputs_mean[1], fe.inputs_std[1], "degC/min"),
         )
     layers = tuple(_layer(layer.w_x, layer.w_h, layer.b, k) for k, layer in enumerate(spec.layers))
-    return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec))
+    return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec), frac)
 
 
 def _pla(spec: PlaSpec, limits: Limits) -> QPla:

@@ -7,6 +7,7 @@ no paths, sorted JSON keys, so the same model always gives byte-identical files.
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass
 
@@ -14,13 +15,26 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.activations import TABLE_STEP_BITS, TANH_TABLE, activation_errors
+from codegen.activations import (
+    ACT_FRAC,
+    ACT_MAX,
+    EXTRA_BITS,
+    RAW_FRAC,
+    RAW_MAX,
+    SLOPE_SHIFT,
+    TABLE_FRAC,
+    TABLE_LAST,
+    TABLE_STEP_BITS,
+    TANH_TABLE,
+    activation_errors,
+)
 from codegen.quantize import (
     C_FRAC,
+    EST_FRAC,
+    EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
-    MEAN_FRAC,
     X_MAX,
     Z_FRAC,
     QPla,
@@ -123,18 +137,22 @@ def state_fields(model: QuantModel) -> list[Field]:
     L, H = len(model.layers), model.hidden_size
     if L:
         fields.append(Field("int32_t", "c", (L, H), "cell states, Q7.24"))
-    fields.append(Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug"))
+        fields.append(Field("int32_t", "h", (L, H), "hidden states, Q30"))
+    fields.append(Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug, whole part (floor)"))
     if model.kind == "temperature":
-        fields.append(Field("int32_t", "prev_mean", (), "window mean at the previous step, Q8 mdegC"))
+        fields.insert(
+            1,
+            Field("int64_t", "prev_mean", (), f"window mean at the previous step, Q{model.mean_frac} mdegC"),
+        )
     fields += [
+        Field("uint32_t", "estimate_frac", (), "its fraction, 1/2^16 of 1/16 ug"),
+        Field("uint32_t", "shaper", (), "output rounding: accumulated fractions, 1/2^16 of 1/16 ug"),
         Field("uint32_t", "window_pos", (), "next ring slot"),
         Field("uint32_t", "window_fill", (), "samples in the window"),
         Field("uint32_t", "phase", (), "n mod decimation; the network steps at 0"),
         Field("uint32_t", "steps", (), "network steps since reset (saturating)"),
         *common,
     ]
-    if L:
-        fields.append(Field("int16_t", "h", (L, H), "hidden states, Q0.15"))
     return fields
 
 
@@ -153,11 +171,11 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
     sizes = {"model_id_string": len("sha256:") + 64 + 1}
     if isinstance(model, QStream):
         if model.layers:
-            sizes["tanh_table"] = 2 * len(TANH_TABLE)
-            sizes["weights"] = sum(2 * (lay.wx.q.size + lay.wh.q.size) for lay in model.layers) + 2 * (
+            sizes["tanh_table"] = 4 * len(TANH_TABLE)
+            sizes["weights"] = sum(4 * (lay.wx.q.size + lay.wh.q.size) for lay in model.layers) + 4 * (
                 model.hidden_size
             )
-            sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
+            sizes["biases"] = sum(8 * lay.b.size for lay in model.layers)
     elif isinstance(model, QPla):
         sizes["pla_tables"] = (
             4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
@@ -178,6 +196,11 @@ def _rows(values: np.ndarray | list[int] | tuple[int, ...], *, width: int = 32, 
     items = [_c_int(v, width) for v in np.asarray(values, dtype=np.int64).ravel()]
     lines = [", ".join(items[k : k + per_line]) + "," for k in range(0, len(items), per_line)]
     return "\n".join("    " + line for line in lines)
+
+
+def _bound_text(bound: int) -> str:
+    """log2 of a bound, truncated (a bound below 2**62 never prints as 2^62.00)."""
+    return f"2^{math.floor(math.log2(bound) * 100) / 100:.2f}" if bound > 0 else "0"
 
 
 def _matrix_rows(q: np.ndarray) -> str:
@@ -220,18 +243,23 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             decimation=fe.decimation,
             step_hz=f"{fe.rate_hz / fe.decimation:g}",
             window=model.window,
-            mean_scale=1 << MEAN_FRAC,
+            mean_scale=f"INT64_C({1 << model.mean_frac})",
+            mean_frac=model.mean_frac,
+            est_frac=EST_FRAC,
+            est_one=1 << EST_FRAC,
+            est_limit=_c_int(EST_LIMIT, 64),
             layers=[
                 {
                     "rows": lay.wx.q.shape[0],
                     "n_in": lay.wx.q.shape[1],
                     "wx_frac": lay.wx.frac,
                     "wh_frac": lay.wh.frac,
+                    "acc_frac": lay.acc_frac,
+                    "acc_bound_text": _bound_text(lay.acc_bound),
                     "wx": _matrix_rows(lay.wx.q),
                     "wh": _matrix_rows(lay.wh.q),
-                    "b": _rows(lay.b),
-                    "sx": lay.wx.shift,
-                    "sh": lay.wh.shift,
+                    "b": _rows(lay.b, width=64, per_line=4),
+                    "shift": lay.z_shift,
                 }
                 for lay in model.layers
             ],
@@ -241,17 +269,31 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                     "mu": _c_int(q.mu_q, 64),
                     "inv": _c_int(q.inv_q, 64),
                     "d_max": _c_int(q.d_max, 64),
+                    "pre_shift": q.pre_shift,
                     "shift": q.shift,
                     "doc": f"({q.name} - {q.mean:.6g} {q.unit}) / {q.std:.6g} {q.unit}",
                 }
                 for q in model.inputs
             ],
             x_max=X_MAX,
-            tanh_table=_rows(TANH_TABLE),
+            tanh_table=_rows(TANH_TABLE, per_line=8),
+            table_last=TABLE_LAST,
+            raw_last=_c_int(int(TANH_TABLE[TABLE_LAST]) << EXTRA_BITS, 64),
+            raw_max=_c_int(RAW_MAX, 64),
+            raw_one=_c_int(1 << RAW_FRAC, 64),
+            one_q62=f"UINT64_C({1 << (2 * TABLE_FRAC)})",
+            slope_shift=SLOPE_SHIFT,
+            extra_scale=1 << EXTRA_BITS,
+            tanh_round=1 << (RAW_FRAC - ACT_FRAC - 1),
+            tanh_out_shift=RAW_FRAC - ACT_FRAC,
+            sigmoid_round=1 << (RAW_FRAC - ACT_FRAC),
+            sigmoid_out_shift=RAW_FRAC + 1 - ACT_FRAC,
+            act_max=ACT_MAX,
+            act_frac=ACT_FRAC,
             tanh_shift=Z_FRAC - TABLE_STEP_BITS,
             sigmoid_shift=Z_FRAC + 1 - TABLE_STEP_BITS,
             cell_tanh_shift=C_FRAC - TABLE_STEP_BITS,
-            cell_lift=1 << (C_FRAC - 15),
+            ig_shift=ACT_FRAC - C_FRAC,
         )
         if model.head is not None:
             ctx["head"] = {
@@ -259,6 +301,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 "frac": model.head.w.frac,
                 "shift": model.head.shift,
                 "bias": _c_int(model.head.bias_q, 64),
+                "acc_bound_text": _bound_text(model.head.acc_bound),
             }
         macros += [
             ("SAMPLE_RATE_HZ", f"{fe.rate_hz:g}"),
@@ -324,8 +367,9 @@ def manifest_json(manifest: dict[str, object]) -> str:
 def activation_summary() -> dict[str, object]:
     errors = activation_errors(Z_FRAC, C_FRAC)
     return {
-        "method": "tanh table of 1025 int16-range entries (step 1/128, inputs 0..8) with linear "
-        "interpolation; sigmoid(z) = (1 + tanh(z/2)) / 2",
-        "table_bytes": 2 * len(TANH_TABLE),
+        "method": f"tanh table of {TABLE_LAST + 1} uint32 Q31 entries (step 1/{1 << TABLE_STEP_BITS}, inputs "
+        f"0..{TABLE_LAST >> TABLE_STEP_BITS}) with cubic Hermite interpolation (slopes 1 - tanh^2 from the "
+        "entries); sigmoid(z) = (1 + tanh(z/2)) / 2; outputs Q30, rounded once",
+        "table_bytes": 4 * len(TANH_TABLE),
         **{kind: err.to_dict() for kind, err in errors.items()},
     }

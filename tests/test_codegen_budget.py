@@ -1,5 +1,6 @@
-"""The golden model against the trainer's float models: the error budget, the cell state's precision
-over a 2 h stream, the documented saturation of the cell state, and (slow) the full verify."""
+"""The golden model against the trainer's float models: the error budget, the Table 1 figures of
+trained networks (the issue's requirement), the cell state's precision over a 2 h stream, the
+output's error feedback, the documented saturation of the cell state, and (slow) the full verify."""
 
 from __future__ import annotations
 
@@ -14,19 +15,33 @@ import torch
 from codegen import testmodels as tm
 from codegen.cli import main as codegen_main
 from codegen.export import export
-from codegen.golden import golden_for
+from codegen.golden import GoldenStream, golden_for
 from codegen.hostbuild import load_module
 from codegen.quantize import ACCEL_PER_MG, FLAG_SATURATED
-from codegen.verify import integer_recording, to_step_units
+from codegen.verify import (
+    Table1Check,
+    error_budget,
+    held_fine_output,
+    integer_recording,
+    to_step_units,
+    verify,
+)
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
 from trainer.recording import Recording
-from trainer.recording_io import read_recording
+from trainer.recording_io import read_recording, write_recording
 
+LSB_MG = 1.0 / ACCEL_PER_MG  # the output's unit, 1/16 ug
 # Documented budget of the integer arithmetic alone (golden minus float on the same integer inputs),
-# in mg: far below the simulated sensor's 0.35 mg white noise per sample.
-ARITHMETIC_RMS_MG = {"dlstm": 5e-4, "dlstm-temp": 5e-4, "persistence": 5e-5, "pla": 5e-5, "poly3": 5e-5}
-ARITHMETIC_MAX_MG = {"dlstm": 3e-3, "dlstm-temp": 3e-3, "persistence": 1e-4, "pla": 1e-4, "poly3": 1e-4}
+# in mg. Per sample it is the output's rounding to 1/16 ug: uniform (0.29 LSB RMS) for the memoryless
+# methods, error feedback (0.41 LSB RMS, at most one LSB) for the streaming ones. Before that
+# rounding (the model's own arithmetic) it is below 1 ng, and so it is after the paper's 0.5 s
+# smoothing for the streaming methods (the error feedback averages out within a few samples).
+ARITHMETIC_RMS_MG = {"dlstm": 0.45, "dlstm-temp": 0.45, "persistence": 0.45, "pla": 0.32, "poly3": 0.32}
+ARITHMETIC_MAX_LSB = {"dlstm": 1.0, "dlstm-temp": 1.0, "persistence": 1.0, "pla": 0.5, "poly3": 0.5}
+NETWORK_RMS_MG, NETWORK_MAX_MG = 3e-7, 1e-6  # 0.3 ng and 1 ng; measured 0.05 .. 0.2 ng RMS
+SMOOTHED_RMS_MG = 1e-6  # streaming methods; the memoryless ones' white rounding averages to 0.03 LSB
+SMOOTHED_RMS_LSB = {"dlstm": 0.016, "dlstm-temp": 0.016, "persistence": 0.016, "pla": 0.04, "poly3": 0.04}
 
 
 @pytest.fixture(scope="module")
@@ -57,13 +72,107 @@ def test_golden_against_the_trainers_float_model(method: str, recording: Recordi
     model, _ = export(path, tmp_path / "out")
     float_model, _ = load_model(path)
     accel, temp = to_step_units(recording)
-    golden_mg = golden_for(model.quantised).run(accel, temp) / ACCEL_PER_MG
-    arithmetic = golden_mg - float_model.compensate(integer_recording(recording, accel, temp))
-    assert np.sqrt(np.mean(arithmetic**2)) < ARITHMETIC_RMS_MG[method]
-    assert np.max(np.abs(arithmetic)) < ARITHMETIC_MAX_MG[method]
-    total = golden_mg - float_model.compensate(recording.without_truth())
-    noise = np.std(np.diff(recording.accel_mg)) / np.sqrt(2)
-    assert np.sqrt(np.mean(total**2)) < noise / 500
+    golden = golden_for(model.quantised)
+    fine = None
+    if isinstance(golden, GoldenStream):
+        golden.fine_estimates = []
+    out = golden.run(accel, temp)
+    if isinstance(golden, GoldenStream):
+        assert golden.fine_estimates is not None
+        fine = held_fine_output(accel, golden.fine_estimates, golden.model.frontend.decimation)
+    budget = error_budget(
+        out,
+        float_model.compensate(recording.without_truth()),
+        float_model.compensate(integer_recording(recording, accel, temp)),
+        recording.accel_mg,
+        recording.sample_rate_hz,
+        fine,
+    )
+    assert budget.arithmetic_rms_mg < ARITHMETIC_RMS_MG[method] * LSB_MG
+    assert budget.arithmetic_max_abs_mg < ARITHMETIC_MAX_LSB[method] * LSB_MG + NETWORK_MAX_MG
+    assert budget.smoothed_rms_mg < SMOOTHED_RMS_LSB[method] * LSB_MG
+    if fine is not None:
+        assert budget.network_rms_mg is not None and budget.network_max_abs_mg is not None
+        assert budget.network_rms_mg < NETWORK_RMS_MG and budget.network_max_abs_mg < NETWORK_MAX_MG
+    assert budget.rms_mg < budget.noise_mg / 1000
+
+
+# ------------------------------------------------------------------------- trained networks, Table 1
+
+FAST_FIT = ("--population", "2", "--iterations", "150", "--quiet")
+
+
+def _simulate_pair(directory: Path, duration_s: int | None) -> tuple[Path, Path]:
+    """The paper's oven protocol: training run seed 1, validation run seed 2."""
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = directory / "train.npz", directory / "valid.npz"
+    extra = ["--duration", str(duration_s)] if duration_s else []
+    for seed, path in zip((1, 2), paths, strict=True):
+        if not path.exists():
+            args = ["simulate", "--protocol", "paper-oven", "--seed", str(seed), *extra, "-o", str(path)]
+            assert trainer_main(args) == 0
+    return paths
+
+
+def _on_the_mdegc_grid(path: Path, directory: Path) -> Path:
+    """The recording with its temperatures rounded to whole mdegC, as a digital sensor delivers them."""
+    rec = read_recording(path)
+    grid = directory / "valid_mdegc.npz"
+    write_recording(
+        Recording({**rec.columns, "temp_c": np.rint(rec.temp_c * 1000) / 1000}, rec.meta, "grid"), grid
+    )
+    return grid
+
+
+def _assert_identical(table: Table1Check | None, margin: float) -> None:
+    assert table is not None
+    assert table.identical == table.figures == 7, table.text
+    assert table.worst_half_unit_fraction < margin  # far from any rounding boundary
+
+
+def _check_trained(method: str, train: Path, valid: Path, work: Path, cycles: int) -> None:
+    model = work / f"{method}.pt"
+    assert (
+        trainer_main(
+            ["fit", "--method", method, str(train), "-o", str(model), *FAST_FIT, "--cycles", str(cycles)]
+        )
+        == 0
+    )
+    export(model, work / "out")
+    result = verify(model, work / "out", valid)
+    assert result.mismatches == 0 and result.state_equal
+    b = result.budget
+    assert b.network_rms_mg is not None and b.network_max_abs_mg is not None
+    assert b.network_rms_mg < NETWORK_RMS_MG and b.network_max_abs_mg < NETWORK_MAX_MG
+    assert b.smoothed_rms_mg < SMOOTHED_RMS_MG
+    # the generator's share: the float model fed the C's integer inputs prints the same Table 1
+    _assert_identical(result.table1_integer_inputs, 0.05)
+    if method == "dlstm-temp":
+        # the rate input differentiates 5 s temperature means: the API's 1 mdegC rounding of the
+        # simulation's float temperatures moves the float model's own B by up to 5 half-units, so
+        # the comparison with the float model is made on temperatures a digital sensor could give
+        result = verify(model, work / "out", _on_the_mdegc_grid(valid, work))
+    _assert_identical(result.table1, 0.25)
+
+
+@pytest.mark.parametrize(("method", "cycles"), [("dlstm-issa", 2), ("dlstm-temp", 0)])
+def test_trained_networks_print_the_float_models_table1(
+    method: str, cycles: int, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+) -> None:
+    """The issue's requirement on small but real DLSTMs (30 min training and validation runs):
+    the quantised model's Table 1 equals the float model's to the printed digit, with margin."""
+    train, valid = _simulate_pair(tmp_path_factory.getbasetemp() / "paper_short", 1800)
+    _check_trained(method, train, valid, tmp_path, cycles)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("method", "cycles"), [("dlstm-issa", 3), ("dlstm", 0), ("dlstm-temp", 0)])
+def test_trained_networks_print_the_float_models_table1_on_the_full_run(
+    method: str, cycles: int, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+) -> None:
+    """The same on the paper's full 2 h runs (1.44 M samples each)."""
+    train, valid = _simulate_pair(tmp_path_factory.getbasetemp() / "paper_full", None)
+    _check_trained(method, train, valid, tmp_path, cycles)
 
 
 def _two_hour_stream(rate: float = 200.0) -> Recording:
@@ -94,16 +203,23 @@ def test_cell_state_does_not_drift_over_a_two_hour_stream(
     model, _ = export(path, tmp_path / "out")
     float_model, _ = load_model(path)
     accel, temp = to_step_units(rec)
-    steps = slice(0, None, fe["decimation"])
-    golden_drift = (accel - golden_for(model.quantised).run(accel, temp))[steps] / ACCEL_PER_MG
-    float_drift = (rec.accel_mg - float_model.compensate(integer_recording(rec, accel, temp)))[steps]
+    golden = golden_for(model.quantised)
+    assert isinstance(golden, GoldenStream)
+    golden.fine_estimates = []  # the network's estimates before the output's rounding
+    golden.run(accel, temp)
+    golden_drift = np.asarray(golden.fine_estimates) / ACCEL_PER_MG
+    ints = integer_recording(rec, accel, temp)
+    float_drift = (ints.accel_mg - float_model.compensate(ints))[:: fe["decimation"]]
     err = golden_drift - float_drift
     assert err.size == n_steps
     quarter = err.size // 4
     first, last = np.sqrt(np.mean(err[:quarter] ** 2)), np.sqrt(np.mean(err[-quarter:] ** 2))
-    assert last < 1.5 * first + 1e-5
-    assert np.max(np.abs(err)) < 1e-2  # mg; this network amplifies perturbations (float too)
-    assert np.sqrt(np.mean(err**2)) < 5e-4
+    assert last < 1.5 * first + 1e-8
+    assert np.max(np.abs(err)) < 2e-5  # mg; this network amplifies perturbations (float too)
+    assert np.sqrt(np.mean(err**2)) < 2e-7
+    print(
+        f"RMS {np.sqrt(np.mean(err**2)):.3g} first {first:.3g} last {last:.3g} max {np.max(np.abs(err)):.3g}"
+    )
 
 
 def test_cell_state_saturates_explicitly_and_is_flagged(recording: Recording, tmp_path: Path) -> None:
@@ -141,12 +257,9 @@ def test_full_paper_recording_verifies_with_zero_mismatches(
     method: str, tmp_path_factory: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The issue's acceptance: export + verify on the simulated 2 h validation run (1.44 M samples)."""
-    base = tmp_path_factory.getbasetemp() / "paper"
-    valid = base / "valid.npz"
-    if not valid.exists():
-        base.mkdir(exist_ok=True)
-        assert trainer_main(["simulate", "--protocol", "paper-oven", "--seed", "2", "-o", str(valid)]) == 0
+    _, valid = _simulate_pair(tmp_path_factory.getbasetemp() / "paper_full", None)
     rec = read_recording(valid)
+    base = tmp_path_factory.getbasetemp() / "random"
     path = _save(_checkpoint(method, rec), base / method)
     out = base / method / "out"
     assert codegen_main(["export", str(path), "-o", str(out)]) == 0
@@ -155,5 +268,7 @@ def test_full_paper_recording_verifies_with_zero_mismatches(
     printed = capsys.readouterr().out
     assert "samples compared: 1440000" in printed and "mismatches: 0\n" in printed
     assert "final state identical: yes" in printed
-    if method in ("pla", "poly3", "persistence"):
-        assert "Table 1 (quantised vs float): 7 of 7 figures print identically" in printed
+    same = "7 of 7 figures print identically"
+    assert f"Table 1 (quantised vs float on the same integer inputs): {same}" in printed
+    if method != "dlstm-temp":  # see _check_trained: the temperature's 1 mdegC rounding, not the C
+        assert f"Table 1 (quantised vs float): {same}" in printed

@@ -187,12 +187,20 @@ def test_manifest_documents_rates_ranges_bounds_and_sizes(exported: dict[str, Pa
     assert manifest["rates"] == {"sample_rate_hz": 200.0, "decimation": 200, "network_step_hz": 1.0}
     assert manifest["architecture"] == {"input_size": 1, "hidden_size": 10, "num_layers": 2}
     assert manifest["macs_per_network_step"] == 4 * 10 * (1 + 10) + 4 * 10 * (10 + 10) + 10
-    for layer in manifest["quantisation"]["layers"]:
-        assert layer["w_x"]["acc_headroom_bits"] >= 0 and layer["w_h"]["acc_headroom_bits"] >= 0
+    for index, layer in enumerate(manifest["quantisation"]["layers"]):
+        assert layer["acc_bound"] < layer["acc_limit"] == 2**62 and layer["acc_headroom_bits"] > 1
+        assert layer["acc_bound"] >= layer["w_x"]["acc_share_bound"] + layer["w_h"]["acc_share_bound"]
+        # one accumulator format per layer: the Q27 input's weights carry 3 more bits than h's (Q30)
+        assert layer["w_x"]["frac_bits"] - layer["w_h"]["frac_bits"] == (3 if index == 0 else 0)
+        assert layer["acc_frac_bits"] >= 50  # trained-size weights keep 20 fractional bits or more
+    head = manifest["quantisation"]["head"]
+    assert head["acc_bound"] < 2**62 and head["estimate_headroom_bits"] > 0
     tables = manifest["sizes"]["flash_tables"]
-    assert tables["weights"] == 2 * (40 * 1 + 40 * 10 + 40 * 10 + 40 * 10 + 10)
+    assert tables["weights"] == 4 * (40 * 1 + 40 * 10 + 40 * 10 + 40 * 10 + 10)
+    assert tables["biases"] == 8 * 80 and tables["tanh_table"] == 4 * 385
     assert manifest["sizes"]["flash_table_bytes"] == sum(tables.values())
-    assert manifest["activations"]["tanh"]["max_abs_error"] <= 1.0 / 32768
+    assert manifest["activations"]["tanh"]["max_abs_error"] < 12 / 2**30
+    assert manifest["activations"]["sigmoid"]["max_abs_error"] < 12 / 2**30
     lo, hi = manifest["valid_temp_range_c"]
     assert manifest["valid_temp_range_mdegc"] == [int(np.ceil(lo * 1000)), int(np.floor(hi * 1000))]
 
@@ -213,10 +221,15 @@ def test_verify_detects_a_tampered_module(
     shutil.copytree(exported["dlstm-issa"], out)
     source = out / "tdc_dlstm_issa.c"
     text = source.read_text()
-    # change one weight of the recurrent matrix by one LSB
-    match = re.search(r"(static const int16_t tdc_dlstm_issa_l0_wh\[40\]\[10\] = \{\n    \{ )(-?\d+)", text)
+    # change one weight of the recurrent matrix by 2**-20 (one LSB, ~1e-8, may change no output sample)
+    frac = json.loads((out / "tdc_dlstm_issa.manifest.json").read_text())["quantisation"]["layers"][0]["w_h"]
+    match = re.search(r"(static const int32_t tdc_dlstm_issa_l0_wh\[40\]\[10\] = \{\n    \{ )(-?\d+)", text)
     assert match
-    text = text[: match.start(2)] + str(int(match.group(2)) + 1) + text[match.end(2) :]
+    text = (
+        text[: match.start(2)]
+        + str(int(match.group(2)) + (1 << (frac["frac_bits"] - 20)))
+        + text[match.end(2) :]
+    )
     source.write_text(text)
     result = _cli("verify", str(models["dlstm-issa"]), str(out), str(recording[1]), "--no-table")
     assert result.returncode == 1 and "mismatches: 0\n" not in result.stdout
