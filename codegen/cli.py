@@ -7,16 +7,9 @@ import json
 import sys
 
 from codegen import __version__
-from trainer.errors import UserError, run_cli
+from trainer.errors import OneLineArgumentParser, run_cli
 
 EXIT_MISMATCH = 1
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UserError(f"{self.prog}: {message}")
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -51,9 +44,11 @@ def _verify(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="codegen", description="Fixed-point C99 export of mems-tdc compensators.")
+    parser = OneLineArgumentParser(
+        prog="codegen", description="Fixed-point C99 export of mems-tdc compensators."
+    )
     parser.add_argument("--version", action="version", version=f"mems-tdc codegen {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser)
 
     exp = sub.add_parser("export", help="quantise a model.pt and render NAME.h, NAME.c and a manifest")
     exp.add_argument("model", help="checkpoint written by 'trainer fit' (model.pt)")

@@ -7,7 +7,7 @@ import importlib
 import sys
 
 from trainer import __version__
-from trainer.errors import UserError, run_cli
+from trainer.errors import OneLineArgumentParser, run_cli
 
 # Sub-command name -> module in trainer.commands that defines add_parser() and run().
 COMMANDS: dict[str, str] = {
@@ -20,17 +20,12 @@ COMMANDS: dict[str, str] = {
 }
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise UserError(f"{self.prog}: {message}")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="trainer", description="Temperature-drift compensation of MEMS accelerometers.")
+    parser = OneLineArgumentParser(
+        prog="trainer", description="Temperature-drift compensation of MEMS accelerometers."
+    )
     parser.add_argument("--version", action="version", version=f"mems-tdc {__version__}")
-    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    subparsers = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser)
     for module_name in COMMANDS.values():
         module = importlib.import_module(f"trainer.commands.{module_name}")
         module.add_parser(subparsers)

@@ -7,6 +7,7 @@ stderr and exit with status 2. Anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import tempfile
@@ -19,6 +20,13 @@ EXIT_USER_ERROR = 2
 
 class UserError(Exception):
     """Bad input from the user; the message must name the file, row, column or field."""
+
+
+class OneLineArgumentParser(argparse.ArgumentParser):
+    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise UserError(f"{self.prog}: {message}")
 
 
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
