@@ -104,7 +104,13 @@ def timing_2h_200hz() -> dict[str, Any]:
     from trainer.physics.simulate import simulate
 
     cfg = load_config(None)
-    truth = replace(cfg, effects=(*cfg.effects, EffectConfig("periodic", {"amp_mg": 0.05, "period_s": 300.0, "phase_rad": 0.0})))
+    truth = replace(
+        cfg,
+        effects=(
+            *cfg.effects,
+            EffectConfig("periodic", {"amp_mg": 0.05, "period_s": 300.0, "phase_rad": 0.0}),
+        ),
+    )
     rec = simulate(truth, 7)
     started = time.perf_counter()
     result = diagnose(rec, cfg)
@@ -147,7 +153,9 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--per-effect", type=int, default=5)
     parser.add_argument("--clean", type=int, default=12)
     parser.add_argument("--pairs", type=int, default=9)

@@ -30,7 +30,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("recording", help="recording, .csv or .npz (true_* columns are ignored)")
     parser.add_argument("--sim", metavar="CONFIG.toml", help="the simulation you believe in (physics TOML)")
     parser.add_argument("--json", metavar="OUT.json", help="write the machine-readable result")
-    parser.add_argument("--report", metavar="DIR", help="write a report directory (Markdown, plots, augmented TOML)")
+    parser.add_argument(
+        "--report", metavar="DIR", help="write a report directory (Markdown, plots, augmented TOML)"
+    )
     parser.add_argument(
         "--holdout",
         type=_fraction,
@@ -84,7 +86,9 @@ def summary(result: object) -> str:
         for e in doc["left_out"]:
             params = ", ".join(f"{k}={v:.4g}" for k, v in e["params"].items())
             extra = f" (ambiguous with {', '.join(e['ambiguous_with'])})" if e.get("ambiguous_with") else ""
-            lines.append(f"left out: {e['effect']} [{params}] BIC -{e['evidence']['delta_bic_when_added']:.1f}{extra}")
+            lines.append(
+                f"left out: {e['effect']} [{params}] BIC -{e['evidence']['delta_bic_when_added']:.1f}{extra}"
+            )
     else:
         lines.append("left out: nothing found beyond the simulation")
     for n in doc["not_identifiable"]:
@@ -97,6 +101,8 @@ def summary(result: object) -> str:
         h = doc["holdout"]
         lines.append(
             f"held-out tail: block RMS {h['before']['test_rms_block_mg']:.4g} -> {h['after']['test_rms_block_mg']:.4g} mg"
+            f" (least squares, bare: {h['before']['test_rms_block_mg_ols']:.4g} -> "
+            f"{h['after']['test_rms_block_mg_ols']:.4g} mg)"
         )
     lines.append(f"({doc['seconds']:.1f} s)")
     return "\n".join(lines)

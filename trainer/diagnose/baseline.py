@@ -50,7 +50,9 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
             identifiers=["bias_poly", "white_noise", *DEFAULT_NOISE],
             known_input=None,
             input_varies=False,
-            notes=["no --sim given: baseline is bias_poly plus white noise, bias instability, rate random walk"],
+            notes=[
+                "no --sim given: baseline is bias_poly plus white noise, bias instability, rate random walk"
+            ],
         )
     notes: list[str] = []
     g_in = known_input(cfg, t)
@@ -94,7 +96,9 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
         elif term.identifier == "rate_ramp":
             terms.append(Term("rate_ramp"))
         elif term.identifier == "quantization_noise":
-            notes.append("quantization_noise only shows at the shortest taus; it is not part of the drift model")
+            notes.append(
+                "quantization_noise only shows at the shortest taus; it is not part of the drift model"
+            )
     if "white_noise" not in identifiers:
         notes.append("the simulation has no white_noise; every sensor has some, so it is always fitted")
     order = [t for t in BLOCK_NOISE if t in noise]

@@ -37,7 +37,7 @@ def detect_lattice(temp_c: np.ndarray) -> float | None:
     a continuous one (the usual float reading) takes nearly as many values as there are samples.
     """
     values = np.unique(np.asarray(temp_c, dtype=np.float64))
-    if values.size < 3 or values.size > max(50, temp_c.size // 20):
+    if values.size < 3 or values.size > temp_c.size // 3:  # a float reading is nearly all distinct
         return None
     steps = np.diff(values)
     lsb = float(np.min(steps))
@@ -72,9 +72,13 @@ def dequantize(
         return np.array([t[0], t_end]), np.array([mid, mid]), [(float(t[0]), t_end + 1.0)]
     # Seconds per level on the fastest ramp: noise-dithered flips around one threshold come in
     # bursts far shorter than that, a longer pause is a new crossing.
-    step = max(1, int(round(10.0 / max(float(t[1] - t[0]), 1e-9))))
+    step = max(1, round(10.0 / max(float(t[1] - t[0]), 1e-9)))
     coarse_t, coarse_T = t[::step], temp_c[::step]
-    fastest = float(np.percentile(np.abs(rate_c_per_min(coarse_t, coarse_T)), 95)) / 60.0 if coarse_t.size >= 7 else 0.0
+    fastest = (
+        float(np.percentile(np.abs(rate_c_per_min(coarse_t, coarse_T)), 95)) / 60.0
+        if coarse_t.size >= 7
+        else 0.0
+    )
     typical = lsb / fastest if fastest > 0 else t_end - float(t[0])
     knots_t: list[float] = []
     knots_v: list[float] = []
@@ -135,7 +139,7 @@ def rate_c_per_min(t: np.ndarray, temp: np.ndarray) -> np.ndarray:
     """Smoothed ``dT/dt`` in degC/min: Savitzky-Golay (quadratic) derivative over ~60 s."""
     n = temp.size
     dt = float(t[1] - t[0]) if n > 1 else 1.0
-    window = max(5, int(round(RATE_WINDOW_S / dt)) | 1)
+    window = max(5, round(RATE_WINDOW_S / dt) | 1)
     window = min(window, n - 1 if (n - 1) % 2 == 1 else n - 2)
     if window < 5:
         return np.gradient(temp, t) * 60.0
@@ -179,7 +183,8 @@ class BlockData:
 
     @property
     def starts(self) -> np.ndarray:
-        return self.t - 0.5 * self.block_s
+        """Time of each block's first sample (the centre is the mean of its sample times)."""
+        return self.t - 0.5 * (self.block_s - 1.0 / self.fs)
 
     def temperature(self, dequantized: bool) -> np.ndarray:
         if dequantized and self.temp_smooth is not None:
@@ -251,8 +256,10 @@ def build_blocks(
     plateaus: list[tuple[float, float]] = []
     if lsb is not None:
         kt, kv, plateaus = dequantize(t - t0, temp, lsb)
-        smooth_block = PchipInterpolator(kt, kv, extrapolate=True)(tb) if kt.size > 2 else np.interp(tb, kt, kv)
-    mf = max(1, int(round(FINE_STEP_S * fs)))
+        smooth_block = (
+            PchipInterpolator(kt, kv, extrapolate=True)(tb) if kt.size > 2 else np.interp(tb, kt, kv)
+        )
+    mf = max(1, round(FINE_STEP_S * fs))
     nf = n // mf
     return BlockData(
         source=rec.source,

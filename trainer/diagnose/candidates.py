@@ -50,7 +50,7 @@ def _log_grid(lo: float, hi: float, n: int) -> np.ndarray:
 
 def _profile_1d(current: ModelFit, data: BlockData, new: Term) -> ModelFit:
     """Grid over the new term's single nonlinear parameter, then a joint polish."""
-    (lo, hi), = search_bounds(new.identifier, data)
+    ((lo, hi),) = search_bounds(new.identifier, data)
     grid = _log_grid(lo, hi, GRID_POINTS[new.identifier])
     best: ModelFit | None = None
     for value in grid:

@@ -15,6 +15,7 @@ likelihood. The likelihood of a linear model under ``C`` is computed with one Ch
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ LOG_RATIO_BOUNDS = (-9.0, 7.0)
 
 
 @lru_cache(maxsize=8)
-def _unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
+def unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
     """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
     tcs, variances = bias_instability_bank(float(block_s), max(BI_FLAT_UNTIL_S, float(duration_s)))
     lags = np.arange(n, dtype=np.float64)
@@ -67,7 +68,7 @@ class Gls:
         self.block_s = block_s
         self.duration_s = duration_s
         self.state = state
-        units = _unit_matrices(n, block_s, duration_s) if state.terms else {}
+        units = unit_matrices(n, block_s, duration_s) if state.terms else {}
         cov: np.ndarray | None = None
         for term, ratio in state.ratios().items():
             if cov is None:
@@ -101,7 +102,20 @@ class Gls:
             beta = np.zeros(0)
             rw = yw
         rss = float(rw @ rw)
-        return GlsResult(beta=beta, rss=rss, loglik=self.loglik_from_rss(rss))
+        return GlsResult(beta=beta, rss=rss, loglik=self.loglik_from_rss(rss), reml=self._reml(Xw, rss))
+
+    def _reml(self, Xw: np.ndarray, rss: float) -> float:
+        """Restricted likelihood: the noise seen after the regressors took their share. ML variance
+        estimates are biased low when slow regressors (the polynomial) absorb part of a random walk."""
+        p = Xw.shape[1]
+        if p == 0:
+            return self.loglik_from_rss(rss)
+        diag = np.abs(np.diag(np.linalg.qr(Xw, mode="r")))
+        rank = int(np.sum(diag > 1e-10 * max(float(diag.max()), 1e-300)))
+        logdet_xtx = 2.0 * float(np.sum(np.log(diag[diag > 1e-10 * max(float(diag.max()), 1e-300)])))
+        dof = self.n - rank
+        s2 = max(rss / dof, 1e-300)
+        return -0.5 * dof * (math.log(2.0 * math.pi * s2) + 1.0) - self.half_logdet - 0.5 * logdet_xtx
 
     def loglik_from_rss(self, rss: float) -> float:
         n = self.n
@@ -124,7 +138,8 @@ class Gls:
 class GlsResult:
     beta: np.ndarray
     rss: float
-    loglik: float
+    loglik: float  # ML, scale profiled: what the BIC uses
+    reml: float  # restricted likelihood: what the noise ratios are estimated by
 
 
 def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
@@ -146,7 +161,12 @@ def fit_noise(
     max_evals: int = 30,
     explore: bool = True,
 ) -> tuple[Gls, GlsResult]:
-    """Maximum-likelihood noise ratios for the linear model ``X``; returns the factor and fit."""
+    """Noise ratios for the linear model ``X`` by restricted maximum likelihood (REML).
+
+    REML, not ML: the polynomial and the effect columns absorb part of a slow random walk, and ML
+    would give back a walk coefficient biased low. Returns the factor and the fit at those ratios
+    (whose ``loglik`` is the ML value the BIC uses).
+    """
     if not start.terms:
         gls = Gls(n, block_s, duration_s, start)
         return gls, gls.fit(X, y)
@@ -160,19 +180,19 @@ def fit_noise(
         return cache[key]
 
     x0 = np.array(start.log_ratios)
-    # A coarse look along each axis first: ML surfaces of variance ratios are flat far from the
-    # optimum, and Nelder-Mead started on a plateau would stop there.
+    # A grid of whole decades around the start first: the likelihood of variance ratios has flat
+    # ridges, and a Nelder-Mead started on one stops there. Comparing two models by BIC is only
+    # fair if both noise fits reached their optimum, so every fit explores.
+    span = (-2.0, -1.0, 0.0, 1.0, 2.0) if explore else (-1.0, 0.0, 1.0)
     best = x0
-    best_ll = evaluate(x0)[1].loglik
-    for axis in range(x0.size if explore else 0):
-        for delta in (-3.0, -1.5, 1.5, 3.0):
-            trial = best.copy()
-            trial[axis] = np.clip(trial[axis] + delta, *LOG_RATIO_BOUNDS)
-            ll = evaluate(trial)[1].loglik
-            if ll > best_ll:
-                best, best_ll = trial, ll
+    best_ll = evaluate(x0)[1].reml
+    for offsets in itertools.product(span, repeat=x0.size):
+        trial = np.clip(x0 + np.array(offsets), *LOG_RATIO_BOUNDS)
+        ll = evaluate(trial)[1].reml
+        if ll > best_ll:
+            best, best_ll = trial, ll
     result = minimize(
-        lambda v: -evaluate(v)[1].loglik,
+        lambda v: -evaluate(v)[1].reml,
         best,
         method="Nelder-Mead",
         options={"xatol": 0.05, "fatol": 0.05, "maxfev": max_evals, "initial_simplex": _simplex(best)},

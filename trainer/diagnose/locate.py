@@ -88,7 +88,13 @@ class SpectralPeak:
 
 
 def spectral_peaks(
-    x: np.ndarray, dt: float, period_min: float, period_max: float, *, max_peaks: int = 3, alpha: float = ALPHA
+    x: np.ndarray,
+    dt: float,
+    period_min: float,
+    period_max: float,
+    *,
+    max_peaks: int = 3,
+    alpha: float = ALPHA,
 ) -> list[SpectralPeak]:
     """Significant narrow-band peaks of ``x`` (a residual on a uniform grid of step ``dt``)."""
     m = x.size
@@ -98,7 +104,7 @@ def spectral_peaks(
     detrended = x - np.polyval(np.polyfit(t, x, 1), t)
     window = np.hanning(m)
     oversample = 4
-    nfft = 1 << int(math.ceil(math.log2(oversample * m)))
+    nfft = 1 << math.ceil(math.log2(oversample * m))
     spec = np.abs(np.fft.rfft(detrended * window, nfft)) ** 2 / np.sum(window**2)
     freqs = np.fft.rfftfreq(nfft, dt)
     half = 40 * (nfft // m)
@@ -109,7 +115,10 @@ def spectral_peaks(
     ratio = spec / np.maximum(background, 1e-300)
     independent = max(1.0, (1.0 / period_min - 1.0 / period_max) * m * dt / 2.0)  # Hann: 2 bins wide
     idx = np.flatnonzero(band)
-    local_max = idx[(ratio[idx] >= ratio[np.maximum(idx - 1, 0)]) & (ratio[idx] >= ratio[np.minimum(idx + 1, ratio.size - 1)])]
+    local_max = idx[
+        (ratio[idx] >= ratio[np.maximum(idx - 1, 0)])
+        & (ratio[idx] >= ratio[np.minimum(idx + 1, ratio.size - 1)])
+    ]
     order = local_max[np.argsort(-ratio[local_max])]
     peaks: list[SpectralPeak] = []
     taken: list[float] = []
@@ -148,14 +157,21 @@ def fit_sine(t: np.ndarray, x: np.ndarray, period0: float, span_s: float) -> Sin
     f0 = 1.0 / period0
     df = 1.0 / span_s
     result = minimize_scalar(
-        lambda f: rss(1.0 / f)[0], bounds=(max(f0 - df, 1e-9), f0 + df), method="bounded", options={"xatol": df * 1e-3}
+        lambda f: rss(1.0 / f)[0],
+        bounds=(max(f0 - df, 1e-9), f0 + df),
+        method="bounded",
+        options={"xatol": df * 1e-3},
     )
     period = 1.0 / float(result.x)
     value, beta = rss(period)
-    return SineFit(period, float(math.hypot(beta[0], beta[1])), float(math.atan2(beta[1], beta[0])), base_rss - value)
+    return SineFit(
+        period, float(math.hypot(beta[0], beta[1])), float(math.atan2(beta[1], beta[0])), base_rss - value
+    )
 
 
-def modelled_adev(taus: np.ndarray, dt: float, duration_s: float, noise: dict[str, dict[str, float]]) -> np.ndarray:
+def modelled_adev(
+    taus: np.ndarray, dt: float, duration_s: float, noise: dict[str, dict[str, float]]
+) -> np.ndarray:
     """Allan deviation of the modelled noise terms (catalogue coefficients) at ``taus``."""
     var = np.zeros_like(taus, dtype=np.float64)
     if "white_noise" in noise:
@@ -199,15 +215,15 @@ def allan_comparison(
 ) -> AllanComparison:
     """Allan deviation of the full-rate residual and the tau ranges where it exceeds the model.
 
-    A point departs when it is above the model by more than 3 of its IEEE 952 error bars and by
-    more than 10 %; a departure is reported when at least two neighbouring taus do.
+    A point departs when it is above the model by more than 2.5 of its (conservative) IEEE 952
+    error bars and by more than 20 %; a departure is reported when at least two neighbouring taus do.
     """
     curve = allan_deviation(residual_full, fs, 8)
     taus = np.asarray(curve.taus_s)
     model = modelled_adev(taus, 1.0 / fs, duration_s, noise)
     adev = np.asarray(curve.adev)
     err = np.asarray(curve.adev_err)
-    over = (adev - model > 3.0 * err) & (adev > 1.1 * model)
+    over = (adev - model > 2.5 * err) & (adev > 1.2 * model)
     departures = []
     k = 0
     while k < over.size:
@@ -216,7 +232,9 @@ def allan_comparison(
             while j + 1 < over.size and over[j + 1]:
                 j += 1
             if j > k:
-                departures.append((float(taus[k]), float(taus[j]), float(np.max(adev[k : j + 1] / model[k : j + 1]))))
+                departures.append(
+                    (float(taus[k]), float(taus[j]), float(np.max(adev[k : j + 1] / model[k : j + 1])))
+                )
             k = j + 1
         else:
             k += 1

@@ -94,8 +94,16 @@ class Term:
 
     @property
     def n_free_nl(self) -> int:
+        """Parameters this term adds to the BIC count besides its linear columns.
+
+        A step time or a period found by scanning hundreds of positions counts twice (the
+        modified BIC for change points, Zhang & Siegmund 2007): the look-elsewhere effect of an
+        exhaustive scan is far larger than that of a smooth time constant.
+        """
         if self.identifier == "temp_quantization":
             return 1  # the LSB is estimated (from the lattice of the thermometer column)
+        if self.identifier in ("bias_step", "periodic"):
+            return 2
         return 0 if self.fixed else len(self.nl)
 
 
@@ -225,7 +233,9 @@ class ModelFit:
         return {term: {names[term]: value} for term, value in values.items()}
 
     def linear(self, index: int) -> dict[str, float]:
-        return {role: float(b) for (owner, role), b in zip(self.roles, self.beta, strict=True) if owner == index}
+        return {
+            role: float(b) for (owner, role), b in zip(self.roles, self.beta, strict=True) if owner == index
+        }
 
     def term_contribution(self, index: int) -> np.ndarray:
         """Block-level contribution of one non-poly term (its columns times its coefficients)."""
@@ -329,12 +339,20 @@ def fit_model(
     for _ in range(rounds):
         design = build_design(fit.terms, data)
         new_gls, _ = fit_noise(
-            design.X, data.accel - design.offset, data.n, data.block_s, data.duration_s, fit.noise, explore=explore
+            design.X,
+            data.accel - design.offset,
+            data.n,
+            data.block_s,
+            data.duration_s,
+            fit.noise,
+            explore=explore,
         )
         explore = False
         moved = np.max(np.abs(np.subtract(new_gls.state.log_ratios, fit.noise.log_ratios)), initial=0.0)
-        fit = polish(fit.terms, data, new_gls) if optimise and _free_slots(fit.terms, data) else evaluate(
-            fit.terms, data, new_gls
+        fit = (
+            polish(fit.terms, data, new_gls)
+            if optimise and _free_slots(fit.terms, data)
+            else evaluate(fit.terms, data, new_gls)
         )
         if moved < 0.15:
             break

@@ -10,6 +10,7 @@ identifiable, with the test that would make them identifiable.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,7 +89,7 @@ def classify_branches(rate: np.ndarray, block_s: float) -> np.ndarray:
     scale = float(np.percentile(np.abs(rate), 95)) if rate.size else 0.0
     threshold = max(0.05, 0.1 * scale)
     codes = np.where(rate > threshold, 1, np.where(rate < -threshold, -1, 0)).astype(np.int64)
-    min_len = max(2, int(round(max(120.0, 0.02 * rate.size * block_s) / block_s)))
+    min_len = max(2, round(max(120.0, 0.02 * rate.size * block_s) / block_s))
     for _ in range(4):
         runs = _runs(codes)
         if len(runs) <= 1:
@@ -131,7 +132,7 @@ def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: b
     segments, source = _segments(data, meta, codes)
     runs = _runs(codes)
     moving = [(code, a, b) for code, a, b in runs if code != 0]
-    reversals = sum(1 for r0, r1 in zip(moving, moving[1:], strict=False) if r0[0] != r1[0])
+    reversals = sum(1 for r0, r1 in itertools.pairwise(moving) if r0[0] != r1[0])
     heat = temp[codes == 1]
     cool = temp[codes == -1]
     overlap = None
@@ -141,11 +142,9 @@ def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: b
         if hi > lo:
             overlap = (lo, hi)
     hold_lengths = [(b - a) * data.block_s for code, a, b in runs if code == 0]
-    after_ramp = [
-        (b - a) * data.block_s for k, (code, a, b) in enumerate(runs) if code == 0 and k > 0
-    ]
+    after_ramp = [(b - a) * data.block_s for k, (code, a, b) in enumerate(runs) if code == 0 and k > 0]
     ramp_rates: list[float] = []
-    for code, a, b in moving:
+    for _, a, b in moving:
         core = np.abs(rate[a:b])
         value = float(np.median(core))
         if not any(abs(value / r - 1.0) < 0.25 for r in ramp_rates):
@@ -200,7 +199,9 @@ def identifiability(p: Profile) -> dict[str, Identifiability]:
             "polynomial absorbs (an uneven heating rate in flight would then skew the compensation)"
         )
         for effect in ("thermal_lag", "temp_rate"):
-            out[effect] = Identifiability(False, reason, "ramp at two different rates, or add a hold after the ramp")
+            out[effect] = Identifiability(
+                False, reason, "ramp at two different rates, or add a hold after the ramp"
+            )
     overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
     if p.reversals >= 1 and overlap_span >= 3.0:
         out["hysteresis"] = Identifiability(
@@ -229,7 +230,8 @@ def identifiability(p: Profile) -> dict[str, Identifiability]:
         )
     out["warmup"] = Identifiability(
         True,
-        "the recording starts at power-on" + ("" if p.segments and p.segments[0].label == "soak" else " (no soak)"),
+        "the recording starts at power-on"
+        + ("" if p.segments and p.segments[0].label == "soak" else " (no soak)"),
         "" if p.segments and p.segments[0].label == "soak" else "power on and soak 30 min before ramping",
         weak=not (p.segments and p.segments[0].label == "soak"),
     )
@@ -255,7 +257,9 @@ def identifiability(p: Profile) -> dict[str, Identifiability]:
     monotone = p.reversals == 0 and p.hold_s < 0.1 * p.duration_s
     out["rate_ramp"] = Identifiability(
         not monotone,
-        "time and temperature move together on one ramp" if monotone else "holds or reversals decouple time from temperature",
+        "time and temperature move together on one ramp"
+        if monotone
+        else "holds or reversals decouple time from temperature",
         "add a hold or a reversal" if monotone else "",
     )
     out["rate_random_walk"] = Identifiability(True, f"{p.duration_s:.0f} s of data")
@@ -294,7 +298,13 @@ class Region:
 
 
 def region(
-    data: BlockData, profile: Profile, a: int, b: int, significance: dict[str, float], kind: str, note: str = ""
+    data: BlockData,
+    profile: Profile,
+    a: int,
+    b: int,
+    significance: dict[str, float],
+    kind: str,
+    note: str = "",
 ) -> Region:
     """A :class:`Region` covering blocks ``a:b``."""
     a = max(0, min(a, data.n - 1))
@@ -310,4 +320,14 @@ def region(
     counts = {c: int(np.sum(codes == c)) for c in (1, -1, 0)}
     top = max(counts, key=lambda c: counts[c])
     branch = BRANCH_NAMES[top] if counts[top] >= 0.8 * codes.size else "mixed"
-    return Region(t0, t1, "+".join(labels) or "?", float(temp.min()), float(temp.max()), branch, significance, kind, note)
+    return Region(
+        t0,
+        t1,
+        "+".join(labels) or "?",
+        float(temp.min()),
+        float(temp.max()),
+        branch,
+        significance,
+        kind,
+        note,
+    )

@@ -100,7 +100,8 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     lines += [f"- {' vs '.join(a['effects'])}: {a['reason']}" for a in doc["ambiguous"]] or ["None."]
     lines += ["", "## Not identifiable from this temperature profile", ""]
     lines += [
-        f"- {n['effect']}: {n['reason']}." + (f" Test that would identify it: {n['recommended_test']}." if n["recommended_test"] else "")
+        f"- {n['effect']}: {n['reason']}."
+        + (f" Test that would identify it: {n['recommended_test']}." if n["recommended_test"] else "")
         for n in doc["not_identifiable"]
     ] or ["None."]
     if doc["not_supported"]:
@@ -128,8 +129,12 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
             "",
             f"Held-out check (both models fitted on 0..{h['train_t_end_s']:.0f} s, scored on "
             f"{h['test_t_start_s']:.0f}..{h['test_t_end_s']:.0f} s): block RMS {h['before']['test_rms_block_mg']:.5f} -> "
-            f"{h['after']['test_rms_block_mg']:.5f} mg ({h['improvement_percent']} % better).",
+            f"{h['after']['test_rms_block_mg']:.5f} mg as fitted (GLS forecast, {h['improvement_percent']} % better); "
+            f"{h['before']['test_rms_block_mg_ols']:.5f} -> {h['after']['test_rms_block_mg_ols']:.5f} mg refitted by "
+            f"least squares and extrapolated bare ({h['improvement_percent_ols']} % better).",
         ]
+        if h.get("note"):
+            lines.append(f"({h['note']}.)")
     lines += ["", "## Where the starting model's residual is structured", ""]
     lines += [_region_line(r) for r in doc["mismatch"]] or ["Nowhere beyond the modelled noise."]
     lines += ["", "## Still unexplained after the additions", ""]
@@ -204,9 +209,14 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     plt.close(fig)
     files["residual_temperature.png"] = "residual over temperature, heating red, cooling blue, holds grey"
     fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
-    for name, summary, colour in (("before", diagnosis.before, "tab:orange"), ("after", diagnosis.after, "tab:green")):
+    for name, summary, colour in (
+        ("before", diagnosis.before, "tab:orange"),
+        ("after", diagnosis.after, "tab:green"),
+    ):
         a = summary.allan
-        ax.errorbar(a.taus_s, a.adev, yerr=a.adev_err, fmt="o-", ms=3, lw=1, color=colour, label=f"residual {name}")
+        ax.errorbar(
+            a.taus_s, a.adev, yerr=a.adev_err, fmt="o-", ms=3, lw=1, color=colour, label=f"residual {name}"
+        )
         ax.loglog(a.taus_s, a.model, "--", color=colour, lw=1, label=f"modelled noise ({name})")
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -237,13 +247,17 @@ def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> Non
     if target.exists() and not target.is_dir():
         raise UserError(f"{target}: exists and is not a directory")
     if target.is_dir() and any(target.iterdir()) and not (target / REPORT_MARKER).is_file():
-        raise UserError(f"{target}: directory exists and is not an earlier diagnosis report; choose another --report")
+        raise UserError(
+            f"{target}: directory exists and is not an earlier diagnosis report; choose another --report"
+        )
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=parent))
     try:
         files = {"diagnosis.json": "the machine-readable result (same as --json)"}
         (staging / "diagnosis.json").write_text(json_text(diagnosis), encoding="utf-8")
         (staging / "augmented.toml").write_text(config_to_toml(diagnosis.augmented), encoding="utf-8")
-        files["augmented.toml"] = "the simulation with the fitted and found effects: `trainer simulate --config augmented.toml`"
+        files["augmented.toml"] = (
+            "the simulation with the fitted and found effects: `trainer simulate --config augmented.toml`"
+        )
         files.update(plot_residuals(diagnosis, staging))
         (staging / "report.md").write_text(markdown(diagnosis, files), encoding="utf-8")
         os.chmod(staging, 0o755)

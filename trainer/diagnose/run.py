@@ -13,8 +13,14 @@ from tqdm import tqdm
 from trainer.diagnose.baseline import Baseline, build_baseline
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
 from trainer.diagnose.candidates import FAST_PERIOD_BLOCKS, fine_residual, scan_periods, scan_steps
-from trainer.diagnose.gls import window_variances
-from trainer.diagnose.locate import AllanComparison, allan_comparison, scan_regions, spectral_peaks
+from trainer.diagnose.gls import unit_matrices, window_variances
+from trainer.diagnose.locate import (
+    AllanComparison,
+    allan_comparison,
+    modelled_adev,
+    scan_regions,
+    spectral_peaks,
+)
 from trainer.diagnose.model import (
     PLAUSIBLE,
     ModelFit,
@@ -23,8 +29,15 @@ from trainer.diagnose.model import (
     fit_model,
 )
 from trainer.diagnose.profile import Profile, Region, analyse_profile, region
+from trainer.diagnose.select import (
+    THRESHOLD,
+    Selection,
+    baseline_support,
+    final_indices,
+    forward_select,
+    resolve,
+)
 from trainer.diagnose.threads import single_blas_thread
-from trainer.diagnose.select import Selection, THRESHOLD, baseline_support, final_indices, forward_select, resolve
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig, drift
 from trainer.recording import Recording
@@ -83,8 +96,7 @@ ADVICE: dict[str, str] = {
 class FitSummary:
     rms_mg: float  # full-rate residual RMS
     rms_block_mg: float  # residual RMS of the block means (where drift mismatches show)
-    bic: float  # at the common reference noise covariance (what the selection compared)
-    bic_own_noise: float  # with the model's own ML noise estimate
+    bic: float  # with the model's own ML noise estimate (what the selection compared)
     noise: dict[str, dict[str, float]]
     loglik: float
     n_params: int
@@ -92,13 +104,14 @@ class FitSummary:
     residual_block: np.ndarray
     residual_full: np.ndarray
     allan: AllanComparison
+    bic_common: float = math.nan  # both models at the final model's noise covariance
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "rms_mg": round(self.rms_mg, 6),
             "rms_block_mg": round(self.rms_block_mg, 6),
             "bic": round(self.bic, 2),
-            "bic_own_noise": round(self.bic_own_noise, 2),
+            "bic_at_final_noise": round(self.bic_common, 2),
             "noise": {k: {n: float(f"{v:.5g}") for n, v in p.items()} for k, p in self.noise.items()},
             "loglik": round(self.loglik, 2),
             "n_params": self.n_params,
@@ -148,9 +161,10 @@ class Diagnosis:
             "profile": self.profile.to_dict(),
             "criterion": {
                 "name": (
-                    "BIC of the GLS likelihood of block means under a reference noise covariance "
-                    "(white, flicker, random walk; ML on the saturated, then on the chosen model)"
+                    "BIC of the GLS likelihood of block means, noise (white, flicker, random walk) "
+                    "re-estimated for every model (REML)"
                 ),
+                "rms_note": "RMS and residual plots are least-squares fits of each model's terms",
                 "add_threshold": THRESHOLD,
                 "ambiguous_below": 6.0,
             },
@@ -212,9 +226,15 @@ def _rms(x: np.ndarray) -> float:
 def summarise(
     fit: ModelFit, profile: Profile, noise: dict[str, dict[str, float]], own: ModelFit
 ) -> FitSummary:
-    """Residuals of ``fit``; ``noise`` is the noise model its Allan deviation is compared with,
-    ``own`` the same terms with their own ML noise (for the own-noise BIC)."""
+    """Residuals, RMS and Allan comparison of ``fit``'s terms; ``own`` carries the BIC (own noise).
+
+    Residuals and RMS are those of a least-squares fit of the same terms (nonlinear parameters as
+    fitted): a GLS fit under a strong random walk pins the level loosely, which makes its raw
+    residual hard to read, while the least-squares residual shows what the terms explain.
+    ``noise`` is the noise model the residual's Allan deviation is compared with.
+    """
     data = fit.data
+    fit = fit_model(fit.terms, (), data, refit_noise=False, optimise=False)
     residual_full = data.full_accel - full_rate_model(fit)
     per_segment = []
     for seg in profile.segments:
@@ -233,11 +253,10 @@ def summarise(
     return FitSummary(
         rms_mg=_rms(residual_full),
         rms_block_mg=_rms(fit.residual),
-        bic=fit.bic,
-        bic_own_noise=own.bic,
+        bic=own.bic,
         noise=noise,
-        loglik=fit.loglik,
-        n_params=fit.n_params,
+        loglik=own.loglik,
+        n_params=own.n_params,
         per_segment=per_segment,
         residual_block=fit.residual,
         residual_full=residual_full,
@@ -265,7 +284,7 @@ def where_regions(
     """
     if visible.size == 0 or float(np.max(np.abs(visible))) <= 0:
         return []
-    width = max(3, int(round(0.02 * data.n)) | 1)
+    width = max(3, round(0.02 * data.n) | 1)
     kernel = np.ones(width) / width
     envelope = np.sqrt(np.convolve(visible * visible, kernel, mode="same"))
     mask = envelope >= 0.5 * float(np.max(envelope))
@@ -296,7 +315,11 @@ def _special_where(
         before_z = window_z(residual, cov, max(0, j - 10), j)
         after_z = window_z(residual, cov, j, min(data.n, j + 10))
         sig = {"z_before": round(before_z, 2), "z_after": round(after_z, 2)}
-        return [region(data, profile, a, b, sig, "change_point", f"step of {p['step_mg']:.4g} mg at {p['t_s']:.1f} s")]
+        return [
+            region(
+                data, profile, a, b, sig, "change_point", f"step of {p['step_mg']:.4g} mg at {p['t_s']:.1f} s"
+            )
+        ]
     if effect.identifier == "warmup":
         b = int(np.clip(np.searchsorted(data.starts, 3.0 * p["tau_s"]), 2, data.n))
         sig = {"z": round(window_z(residual, cov, 0, b), 2)}
@@ -312,7 +335,9 @@ def _param_flags(effect: EffectConfig) -> list[str]:
     for name, value in effect.params.items():
         bounds = PLAUSIBLE.get((effect.identifier, name))
         if bounds and not (bounds[0] <= abs(value) <= bounds[1]):
-            flags.append(f"{name} = {value:.4g} is outside the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}")
+            flags.append(
+                f"{name} = {value:.4g} is outside the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}"
+            )
     return flags
 
 
@@ -332,7 +357,9 @@ def diagnose(
     ``rec`` may contain ``true_*`` columns; they are removed before anything is read.
     """
     with single_blas_thread():
-        return _diagnose(rec, sim, holdout_fraction=holdout_fraction, max_blocks=max_blocks, progress=progress)
+        return _diagnose(
+            rec, sim, holdout_fraction=holdout_fraction, max_blocks=max_blocks, progress=progress
+        )
 
 
 def _diagnose(
@@ -344,8 +371,10 @@ def _diagnose(
     t_axis = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
     probe = build_blocks(rec, max_blocks=max_blocks)
     baseline = build_baseline(sim, t_axis, probe.lattice_lsb_c)
-    data = probe if baseline.known_input is None else build_blocks(
-        rec, known_input=baseline.known_input, max_blocks=max_blocks
+    data = (
+        probe
+        if baseline.known_input is None
+        else build_blocks(rec, known_input=baseline.known_input, max_blocks=max_blocks)
     )
     profile = analyse_profile(data, rec.meta, baseline.input_varies)
     ident = profile.identifiability
@@ -355,7 +384,9 @@ def _diagnose(
     stages.update()
 
     present = set(baseline.identifiers)
-    candidates = [c for c in CANDIDATE_ORDER if c not in present and ident.get(c, None) and ident[c].identifiable]
+    candidates = [
+        c for c in CANDIDATE_ORDER if c not in present and ident.get(c, None) and ident[c].identifiable
+    ]
     selection = forward_select(baseline_fit, data, candidates, progress=progress)
     identifiable = {c for c in CANDIDATE_ORDER if ident.get(c) and ident[c].identifiable}
     resolve(selection, data, identifiable, progress=progress)
@@ -367,7 +398,9 @@ def _diagnose(
     # residual is not distorted by a noise fit that absorbed the missing effect.
     baseline_common = fit_model(baseline_fit.terms, final.noise.terms, data, gls=final.gls, refit_noise=False)
     before = summarise(baseline_common, profile, baseline_fit.noise_params(), own=baseline_fit)
+    before.bic_common = baseline_common.bic
     after = summarise(final, profile, selection.final_ml.noise_params(), own=selection.final_ml)
+    after.bic_common = final.bic
 
     left_out = _left_out(selection, data, profile, baseline_common, cov_final, before)
     mismatch = locate_mismatch(baseline_common, data, profile, cov_final, before.allan)
@@ -380,7 +413,8 @@ def _diagnose(
         if not info.identifiable and effect not in present and effect != "temp_quantization"
     ]
     tested = [
-        {"effect": t.effect, "delta_bic": round(t.delta_bic, 2), "how": t.note} for t in selection.tested_first_round
+        {"effect": t.effect, "delta_bic": round(t.delta_bic, 2), "how": t.note}
+        for t in selection.tested_first_round
     ]
     for effect, info in ident.items():
         if info.identifiable and info.weak and effect in candidates:
@@ -391,12 +425,16 @@ def _diagnose(
     stages.update()
     stages.close()
     notes = []
-    if data.lattice_lsb_c is not None and "temp_quantization" not in [e["effect"] for e in left_out]:
-        if "temp_quantization" not in present:
-            notes.append(
-                f"the thermometer column is quantised ({data.lattice_lsb_c:g} degC) but modelling the staircase "
-                "does not improve the fit"
-            )
+    found = [e["effect"] for e in left_out]
+    if (
+        data.lattice_lsb_c is not None
+        and "temp_quantization" not in found
+        and "temp_quantization" not in present
+    ):
+        notes.append(
+            f"the thermometer column is quantised ({data.lattice_lsb_c:g} degC) but modelling the staircase "
+            "does not improve the fit"
+        )
     return Diagnosis(
         source=rec.source,
         data=data,
@@ -442,7 +480,9 @@ def _left_out(
         occurrence = seen.get(step.effect, 0)
         seen[step.effect] = occurrence + 1
         index = indices[(step.effect, occurrence)]
-        importance, reduced = selection.drop_one.get((step.effect, occurrence), (step.delta_bic, baseline_fit))
+        importance, reduced = selection.drop_one.get(
+            (step.effect, occurrence), (step.delta_bic, baseline_fit)
+        )
         entry: dict[str, Any] = {"effect": step.effect}
         if index is None:
             entry["params"] = {k: float(f"{v:.6g}") for k, v in noise_params.get(step.effect, {}).items()}
@@ -460,7 +500,7 @@ def _left_out(
                     "kind": "allan",
                 }
                 for a, b, r in departures
-            ]
+            ] or [_noise_where(step.effect, noise_params, data, profile)]
         else:
             effect = effects_by_index.get(index) or _rate_ramp_effect(final, index)
             entry["params"] = {k: float(f"{v:.6g}") for k, v in effect.params.items()}
@@ -480,14 +520,37 @@ def _left_out(
             "how": step.evidence,
         }
         entry["advice"] = ADVICE.get(step.effect, "")
-        ambiguous_with = [
-            a["effects"][1] for a in selection.ambiguous if a["effects"][0] == step.effect
-        ]
+        ambiguous_with = [a["effects"][1] for a in selection.ambiguous if a["effects"][0] == step.effect]
         if ambiguous_with:
             entry["ambiguous_with"] = ambiguous_with
         out.append(entry)
     out.sort(key=lambda e: -e["evidence"]["delta_bic_when_dropped"])
     return out
+
+
+def _noise_where(
+    effect: str, noise: dict[str, dict[str, float]], data: BlockData, profile: Profile
+) -> dict[str, Any]:
+    """Where a noise term shows when the Allan test saw no clear departure: the taus where it
+    dominates the fitted noise model (the whole run in time)."""
+    taus = np.logspace(math.log10(1.0 / data.fs), math.log10(max(data.duration_s / 10.0, 2.0 / data.fs)), 200)
+    alone = modelled_adev(taus, 1.0 / data.fs, data.duration_s, {effect: noise[effect]})
+    others = modelled_adev(
+        taus, 1.0 / data.fs, data.duration_s, {k: v for k, v in noise.items() if k != effect}
+    )
+    dominant = taus[alone > others]
+    span = [float(dominant[0]), float(dominant[-1])] if dominant.size else [float(taus[-1]), float(taus[-1])]
+    return {
+        "t_start_s": 0.0,
+        "t_end_s": round(data.duration_s, 3),
+        "segment": "+".join(dict.fromkeys(s.label for s in profile.segments)),
+        "temp_min_c": round(profile.temp_min_c, 3),
+        "temp_max_c": round(profile.temp_max_c, 3),
+        "branch": "mixed",
+        "tau_range_s": [round(span[0], 3), round(span[1], 3)],
+        "significance": {"dominant_in_model": True},
+        "kind": "allan",
+    }
 
 
 def _rate_ramp_effect(final: ModelFit, index: int) -> EffectConfig:
@@ -496,9 +559,17 @@ def _rate_ramp_effect(final: ModelFit, index: int) -> EffectConfig:
 
 
 def locate_mismatch(
-    fit: ModelFit, data: BlockData, profile: Profile, cov: np.ndarray, allan: AllanComparison
+    fit: ModelFit,
+    data: BlockData,
+    profile: Profile,
+    cov: np.ndarray,
+    allan: AllanComparison,
 ) -> list[Region]:
-    """Regions, change points, periodic components and Allan departures of ``fit``'s residual."""
+    """Regions, change points, periodic components and Allan departures of ``fit``'s residual.
+
+    The window scan reads the GLS residual against the noise covariance ``cov`` it was fitted
+    under (a random walk pinned at the start and a least-squares residual would not agree).
+    """
     out = scan_regions(fit.residual, cov, data, profile)
     times, rss = scan_steps(fit, data)
     k = int(np.argmin(rss))
@@ -579,36 +650,63 @@ def predict(fit: ModelFit, data: BlockData) -> np.ndarray:
     return design.X @ beta + design.offset
 
 
-def holdout_check(baseline_fit: ModelFit, final: ModelFit, data: BlockData, fraction: float) -> dict[str, Any] | None:
-    """Fit both models on the leading part of the run and score them on the held-out tail."""
-    n_train = int(round((1.0 - fraction) * data.n))
+def noise_forecast(fit: ModelFit, data: BlockData, n_train: int, residual_train: np.ndarray) -> np.ndarray:
+    """Conditional mean of the modelled noise over blocks ``n_train:`` given the training residual.
+
+    With flicker and a random walk in the noise model, the best forecast of a held-out stretch is
+    the regression plus this kriging term (the BLUP); with white noise only it is zero.
+    """
+    if not fit.noise.terms:
+        return np.zeros(data.n - n_train)
+    units = unit_matrices(data.n, data.block_s, data.duration_s)
+    cov = np.eye(data.n)
+    for term, ratio in fit.noise.ratios().items():
+        cov += ratio * units[term]
+    weights = np.linalg.solve(cov[:n_train, :n_train], residual_train)
+    return cov[n_train:, :n_train] @ weights
+
+
+def holdout_check(
+    baseline_fit: ModelFit, final: ModelFit, data: BlockData, fraction: float
+) -> dict[str, Any] | None:
+    """Fit both models on the leading part of the run and score them on the held-out tail.
+
+    Two scores: the models as fitted (GLS, the held-out forecast is the regression plus the
+    noise model's conditional mean, the BLUP) and the same terms refitted by ordinary least
+    squares and extrapolated bare, which is what a compensator without noise model would do.
+    """
+    n_train = round((1.0 - fraction) * data.n)
     if n_train < 120 or data.n - n_train < 20:
         return None
     train = data.subset(n_train)
+    cut = float(data.starts[n_train])
     out: dict[str, Any] = {
-        "train_t_end_s": round(float(data.starts[n_train]), 3),
-        "test_t_start_s": round(float(data.starts[n_train]), 3),
+        "train_t_end_s": round(cut, 3),
+        "test_t_start_s": round(cut, 3),
         "test_t_end_s": round(data.duration_s, 3),
     }
-    cut = float(data.starts[n_train])
-    dropped = sorted(
-        {t.identifier for t in final.terms if t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s}
-    )
-    if dropped:
-        out["note"] = "a bias_step inside the held-out part cannot be learned from the fitting part; left out of both"
+    if any(t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s for t in final.terms):
+        out["note"] = (
+            "a bias_step inside the held-out part cannot be learned from the fitting part; left out of both"
+        )
     for name, fit in (("before", baseline_fit), ("after", final)):
         terms = [t for t in fit.terms if not (t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s)]
         refit = fit_model(terms, fit.noise.terms, train, start=fit.noise)
-        prediction = predict(refit, data)
-        residual = data.accel - prediction
-        test = residual[n_train:]
+        residual = data.accel - predict(refit, data)
+        forecast = noise_forecast(refit, data, n_train, residual[:n_train])
+        ols = fit_model(terms, (), train)
+        residual_ols = data.accel - predict(ols, data)
         out[name] = {
-            "test_rms_block_mg": round(_rms(test), 6),
-            "test_mean_mg": round(float(np.mean(test)), 6),
-            "train_rms_block_mg": round(_rms(residual[:n_train]), 6),
+            "test_rms_block_mg": round(_rms(residual[n_train:] - forecast), 6),
+            "test_rms_block_mg_ols": round(_rms(residual_ols[n_train:]), 6),
+            "train_rms_block_mg_ols": round(_rms(residual_ols[:n_train]), 6),
         }
-    b, a = out["before"]["test_rms_block_mg"], out["after"]["test_rms_block_mg"]
-    out["improvement_percent"] = round(100.0 * (b - a) / b, 2) if b > 0 else None
+    for key, label in (
+        ("test_rms_block_mg", "improvement_percent"),
+        ("test_rms_block_mg_ols", "improvement_percent_ols"),
+    ):
+        b, a = out["before"][key], out["after"][key]
+        out[label] = round(100.0 * (b - a) / b, 2) if b > 0 else None
     return out
 
 
@@ -653,7 +751,9 @@ def augmented_config(
         duration = seg.end_s - seg.start_s
         end_c = temp_at(seg.end_s - 1e-6)
         label = seg.label
-        if label == "ramp_up" and end_c <= current + 0.01 or label == "ramp_down" and end_c >= current - 0.01:
+        if (label == "ramp_up" and end_c <= current + 0.01) or (
+            label == "ramp_down" and end_c >= current - 0.01
+        ):
             label = "hold"
         if label in ("soak", "hold"):
             end_c = temp_at(0.5 * (seg.start_s + seg.end_s)) if chamber is None else end_c

@@ -17,7 +17,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from trainer.physics.config import NoiseConfig, PhysicsConfig, ProtocolConfig, RecordingConfig, TemperatureConfig
+from trainer.physics.config import (
+    NoiseConfig,
+    PhysicsConfig,
+    ProtocolConfig,
+    RecordingConfig,
+    TemperatureConfig,
+)
 from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import SegmentSpec
 from trainer.physics.simulate import simulate
@@ -61,7 +67,7 @@ class Scenario:
         return simulate(self.truth, self.seed)
 
 
-def _protocol(rng: np.random.Generator, reversal: bool) -> ProtocolConfig:
+def _protocol(rng: np.random.Generator, reversal: bool, long_holds: bool = False) -> ProtocolConfig:
     start = float(rng.uniform(-40.0, -15.0))
     top = float(rng.uniform(60.0, 85.0))
     r1 = float(rng.uniform(0.7, 2.0))
@@ -75,7 +81,8 @@ def _protocol(rng: np.random.Generator, reversal: bool) -> ProtocolConfig:
     else:
         segments.append(SegmentSpec("ramp_up", (top - start) / r1 * 60.0, top))
         r_down = r2
-    segments.append(SegmentSpec("hold", float(rng.uniform(1800.0, 3600.0)), top))
+    hold = (5400.0, 7200.0) if long_holds else (1800.0, 3600.0)  # creep needs a hold of >= 1.5 time constants
+    segments.append(SegmentSpec("hold", float(rng.uniform(*hold)), top))
     if reversal:
         bottom = float(rng.uniform(10.0, 30.0))
         segments.append(SegmentSpec("ramp_down", (top - bottom) / r_down * 60.0, bottom))
@@ -83,7 +90,9 @@ def _protocol(rng: np.random.Generator, reversal: bool) -> ProtocolConfig:
     return ProtocolConfig("custom", start, tuple(segments))
 
 
-def _draw_effect(effect: str, rng: np.random.Generator, protocol: ProtocolConfig, slope: float) -> EffectConfig | None:
+def _draw_effect(
+    effect: str, rng: np.random.Generator, protocol: ProtocolConfig, slope: float
+) -> EffectConfig | None:
     duration = sum(s.duration_s for s in protocol.segments)
     sign = float(rng.choice([-1.0, 1.0]))
     if effect == "thermal_lag":
@@ -91,37 +100,57 @@ def _draw_effect(effect: str, rng: np.random.Generator, protocol: ProtocolConfig
     if effect == "temp_rate":
         return EffectConfig(effect, {"k_mg_per_c_per_min": sign * float(rng.uniform(0.04, 0.2))})
     if effect == "hysteresis":
-        return EffectConfig(effect, {"amp_mg": sign * float(rng.uniform(0.05, 0.2)), "width_c": float(rng.uniform(2.0, 6.0))})
+        return EffectConfig(
+            effect, {"amp_mg": sign * float(rng.uniform(0.05, 0.2)), "width_c": float(rng.uniform(2.0, 6.0))}
+        )
     if effect == "stress_relaxation":
         return EffectConfig(
-            effect, {"gain_mg_per_c": sign * float(rng.uniform(0.012, 0.03)), "tau_s": float(rng.uniform(1500.0, 5000.0))}
+            effect,
+            {
+                "gain_mg_per_c": sign * float(rng.uniform(0.012, 0.03)),
+                "tau_s": float(rng.uniform(1500.0, 4000.0)),
+            },
         )
     if effect == "warmup":
-        return EffectConfig(effect, {"amp_mg": sign * float(rng.uniform(0.5, 1.2)), "tau_s": float(rng.uniform(200.0, 900.0))})
+        return EffectConfig(
+            effect, {"amp_mg": sign * float(rng.uniform(0.5, 1.2)), "tau_s": float(rng.uniform(200.0, 900.0))}
+        )
     if effect == "periodic":
         period = float(np.exp(rng.uniform(math.log(20.0), math.log(1500.0))))
         return EffectConfig(
             effect,
-            {"amp_mg": float(rng.uniform(0.015, 0.06)), "period_s": period, "phase_rad": float(rng.uniform(-3.1, 3.1))},
+            {
+                "amp_mg": float(rng.uniform(0.015, 0.06)),
+                "period_s": period,
+                "phase_rad": float(rng.uniform(-3.1, 3.1)),
+            },
         )
     if effect == "bias_step":
         return EffectConfig(
-            effect, {"t_s": float(rng.uniform(0.25, 0.8) * duration), "step_mg": sign * float(rng.uniform(0.15, 0.4))}
+            effect,
+            {
+                "t_s": float(rng.uniform(0.25, 0.8) * duration),
+                "step_mg": sign * float(rng.uniform(0.15, 0.4)),
+            },
         )
     if effect == "temp_quantization":
         return EffectConfig(effect, {"lsb_c": float(rng.choice([0.5, 0.625]))})
     return None
 
 
-def make_scenario(effects: Sequence[str], seed: int, *, rates: Sequence[float] = (2.0, 5.0, 10.0)) -> Scenario:
+def make_scenario(
+    effects: Sequence[str], seed: int, *, rates: Sequence[float] = (2.0, 5.0, 10.0)
+) -> Scenario:
     """A generated case with ``effects`` concealed (empty: a clean recording)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7919]))
-    reversal = bool(rng.random() < 0.75) or "hysteresis" in effects
-    protocol = _protocol(rng, reversal)
+    # Hysteresis needs a reversal and a random walk one that decouples time from temperature (else
+    # the polynomial absorbs it); creep needs long holds: the tests use protocols that can show them.
+    reversal = bool(rng.random() < 0.75) or "hysteresis" in effects or "rate_random_walk" in effects
+    protocol = _protocol(rng, reversal, long_holds="stress_relaxation" in effects)
     fs = float(rng.choice(list(rates)))
     slope = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 0.25))
     if "temp_quantization" in effects:  # a staircase matters only on a steep enough bias curve
-        slope = math.copysign(max(abs(slope), 0.12), slope)
+        slope = math.copysign(max(abs(slope), 0.2), slope)
     poly = EffectConfig(
         "bias_poly",
         {
@@ -140,7 +169,7 @@ def make_scenario(effects: Sequence[str], seed: int, *, rates: Sequence[float] =
     truth_noise = list(noise_user)
     k_rrw = float(rng.uniform(2e-4, 6e-4))
     if "rate_random_walk" in effects:
-        k_rrw = float(rng.uniform(2.5e-3, 5e-3))
+        k_rrw = float(rng.uniform(3e-3, 6e-3))
         hidden.append(EffectConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
         truth_noise.append(NoiseConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
     else:
@@ -148,15 +177,19 @@ def make_scenario(effects: Sequence[str], seed: int, *, rates: Sequence[float] =
         truth_noise.append(NoiseConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
     temperature = TemperatureConfig(
         case_tau_s=float(rng.uniform(120.0, 300.0)),
-        temp_noise_c=float(rng.uniform(0.005, 0.015) if "temp_quantization" in effects else rng.uniform(0.01, 0.04)),
+        temp_noise_c=float(
+            rng.uniform(0.005, 0.015) if "temp_quantization" in effects else rng.uniform(0.01, 0.04)
+        ),
     )
     for effect in effects:
         drawn = _draw_effect(effect, rng, protocol, slope)
         if drawn is not None:
             hidden.append(drawn)
     effect_order = ["bias_poly", *[e for e in HIDDEN_EFFECTS]]
-    truth_effects = sorted([poly, *[h for h in hidden if h.identifier != "rate_random_walk"]],
-                           key=lambda e: effect_order.index(e.identifier))
+    truth_effects = sorted(
+        [poly, *[h for h in hidden if h.identifier != "rate_random_walk"]],
+        key=lambda e: effect_order.index(e.identifier),
+    )
     base = PhysicsConfig(
         recording=RecordingConfig(sample_rate_hz=fs, sensor="scenario"),
         protocol=protocol,
@@ -166,24 +199,34 @@ def make_scenario(effects: Sequence[str], seed: int, *, rates: Sequence[float] =
     )
     truth = replace(base, effects=tuple(truth_effects), noise=tuple(truth_noise))
     truth = _conceal(truth, base, hidden, seed)
-    sim = replace(base, noise=tuple(n if n.identifier != "white_noise" else truth.noise[0] for n in noise_user))
+    sim = replace(
+        base, noise=tuple(n if n.identifier != "white_noise" else truth.noise[0] for n in noise_user)
+    )
     name = "+".join(effects) or "clean"
     return Scenario(f"{name}#{seed}", seed, truth, sim, tuple(hidden))
 
 
-def contribution(truth: PhysicsConfig, base: PhysicsConfig, hidden: Sequence[EffectConfig], seed: int) -> np.ndarray:
+def contribution(
+    truth: PhysicsConfig, base: PhysicsConfig, hidden: Sequence[EffectConfig], seed: int
+) -> np.ndarray:
     """What the concealed effects add to the model's error, sample by sample (mg).
 
     For bias effects the change of the true drift; for ``temp_quantization`` the error of the
     polynomial evaluated on the staircase reading; for ``rate_random_walk`` the walk itself.
     """
     with_rec = simulate(truth, seed)
-    out = with_rec.columns["true_drift_mg"] - simulate(replace(truth, effects=base.effects), seed).columns["true_drift_mg"]
+    out = (
+        with_rec.columns["true_drift_mg"]
+        - simulate(replace(truth, effects=base.effects), seed).columns["true_drift_mg"]
+    )
     poly = base.effects[0].params
     if any(h.identifier == "temp_quantization" for h in hidden):
+
         def curve(T: np.ndarray) -> np.ndarray:
             d = T - 25.0
-            return poly["c0_mg"] + d * (poly["c1_mg_per_c"] + d * (poly["c2_mg_per_c2"] + d * poly["c3_mg_per_c3"]))
+            return poly["c0_mg"] + d * (
+                poly["c1_mg_per_c"] + d * (poly["c2_mg_per_c2"] + d * poly["c3_mg_per_c3"])
+            )
 
         out = out + curve(with_rec.columns["true_temp_c"]) - curve(with_rec.columns["temp_c"])
     if any(h.identifier == "rate_random_walk" for h in hidden):
@@ -192,7 +235,9 @@ def contribution(truth: PhysicsConfig, base: PhysicsConfig, hidden: Sequence[Eff
     return out
 
 
-def _conceal(truth: PhysicsConfig, base: PhysicsConfig, hidden: Sequence[EffectConfig], seed: int) -> PhysicsConfig:
+def _conceal(
+    truth: PhysicsConfig, base: PhysicsConfig, hidden: Sequence[EffectConfig], seed: int
+) -> PhysicsConfig:
     """Raise the white noise so that the per-sample noise is at least the concealed contribution."""
     if not hidden:
         return truth
