@@ -132,3 +132,12 @@ def test_failed_save_leaves_no_file(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="does not exist"):
         save_model(_fitted_pla(), tmp_path / "missing" / "m.pt", train_stats={}, valid_temp_range_c=(0, 1))
     assert not (tmp_path / "missing").exists()
+
+
+def test_the_same_model_gives_byte_identical_files_whatever_the_path(tmp_path: Path) -> None:
+    model = _fitted_pla()
+    (tmp_path / "a").mkdir()
+    paths = [tmp_path / "a" / "model.pt", tmp_path / "other-name.pt"]
+    for path in paths:
+        save_model(model, path, train_stats={"n": 1}, valid_temp_range_c=(0.0, 1.0))
+    assert paths[0].read_bytes() == paths[1].read_bytes()

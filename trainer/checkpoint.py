@@ -10,6 +10,7 @@ and is always read with ``torch.load(weights_only=True)``, which refuses pickled
 
 from __future__ import annotations
 
+import io
 import os
 import pickle
 from pathlib import Path
@@ -42,8 +43,13 @@ def save_model(
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
         "created_by": f"mems-tdc {__version__}",
     }
+    # torch.save names the archive's root folder after the file it writes; serialising to memory
+    # first keeps that name fixed ("archive"), so the same model gives byte-identical files
+    # (and the same model_id in the generated C) whatever the output path.
+    buffer = io.BytesIO()
+    torch.save(checkpoint, buffer)
     with atomic_output(path) as tmp:
-        torch.save(checkpoint, tmp)
+        tmp.write_bytes(buffer.getvalue())
 
 
 def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
