@@ -144,29 +144,31 @@ def test_evaluate_negative_smoothing_is_rejected(recordings: tuple[Path, Path], 
     )
 
 
+@pytest.fixture(scope="module")
+def steps(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An input-test recording: the tilt-sequence true input on the same short protocol."""
+    path = tmp_path_factory.mktemp("input") / "steps.npz"
+    args = [
+        "simulate",
+        "--seed",
+        "5",
+        "--duration",
+        "1200",
+        "--rate",
+        "50",
+        "--input",
+        "steps",
+        "-o",
+        str(path),
+    ]
+    assert main(args) == 0
+    return path
+
+
 def test_compare_writes_the_table_figures_report_and_models(
-    recordings: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    recordings: tuple[Path, Path], steps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     train, valid = recordings
-    steps = tmp_path / "steps.npz"
-    assert (
-        main(
-            [
-                "simulate",
-                "--seed",
-                "5",
-                "--duration",
-                "1200",
-                "--rate",
-                "50",
-                "--input",
-                "steps",
-                "-o",
-                str(steps),
-            ]
-        )
-        == 0
-    )
     out_dir = tmp_path / "cmp"
     (tmp_path / "cmp").mkdir()
     keep = out_dir / "notes.txt"
@@ -197,32 +199,13 @@ def test_compare_writes_the_table_figures_report_and_models(
 
 
 def test_compare_survival_separates_temperature_models_from_recursive_ones(
-    recordings: tuple[Path, Path], tmp_path: Path
+    recordings: tuple[Path, Path], steps: Path
 ) -> None:
     """Independent physics check: a temperature-only model cannot remove a true input step."""
     from trainer.compare import compare
     from trainer.fusion import FusionSettings
 
     train, valid = recordings
-    steps = tmp_path / "steps.npz"
-    assert (
-        main(
-            [
-                "simulate",
-                "--seed",
-                "6",
-                "--duration",
-                "1200",
-                "--rate",
-                "50",
-                "--input",
-                "steps",
-                "-o",
-                str(steps),
-            ]
-        )
-        == 0
-    )
     result = compare(
         read_recording(train),
         read_recording(valid),

@@ -26,6 +26,7 @@ from trainer.dlstm_compensator import (
 )
 from trainer.evaluate import Evaluation, InputSurvival, evaluate, input_survival
 from trainer.fusion import FusionSettings, train_stage
+from trainer.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.recording import Recording
 
 ORACLE = "oracle"  # evaluation only: accel - true_drift_mg, what perfect compensation would score
@@ -94,7 +95,7 @@ def compare(
     settings: FusionSettings,
     *,
     input_tests: tuple[Recording, ...] = (),
-    smoothing_s: float = 0.5,
+    smoothing_s: float = PAPER_RUN_SMOOTHING_S,
     methods: tuple[str, ...] = METHOD_ORDER,
     progress: bool = True,
     log: Callable[[str], None] = print,

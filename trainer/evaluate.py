@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from trainer.allan import AllanCurve, AllanTable, allan_table, default_taus
+from trainer.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.recording import Recording
 from trainer.signal import moving_average, window_samples
 
-PAPER_VALIDATION_SMOOTHING_S = 0.5
+PAPER_VALIDATION_SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the paper's 0.5 s validation smoothing
 # A moving average of width w distorts the Allan deviation for tau up to a few w (the hump in
 # Figure 13 below 1 s); coefficients are read only from tau >= this many windows.
 MIN_TAU_IN_SMOOTHING_WINDOWS = 4.0

@@ -11,6 +11,7 @@ from typing import Any
 
 from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
 from trainer.errors import UserError
+from trainer.realtime import PAPER_RUN_SMOOTHING_S
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")
@@ -38,7 +39,12 @@ def add_parser(subparsers: Any) -> None:
         default=",".join(ALL_METHODS),
         help=f"comma-separated subset of {','.join(ALL_METHODS)}",
     )
-    parser.add_argument("--smoothing", type=float, default=0.5, help="validation smoothing in s (paper: 0.5)")
+    parser.add_argument(
+        "--smoothing",
+        type=float,
+        default=PAPER_RUN_SMOOTHING_S,
+        help="validation smoothing in s (paper: 0.5)",
+    )
     add_dlstm_options(parser)
     parser.set_defaults(func=run)
 

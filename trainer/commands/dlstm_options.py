@@ -6,6 +6,12 @@ import argparse
 from typing import Any
 
 from trainer.errors import UserError
+from trainer.realtime import (
+    DEFAULT_STEP_S,
+    DEFAULT_TEMP_SMOOTHING_S,
+    PAPER_RUN_SMOOTHING_S,
+    PAPER_TRAIN_SMOOTHING_S,
+)
 
 
 def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
@@ -21,13 +27,26 @@ def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--target-loss", type=float, default=None, help="stop early at this training MSE")
     group.add_argument("--seed", type=int, default=0, help="seed of every random step (0)")
     group.add_argument(
-        "--train-smoothing", type=float, default=5.0, help="training smoothing in s (paper: 5)"
+        "--train-smoothing",
+        type=float,
+        default=PAPER_TRAIN_SMOOTHING_S,
+        help="training smoothing in s (paper: 5)",
     )
     group.add_argument(
-        "--run-smoothing", type=float, default=0.5, help="run-time smoothing in s (paper: 0.5)"
+        "--run-smoothing",
+        type=float,
+        default=PAPER_RUN_SMOOTHING_S,
+        help="run-time smoothing in s (paper: 0.5)",
     )
-    group.add_argument("--temp-smoothing", type=float, default=5.0, help="temperature smoothing in s (5)")
-    group.add_argument("--step", type=float, default=1.0, help="network step (decimation) in s (1)")
+    group.add_argument(
+        "--temp-smoothing",
+        type=float,
+        default=DEFAULT_TEMP_SMOOTHING_S,
+        help="temperature smoothing in s (5)",
+    )
+    group.add_argument(
+        "--step", type=float, default=DEFAULT_STEP_S, help="network step (decimation) in s (1)"
+    )
     group.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest for these sizes)")
     group.add_argument("--quiet", action="store_true", help="no progress bars")
 

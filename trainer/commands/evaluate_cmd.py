@@ -7,9 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from trainer.errors import UserError, atomic_output
+from trainer.realtime import PAPER_RUN_SMOOTHING_S
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
-PAPER_VALIDATION_SMOOTHING_S = 0.5  # the paper's validation smoothing; trainer.evaluate keeps the same value
 
 
 def add_parser(subparsers: Any) -> None:
@@ -20,7 +20,7 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument(
         "--smoothing",
         type=float,
-        default=PAPER_VALIDATION_SMOOTHING_S,
+        default=PAPER_RUN_SMOOTHING_S,
         help="trailing moving average in s applied before the Allan analysis (paper: 0.5)",
     )
     parser.set_defaults(func=run)
