@@ -27,7 +27,7 @@ from codegen.hostbuild import STRICT_FLAGS, find_compiler
 from codegen.quantize import QStream
 from codegen.render import render_template
 from trainer.cli import main as trainer_main
-from trainer.recording_io import read_recording
+from trainer.data.recording_io import read_recording
 
 
 def callgrind_instructions(binary: Path, function: str, work: Path) -> int:

@@ -46,7 +46,7 @@ from codegen.hostbuild import write_vectors
 from codegen.quantize import QPla, QPoly3, QStream
 from codegen.verify import to_step_units
 from trainer.cli import main as trainer_main
-from trainer.recording_io import read_recording
+from trainer.data.recording_io import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 CLOCK_MHZ = 168.0  # a typical Cortex-M4F flight computer (STM32F4): time per sample at 1 instruction/cycle

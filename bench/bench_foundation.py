@@ -23,28 +23,28 @@ STAGES: dict[str, str] = {
         from trainer.physics.simulate import simulate
         config = load_config(None)
         t0 = time.perf_counter(); rec = simulate(config, seed=1); elapsed = time.perf_counter() - t0
-        from trainer.recording_io import write_recording
+        from trainer.data.recording_io import write_recording
         write_recording(rec, WORK / "train.npz")
         extra = {"rows": len(rec)}
     """,
     "write CSV (1.44 M rows)": """
-        from trainer.recording_io import read_recording, write_recording
+        from trainer.data.recording_io import read_recording, write_recording
         rec = read_recording(WORK / "train.npz")
         t0 = time.perf_counter(); write_recording(rec, WORK / "train.csv"); elapsed = time.perf_counter() - t0
         extra = {"columns": len(rec.columns), "MB": round((WORK / "train.csv").stat().st_size / 1e6, 1)}
     """,
     "load CSV (1.44 M rows)": """
-        from trainer.recording_io import read_recording
+        from trainer.data.recording_io import read_recording
         t0 = time.perf_counter(); rec = read_recording(WORK / "train.csv"); elapsed = time.perf_counter() - t0
         extra = {"rows": len(rec)}
     """,
     "load NPZ (1.44 M rows)": """
-        from trainer.recording_io import read_recording
+        from trainer.data.recording_io import read_recording
         t0 = time.perf_counter(); rec = read_recording(WORK / "train.npz"); elapsed = time.perf_counter() - t0
         extra = {"rows": len(rec)}
     """,
     "fit PLA (10 intervals)": """
-        from trainer.recording_io import read_recording
+        from trainer.data.recording_io import read_recording
         from trainer.fitting import fit_compensator
         from trainer.compensator import registered_methods
         registered_methods()  # imports every method module (torch) outside the timed region
@@ -53,7 +53,7 @@ STAGES: dict[str, str] = {
         extra = {}
     """,
     "fit cubic (PX4 recipe)": """
-        from trainer.recording_io import read_recording
+        from trainer.data.recording_io import read_recording
         from trainer.fitting import fit_compensator
         from trainer.compensator import registered_methods
         registered_methods()  # imports every method module (torch) outside the timed region
@@ -62,8 +62,8 @@ STAGES: dict[str, str] = {
         extra = {}
     """,
     "Allan deviation + N/B/K/R/Q": """
-        from trainer.recording_io import read_recording
-        from trainer.allan import allan_deviation, noise_coefficients
+        from trainer.data.recording_io import read_recording
+        from trainer.scoring.allan import allan_deviation, noise_coefficients
         rec = read_recording(WORK / "train.npz")
         t0 = time.perf_counter()
         curve = allan_deviation(rec.accel_mg, rec.sample_rate_hz)

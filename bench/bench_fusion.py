@@ -29,8 +29,8 @@ import json, sys, time, torch
 torch.set_num_threads(1)
 from trainer.physics.config import load_config
 from trainer.physics.simulate import simulate
-from trainer.dlstm_compensator import RecursiveDLSTMWithISSA
-from trainer.fusion import FusionSettings
+from trainer.dlstm.compensators import RecursiveDLSTMWithISSA
+from trainer.dlstm.fusion import FusionSettings
 rec = simulate(load_config(None), seed=1).without_truth()
 settings = FusionSettings(iterations=int(sys.argv[1]), cycles=int(sys.argv[2]))
 start = time.perf_counter()
@@ -60,11 +60,11 @@ def batched_vs_sequential(repeats: int) -> dict[str, float]:
     import numpy as np
     import torch
 
-    from trainer.dlstm import PopulationDLSTM
-    from trainer.dlstm_train import per_individual_loss, population_loss
+    from trainer.dlstm.network import PopulationDLSTM
+    from trainer.dlstm.realtime import FrontEnd, smoothed_steps
+    from trainer.dlstm.train import per_individual_loss, population_loss
     from trainer.physics.config import load_config
     from trainer.physics.simulate import simulate
-    from trainer.realtime import FrontEnd, smoothed_steps
 
     torch.set_num_threads(1)
     rec = simulate(load_config(None), seed=1)

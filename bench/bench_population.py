@@ -22,8 +22,8 @@ from collections.abc import Callable
 
 import torch
 
-from trainer.dlstm import DEFAULT_GROUP_SIZE, PopulationDLSTM
-from trainer.dlstm_train import one_step_ahead, per_individual_loss, population_loss
+from trainer.dlstm.network import DEFAULT_GROUP_SIZE, PopulationDLSTM
+from trainer.dlstm.train import one_step_ahead, per_individual_loss, population_loss
 
 
 def cpu_model() -> str:

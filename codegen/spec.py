@@ -4,7 +4,7 @@ The checkpoint itself is loaded and validated by :func:`trainer.checkpoint.load_
 module only checks what the code generator relies on (shapes, finiteness, orderings, positive
 scales) so that a malformed payload is a :class:`UserError`, never a traceback or silent garbage.
 
-DLSTM payloads follow ``trainer/dlstm_compensator.py``: weights named as
+DLSTM payloads follow ``trainer/dlstm/compensators.py``: weights named as
 ``PopulationDLSTM.individual`` (``w_x0, w_h0, b0, ..., w_out, b_out``; the ``layer0.w_x`` /
 ``head.w`` names of docs/realtime.md are accepted too), ``frontend`` (kind, rate, windows,
 decimation) and ``normalisation`` (``inputs_mean``, ``inputs_std``, ``output_mean``,

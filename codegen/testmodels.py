@@ -1,7 +1,7 @@
 """Checkpoints for the tests and the benchmark, in the trainer's exact file layout.
 
 DLSTM checkpoints carry random (MATLAB-style initialised, optionally scaled) weights from
-:class:`trainer.dlstm.PopulationDLSTM` and a front end whose normalisation is computed from a
+:class:`trainer.dlstm.network.PopulationDLSTM` and a front end whose normalisation is computed from a
 recording the way docs/realtime.md defines the training pairs; PLA and poly3 are fitted by the
 trainer itself. Nothing here is used by ``codegen export`` or ``verify``.
 """
@@ -19,10 +19,10 @@ from trainer import __version__ as trainer_version
 from trainer.baselines.pla import PiecewiseLinear
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.checkpoint import FORMAT_NAME, FORMAT_VERSION
-from trainer.dlstm import PopulationDLSTM
+from trainer.data.recording import Recording
+from trainer.data.smoothing import moving_average, window_samples
+from trainer.dlstm.network import PopulationDLSTM
 from trainer.errors import atomic_output
-from trainer.recording import Recording
-from trainer.signal import moving_average, window_samples
 
 
 def frontend_fields(
@@ -70,7 +70,7 @@ def dlstm_payload(
     frontend: dict[str, Any],
     normalisation: dict[str, Any],
 ) -> dict[str, Any]:
-    """The payload layout of ``trainer/dlstm_compensator.py``."""
+    """The payload layout of ``trainer/dlstm/compensators.py``."""
     kind = "temperature" if method in TEMPERATURE_METHODS else "recursive"
     w_x0 = weights["w_x0"]
     norm_fields: dict[str, float]

@@ -24,11 +24,11 @@ from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden import GoldenStream, golden_for
 from codegen.hostbuild import load_module
 from codegen.quantize import ACCEL_PER_MG, QStream
+from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.recording import Recording
 
 if TYPE_CHECKING:
-    from trainer.allan import AllanTable
+    from trainer.scoring.allan import AllanTable
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def error_budget(
     the latter also after the paper's 0.5 s smoothing and, given ``fine_mg`` (the golden output
     before the estimate's rounding to 1/16 ug), before that rounding: the output LSB costs up to
     one LSB per sample, which the error feedback pushes to high frequencies."""
-    from trainer.evaluate import PAPER_VALIDATION_SMOOTHING_S, smooth_for_scoring
+    from trainer.scoring.evaluate import PAPER_VALIDATION_SMOOTHING_S, smooth_for_scoring
 
     golden_mg = golden / ACCEL_PER_MG
     arithmetic = golden_mg - float_on_ints_mg
@@ -197,7 +197,7 @@ def compare_table1(
 ) -> tuple[Table1Check, Table1Check]:
     """Table 1 of the quantised model against the float model's on the recording (everything,
     the "ADC" included) and on the same integer inputs the C saw (the generator's share)."""
-    from trainer.evaluate import evaluate
+    from trainer.scoring.evaluate import evaluate
 
     columns = {method: golden_mg, "float": float_mg, "float, integer inputs": float_on_ints_mg}
     table = evaluate(rec, columns).table
@@ -214,7 +214,7 @@ def verify(
     table1: bool = True,
 ) -> VerifyResult:
     from trainer.checkpoint import load_model
-    from trainer.recording_io import read_recording
+    from trainer.data.recording_io import read_recording
 
     out = Path(out_dir)
     name, manifest = find_manifest(out, name)

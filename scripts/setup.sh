@@ -1,20 +1,28 @@
 #!/usr/bin/env bash
-# Installs mems-tdc and its Python dependencies (torch from PyPI: the first install takes minutes).
-# Usage: scripts/setup.sh [test]   -- "test" adds the test tools (pytest, hypothesis, ruff).
+# Installs mems-tdc and its Python dependencies into the project environment .venv (made with
+# `python3 -m venv`; the system's Python packages are never touched). torch comes from PyPI: the
+# first install takes minutes. Scripts run the tools from .venv/bin; `source .venv/bin/activate`
+# puts `trainer` and `codegen` on your PATH.
+# Usage: scripts/setup.sh [test]   -- "test" adds the test tools (pytest, hypothesis, ruff, mypy).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PYTHON=${PYTHON:-python3}
+VENV=${VENV:-.venv}
+BASE_PYTHON=${PYTHON:-python3}
+if [ ! -x "$VENV/bin/python" ]; then
+  "$BASE_PYTHON" -m venv "$VENV"
+fi
+PY="$VENV/bin/python"
 extra=""
 [ "${1:-}" = "test" ] && extra="[test]"
-stamp=".setup-stamp${extra:+-test}"
-# Reinstall only when pyproject.toml changed since the last successful install.
-# Reinstall also when the installed package is another checkout's (an editable install elsewhere).
+stamp="$VENV/.setup-stamp${extra:+-test}"
+# Reinstall only when pyproject.toml changed since the last successful install, or when the
+# environment's package is another checkout's (an editable install elsewhere).
 installed_here() {
-  "$PYTHON" -c 'import os, sys, trainer, codegen
+  "$PY" -c 'import os, sys, trainer, codegen
 sys.exit(os.path.dirname(os.path.dirname(os.path.abspath(trainer.__file__))) != os.getcwd())' 2>/dev/null
 }
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || ! installed_here; then
-  "$PYTHON" -m pip install --quiet --disable-pip-version-check --root-user-action=ignore -e ".${extra}"
+  "$PY" -m pip install --quiet --disable-pip-version-check -e ".${extra}"
   touch "$stamp"
 fi
 # The tests also need C tools beyond gcc (clang, valgrind; the Arm toolchain and QEMU for the

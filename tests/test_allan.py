@@ -1,4 +1,4 @@
-"""Tests of trainer.allan against noise synthesised here with known IEEE 952 coefficients.
+"""Tests of trainer.scoring.allan against noise synthesised here with known IEEE 952 coefficients.
 
 The generators below are this file's own (not the project's simulator). Derivations, for a rate
 signal x (mg) sampled at fs with period dt = 1/fs:
@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from trainer.allan import (
+from trainer.scoring.allan import (
     BIAS_INSTABILITY_FACTOR,
     AllanCurve,
     allan_deviation,

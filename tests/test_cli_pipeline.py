@@ -11,7 +11,7 @@ import pytest
 
 from trainer.checkpoint import load_model
 from trainer.cli import main
-from trainer.recording_io import read_recording
+from trainer.data.recording_io import read_recording
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -85,7 +85,7 @@ def test_fit_never_reads_ground_truth(recordings: tuple[Path, Path], tmp_path: P
     train, _ = recordings
     rec = read_recording(train)
     rec.columns["true_drift_mg"] = rec.columns["true_drift_mg"] * 0 + 1e6  # poison the truth
-    from trainer.recording_io import write_recording
+    from trainer.data.recording_io import write_recording
 
     poisoned = tmp_path / "poisoned.npz"
     write_recording(rec, poisoned)
@@ -202,8 +202,8 @@ def test_compare_survival_separates_temperature_models_from_recursive_ones(
     recordings: tuple[Path, Path], steps: Path
 ) -> None:
     """Independent physics check: a temperature-only model cannot remove a true input step."""
-    from trainer.compare import compare
-    from trainer.fusion import FusionSettings
+    from trainer.dlstm.fusion import FusionSettings
+    from trainer.scoring.compare import compare
 
     train, valid = recordings
     result = compare(

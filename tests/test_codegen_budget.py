@@ -28,8 +28,8 @@ from codegen.verify import (
 )
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
-from trainer.recording import Recording
-from trainer.recording_io import read_recording, write_recording
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
 
 LSB_MG = 1.0 / ACCEL_PER_MG  # the output's unit, 1/16 ug
 # Documented budget of the integer arithmetic alone (golden minus float on the same integer inputs),

@@ -34,8 +34,8 @@ from codegen.quantize import C_FRAC, Z_FRAC
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from trainer.cli import main as trainer_main
-from trainer.recording import Recording
-from trainer.recording_io import read_recording
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3")

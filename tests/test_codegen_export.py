@@ -22,9 +22,9 @@ from codegen.cli import main as codegen_main
 from codegen.hostbuild import STRICT_FLAGS, load_module
 from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import run_cli
-from trainer.recording import Recording
-from trainer.recording_io import read_recording, write_recording
 
 METHODS = ("dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3")
 EXTRA_WARNINGS = (

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from trainer.cli import main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.scenarios import make_scenario
 from trainer.errors import run_cli
 from trainer.physics.config import load_config, save_config
 from trainer.physics.simulate import simulate
-from trainer.recording import Recording
-from trainer.recording_io import write_recording
 
 REGION_KEYS = {"t_start_s", "t_end_s", "segment", "temp_min_c", "temp_max_c", "branch", "significance"}
 
@@ -185,7 +185,7 @@ REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofup
 def test_real_chamber_run() -> None:
     """The real run: the one-sample jump visible in the raw data is found where it is, and the
     augmented model predicts the held-out tail better than the polynomial."""
-    from trainer.importer import import_foreign, options_with_preset
+    from trainer.data.importer import import_foreign, options_with_preset
 
     rec = import_foreign(REAL, options_with_preset("tofupilot"))
     t, a = rec.time_s, rec.accel_mg

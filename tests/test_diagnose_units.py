@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from trainer.data.recording import Recording
 from trainer.diagnose.blocks import block_means, build_blocks, dequantize, detect_lattice
 from trainer.diagnose.gls import Gls, NoiseState, unit_matrices
 from trainer.diagnose.locate import allan_comparison, scan_regions, spectral_peaks
@@ -32,7 +33,6 @@ from trainer.physics.effects import EffectConfig
 from trainer.physics.noise import noise_term
 from trainer.physics.profiles import SegmentSpec
 from trainer.physics.simulate import simulate
-from trainer.recording import Recording
 
 CYCLE = ProtocolConfig(
     "custom",

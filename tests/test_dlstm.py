@@ -9,8 +9,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trainer.dlstm import GATE_ORDER, DLSTMSpec, PopulationDLSTM, forward_flat, split_flat
-from trainer.dlstm_train import (
+from trainer.dlstm.network import GATE_ORDER, DLSTMSpec, PopulationDLSTM, forward_flat, split_flat
+from trainer.dlstm.train import (
     _clip_per_individual,
     one_step_ahead,
     per_individual_loss,

@@ -30,7 +30,7 @@ from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
 from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
 from trainer.cli import main as trainer_main
-from trainer.recording_io import read_recording
+from trainer.data.recording_io import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1

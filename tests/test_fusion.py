@@ -10,11 +10,11 @@ import pytest
 import torch
 
 from trainer.checkpoint import load_model, save_model
-from trainer.dlstm import PopulationDLSTM
-from trainer.dlstm_compensator import RecursiveDLSTMWithISSA, TemperatureDLSTM
-from trainer.dlstm_train import population_loss
-from trainer.fusion import FusionSettings, _as_batch, refine_stage, train_stage
-from trainer.recording import Recording
+from trainer.data.recording import Recording
+from trainer.dlstm.compensators import RecursiveDLSTMWithISSA, TemperatureDLSTM
+from trainer.dlstm.fusion import FusionSettings, _as_batch, refine_stage, train_stage
+from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.train import population_loss
 
 
 def _drift_pairs(steps: int = 300) -> tuple[np.ndarray, np.ndarray]:

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from trainer.cli import main
+from trainer.data.importer import STANDARD_GRAVITY
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording
 from trainer.errors import UserError, run_cli
-from trainer.importer import STANDARD_GRAVITY
-from trainer.recording import Recording
-from trainer.recording_io import read_recording
 
 REAL = Path(__file__).resolve().parents[2] / "shared/data/real/tofupilot_imu_chamber_cycle.tsv"
 

@@ -18,7 +18,7 @@ import math
 import numpy as np
 import pytest
 
-from trainer.optim.levy import levy_step, mantegna_sigma
+from trainer.dlstm.optim.levy import levy_step, mantegna_sigma
 
 N_SAMPLES = 2_000_000
 

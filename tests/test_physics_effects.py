@@ -13,12 +13,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trainer.data.recording import Recording
 from trainer.physics.config import parse_config_text
 from trainer.physics.effects import effect_contribution
 from trainer.physics.profiles import parse_segments
 from trainer.physics.simulate import simulate
 from trainer.physics.thermal import lowpass, play_operator
-from trainer.recording import Recording
 
 T_REF = 25.0
 RATE_C_PER_S = 1.0 / 60.0

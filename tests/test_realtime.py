@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from trainer.dlstm import PopulationDLSTM
-from trainer.dlstm_compensator import Persistence, RecursiveDLSTM, TemperatureDLSTM
+from trainer.data.recording import Recording
+from trainer.dlstm.compensators import Persistence, RecursiveDLSTM, TemperatureDLSTM
+from trainer.dlstm.fusion import FusionSettings
+from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.realtime import FrontEnd, hold, temperature_steps
 from trainer.errors import UserError
-from trainer.fusion import FusionSettings
-from trainer.realtime import FrontEnd, hold, temperature_steps
-from trainer.recording import Recording
 
 RATE = 50.0
 

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trainer import recording_io
+from trainer.data import recording_io
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import UserError
-from trainer.recording import Recording
-from trainer.recording_io import read_recording, write_recording
 
 # A valid 200 Hz file; error cases below replace one line (line numbers are 1-based file lines).
 BASE_LINES = [

@@ -1,4 +1,4 @@
-"""trainer.signal against brute-force loops written from the definitions, on random data."""
+"""trainer.data.smoothing against brute-force loops written from the definitions, on random data."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trainer.signal import decimate, decimation_indices, moving_average, window_samples
+from trainer.data.smoothing import decimate, decimation_indices, moving_average, window_samples
 
 signals = st.integers(min_value=0, max_value=60).flatmap(
     lambda n: st.lists(st.floats(-1e4, 1e4, allow_nan=False), min_size=n, max_size=n)

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from trainer.cli import main
+from trainer.data.recording_io import read_recording
 from trainer.errors import run_cli
 from trainer.physics.config import config_hash, load_config, with_overrides
 from trainer.physics.profiles import parse_segments
 from trainer.physics.simulate import simulate
-from trainer.recording_io import read_recording
 
 TRUE_COLUMNS = {"true_temp_c", "true_pm_temp_c", "true_accel_mg", "true_drift_mg", "true_noise_mg"}
 

@@ -1,4 +1,4 @@
-"""Tests of SSA / ISSA (trainer.optim.ssa): hand-checked update rules, wiring, and benchmarks.
+"""Tests of SSA / ISSA (trainer.dlstm.optim.ssa): hand-checked update rules, wiring, and benchmarks.
 
 Benchmarks use d = 10, 30 sparrows, 200 iterations, bounds [-b, b]^d and the standard
 functions plus SHIFTED copies ``f(x - s)`` whose optimum ``s`` is away from the origin.
@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from trainer.optim.levy import levy_step
-from trainer.optim.ssa import (
+from trainer.dlstm.optim.levy import levy_step
+from trainer.dlstm.optim.ssa import (
     OptimizeResult,
     apply_elitism,
     minimize,

@@ -12,7 +12,7 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
-from trainer.recording import Recording
+from trainer.data.recording import Recording
 
 _REGISTRY: dict[str, type[Compensator]] = {}
 
@@ -59,6 +59,6 @@ def registered_methods() -> dict[str, type[Compensator]]:
     """Method name -> class, after importing every module that defines one."""
     import trainer.baselines.pla
     import trainer.baselines.poly3
-    import trainer.dlstm_compensator  # noqa: F401
+    import trainer.dlstm.compensators  # noqa: F401
 
     return dict(_REGISTRY)

@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 
 from trainer.compensator import Compensator, registered_methods
+from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.recording import Recording
 
 
 def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:

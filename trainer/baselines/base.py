@@ -8,7 +8,7 @@ from typing import Self
 import numpy as np
 
 from trainer.compensator import Compensator
-from trainer.recording import Recording
+from trainer.data.recording import Recording
 
 
 class TemperatureCompensator(Compensator):

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
-from trainer.realtime import PAPER_RUN_SMOOTHING_S
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")
@@ -77,10 +77,10 @@ def run(args: argparse.Namespace) -> int:
     settings, frontend = settings_from_args(args)
 
     from trainer.checkpoint import save_model
-    from trainer.compare import compare
+    from trainer.data.recording_io import read_recording
     from trainer.fitting import training_stats
-    from trainer.recording_io import read_recording
-    from trainer.report import headline_table, render_report, write_figures, write_survival_figure
+    from trainer.scoring.compare import compare
+    from trainer.scoring.report import headline_table, render_report, write_figures, write_survival_figure
 
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():

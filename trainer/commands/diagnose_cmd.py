@@ -60,10 +60,10 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from trainer.data.recording_io import read_recording
     from trainer.diagnose import diagnose
     from trainer.diagnose.report import write_json, write_report
     from trainer.physics.config import load_config
-    from trainer.recording_io import read_recording
 
     _check_outputs(args)
     sim = load_config(args.sim) if args.sim else None

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from trainer.errors import UserError
-from trainer.realtime import (
+from trainer.dlstm.realtime import (
     DEFAULT_STEP_S,
     DEFAULT_TEMP_SMOOTHING_S,
     PAPER_RUN_SMOOTHING_S,
     PAPER_TRAIN_SMOOTHING_S,
 )
+from trainer.errors import UserError
 
 
 def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +53,7 @@ def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
 
 def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]:
     """(FusionSettings, front-end seconds) from parsed options, each checked with a clear message."""
-    from trainer.fusion import FusionSettings
+    from trainer.dlstm.fusion import FusionSettings
 
     positive_ints = ("population", "hidden", "layers", "threads")
     for name in positive_ints:

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, atomic_output
-from trainer.realtime import PAPER_RUN_SMOOTHING_S
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -44,11 +44,11 @@ def drift_lines(result: Any) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from trainer.allan import plot_allan
     from trainer.checkpoint import load_model
-    from trainer.evaluate import evaluate
-    from trainer.plots import plot_series
-    from trainer.recording_io import read_recording
+    from trainer.data.recording_io import read_recording
+    from trainer.scoring.allan import plot_allan
+    from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.plots import plot_series
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")

@@ -32,9 +32,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from trainer.checkpoint import save_model
+    from trainer.data.recording_io import read_recording
     from trainer.errors import check_writable
     from trainer.fitting import fit_compensator, training_stats
-    from trainer.recording_io import read_recording
 
     check_writable(args.output)  # fail before a long training run, not after it
     options: dict[str, Any] = {}

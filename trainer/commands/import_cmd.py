@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from trainer.importer import (
+from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
     DELIMITER_NAMES,
     GRAVITY_MODES,
@@ -14,7 +14,7 @@ from trainer.importer import (
     import_foreign,
     options_with_preset,
 )
-from trainer.recording_io import recording_format, write_recording
+from trainer.data.recording_io import recording_format, write_recording
 
 _DELIMITER_ALIASES = {"tab": "\t", "\\t": "\t", "comma": ",", "semicolon": ";"}
 

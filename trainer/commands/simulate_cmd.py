@@ -8,11 +8,11 @@ import sys
 import time
 from dataclasses import replace
 
+from trainer.data.recording_io import recording_format, write_recording
 from trainer.physics.config import load_config, with_overrides
 from trainer.physics.input_presets import INPUT_PRESETS, input_preset
 from trainer.physics.profiles import BUILTIN_PROTOCOLS
 from trainer.physics.simulate import nominal_rows, simulate
-from trainer.recording_io import recording_format, write_recording
 
 
 def _positive(unit: str) -> type[float]:

@@ -16,8 +16,8 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.signal import savgol_filter
 
+from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.recording import Recording
 
 DEFAULT_MAX_BLOCKS = 600  # dense GLS: Cholesky cost ~ N^3, a few ms at 600
 FINE_STEP_S = 0.5  # fine grid for periodograms: periods down to the catalogue's 5 s stay resolved

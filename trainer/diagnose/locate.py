@@ -20,11 +20,11 @@ from scipy.ndimage import median_filter
 from scipy.optimize import minimize_scalar
 from scipy.stats import norm
 
-from trainer.allan import allan_deviation
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import window_variances
 from trainer.diagnose.profile import Profile, Region, region
 from trainer.physics.noise import BI_FLAT_UNTIL_S, FLICKER_FLOOR_VAR, bias_instability_allan_variance
+from trainer.scoring.allan import allan_deviation
 
 ALPHA = 1e-3
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from trainer.data.recording import Recording
 from trainer.diagnose.baseline import Baseline, build_baseline
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
 from trainer.diagnose.candidates import FAST_PERIOD_BLOCKS, fine_residual, scan_periods, scan_steps
@@ -40,7 +41,6 @@ from trainer.diagnose.select import (
 from trainer.diagnose.threads import single_blas_thread
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig, drift
-from trainer.recording import Recording
 
 CANDIDATE_ORDER: tuple[str, ...] = (
     "thermal_lag",

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from trainer.data.recording import Recording
 from trainer.physics.config import (
     NoiseConfig,
     PhysicsConfig,
@@ -27,7 +28,6 @@ from trainer.physics.config import (
 from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import SegmentSpec
 from trainer.physics.simulate import simulate
-from trainer.recording import Recording
 
 HIDDEN_EFFECTS: tuple[str, ...] = (
     "thermal_lag",

@@ -11,13 +11,13 @@ import numpy as np
 from tqdm import tqdm
 
 from trainer import __version__
+from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.physics.config import PhysicsConfig, config_hash
 from trainer.physics.effects import drift, quantize_temperature
 from trainer.physics.noise import noise_term
 from trainer.physics.profiles import build_profile, format_segments, input_signal
 from trainer.physics.thermal import lowpass
-from trainer.recording import Recording
 
 # One random stream per source, derived by SeedSequence spawning. Indices are permanent: new
 # streams are appended, so switching one term on or adding a new one never changes the others.

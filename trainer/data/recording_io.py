@@ -28,8 +28,8 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
+from trainer.data.recording import REQUIRED_COLUMNS, Recording
 from trainer.errors import UserError, atomic_output
-from trainer.recording import REQUIRED_COLUMNS, Recording
 
 RecordingFormat = Literal["csv", "npz"]
 

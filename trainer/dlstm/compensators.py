@@ -1,7 +1,7 @@
 """DLSTM compensators: the paper's recursive real-time model, its SSA/ISSA fusions, the
 temperature-input variant, and the persistence predictor that the honest scoring needs.
 
-All of them run the streaming front end of :mod:`trainer.realtime` (docs/realtime.md):
+All of them run the streaming front end of :mod:`trainer.dlstm.realtime` (docs/realtime.md):
 
 - ``dlstm``, ``dlstm-ssa``, ``dlstm-issa`` (kind ``recursive``): the network maps the smoothed
   output at step k to the one at step k+1 (the paper's ``U(t-1) -> U(t)``) and the compensated
@@ -20,11 +20,18 @@ import numpy as np
 import torch
 
 from trainer.compensator import Compensator
-from trainer.dlstm import PopulationDLSTM
+from trainer.data.recording import Recording
+from trainer.dlstm.fusion import (
+    FusionResult,
+    FusionSettings,
+    Optimiser,
+    TrainedPopulation,
+    fuse,
+    refine_stage,
+)
+from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.realtime import FrontEnd, Standardiser, hold, smoothed_steps, temperature_steps
 from trainer.errors import UserError
-from trainer.fusion import FusionResult, FusionSettings, Optimiser, TrainedPopulation, fuse, refine_stage
-from trainer.realtime import FrontEnd, Standardiser, hold, smoothed_steps, temperature_steps
-from trainer.recording import Recording
 
 WEIGHT_KEYS = ("w_x0", "w_h0", "b0", "w_x1", "w_h1", "b1", "w_out", "b_out")
 MIN_TRAINING_STEPS = 16

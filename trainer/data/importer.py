@@ -22,9 +22,9 @@ from typing import Literal
 
 import numpy as np
 
+from trainer.data.recording import Recording
+from trainer.data.recording_io import JITTER_LIMIT, Table, csv_time_decimals, find_time_problem, read_table
 from trainer.errors import UserError
-from trainer.recording import Recording
-from trainer.recording_io import JITTER_LIMIT, Table, csv_time_decimals, find_time_problem, read_table
 
 STANDARD_GRAVITY = 9.80665  # m/s^2 per g (CGPM 1901)
 TIME_UNIT_SECONDS: dict[str, float | None] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "index": None}

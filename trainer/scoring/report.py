@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from trainer.allan import plot_allan
-from trainer.compare import PAPER_METHODS, Comparison
-from trainer.plots import plot_fit, plot_series
-from trainer.realtime import PAPER_TRAIN_SMOOTHING_S
-from trainer.recording import Recording
-from trainer.signal import moving_average, window_samples
+from trainer.data.recording import Recording
+from trainer.data.smoothing import moving_average, window_samples
+from trainer.dlstm.realtime import PAPER_TRAIN_SMOOTHING_S
+from trainer.scoring.allan import plot_allan
+from trainer.scoring.compare import PAPER_METHODS, Comparison
+from trainer.scoring.plots import plot_fit, plot_series
 
 # Guo et al. 2023, Table 1 (validation data and the four methods): value, improvement %.
 PAPER_TABLE_1 = {

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trainer.allan import AllanCurve, AllanTable, allan_table, default_taus
-from trainer.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.recording import Recording
-from trainer.signal import moving_average, window_samples
+from trainer.data.recording import Recording
+from trainer.data.smoothing import moving_average, window_samples
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.scoring.allan import AllanCurve, AllanTable, allan_table, default_taus
 
 PAPER_VALIDATION_SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the paper's 0.5 s validation smoothing
 # A moving average of width w distorts the Allan deviation for tau up to a few w (the hump in

@@ -1,4 +1,4 @@
-"""Gradient training of a :class:`~trainer.dlstm.PopulationDLSTM` (step 2 of the paper's fusion).
+"""Gradient training of a :class:`~trainer.dlstm.network.PopulationDLSTM` (step 2 of the paper's fusion).
 
 One iteration = one full-batch Adam step over the whole training sequence (the paper: learning
 rate 0.02, 500 iterations; MATLAB's trainNetwork with 'adam', which is what such papers use).
@@ -24,7 +24,7 @@ import torch
 from torch import Tensor
 from tqdm.auto import tqdm
 
-from trainer.dlstm import DLSTMSpec, PopulationDLSTM, forward_flat
+from trainer.dlstm.network import DLSTMSpec, PopulationDLSTM, forward_flat
 
 LossKind = Literal["mse", "half_mse", "mae"]
 # callback(iteration, per-individual losses (P,)) -> True to stop (the paper's "accuracy meets

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from trainer.data.recording import Recording
+from trainer.data.smoothing import moving_average, window_samples
 from trainer.errors import UserError
-from trainer.recording import Recording
-from trainer.signal import moving_average, window_samples
 
 PAPER_TRAIN_SMOOTHING_S = 5.0
 PAPER_RUN_SMOOTHING_S = 0.5

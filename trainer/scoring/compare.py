@@ -17,17 +17,17 @@ import numpy as np
 from trainer.baselines.pla import PiecewiseLinear
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.compensator import Compensator
-from trainer.dlstm_compensator import (
+from trainer.data.recording import Recording
+from trainer.dlstm.compensators import (
     Persistence,
     RecursiveDLSTM,
     RecursiveDLSTMWithISSA,
     RecursiveDLSTMWithSSA,
     TemperatureDLSTM,
 )
-from trainer.evaluate import Evaluation, InputSurvival, evaluate, input_survival
-from trainer.fusion import FusionSettings, train_stage
-from trainer.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.recording import Recording
+from trainer.dlstm.fusion import FusionSettings, train_stage
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.scoring.evaluate import Evaluation, InputSurvival, evaluate, input_survival
 
 ORACLE = "oracle"  # evaluation only: accel - true_drift_mg, what perfect compensation would score
 METHOD_ORDER = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")

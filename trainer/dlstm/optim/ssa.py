@@ -84,7 +84,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from tqdm import tqdm
 
-from trainer.optim.levy import levy_step
+from trainer.dlstm.optim.levy import levy_step
 
 __all__ = [
     "OptimizeResult",

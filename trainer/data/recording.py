@@ -1,7 +1,7 @@
 """The in-memory recording: named 1-D float64 columns plus ``key=value`` metadata.
 
 This mirrors ``shared/specs/recording-format.md``. Reading and writing files lives in
-:mod:`trainer.recording_io`; this module only holds the data and the rules every consumer
+:mod:`trainer.data.recording_io`; this module only holds the data and the rules every consumer
 shares (required columns, ground-truth columns that fitting must never see).
 """
 

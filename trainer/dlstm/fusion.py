@@ -21,9 +21,9 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from trainer.dlstm import PopulationDLSTM
-from trainer.dlstm_train import TrainingHistory, population_loss, train_population
-from trainer.optim import minimize
+from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.optim import minimize
+from trainer.dlstm.train import TrainingHistory, population_loss, train_population
 
 Optimiser = Literal["none", "ssa", "issa"]
 

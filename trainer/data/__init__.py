@@ -1,0 +1,1 @@
+"""Recordings: the format and its validation, CSV/NPZ I/O, foreign-logger import, smoothing."""
