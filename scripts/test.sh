@@ -1,8 +1,13 @@
 #!/usr/bin/env bash
-# The test command of the README (and of CI): set-up, then the whole suite on both cores.
+# The test command of the README (and of CI): set-up into .venv, the linters and the type checker
+# (a finding fails the run), then the whole suite on both cores.
 # Extra arguments go to pytest, e.g. scripts/test.sh --runslow  or  scripts/test.sh tests/test_allan.py
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh test
+BIN=.venv/bin
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} MPLBACKEND=Agg
-exec "${PYTHON:-python3}" -m pytest -n 2 "$@"
+"$BIN/ruff" check trainer codegen tests bench firmware_c
+"$BIN/ruff" format --check --quiet trainer codegen tests bench firmware_c
+"$BIN/mypy"  # configured in pyproject.toml: trainer, codegen, bench
+exec "$BIN/python" -m pytest -n 2 "$@"
