@@ -21,6 +21,8 @@ import allantools
 import numpy as np
 from scipy.optimize import nnls
 
+from trainer.scoring.markdown import markdown_table
+
 __all__ = [
     "BIAS_INSTABILITY_FACTOR",
     "AllanCurve",
@@ -598,11 +600,7 @@ class AllanTable:
     def to_markdown(self) -> str:
         """GitHub-flavoured Markdown, values as 5.43×10⁻⁴; unobserved coefficients marked †."""
         header, rows, any_flag = self._cells(_sci_markdown, "†")
-        lines = [
-            "| " + " | ".join(header) + " |",
-            "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|",
-        ]
-        lines += ["| " + " | ".join(row) + " |" for row in rows]
+        lines = [markdown_table(header, rows, align="l" + "r" * (len(header) - 1))]
         if any_flag:
             lines += ["", f"† {_FLAG_NOTE}"]
         return "\n".join(lines) + "\n"
