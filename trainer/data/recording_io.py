@@ -493,7 +493,7 @@ def csv_time_decimals(time: np.ndarray) -> int:
     return max(TIME_DECIMALS, 3 + math.ceil(-math.log10(step)))
 
 
-def _check_writable(rec: Recording) -> None:
+def _check_recording_writable(rec: Recording) -> None:
     """Structural rules a writer must not break (a bug in the caller, hence ValueError)."""
     for name in REQUIRED_COLUMNS:
         if name not in rec.columns:
@@ -521,7 +521,7 @@ def _ordered_meta(meta: dict[str, str]) -> list[tuple[str, str]]:
 def write_recording(rec: Recording, path: str | Path) -> None:
     """Write every column (unknown ones included) to ``.csv`` or ``.npz``; atomic, nothing left on error."""
     fmt = recording_format(path)
-    _check_writable(rec)
+    _check_recording_writable(rec)
     if fmt == "npz" and NPZ_META in rec.columns:
         raise UserError(f"{path}: column name {NPZ_META!r} is reserved in .npz files; write .csv instead")
     with atomic_output(path) as tmp:
