@@ -21,11 +21,15 @@ import sys
 import tempfile
 from pathlib import Path
 
-from codegen import testmodels as tm
+# The test checkpoints live with the tests (tests/testmodels.py), outside the installed packages:
+# put the repository root on the path so that ``tests`` is importable however the bench is run.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from codegen.export import export
 from codegen.hostbuild import STRICT_FLAGS, find_compiler
 from codegen.quantize import QStream
 from codegen.render import render_template
+from tests import testmodels as tm
 from trainer.cli import main as trainer_main
 from trainer.data.recording_io import read_recording
 

@@ -13,13 +13,12 @@ decimation) and ``normalisation`` (``inputs_mean``, ``inputs_std``, ``output_mea
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from trainer.errors import UserError
+from trainer.fields import DottedFields as _Fields
 
 RECURSIVE_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa")
 TEMPERATURE_METHODS = ("dlstm-temp",)
@@ -99,68 +98,6 @@ class Checkpoint:
     method: str
     model: ModelSpec
     valid_temp_range_c: tuple[float, float]
-
-
-class _Fields:
-    """Typed access to a nested dict that names the dotted field in every error."""
-
-    def __init__(self, source: str, data: Any, prefix: str) -> None:
-        self.source, self.data, self.prefix = source, data, prefix
-        if not isinstance(data, dict):
-            self.fail(f"field '{prefix}' must be a dict, got {type(data).__name__}")
-
-    def fail(self, message: str) -> None:
-        raise UserError(f"{self.source}: {message}")
-
-    def name(self, key: str) -> str:
-        return f"{self.prefix}.{key}" if self.prefix else key
-
-    def raw(self, key: str) -> Any:
-        if key not in self.data:
-            self.fail(f"field '{self.name(key)}' is missing")
-        return self.data[key]
-
-    def sub(self, key: str) -> _Fields:
-        return _Fields(self.source, self.raw(key), self.name(key))
-
-    def number(self, key: str, *, positive: bool = False) -> float:
-        value = self.raw(key)
-        try:
-            result = float(value)
-        except (TypeError, ValueError):
-            self.fail(f"field '{self.name(key)}' must be a number, got {value!r}")
-        if not math.isfinite(result) or (positive and result <= 0):
-            self.fail(
-                f"field '{self.name(key)}' must be a finite{' positive' if positive else ''} number, "
-                f"got {result!r}"
-            )
-        return result
-
-    def integer(self, key: str, lo: int, hi: int) -> int:
-        value = self.number(key)
-        if value != int(value) or not lo <= value <= hi:
-            self.fail(f"field '{self.name(key)}' must be an integer in [{lo}, {hi}], got {value!r}")
-        return int(value)
-
-    def array(self, key: str, shape: tuple[int, ...]) -> np.ndarray:
-        value = self.raw(key)
-        try:
-            arr = np.asarray(
-                value.detach().cpu().double().numpy() if hasattr(value, "detach") else value, dtype=np.float64
-            )
-        except (TypeError, ValueError):
-            self.fail(f"field '{self.name(key)}' must be an array of numbers")
-        if arr.shape != shape:
-            self.fail(f"field '{self.name(key)}' must have shape {shape}, got {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            self.fail(f"field '{self.name(key)}' holds NaN or inf")
-        return arr.copy()
-
-    def numbers(self, key: str, count: int, *, positive: bool = False) -> tuple[float, ...]:
-        arr = self.array(key, (count,))
-        if positive and np.any(arr <= 0):
-            self.fail(f"field '{self.name(key)}' must be positive, got {arr.tolist()}")
-        return tuple(float(v) for v in arr)
 
 
 def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:

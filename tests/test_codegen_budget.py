@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import torch
 
-from codegen import testmodels as tm
 from codegen.cli import main as codegen_main
 from codegen.export import export
 from codegen.golden import GoldenStream, golden_for
@@ -26,6 +25,7 @@ from codegen.verify import (
     to_step_units,
     verify,
 )
+from tests import testmodels as tm
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording

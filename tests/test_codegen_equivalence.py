@@ -16,7 +16,6 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from codegen import testmodels as tm
 from codegen.activations import TABLE_STEP_BITS, TANH_TABLE, sigmoid_act, tanh_act
 from codegen.export import LoadedModel, export
 from codegen.golden import golden_for
@@ -33,6 +32,7 @@ from codegen.hostbuild import (
 from codegen.quantize import C_FRAC, Z_FRAC
 from codegen.render import render_template
 from codegen.verify import to_step_units
+from tests import testmodels as tm
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording

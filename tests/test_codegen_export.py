@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 import torch
 
-from codegen import testmodels as tm
 from codegen.cli import main as codegen_main
 from codegen.hostbuild import STRICT_FLAGS, load_module
+from tests import testmodels as tm
 from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trainer.data import recording_io
+from trainer.data import csv_table, recording_io
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import UserError
@@ -149,13 +149,13 @@ def test_unknown_columns_survive_a_copy(tmp_path: Path) -> None:
 def count_row_scans(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Record the first line of every chunk that falls back to the Python row scan."""
     calls: list[int] = []
-    original = recording_io._scan_chunk
+    original = csv_table._scan_chunk
 
     def spy(chunk: bytes, first_line: int, *args: object) -> tuple[np.ndarray, np.ndarray]:
         calls.append(first_line)
         return original(chunk, first_line, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(recording_io, "_scan_chunk", spy)
+    monkeypatch.setattr(csv_table, "_scan_chunk", spy)
     return calls
 
 
@@ -205,7 +205,7 @@ def test_any_chunking_gives_the_same_rows_and_error_lines(
     chunk_bytes: int,
 ) -> None:
     lines, values, bad_line = case
-    monkeypatch.setattr(recording_io, "CHUNK_BYTES", chunk_bytes)
+    monkeypatch.setattr(csv_table, "CHUNK_BYTES", chunk_bytes)
     path = write_lines(tmp_path / "m.csv", lines)
     if bad_line is None:
         rec = read_recording(path)
@@ -312,7 +312,7 @@ def test_error_in_the_last_row_only_rescans_the_last_chunk(
     body = "\n".join(f"{t:.3f},1,2" for t in np.arange(n) / 200)
     path = tmp_path / "rec.csv"
     path.write_text("time_s,temp_c,accel_mg\n" + body + "\n0.0,x,2\n")
-    monkeypatch.setattr(recording_io, "CHUNK_BYTES", 1 << 16)  # about 12 chunks
+    monkeypatch.setattr(csv_table, "CHUNK_BYTES", 1 << 16)  # about 12 chunks
     scans = count_row_scans(monkeypatch)
     assert f"line {n + 2}, column 'temp_c'" in read_error(path)
     assert len(scans) == 1

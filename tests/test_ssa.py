@@ -18,6 +18,7 @@ import pytest
 from trainer.dlstm.optim.levy import levy_step
 from trainer.dlstm.optim.ssa import (
     OptimizeResult,
+    SsaSettings,
     apply_elitism,
     minimize,
     producer_update,
@@ -63,12 +64,11 @@ def run(name: str, shifted: bool, variant: str, seed: int, contraction: str = "o
     return minimize(
         fitness,
         seed=seed,
-        variant=variant,
-        iterations=200,
-        population_size=30,
+        settings=SsaSettings(
+            variant=variant, iterations=200, population_size=30, producer_contraction=contraction
+        ),
         lower=np.full(D, -b),
         upper=np.full(D, b),
-        producer_contraction=contraction,
     )
 
 
@@ -241,13 +241,15 @@ def test_one_iteration_follows_the_documented_draw_order(variant: str, safety_th
         rastrigin,
         start,
         seed=seed,
-        variant=variant,
-        iterations=1,
+        settings=SsaSettings(
+            variant=variant,
+            iterations=1,
+            safety_threshold=safety_threshold,
+            producer_share=0.34,
+            scouter_share=0.34,  # 2 and 2
+        ),
         lower=-1.5,
         upper=1.5,
-        safety_threshold=safety_threshold,
-        producer_share=0.34,
-        scouter_share=0.34,  # 2 and 2
     )
     # Replay: sort, then R2, alpha, producer jumps, signs, scrounger jumps, scouts, beta, K.
     fit = rastrigin(start)
@@ -326,9 +328,7 @@ def test_one_batched_call_per_iteration(variant: str) -> None:
     result = minimize(
         counter,
         seed=1,
-        variant=variant,
-        iterations=25,
-        population_size=12,
+        settings=SsaSettings(variant=variant, iterations=25, population_size=12),
         lower=np.full(4, -5.0),
         upper=np.full(4, 5.0),
     )
@@ -342,7 +342,9 @@ def test_one_batched_call_per_iteration(variant: str) -> None:
 @pytest.mark.parametrize("variant", ["ssa", "issa"])
 def test_same_seed_same_result_and_generator_seed_equivalent(variant: str) -> None:
     kwargs = dict(
-        variant=variant, iterations=40, population_size=10, lower=np.full(5, -3.0), upper=np.full(5, 3.0)
+        settings=SsaSettings(variant=variant, iterations=40, population_size=10),
+        lower=np.full(5, -3.0),
+        upper=np.full(5, 3.0),
     )
     a = minimize(rastrigin, seed=42, **kwargs)
     b = minimize(rastrigin, seed=42, **kwargs)
@@ -361,7 +363,11 @@ def test_bounds_are_enforced_by_clipping(variant: str) -> None:
     lower, upper = np.array([-1.0, -1.0, -1.0]), np.array([2.0, 2.0, 2.0])
     counter = CountingFitness(lambda x: np.sum((x - 10.0) ** 2, axis=1))
     result = minimize(
-        counter, seed=5, variant=variant, iterations=60, population_size=10, lower=lower, upper=upper
+        counter,
+        seed=5,
+        settings=SsaSettings(variant=variant, iterations=60, population_size=10),
+        lower=lower,
+        upper=upper,
     )
     seen = np.concatenate(counter.batches)
     assert np.all(seen >= lower) and np.all(seen <= upper)
@@ -372,7 +378,7 @@ def test_bounds_are_enforced_by_clipping(variant: str) -> None:
 def test_initial_population_is_used_as_given_and_its_best_is_never_lost() -> None:
     start = np.random.default_rng(9).normal(size=(10, 40))  # like trained networks: no bounds
     counter = CountingFitness(lambda x: np.sum((x - 0.7) ** 2, axis=1))
-    result = minimize(counter, start, seed=0, variant="issa", iterations=30)
+    result = minimize(counter, start, seed=0, settings=SsaSettings(variant="issa", iterations=30))
     np.testing.assert_array_equal(counter.batches[0], start)
     assert result.population.shape == (10, 40)
     assert result.best_fitness <= counter.function(start).min()
@@ -389,8 +395,7 @@ def test_callback_can_stop_the_run() -> None:
     result = minimize(
         sphere,
         seed=0,
-        iterations=50,
-        population_size=8,
+        settings=SsaSettings(iterations=50, population_size=8),
         lower=np.full(3, -1.0),
         upper=np.full(3, 1.0),
         callback=stop_at_five,
@@ -403,9 +408,7 @@ def test_callback_can_stop_the_run() -> None:
 def test_progress_bar_does_not_change_the_result() -> None:
     kwargs = dict(
         seed=3,
-        variant="issa",
-        iterations=10,
-        population_size=6,
+        settings=SsaSettings(variant="issa", iterations=10, population_size=6),
         lower=np.full(2, -1.0),
         upper=np.full(2, 1.0),
     )
@@ -420,7 +423,11 @@ def test_nan_fitness_is_never_chosen_as_best() -> None:
         return np.where(x[:, 0] > 0, np.nan, values)
 
     result = minimize(
-        half_nan, seed=2, iterations=20, population_size=10, lower=np.full(2, -1.0), upper=np.full(2, 1.0)
+        half_nan,
+        seed=2,
+        settings=SsaSettings(iterations=20, population_size=10),
+        lower=np.full(2, -1.0),
+        upper=np.full(2, 1.0),
     )
     assert np.isfinite(result.best_fitness) and result.best_x[0] <= 0
 
@@ -429,23 +436,39 @@ def test_nan_fitness_is_never_chosen_as_best() -> None:
     ("kwargs", "message"),
     [
         (dict(lower=np.zeros(2)), "both lower and upper"),
-        (dict(lower=np.zeros(2), upper=np.ones(2), variant="pso"), "variant"),
-        (dict(lower=np.zeros(2), upper=np.ones(2), producer_contraction="mean"), "producer_contraction"),
         (dict(lower=np.zeros(2), upper=np.ones(2), population_size=1), "at least 2"),
-        (dict(lower=np.zeros(2), upper=np.ones(2), scouter_share=1.5), "scouter_share"),
         (dict(lower=np.ones(2), upper=np.zeros(2)), "lower <= upper"),
     ],
 )
 def test_invalid_arguments_are_rejected(kwargs: dict, message: str) -> None:
+    population_size = kwargs.pop("population_size", None)
     with pytest.raises(ValueError, match=message):
-        minimize(sphere, seed=0, iterations=1, **kwargs)
+        minimize(
+            sphere, seed=0, settings=SsaSettings(iterations=1, population_size=population_size), **kwargs
+        )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(variant="pso"), "variant"),
+        (dict(producer_contraction="mean"), "producer_contraction"),
+        (dict(iterations=-1), "iterations"),
+        (dict(scouter_share=1.5), "scouter_share"),
+    ],
+)
+def test_invalid_settings_are_rejected(kwargs: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        SsaSettings(**kwargs)
 
 
 def test_initial_population_outside_bounds_and_bad_fitness_shape_are_rejected() -> None:
     with pytest.raises(ValueError, match="outside"):
-        minimize(sphere, np.full((4, 2), 3.0), seed=0, iterations=1, lower=-1.0, upper=1.0)
+        minimize(
+            sphere, np.full((4, 2), 3.0), seed=0, settings=SsaSettings(iterations=1), lower=-1.0, upper=1.0
+        )
     with pytest.raises(ValueError, match="shape"):
-        minimize(lambda x: sphere(x)[:, None], np.zeros((4, 2)), seed=0, iterations=1)
+        minimize(lambda x: sphere(x)[:, None], np.zeros((4, 2)), seed=0, settings=SsaSettings(iterations=1))
 
 
 # ---------------------------------------------------------------- monotonicity / elitism
@@ -531,12 +554,14 @@ def test_benchmark_table_21_seeds(capsys: pytest.CaptureFixture[str]) -> None:
                     minimize(
                         fitness,
                         seed=s,
-                        variant=variant,
-                        iterations=200,
-                        population_size=30,
+                        settings=SsaSettings(
+                            variant=variant,
+                            iterations=200,
+                            population_size=30,
+                            producer_contraction=contraction,
+                        ),
                         lower=np.full(D, -b),
                         upper=np.full(D, b),
-                        producer_contraction=contraction,
                     ).best_fitness
                     for s in range(21)
                 ]

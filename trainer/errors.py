@@ -42,7 +42,7 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
         return 130
 
 
-def check_writable(path: str | os.PathLike[str]) -> None:
+def check_output_path(path: str | os.PathLike[str]) -> None:
     """Fail early (before long work) when ``path`` cannot be written; creates nothing."""
     target = Path(path)
     parent = target.parent if str(target.parent) else Path(".")
@@ -50,6 +50,11 @@ def check_writable(path: str | os.PathLike[str]) -> None:
         raise UserError(f"{target}: output directory {parent} does not exist")
     if not os.access(parent, os.W_OK) or (target.exists() and not os.access(target, os.W_OK)):
         raise UserError(f"{target}: not writable")
+
+
+# Former name of check_output_path, still imported by trainer/commands/fit_cmd.py: remove once
+# that import says check_output_path.
+check_writable = check_output_path
 
 
 def _current_umask() -> int:
@@ -65,7 +70,7 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     Guarantees that a failed command leaves no partial output file behind.
     """
     target = Path(path)
-    check_writable(target)
+    check_output_path(target)
     parent = target.parent if str(target.parent) else Path(".")
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
     os.close(fd)

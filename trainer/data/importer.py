@@ -22,8 +22,9 @@ from typing import Literal
 
 import numpy as np
 
+from trainer.data.csv_table import Table, read_table
 from trainer.data.recording import Recording
-from trainer.data.recording_io import JITTER_LIMIT, Table, csv_time_decimals, find_time_problem, read_table
+from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
 from trainer.errors import UserError
 
 STANDARD_GRAVITY = 9.80665  # m/s^2 per g (CGPM 1901)

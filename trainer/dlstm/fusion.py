@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from trainer.dlstm.network import PopulationDLSTM
-from trainer.dlstm.optim import minimize
+from trainer.dlstm.optim import SsaSettings, minimize
 from trainer.dlstm.train import TrainingHistory, population_loss, train_population
 
 Optimiser = Literal["none", "ssa", "issa"]
@@ -162,8 +162,7 @@ def refine_stage(
         fitness,
         model.flatten().detach().double().numpy(),
         seed=settings.seed,
-        variant=optimiser,
-        iterations=settings.cycles,
+        settings=SsaSettings(variant=optimiser, iterations=settings.cycles),
         callback=reached_target,
         progress=progress,
     )

@@ -9,7 +9,6 @@ silently would simulate different physics from the one the user wrote down. ``lo
 from __future__ import annotations
 
 import hashlib
-import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -19,6 +18,7 @@ from typing import Any
 import tomli_w
 
 from trainer.errors import UserError, atomic_output
+from trainer.fields import TableFields, show
 from trainer.physics.effects import EFFECT_PARAMETERS, MULTI_INSTANCE, EffectConfig, Param
 from trainer.physics.noise import NOISE_PARAMETERS
 from trainer.physics.profiles import BUILTIN_PROTOCOLS, PROTOCOL_NAMES, SEGMENT_LABELS, SegmentSpec
@@ -112,77 +112,7 @@ class PhysicsConfig:
 # ----------------------------------------------------------------------------------- reading
 
 
-class _Table:
-    """A TOML table being validated: typed getters with one-line errors, then ``finish()``."""
-
-    def __init__(self, source: str, where: str, data: Any) -> None:
-        if not isinstance(data, dict):
-            raise UserError(f"{source}: [{where}] must be a table, got {_show(data)}")
-        self.source, self.where, self.data = source, where, data
-        self.used: set[str] = set()
-
-    def fail(self, message: str) -> UserError:
-        return UserError(f"{self.source}: [{self.where}] {message}")
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str) -> Any:
-        self.used.add(key)
-        return self.data[key]
-
-    def number(self, key: str, rule: str = "finite", default: float | None = None) -> float:
-        if key not in self.data:
-            if default is None:
-                raise self.fail(f"missing {key}")
-            return default
-        return _check_number(self.raw(key), rule, lambda m: self.fail(f"{key} {m}"))
-
-    def string(self, key: str, choices: tuple[str, ...] | None = None, default: str | None = None) -> str:
-        if key not in self.data:
-            if default is None:
-                raise self.fail(f"missing {key}")
-            return default
-        value = self.raw(key)
-        if not isinstance(value, str):
-            raise self.fail(f"{key} must be a string, got {_show(value)}")
-        if choices is not None and value not in choices:
-            raise self.fail(f"{key} must be one of {', '.join(choices)}, got {value!r}")
-        return value
-
-    def only(self, allowed: tuple[str, ...]) -> None:
-        """Reject unknown keys first: a typo is the cause, the "missing" key its symptom."""
-        for key in self.data:
-            if key not in allowed:
-                raise self.fail(f"unknown key {key!r} (expected: {', '.join(allowed)})")
-
-    def finish(self, hint: tuple[str, ...] | None = None) -> None:
-        """Reject keys nobody asked for: typos must not pass silently."""
-        unknown = [k for k in self.data if k not in self.used]
-        if unknown:
-            expected = ", ".join(hint) if hint is not None else ", ".join(sorted(self.used)) or "none"
-            raise self.fail(f"unknown key {unknown[0]!r} (expected: {expected})")
-
-
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _check_number(value: Any, rule: str, fail: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise fail(f"must be a number, got {_show(value)}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise fail(f"must be finite, got {_show(value)}")
-    if rule == "positive" and not number > 0:
-        raise fail(f"must be > 0, got {_show(value)}")
-    if rule == "nonnegative" and not number >= 0:
-        raise fail(f"must be >= 0, got {_show(value)}")
-    return number
-
-
-def _read_params(table: _Table, spec: tuple[Param, ...]) -> dict[str, float]:
+def _read_params(table: TableFields, spec: tuple[Param, ...]) -> dict[str, float]:
     table.only(tuple(p.name for p in spec))
     params: dict[str, float] = {}
     for param in spec:
@@ -193,11 +123,11 @@ def _read_params(table: _Table, spec: tuple[Param, ...]) -> dict[str, float]:
 
 
 def _read_recording(source: str, data: Any) -> RecordingConfig:
-    table = _Table(source, "recording", data)
+    table = TableFields(source, data, "recording")
     table.only(("sample_rate_hz", "sensor", "duration_s"))
     sensor = table.string("sensor", default=RecordingConfig.sensor)
     if not sensor.strip() or any(c in sensor for c in "\r\n"):
-        raise table.fail(f"sensor must be a non-empty single line, got {sensor!r}")
+        table.fail(f"sensor must be a non-empty single line, got {sensor!r}")
     duration = table.number("duration_s", "positive") if table.has("duration_s") else None
     cfg = RecordingConfig(
         table.number("sample_rate_hz", "positive", RecordingConfig.sample_rate_hz), sensor, duration
@@ -207,7 +137,7 @@ def _read_recording(source: str, data: Any) -> RecordingConfig:
 
 
 def _read_segment(source: str, index: int, data: Any, current_c: float) -> SegmentSpec:
-    table = _Table(source, f"protocol.segments #{index + 1}", data)
+    table = TableFields(source, data, f"protocol.segments #{index + 1}")
     label = table.string("label", SEGMENT_LABELS)
     keys = ("label", "duration_s", "rate_c_per_min", "end_c")
     table.only(keys)
@@ -215,17 +145,15 @@ def _read_segment(source: str, index: int, data: Any, current_c: float) -> Segme
         duration = table.number("duration_s", "positive")
         end_c = table.number("end_c", default=current_c)
         if table.has("rate_c_per_min"):
-            raise table.fail(f"rate_c_per_min is only for ramps, not {label}")
+            table.fail(f"rate_c_per_min is only for ramps, not {label}")
         table.finish(keys)
         return SegmentSpec(label, duration, end_c)
     end_c = table.number("end_c")
     if (end_c > current_c) != (label == "ramp_up") or end_c == current_c:
         direction = "above" if label == "ramp_up" else "below"
-        raise table.fail(
-            f"{label} end_c must be {direction} the previous set-point {current_c:g}, got {end_c:g}"
-        )
+        table.fail(f"{label} end_c must be {direction} the previous set-point {current_c:g}, got {end_c:g}")
     if table.has("duration_s") == table.has("rate_c_per_min"):
-        raise table.fail("give exactly one of duration_s and rate_c_per_min")
+        table.fail("give exactly one of duration_s and rate_c_per_min")
     if table.has("duration_s"):
         duration = table.number("duration_s", "positive")
     else:
@@ -235,19 +163,19 @@ def _read_segment(source: str, index: int, data: Any, current_c: float) -> Segme
 
 
 def _read_protocol(source: str, data: Any) -> ProtocolConfig:
-    table = _Table(source, "protocol", data)
+    table = TableFields(source, data, "protocol")
     table.only(("name", "start_c", "segments"))
     name = table.string("name", PROTOCOL_NAMES, default=ProtocolConfig.name)
     if name != "custom":
         for key in ("start_c", "segments"):
             if table.has(key):
-                raise table.fail(f"{key} is only allowed with name = 'custom', not {name!r}")
+                table.fail(f"{key} is only allowed with name = 'custom', not {name!r}")
         table.finish(("name",))
         return ProtocolConfig(name)
     start_c = table.number("start_c")
     raw = table.raw("segments") if table.has("segments") else None
     if not isinstance(raw, list) or not raw:
-        raise table.fail("custom protocol needs at least one [[protocol.segments]] table")
+        table.fail("custom protocol needs at least one [[protocol.segments]] table")
     segments: list[SegmentSpec] = []
     current = start_c
     for index, item in enumerate(raw):
@@ -259,7 +187,7 @@ def _read_protocol(source: str, data: Any) -> ProtocolConfig:
 
 
 def _read_temperature(source: str, data: Any) -> TemperatureConfig:
-    table = _Table(source, "temperature", data)
+    table = TableFields(source, data, "temperature")
     table.only(("case_tau_s", "temp_noise_c"))
     defaults = TemperatureConfig()
     cfg = TemperatureConfig(
@@ -279,14 +207,12 @@ _INPUT_KEYS: dict[str, tuple[str, ...]] = {
 
 
 def _read_input(source: str, data: Any) -> InputConfig:
-    table = _Table(source, "input", data)
+    table = TableFields(source, data, "input")
     table.only(tuple(dict.fromkeys(k for keys in _INPUT_KEYS.values() for k in keys)))
     kind = table.string("kind", INPUT_KINDS)
     for key in table.data:
         if key not in _INPUT_KEYS[kind]:
-            raise table.fail(
-                f"{key} is not used with kind = {kind!r} (allowed: {', '.join(_INPUT_KEYS[kind])})"
-            )
+            table.fail(f"{key} is not used with kind = {kind!r} (allowed: {', '.join(_INPUT_KEYS[kind])})")
     cfg = InputConfig(kind)
     if kind == "constant":
         cfg = replace(cfg, value_mg=table.number("value_mg"))
@@ -295,10 +221,10 @@ def _read_input(source: str, data: Any) -> InputConfig:
     elif kind == "motion":
         tones_raw = table.raw("tones") if table.has("tones") else []
         if not isinstance(tones_raw, list):
-            raise table.fail("tones must be an array of tables [[input.tones]]")
+            table.fail("tones must be an array of tables [[input.tones]]")
         tones = []
         for index, item in enumerate(tones_raw):
-            tone = _Table(source, f"input.tones #{index + 1}", item)
+            tone = TableFields(source, item, f"input.tones #{index + 1}")
             tone.only(("amp_mg", "freq_hz", "phase_rad"))
             tones.append(
                 Tone(
@@ -321,22 +247,19 @@ def _read_input(source: str, data: Any) -> InputConfig:
     return cfg
 
 
-def _read_steps(table: _Table) -> tuple[tuple[float, float], ...]:
+def _read_steps(table: TableFields) -> tuple[tuple[float, float], ...]:
     raw = table.raw("steps") if table.has("steps") else None
     if not isinstance(raw, list) or not raw:
-        raise table.fail("steps must be a non-empty array of [t_s, value_mg] pairs")
+        table.fail("steps must be a non-empty array of [t_s, value_mg] pairs")
     steps: list[tuple[float, float]] = []
     for index, pair in enumerate(raw):
-
-        def fail(message: str, index: int = index) -> UserError:
-            return table.fail(f"steps[{index}] {message}")
-
+        item = f"steps[{index}]"
         if not isinstance(pair, list) or len(pair) != 2:
-            raise fail(f"must be a [t_s, value_mg] pair, got {_show(pair)}")
-        t_s = _check_number(pair[0], "nonnegative", lambda m, f=fail: f(f"t_s {m}"))
-        value = _check_number(pair[1], "finite", lambda m, f=fail: f(f"value_mg {m}"))
+            table.fail(f"{item} must be a [t_s, value_mg] pair, got {show(pair)}")
+        t_s = table.check_number(f"{item} t_s", pair[0], "nonnegative")
+        value = table.check_number(f"{item} value_mg", pair[1], "finite")
         if steps and t_s <= steps[-1][0]:
-            raise fail(f"t_s must increase, got {t_s:g} after {steps[-1][0]:g}")
+            table.fail(f"{item} t_s must increase, got {t_s:g} after {steps[-1][0]:g}")
         steps.append((t_s, value))
     return tuple(steps)
 
@@ -361,12 +284,14 @@ def _read_terms(
                 raise UserError(f"{source}: [{section}.{identifier}] is an empty array")
             for index, item in enumerate(body):
                 where = f"{section}.{identifier} #{index + 1}"
-                terms.append((identifier, _read_params(_Table(source, where, item), registry[identifier])))
+                terms.append(
+                    (identifier, _read_params(TableFields(source, item, where), registry[identifier]))
+                )
         else:
             terms.append(
                 (
                     identifier,
-                    _read_params(_Table(source, f"{section}.{identifier}", body), registry[identifier]),
+                    _read_params(TableFields(source, body, f"{section}.{identifier}"), registry[identifier]),
                 )
             )
     order = list(registry)

@@ -21,6 +21,8 @@ import allantools
 import numpy as np
 from scipy.optimize import nnls
 
+from trainer.scoring.markdown import markdown_table
+
 __all__ = [
     "BIAS_INSTABILITY_FACTOR",
     "AllanCurve",
@@ -598,11 +600,7 @@ class AllanTable:
     def to_markdown(self) -> str:
         """GitHub-flavoured Markdown, values as 5.43×10⁻⁴; unobserved coefficients marked †."""
         header, rows, any_flag = self._cells(_sci_markdown, "†")
-        lines = [
-            "| " + " | ".join(header) + " |",
-            "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|",
-        ]
-        lines += ["| " + " | ".join(row) + " |" for row in rows]
+        lines = [markdown_table(header, rows, align="l" + "r" * (len(header) - 1))]
         if any_flag:
             lines += ["", f"† {_FLAG_NOTE}"]
         return "\n".join(lines) + "\n"
@@ -678,18 +676,14 @@ def plot_allan(
 ) -> Path:
     """Log-log PNG of ADEV curves, one line each (the paper's Figure 13); returns the path.
 
-    Uses matplotlib's object API with the Agg canvas, so no global backend is switched and no
-    display is needed; the file is written atomically.
+    Follows the plotting convention of :mod:`trainer.scoring.plots` (object API on an Agg
+    canvas, no global backend switch, no display needed); the file is written atomically.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    from trainer.errors import atomic_output
+    from trainer.scoring.plots import new_figure, save_figure
 
     if not curves:
         raise ValueError("plot_allan needs at least one curve")
-    figure = Figure(figsize=(7.0, 5.0), dpi=120)
-    FigureCanvasAgg(figure)
+    figure = new_figure((7.0, 5.0), 120)
     axes = figure.add_subplot()
     for label, curve in curves.items():
         positive = curve.adev > 0
@@ -710,7 +704,4 @@ def plot_allan(
     axes.grid(True, which="both", alpha=0.3)
     axes.legend()
     figure.tight_layout()
-    target = Path(path)
-    with atomic_output(target) as tmp:
-        figure.savefig(tmp, format="png")
-    return target
+    return save_figure(figure, path)

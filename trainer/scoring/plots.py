@@ -1,18 +1,39 @@
-"""PNG figures in the layout of the paper's Figures 10-13 (matplotlib, Agg backend)."""
+"""PNG figures in the layout of the paper's Figures 10-13, and the plotting convention.
+
+The convention of every figure of the tool: matplotlib's object API on an Agg canvas
+(:func:`new_figure`, then ``figure.add_subplot``/``figure.subplots``), written atomically as PNG
+(:func:`save_figure`). No ``pyplot`` global state (nothing to close, no figure leaks) and no
+global backend switch (``matplotlib.use``), so plotting needs no display and changes nothing
+for other users of matplotlib in the same process.
+"""
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from trainer.errors import atomic_output
 
 MAX_PLOT_POINTS = 20_000
+
+
+def new_figure(figsize: tuple[float, float], dpi: float) -> Figure:
+    """An empty figure of ``figsize`` inches at ``dpi``, on its own Agg canvas."""
+    figure = Figure(figsize=figsize, dpi=dpi)
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def save_figure(figure: Figure, path: str | os.PathLike[str]) -> Path:
+    """Write ``figure`` to ``path`` as PNG atomically (no partial file on failure); returns the path."""
+    target = Path(path)
+    with atomic_output(target) as tmp:
+        figure.savefig(tmp, format="png")
+    return target
 
 
 def _thin(n: int) -> slice:
@@ -30,7 +51,8 @@ def plot_series(
 ) -> None:
     """Several signals against time on one axis (Figures 10-12: fitted or compensated outputs)."""
     step = _thin(len(time_s))
-    fig, ax = plt.subplots(figsize=(10, 5), dpi=110)
+    fig = new_figure((10, 5), 110)
+    ax = fig.add_subplot()
     for label, values in series.items():
         ax.plot(time_s[step] / 60.0, values[step], label=label, linewidth=0.8)
     ax.set_xlabel("time (min)")
@@ -39,9 +61,7 @@ def plot_series(
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_fit(
@@ -59,7 +79,8 @@ def plot_fit(
     """
     step = _thin(len(time_s))
     minutes = time_s[step] / 60.0
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 7), dpi=110, sharex=True, height_ratios=(3, 2))
+    fig = new_figure((10, 7), 110)
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
     top.plot(minutes, reference[step], label=reference_label, color="black", linewidth=1.2)
     for label, values in estimates.items():
         top.plot(minutes, values[step], label=label, linewidth=0.8)
@@ -72,6 +93,4 @@ def plot_fit(
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, path)

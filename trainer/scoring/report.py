@@ -12,6 +12,7 @@ from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_TRAIN_SMOOTHING_S
 from trainer.scoring.allan import plot_allan
 from trainer.scoring.compare import PAPER_METHODS, Comparison
+from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import plot_fit, plot_series
 
 # Guo et al. 2023, Table 1 (validation data and the four methods): value, improvement %.
@@ -64,7 +65,7 @@ def headline_table(comparison: Comparison) -> str:
             row.append(f"{100 * scores[name].gain:.1f}" if name in scores else "n/a")
         row.append(f"{comparison.fit_seconds[name]:.1f}" if name in comparison.fit_seconds else "")
         rows.append(row)
-    return _markdown(header, rows)
+    return markdown_table(header, rows)
 
 
 def paper_side_by_side(comparison: Comparison) -> str:
@@ -84,13 +85,7 @@ def paper_side_by_side(comparison: Comparison) -> str:
             row.append(f"{ours[key]:.2f} / {paper[term][1]:.2f}")
         row.append(f"{average[name]:.2f} / {paper['Aver']:.2f}")
         rows.append(row)
-    return _markdown(header, rows)
-
-
-def _markdown(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines)
+    return markdown_table(header, rows)
 
 
 def write_figures(comparison: Comparison, train: Recording, valid: Recording, out_dir: Path) -> list[str]:
@@ -205,7 +200,7 @@ def render_report(
             [name, f"{100 * s.gain:.1f}", _sci(s.error_rms_mg), _sci(s.input_rms_mg)]
             for name, s in scores.items()
         ]
-        lines += [_markdown(header, rows), ""]
+        lines += [markdown_table(header, rows), ""]
     lines += fusion_lines(comparison)
     lines += [
         "## The paper's Table 1 layout (Allan coefficients of the validation data)",

@@ -88,6 +88,7 @@ from trainer.dlstm.optim.levy import levy_step
 
 __all__ = [
     "OptimizeResult",
+    "SsaSettings",
     "apply_elitism",
     "minimize",
     "producer_update",
@@ -100,6 +101,42 @@ Contraction = Literal["origin", "best"]
 FitnessFn = Callable[[np.ndarray], ArrayLike]
 
 SCOUTER_EPSILON = 1e-50  # eq. (11)'s epsilon, the reference code's value
+
+
+@dataclass(frozen=True)
+class SsaSettings:
+    """The optimiser's parameters; the defaults are the paper's (and Xue & Shen's) values.
+
+    ``iterations`` is also ``iter_max`` of the producer rule. ``population_size`` is used when
+    :func:`minimize` draws the population (``None``: 30); with an initial population it must
+    be ``None`` or agree with it. ``w0``, ``c`` and ``levy_beta`` are ISSA's only.
+    ``producer_contraction="best"`` is the documented non-paper option (module docstring).
+    Invalid values raise ``ValueError`` when the settings are made.
+    """
+
+    variant: Variant = "ssa"
+    iterations: int = 200
+    population_size: int | None = None
+    producer_share: float = 0.2
+    scouter_share: float = 0.2
+    safety_threshold: float = 0.8
+    w0: float = 1.0
+    c: float = 0.9
+    levy_beta: float = 1.5
+    producer_contraction: Contraction = "origin"
+
+    def __post_init__(self) -> None:
+        if self.variant not in ("ssa", "issa"):
+            raise ValueError(f"variant must be 'ssa' or 'issa', got {self.variant!r}")
+        if self.producer_contraction not in ("origin", "best"):
+            raise ValueError(
+                f"producer_contraction must be 'origin' or 'best', got {self.producer_contraction!r}"
+            )
+        if self.iterations < 0:
+            raise ValueError("iterations must be >= 0")
+        for name, share in (("producer_share", self.producer_share), ("scouter_share", self.scouter_share)):
+            if not 0.0 <= share <= 1.0:
+                raise ValueError(f"{name} must lie in [0, 1], got {share}")
 
 
 @dataclass(frozen=True)
@@ -279,40 +316,23 @@ def minimize(
     initial_population: ArrayLike | None = None,
     *,
     seed: int | np.random.Generator,
-    variant: Variant = "ssa",
-    iterations: int = 200,
-    population_size: int | None = None,
+    settings: SsaSettings = SsaSettings(),
     lower: ArrayLike | None = None,
     upper: ArrayLike | None = None,
-    producer_share: float = 0.2,
-    scouter_share: float = 0.2,
-    safety_threshold: float = 0.8,
-    w0: float = 1.0,
-    c: float = 0.9,
-    levy_beta: float = 1.5,
-    producer_contraction: Contraction = "origin",
     callback: Callable[[OptimizeResult], bool | None] | None = None,
     progress: bool = False,
 ) -> OptimizeResult:
     """Minimise a batched ``fitness`` with SSA or ISSA (see the module docstring).
 
     Either ``initial_population`` (shape ``(pop, d)``, e.g. trained networks) is given,
-    or ``population_size`` (default 30) sparrows are drawn uniformly in the finite box
-    ``[lower, upper]`` (arrays of shape ``(d,)``; scalars broadcast when the other bound
+    or ``settings.population_size`` (default 30) sparrows are drawn uniformly in the finite
+    box ``[lower, upper]`` (arrays of shape ``(d,)``; scalars broadcast when the other bound
     fixes ``d``).  ``lower``/``upper`` also clip every move.  ``callback`` receives a
     snapshot after each iteration and stops the run by returning ``True`` (the fusion's
     "accuracy meets the requirement" ending condition).  ``iter_max`` in the producer
-    rule is ``iterations`` even when a callback stops early.
+    rule is ``settings.iterations`` even when a callback stops early.
     """
-    if variant not in ("ssa", "issa"):
-        raise ValueError(f"variant must be 'ssa' or 'issa', got {variant!r}")
-    if producer_contraction not in ("origin", "best"):
-        raise ValueError(f"producer_contraction must be 'origin' or 'best', got {producer_contraction!r}")
-    if iterations < 0:
-        raise ValueError("iterations must be >= 0")
-    for name, share in (("producer_share", producer_share), ("scouter_share", scouter_share)):
-        if not 0.0 <= share <= 1.0:
-            raise ValueError(f"{name} must lie in [0, 1], got {share}")
+    variant, iterations, population_size = settings.variant, settings.iterations, settings.population_size
     rng = np.random.default_rng(seed)
 
     if initial_population is not None:
@@ -342,9 +362,9 @@ def minimize(
     if n < 2:
         raise ValueError("the population needs at least 2 sparrows")
 
-    n_producers = _share_count(producer_share, n, minimum=1)
+    n_producers = _share_count(settings.producer_share, n, minimum=1)
     n_scroungers = n - n_producers
-    n_scouters = _share_count(scouter_share, n, minimum=0)
+    n_scouters = _share_count(settings.scouter_share, n, minimum=0)
     ranks = np.arange(1, n + 1, dtype=float)
 
     fitnesses = _evaluate(fitness, population)
@@ -374,26 +394,26 @@ def minimize(
         order = np.argsort(fitnesses, kind="stable")
         population, fitnesses = population[order], fitnesses[order]
         worst_x, worst_fitness = population[-1], float(fitnesses[-1])
-        weight = w0 * c**t if variant == "issa" else 1.0
+        weight = settings.w0 * settings.c**t if variant == "issa" else 1.0
 
         alarm = rng.random()
         alpha = 1.0 - rng.random(n_producers)  # (0, 1]
-        producer_jumps = _draw_jumps(rng, n_producers, variant, levy_beta)
+        producer_jumps = _draw_jumps(rng, n_producers, variant, settings.levy_beta)
         producers = producer_update(
             population[:n_producers],
             ranks[:n_producers],
             alarm=alarm,
-            safety_threshold=safety_threshold,
+            safety_threshold=settings.safety_threshold,
             alpha=alpha,
             jumps=producer_jumps,
             iter_max=iterations,
             weight=weight,
-            anchor=best_x if producer_contraction == "best" else None,
+            anchor=best_x if settings.producer_contraction == "best" else None,
         )
         producers = _clip(producers, lower_b, upper_b)
 
         signs = rng.integers(0, 2, size=(n_scroungers, d)) * 2 - 1
-        scrounger_jumps = _draw_jumps(rng, n_scroungers, variant, levy_beta)
+        scrounger_jumps = _draw_jumps(rng, n_scroungers, variant, settings.levy_beta)
         scroungers = scrounger_update(
             population[n_producers:],
             ranks[n_producers:],
