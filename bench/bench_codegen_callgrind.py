@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from codegen.export import export
 from codegen.hostbuild import STRICT_FLAGS, find_compiler
-from codegen.quantize import QStream
+from codegen.quantize import QPla, QStream
 from codegen.render import render_template
 from tests import testmodels as tm
 from trainer.cli import main as trainer_main
@@ -85,7 +85,7 @@ def bench_model(model_path: Path, work: Path, samples: int, cc: str) -> dict[str
         .stdout.splitlines()[1]
         .split()
     )
-    macs_step = q.macs_per_step() if isinstance(q, QStream) else (1 if q.method == "pla" else 3)
+    macs_step = q.macs_per_step() if isinstance(q, QStream) else (1 if isinstance(q, QPla) else 3)
     decimation = q.frontend.decimation if isinstance(q, QStream) else 1
     manifest = json.loads(files["bench.manifest.json"])
     return {
@@ -106,13 +106,8 @@ def default_models(work: Path) -> list[Path]:
     assert trainer_main(["simulate", "--seed", "2", "--duration", "600", "-o", str(rec_path)]) == 0
     rec = read_recording(rec_path)
     paths = []
-    for method in ("dlstm", "dlstm-temp", "persistence", "pla", "poly3"):
-        if method in ("pla", "poly3"):
-            checkpoint = tm.baseline_checkpoint(method, rec)
-        elif method == "persistence":
-            checkpoint = tm.persistence_checkpoint(rec)
-        else:
-            checkpoint = tm.dlstm_checkpoint(method, rec)  # the paper's 2 x 10 network, 1 s steps
+    for method in tm.representatives():  # one per generated C; DLSTMs: the paper's 2 x 10, 1 s steps
+        checkpoint = tm.checkpoint_for(method, rec)
         paths.append(work / f"{method}.pt")
         tm.save_checkpoint(checkpoint, paths[-1])
     return paths

@@ -45,7 +45,9 @@ from codegen.golden import golden_for
 from codegen.hostbuild import write_vectors
 from codegen.quantize import QPla, QPoly3, QStream
 from codegen.verify import to_step_units
+from trainer import methods as registry
 from trainer.cli import main as trainer_main
+from trainer.commands.method_options import DLSTM_OPTIONS
 from trainer.data.recording_io import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -187,15 +189,15 @@ def default_models(work: Path) -> list[tuple[str, Path]]:
     train = work / "train.npz"
     assert trainer_main(["simulate", "--seed", "1", "--duration", "600", "-o", str(train)]) == 0
     models = []
-    for label, method, extra in (
-        ("DLSTM 2x10 (recursive)", "dlstm-issa", FIT_QUICK),
-        ("DLSTM 2x10 (temperature)", "dlstm-temp", FIT_QUICK),
-        ("PLA (10 intervals)", "pla", ["--quiet"]),
-        ("poly3 (cubic)", "poly3", ["--quiet"]),
-    ):
-        path = work / f"{method}.pt"
-        assert trainer_main(["fit", "--method", method, str(train), "-o", str(path), *extra]) == 0
-        models.append((label, path))
+    # The paper's best recursive DLSTM (the last of the shared population), then every other method
+    # with its own C that 'trainer fit' offers, with default options (DLSTMs: 2 x 10, quick fit).
+    fittable = [m for m in registry.entries() if m.in_fit_cli and m.renderer is not None]
+    sharing = [m for m in fittable if m.shares_population]
+    for method in [*sharing[-1:], *(m for m in fittable if not m.shares_population)]:
+        extra = FIT_QUICK if method.options is DLSTM_OPTIONS else ["--quiet"]
+        path = work / f"{method.name}.pt"
+        assert trainer_main(["fit", "--method", method.name, str(train), "-o", str(path), *extra]) == 0
+        models.append((f"{method.name} ({method.family})", path))
     return models
 
 

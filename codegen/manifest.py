@@ -25,6 +25,7 @@ from codegen.quantize import (
     QuantModel,
 )
 from codegen.render import FLAGS, activation_summary, state_bytes, state_fields, table_bytes
+from trainer.dlstm.realtime import PERSISTENCE_KIND
 
 FORMAT = "mems-tdc-codegen-manifest"
 FORMAT_VERSION = 2
@@ -80,7 +81,7 @@ def _stream(model: QStream) -> dict[str, object]:
             "network_step_hz": _num(fe.rate_hz / fe.decimation),
         },
         "frontend": {
-            "kind": "persistence" if not model.layers else model.kind,
+            "kind": PERSISTENCE_KIND if not model.layers else model.kind,
             "smoothed_signal": "temperature" if model.kind == "temperature" else "acceleration",
             "window_samples": model.window,
             "accel_window": fe.accel_window,

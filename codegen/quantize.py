@@ -56,7 +56,7 @@ from codegen.fixedpoint import (
     quantise_array,
     round_half_away,
 )
-from codegen.spec import Checkpoint, DlstmSpec, FrontEndSpec, PersistenceSpec, PlaSpec, Poly3Spec
+from codegen.spec import Checkpoint, DlstmModelSpec, FrontEndSpec, PersistenceSpec, PlaSpec, Poly3Spec
 from trainer.errors import UserError
 
 X_FRAC = 27
@@ -311,7 +311,7 @@ def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: floa
     raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
 
-def _head(spec: DlstmSpec) -> QHead:
+def _head(spec: DlstmModelSpec) -> QHead:
     """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 30)``: y * std + mean folded in, int64."""
     fe = spec.frontend
     scale = Fraction(fe.output_std) * ACCEL_PER_MG  # accel LSB per unit of y
@@ -351,7 +351,7 @@ def _mean_frac(window: int, v_max: int) -> int:
     return frac
 
 
-def _stream(spec: DlstmSpec | PersistenceSpec, limits: Limits) -> QStream:
+def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     fe = spec.frontend
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
@@ -433,7 +433,7 @@ def quantise_checkpoint(ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCE
     """The fixed-point model of a parsed checkpoint (deterministic: same input, same integers)."""
     limits = _limits(ckpt, accel_limit_g)
     model = ckpt.model
-    if isinstance(model, DlstmSpec | PersistenceSpec):
+    if isinstance(model, DlstmModelSpec | PersistenceSpec):
         return _stream(model, limits)
     if isinstance(model, PlaSpec):
         return _pla(model, limits)

@@ -310,7 +310,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         ]
     elif isinstance(model, QPla):
         ctx.update(
-            family="pla",
+            family="piecewise_linear",
             splits=_rows(model.splits_mdegc) if model.splits_mdegc else "",
             n_splits=len(model.splits_mdegc),
             n_intervals=len(model.slopes_q),
@@ -320,7 +320,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         )
     else:
         ctx.update(
-            family="poly3",
+            family="cubic",
             coefficients=_rows(model.coefficients_q),
             frac=model.frac,
             u_shift=model.u_shift,

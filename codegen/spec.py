@@ -13,17 +13,16 @@ decimation) and ``normalisation`` (``inputs_mean``, ``inputs_std``, ``output_mea
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from trainer import methods as registry
+from trainer.dlstm.realtime import PERSISTENCE_KIND, RECURSIVE_KIND, TEMPERATURE_KIND
 from trainer.fields import DottedFields as _Fields
 
-RECURSIVE_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa")
-TEMPERATURE_METHODS = ("dlstm-temp",)
-DLSTM_METHODS = RECURSIVE_METHODS + TEMPERATURE_METHODS
-SUPPORTED_METHODS = (*DLSTM_METHODS, "persistence", "pla", "poly3")
 MAX_WINDOW = 1 << 20  # keeps window sums times 2**8 inside int64
 
 
@@ -31,7 +30,7 @@ MAX_WINDOW = 1 << 20  # keeps window sums times 2**8 inside int64
 class FrontEndSpec:
     """Streaming front end of docs/realtime.md, in samples."""
 
-    kind: str  # "recursive" | "temperature"
+    kind: str  # RECURSIVE_KIND | TEMPERATURE_KIND
     rate_hz: float
     accel_window: int
     temp_window: int
@@ -50,7 +49,7 @@ class LayerSpec:
 
 
 @dataclass(frozen=True)
-class DlstmSpec:
+class DlstmModelSpec:
     method: str
     frontend: FrontEndSpec
     layers: tuple[LayerSpec, ...]
@@ -88,7 +87,7 @@ class Poly3Spec:
     temp_range_c: tuple[float, float]
 
 
-ModelSpec = DlstmSpec | PersistenceSpec | PlaSpec | Poly3Spec
+ModelSpec = DlstmModelSpec | PersistenceSpec | PlaSpec | Poly3Spec
 
 
 @dataclass(frozen=True)
@@ -103,21 +102,19 @@ class Checkpoint:
 def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:
     fe = payload.sub("frontend")
     kind = fe.raw("kind")
-    expected = "temperature" if method in TEMPERATURE_METHODS else "recursive"
-    if method == "persistence":
-        expected = "persistence"
+    expected = frontend_kind(registry.REGISTRY[method])
     if kind != expected:
         root.fail(f"field 'payload.frontend.kind' is {kind!r}; method {method!r} needs {expected!r}")
-    n_inputs = 2 if kind == "temperature" else 1
+    n_inputs = 2 if kind == TEMPERATURE_KIND else 1
     common = {
         "rate_hz": fe.number("rate_hz", positive=True),
         "accel_window": fe.integer("accel_window", 1, MAX_WINDOW),
         "temp_window": fe.integer("temp_window", 1, MAX_WINDOW),
         "decimation": fe.integer("decimation", 1, MAX_WINDOW),
     }
-    if kind == "persistence":
+    if kind == PERSISTENCE_KIND:
         return FrontEndSpec(
-            "recursive", **common, inputs_mean=(0.0,), inputs_std=(1.0,), output_mean=0.0, output_std=1.0
+            RECURSIVE_KIND, **common, inputs_mean=(0.0,), inputs_std=(1.0,), output_mean=0.0, output_std=1.0
         )
     norm = payload.sub("normalisation")
     return FrontEndSpec(
@@ -146,10 +143,10 @@ def _weight_names(weights: dict[str, Any]) -> dict[str, Any]:
     return renamed
 
 
-def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmSpec:
+def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmModelSpec:
     frontend = _frontend(root, payload, method)
     arch = payload.sub("architecture")
-    n_in = 2 if frontend.kind == "temperature" else 1
+    n_in = 2 if frontend.kind == TEMPERATURE_KIND else 1
     input_size = arch.integer("input_size", n_in, n_in)
     hidden = arch.integer("hidden_size", 1, 256)
     num_layers = arch.integer("num_layers", 1, 16)
@@ -172,7 +169,11 @@ def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmSpec:
         )
     head_w = weights.array("w_out", (1, hidden))[0]
     head_b = float(weights.array("b_out", (1,))[0])
-    return DlstmSpec(method, frontend, tuple(layers), head_w, head_b)
+    return DlstmModelSpec(method, frontend, tuple(layers), head_w, head_b)
+
+
+def _persistence(root: _Fields, payload: _Fields, method: str) -> PersistenceSpec:
+    return PersistenceSpec(method, _frontend(root, payload, method))
 
 
 def _pla(root: _Fields, payload: _Fields, method: str) -> PlaSpec:
@@ -192,23 +193,27 @@ def _poly3(root: _Fields, payload: _Fields, method: str) -> Poly3Spec:
     return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
 
 
+# One parser per renderer of trainer/methods.py (tests/test_method_registry.py checks the keys).
+PARSERS: dict[str, Callable[[_Fields, _Fields, str], ModelSpec]] = {
+    "lstm-stream": _dlstm,
+    "mean-stream": _persistence,
+    "piecewise-linear": _pla,
+    "cubic": _poly3,
+}
+
+
 def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
     """Typed specs of a checkpoint already validated by ``load_checkpoint``."""
     root = _Fields(source, checkpoint, "")
     method = checkpoint.get("method")
-    if method not in SUPPORTED_METHODS:
-        root.fail(f"method {method!r} has no code generator (supported: {', '.join(SUPPORTED_METHODS)})")
+    entry = registry.REGISTRY.get(method) if isinstance(method, str) else None
+    if entry is None or entry.renderer is None:
+        supported = registry.with_renderer()
+        root.fail(f"method {method!r} has no code generator (supported: {', '.join(supported)})")
+    assert entry is not None and entry.renderer is not None
     lo, hi = root.numbers("valid_temp_range_c", 2)
     if not lo <= hi:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
     payload = root.sub("payload")
-    model: ModelSpec
-    if method in DLSTM_METHODS:
-        model = _dlstm(root, payload, method)
-    elif method == "persistence":
-        model = PersistenceSpec(method, _frontend(root, payload, method))
-    elif method == "pla":
-        model = _pla(root, payload, method)
-    else:
-        model = _poly3(root, payload, method)
-    return Checkpoint(method, model, (lo, hi))
+    model = PARSERS[entry.renderer](root, payload, entry.name)
+    return Checkpoint(entry.name, model, (lo, hi))

@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import torch
 
+from codegen.spec import parse_checkpoint
+from tests.testmodels import checkpoint_dict, random_weights, save_checkpoint
 from trainer.baselines.pla import PiecewiseLinear
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.checkpoint import load_model, save_model
+from trainer.dlstm.compensators import RecursiveDLSTM, TemperatureDLSTM
+from trainer.dlstm.realtime import TEMPERATURE_KIND, FrontEnd, Standardiser
 from trainer.errors import UserError
+from trainer.methods import name_of
 
 
 def _fitted_pla() -> PiecewiseLinear:
@@ -141,3 +148,48 @@ def test_the_same_model_gives_byte_identical_files_whatever_the_path(tmp_path: P
     for path in paths:
         save_model(model, path, train_stats={"n": 1}, valid_temp_range_c=(0.0, 1.0))
     assert paths[0].read_bytes() == paths[1].read_bytes()
+
+
+def _legacy_normalisation_fields(kind: str, norm: dict[str, Any]) -> dict[str, float]:
+    """What payload.frontend carried besides payload.normalisation before it was written once."""
+    if kind == TEMPERATURE_KIND:
+        names = ("temp_mean", "temp_std", "rate_mean", "rate_std", "drift_mean", "drift_std")
+        values = (*norm["inputs_mean"][:1], *norm["inputs_std"][:1], norm["inputs_mean"][1])
+        values += (norm["inputs_std"][1], norm["output_mean"], norm["output_std"])
+        return dict(zip(names, (float(v) for v in values), strict=True))
+    return {
+        "accel_mean": float(norm["inputs_mean"][0]),
+        "accel_std": float(norm["inputs_std"][0]),
+        "output_mean": float(norm["output_mean"]),
+        "output_std": float(norm["output_std"]),
+    }
+
+
+@pytest.mark.parametrize("cls", [RecursiveDLSTM, TemperatureDLSTM])
+def test_dlstm_normalisation_is_written_once_and_old_checkpoints_still_load(
+    cls: type[RecursiveDLSTM] | type[TemperatureDLSTM], tmp_path: Path
+) -> None:
+    n_in = 2 if cls.kind == TEMPERATURE_KIND else 1
+    model = cls(progress=False)
+    model.frontend = FrontEnd.from_seconds(50.0)
+    model.inputs_norm = Standardiser(tuple(0.5 + k for k in range(n_in)), tuple(2.0 + k for k in range(n_in)))
+    model.output_norm = Standardiser((3.25,), (0.75,))
+    model.weights = random_weights(n_in, 4, 2, seed=3)
+    model.training = {}
+    payload = model.to_payload()
+    assert set(payload["frontend"]) == {"kind", *model.frontend.to_dict()}  # no normalisation there
+
+    old = copy.deepcopy(payload)
+    old["frontend"].update(_legacy_normalisation_fields(cls.kind, payload["normalisation"]))
+    method = name_of(model)
+    for layout, data in (("new", payload), ("old", old)):
+        path = tmp_path / f"{layout}.pt"
+        save_checkpoint(checkpoint_dict(method, data, (-40.0, 80.0)), path)
+        loaded, checkpoint = load_model(path)
+        assert loaded.frontend == model.frontend, layout
+        assert loaded.inputs_norm == model.inputs_norm and loaded.output_norm == model.output_norm, layout
+        for key, tensor in model.weights.items():
+            assert torch.equal(loaded.weights[key], tensor.float()), (layout, key)
+        spec = parse_checkpoint(checkpoint, str(path)).model
+        assert spec.frontend.inputs_mean == model.inputs_norm.mean, layout
+        assert spec.frontend.output_std == model.output_norm.std[0], layout

@@ -33,12 +33,13 @@ from codegen.quantize import C_FRAC, Z_FRAC
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from tests import testmodels as tm
+from trainer import methods as registry
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
-ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3")
+ALL_METHODS = registry.with_renderer()
 
 
 @pytest.fixture(scope="module")
@@ -49,12 +50,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Recording:
     return read_recording(path)
 
 
-def checkpoint_for(method: str, rec: Recording, **kwargs: Any) -> dict[str, Any]:
-    if method in ("pla", "poly3"):
-        return tm.baseline_checkpoint(method, rec)
-    if method == "persistence":
-        return tm.persistence_checkpoint(rec)
-    return tm.dlstm_checkpoint(method, rec, **kwargs)
+checkpoint_for = tm.checkpoint_for
 
 
 def export_checkpoint(checkpoint: dict[str, Any], directory: Path, name: str) -> LoadedModel:

@@ -9,7 +9,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trainer.dlstm.network import GATE_ORDER, DLSTMSpec, PopulationDLSTM, forward_flat, split_flat
+from trainer.dlstm.network import GATE_ORDER, LstmShape, PopulationDLSTM, forward_flat, split_flat
 from trainer.dlstm.train import (
     _clip_per_individual,
     one_step_ahead,
@@ -63,7 +63,7 @@ def test_paper_configuration_parameter_count() -> None:
     torch_count = sum(p.numel() for p in [*lstm.parameters(), *head.parameters()])
     expected = torch_count - 2 * 4 * 10
     assert expected == 1331
-    assert DLSTMSpec(1).num_params == expected
+    assert LstmShape(1).num_params == expected
     assert PopulationDLSTM(10, 1, seed=0).flatten().shape == (10, expected)
     assert GATE_ORDER == ("i", "f", "g", "o")
 

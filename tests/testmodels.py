@@ -14,14 +14,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from codegen.spec import TEMPERATURE_METHODS
+from codegen.spec import frontend_kind
 from trainer import __version__ as trainer_version
-from trainer.baselines.pla import PiecewiseLinear
-from trainer.baselines.poly3 import CubicPolynomial
+from trainer import methods as registry
 from trainer.checkpoint import FORMAT_NAME, FORMAT_VERSION
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.realtime import PERSISTENCE_KIND, TEMPERATURE_KIND
 from trainer.errors import atomic_output
 
 
@@ -41,7 +41,7 @@ def normalisation_from(rec: Recording, method: str, frontend: dict[str, Any]) ->
     """Mean and std of the network inputs and targets on ``rec`` (docs/realtime.md training pairs)."""
     D = frontend["decimation"]
     u = moving_average(rec.accel_mg, frontend["train_accel_window"])[::D]
-    if method in TEMPERATURE_METHODS:
+    if frontend_kind(registry.REGISTRY[method]) == TEMPERATURE_KIND:
         temp_k = moving_average(rec.temp_c, frontend["temp_window"])[::D]
         rate_k = np.concatenate(([0.0], np.diff(temp_k) * 60.0 * frontend["rate_hz"] / D))
         inputs, targets = np.column_stack([temp_k, rate_k]), u
@@ -70,26 +70,8 @@ def dlstm_payload(
     frontend: dict[str, Any],
     normalisation: dict[str, Any],
 ) -> dict[str, Any]:
-    """The payload layout of ``trainer/dlstm/compensators.py``."""
-    kind = "temperature" if method in TEMPERATURE_METHODS else "recursive"
+    """The payload layout of ``trainer/dlstm/compensators.py`` (normalisation written once)."""
     w_x0 = weights["w_x0"]
-    norm_fields: dict[str, float]
-    if kind == "temperature":
-        norm_fields = {
-            "temp_mean": normalisation["inputs_mean"][0],
-            "temp_std": normalisation["inputs_std"][0],
-            "rate_mean": normalisation["inputs_mean"][1],
-            "rate_std": normalisation["inputs_std"][1],
-            "drift_mean": normalisation["output_mean"],
-            "drift_std": normalisation["output_std"],
-        }
-    else:
-        norm_fields = {
-            "accel_mean": normalisation["inputs_mean"][0],
-            "accel_std": normalisation["inputs_std"][0],
-            "output_mean": normalisation["output_mean"],
-            "output_std": normalisation["output_std"],
-        }
     return {
         "architecture": {
             "input_size": int(w_x0.shape[1]),
@@ -99,7 +81,7 @@ def dlstm_payload(
             "gate_order": "ifgo",
         },
         "weights": {k: v.detach().float().clone() for k, v in weights.items()},
-        "frontend": {"kind": kind, **frontend, **norm_fields},
+        "frontend": {"kind": frontend_kind(registry.REGISTRY[method]), **frontend},
         "normalisation": dict(normalisation),
         "training": {},
     }
@@ -136,19 +118,42 @@ def dlstm_checkpoint(
 ) -> dict[str, Any]:
     """A DLSTM checkpoint with random weights and the front end normalised on ``rec``."""
     fe = frontend or frontend_fields(rec.sample_rate_hz)
-    input_size = 2 if method in TEMPERATURE_METHODS else 1
+    input_size = 2 if frontend_kind(registry.REGISTRY[method]) == TEMPERATURE_KIND else 1
     weights = random_weights(input_size, hidden, layers, seed=seed, scale=scale)
     payload = dlstm_payload(method, weights, fe, normalisation_from(rec, method, fe))
     return checkpoint_dict(method, payload, (float(rec.temp_c.min()), float(rec.temp_c.max())))
 
 
 def baseline_checkpoint(method: str, rec: Recording) -> dict[str, Any]:
-    """PLA or poly3 fitted by the trainer on ``rec``."""
-    model = PiecewiseLinear() if method == "pla" else CubicPolynomial()
+    """A memoryless method (PLA, poly3) fitted by the trainer on ``rec`` with its default options."""
+    model = registry.get(method).cls()
     model.fit(rec.without_truth())
     return checkpoint_dict(method, model.to_payload(), (float(rec.temp_c.min()), float(rec.temp_c.max())))
 
 
 def persistence_checkpoint(rec: Recording) -> dict[str, Any]:
-    payload = {"frontend": {"kind": "persistence", **frontend_fields(rec.sample_rate_hz)}}
-    return checkpoint_dict("persistence", payload, (float(rec.temp_c.min()), float(rec.temp_c.max())))
+    """The reference predictor's checkpoint (the registry's method with the mean-stream renderer)."""
+    method = next(m.name for m in registry.entries() if m.renderer == "mean-stream")
+    payload = {"frontend": {"kind": PERSISTENCE_KIND, **frontend_fields(rec.sample_rate_hz)}}
+    return checkpoint_dict(method, payload, (float(rec.temp_c.min()), float(rec.temp_c.max())))
+
+
+def checkpoint_for(method: str, rec: Recording, **kwargs: Any) -> dict[str, Any]:
+    """A test checkpoint of any method with a renderer (``kwargs`` go to :func:`dlstm_checkpoint`)."""
+    renderer = registry.get(method).renderer
+    if renderer in ("piecewise-linear", "cubic"):
+        return baseline_checkpoint(method, rec)
+    if renderer == "mean-stream":
+        return persistence_checkpoint(rec)
+    return dlstm_checkpoint(method, rec, **kwargs)
+
+
+def representatives() -> tuple[str, ...]:
+    """The first method of each distinct generated C (renderer and front-end kind), in renderer order."""
+    chosen: dict[tuple[str, str], str] = {}
+    for method in registry.entries():
+        if method.renderer is not None:
+            kind = frontend_kind(method) if method.renderer.endswith("stream") else ""
+            chosen.setdefault((method.renderer, kind), method.name)
+    order = {renderer: k for k, renderer in enumerate(registry.RENDERERS)}
+    return tuple(name for (renderer, _), name in sorted(chosen.items(), key=lambda kv: order[kv[0][0]]))

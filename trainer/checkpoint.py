@@ -18,8 +18,8 @@ from typing import Any
 
 import torch
 
-from trainer import __version__
-from trainer.compensator import Compensator, registered_methods
+from trainer import __version__, methods
+from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
 
 FORMAT_NAME = "mems-tdc-model"
@@ -37,7 +37,7 @@ def save_model(
     checkpoint = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
-        "method": model.method,
+        "method": methods.name_of(model),
         "payload": model.to_payload(),
         "train_stats": train_stats,
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
@@ -76,10 +76,9 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     for key in ("method", "payload", "train_stats", "valid_temp_range_c"):
         if key not in checkpoint:
             raise UserError(f"{p}: field '{key}' is missing")
-    methods = registered_methods()
-    if checkpoint["method"] not in methods:
+    if checkpoint["method"] not in methods.REGISTRY:
         raise UserError(
-            f"{p}: field 'method' is {checkpoint['method']!r}, not one of {', '.join(sorted(methods))}"
+            f"{p}: field 'method' is {checkpoint['method']!r}, not one of {', '.join(sorted(methods.REGISTRY))}"
         )
     return checkpoint
 
@@ -87,7 +86,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
 def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any]]:
     """The fitted compensator and its checkpoint dict."""
     checkpoint = load_checkpoint(path)
-    cls = registered_methods()[checkpoint["method"]]
+    cls = methods.REGISTRY[checkpoint["method"]].cls
     try:
         model = cls.from_payload(checkpoint["payload"])
     except (KeyError, TypeError, ValueError, IndexError) as exc:

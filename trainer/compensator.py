@@ -1,37 +1,25 @@
-"""The interface every compensation method implements, and the registry of methods.
+"""The interface every compensation method implements.
 
 A compensator estimates the temperature drift of ``accel_mg`` sample by sample; the compensated
-output is ``accel_mg - drift``. Methods register themselves by name so that the CLI, the
-checkpoint loader and the code generator can find them.
+output is ``accel_mg - drift``. The methods (name, class, family, options, renderer) are listed
+in :mod:`trainer.methods`; a class does not name or register itself.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, Self
+from typing import Any, Self
 
 import numpy as np
 
 from trainer.data.recording import Recording
 
-_REGISTRY: dict[str, type[Compensator]] = {}
-
 
 class Compensator(ABC):
     """Fit on a training recording, then estimate the drift of any recording.
 
-    Subclasses set ``method`` and implement the four abstract methods. ``to_payload`` must return
-    only tensors and plain Python values (str, int, float, bool, None, lists, dicts) so that the
-    checkpoint loads with ``torch.load(weights_only=True)``.
+    Subclasses implement the four abstract methods. ``to_payload`` must return only tensors and plain Python values (str, int, float, bool, None, lists, dicts) so that the checkpoint loads with ``torch.load(weights_only=True)``.
     """
-
-    method: ClassVar[str]
-
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        name = getattr(cls, "method", None)
-        if isinstance(name, str):
-            _REGISTRY[name] = cls
 
     @abstractmethod
     def fit(self, rec: Recording) -> Self:
@@ -53,12 +41,3 @@ class Compensator(ABC):
     def compensate(self, rec: Recording) -> np.ndarray:
         """The compensated output ``accel_mg - drift`` in mg."""
         return rec.accel_mg - self.predict_drift(rec)
-
-
-def registered_methods() -> dict[str, type[Compensator]]:
-    """Method name -> class, after importing every module that defines one."""
-    import trainer.baselines.pla
-    import trainer.baselines.poly3
-    import trainer.dlstm.compensators  # noqa: F401
-
-    return dict(_REGISTRY)

@@ -52,10 +52,6 @@ def check_output_path(path: str | os.PathLike[str]) -> None:
         raise UserError(f"{target}: not writable")
 
 
-# Former name of check_output_path, still imported by trainer/commands/fit_cmd.py: remove once
-# that import says check_output_path.
-check_writable = check_output_path
-
 
 def _current_umask() -> int:
     mask = os.umask(0)

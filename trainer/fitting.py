@@ -6,18 +6,17 @@ from typing import Any
 
 import numpy as np
 
-from trainer.compensator import Compensator, registered_methods
+from trainer import methods
+from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 
 
 def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:
     """A fresh, unfitted compensator of ``method`` built with keyword ``options``."""
-    methods = registered_methods()
-    if method not in methods:
-        raise UserError(f"--method: unknown method {method!r}; choose one of {', '.join(sorted(methods))}")
+    cls = methods.get(method).cls
     try:
-        return methods[method](**(options or {}))
+        return cls(**(options or {}))
     except TypeError as exc:
         raise UserError(f"--method {method}: bad option ({exc})") from None
 

@@ -28,8 +28,6 @@ from trainer.errors import UserError
 class PiecewiseLinear(TemperatureCompensator):
     """The paper's PLA baseline: temperature in, drift out, one line per temperature interval."""
 
-    method = "pla"
-
     def __init__(self, n_intervals: int = 10) -> None:
         if n_intervals < 1:
             raise UserError(f"pla: n_intervals must be >= 1, got {n_intervals}")

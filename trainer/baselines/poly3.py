@@ -45,8 +45,6 @@ def bin_by_temperature(temp: np.ndarray, values: np.ndarray, n_bins: int) -> tup
 class CubicPolynomial(TemperatureCompensator):
     """PX4-style per-axis cubic thermal calibration (offset only)."""
 
-    method = "poly3"
-
     def __init__(
         self,
         *,

@@ -9,12 +9,12 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from trainer import methods
 from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
-ALL_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")
 
 
 def add_parser(subparsers: Any) -> None:
@@ -36,8 +36,8 @@ def add_parser(subparsers: Any) -> None:
     )
     parser.add_argument(
         "--methods",
-        default=",".join(ALL_METHODS),
-        help=f"comma-separated subset of {','.join(ALL_METHODS)}",
+        default=",".join(methods.names()),
+        help=f"comma-separated subset of {','.join(methods.names())}",
     )
     parser.add_argument(
         "--smoothing",
@@ -66,11 +66,12 @@ def publish(staging: Path, out_dir: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    unknown = [m for m in methods if m not in ALL_METHODS]
-    if unknown or not methods:
+    known = methods.names()
+    requested = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    unknown = [m for m in requested if m not in known]
+    if unknown or not requested:
         raise UserError(
-            f"--methods: unknown {', '.join(unknown) or '(empty)'}; choose from {','.join(ALL_METHODS)}"
+            f"--methods: unknown {', '.join(unknown) or '(empty)'}; choose from {','.join(known)}"
         )
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
@@ -101,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         settings,
         input_tests=input_tests,
         smoothing_s=args.smoothing,
-        methods=methods,
+        methods=requested,
         progress=not args.quiet,
         log=log,
     )

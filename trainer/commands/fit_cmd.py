@@ -5,26 +5,23 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+from trainer import methods
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
-METHODS = ("pla", "poly3", "dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp")
-DLSTM_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp")
 
 
 def add_parser(subparsers: Any) -> None:
     parser = subparsers.add_parser("fit", help="fit a compensator on a training recording")
     parser.add_argument("train", help="training recording (.csv or .npz)")
-    parser.add_argument("--method", required=True, choices=METHODS, help="compensation method")
-    parser.add_argument("-o", "--output", required=True, help="checkpoint to write (model.pt)")
-    parser.add_argument("--intervals", type=int, default=10, help="pla: number of temperature intervals (10)")
     parser.add_argument(
-        "--remove-median",
-        action="store_true",
-        help="poly3: subtract the axis median first, exactly as PX4 does (offset left to "
-        "the six-position calibration)",
+        "--method", required=True, choices=methods.fit_cli_names(), help="compensation method"
     )
-    add_dlstm_options(parser)
+    parser.add_argument("-o", "--output", required=True, help="checkpoint to write (model.pt)")
+    groups = []  # each method's options once, however many methods share them
+    for method in methods.entries():
+        if method.in_fit_cli and method.options not in groups:
+            groups.append(method.options)
+            method.options.add_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -33,18 +30,11 @@ def run(args: argparse.Namespace) -> int:
 
     from trainer.checkpoint import save_model
     from trainer.data.recording_io import read_recording
-    from trainer.errors import check_writable
+    from trainer.errors import check_output_path
     from trainer.fitting import fit_compensator, training_stats
 
-    check_writable(args.output)  # fail before a long training run, not after it
-    options: dict[str, Any] = {}
-    if args.method == "pla":
-        options["n_intervals"] = args.intervals
-    elif args.method == "poly3":
-        options["remove_median"] = args.remove_median
-    else:
-        settings, frontend = settings_from_args(args)
-        options = {"settings": settings, "frontend_seconds": frontend, "progress": not args.quiet}
+    check_output_path(args.output)  # fail before a long training run, not after it
+    options = methods.get(args.method).options.fit_kwargs(args)
     train = read_recording(args.train)
     model = fit_compensator(args.method, train, options)
     stats = training_stats(train)

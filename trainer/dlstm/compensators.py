@@ -30,7 +30,16 @@ from trainer.dlstm.fusion import (
     refine_stage,
 )
 from trainer.dlstm.network import PopulationDLSTM
-from trainer.dlstm.realtime import FrontEnd, Standardiser, hold, smoothed_steps, temperature_steps
+from trainer.dlstm.realtime import (
+    PERSISTENCE_KIND,
+    RECURSIVE_KIND,
+    TEMPERATURE_KIND,
+    FrontEnd,
+    Standardiser,
+    hold,
+    smoothed_steps,
+    temperature_steps,
+)
 from trainer.errors import UserError
 
 WEIGHT_KEYS = ("w_x0", "w_h0", "b0", "w_x1", "w_h1", "b1", "w_out", "b_out")
@@ -123,7 +132,6 @@ class _StreamingDLSTM(Compensator):
     def to_payload(self) -> dict[str, Any]:
         assert self.frontend and self.inputs_norm and self.output_norm, "fit the model first"
         w_x0 = self.weights["w_x0"]
-        frontend = {"kind": self.kind, **self.frontend.to_dict(), **self._normalisation_fields()}
         return {
             "architecture": {
                 "input_size": int(w_x0.shape[1]),
@@ -133,7 +141,7 @@ class _StreamingDLSTM(Compensator):
                 "gate_order": "ifgo",
             },
             "weights": {k: v.detach().float().clone() for k, v in self.weights.items()},
-            "frontend": frontend,
+            "frontend": {"kind": self.kind, **self.frontend.to_dict()},
             "normalisation": {
                 "inputs_mean": list(self.inputs_norm.mean),
                 "inputs_std": list(self.inputs_norm.std),
@@ -143,9 +151,6 @@ class _StreamingDLSTM(Compensator):
             "training": self.training,
         }
 
-    def _normalisation_fields(self) -> dict[str, float]:
-        raise NotImplementedError
-
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
         model = cls(progress=False)
@@ -154,7 +159,7 @@ class _StreamingDLSTM(Compensator):
         model.training = payload["training"]
         frontend = payload["frontend"]
         if frontend["kind"] != cls.kind:
-            raise ValueError(f"frontend kind {frontend['kind']!r} does not belong to method {cls.method!r}")
+            raise ValueError(f"frontend kind {frontend['kind']!r} does not belong to {cls.__name__}")
         model.frontend = FrontEnd.from_dict(frontend)
         norm = payload["normalisation"]
         model.inputs_norm = Standardiser(tuple(norm["inputs_mean"]), tuple(norm["inputs_std"]))
@@ -170,8 +175,7 @@ class _StreamingDLSTM(Compensator):
 class RecursiveDLSTM(_StreamingDLSTM):
     """The paper's real-time model: ``u_{k+1} = F[u_k]`` on the smoothed output (DLSTM alone)."""
 
-    method = "dlstm"
-    kind = "recursive"
+    kind = RECURSIVE_KIND
 
     def training_pairs(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
         assert self.frontend is not None
@@ -184,35 +188,23 @@ class RecursiveDLSTM(_StreamingDLSTM):
             -1, 1
         )
 
-    def _normalisation_fields(self) -> dict[str, float]:
-        assert self.inputs_norm and self.output_norm
-        return {
-            "accel_mean": self.inputs_norm.mean[0],
-            "accel_std": self.inputs_norm.std[0],
-            "output_mean": self.output_norm.mean[0],
-            "output_std": self.output_norm.std[0],
-        }
-
 
 class RecursiveDLSTMWithSSA(RecursiveDLSTM):
     """DLSTM + SSA (Xue and Shen 2020) over the trained population."""
 
-    method = "dlstm-ssa"
     optimiser = "ssa"
 
 
 class RecursiveDLSTMWithISSA(RecursiveDLSTM):
     """DLSTM + ISSA (adaptive weight, Lévy flight, elitism) over the trained population."""
 
-    method = "dlstm-issa"
     optimiser = "issa"
 
 
 class TemperatureDLSTM(_StreamingDLSTM):
     """Physically meaningful variant: smoothed temperature and its rate in, drift out."""
 
-    method = "dlstm-temp"
-    kind = "temperature"
+    kind = TEMPERATURE_KIND
 
     def _features(self, rec: Recording) -> np.ndarray:
         assert self.frontend is not None
@@ -227,22 +219,9 @@ class TemperatureDLSTM(_StreamingDLSTM):
     def run_inputs(self, rec: Recording) -> np.ndarray:
         return self._features(rec)
 
-    def _normalisation_fields(self) -> dict[str, float]:
-        assert self.inputs_norm and self.output_norm
-        return {
-            "temp_mean": self.inputs_norm.mean[0],
-            "temp_std": self.inputs_norm.std[0],
-            "rate_mean": self.inputs_norm.mean[1],
-            "rate_std": self.inputs_norm.std[1],
-            "drift_mean": self.output_norm.mean[0],
-            "drift_std": self.output_norm.std[0],
-        }
-
 
 class Persistence(Compensator):
     """``F`` = identity: the held estimate is the last smoothed output (no learning at all)."""
-
-    method = "persistence"
 
     def __init__(self, frontend_seconds: dict[str, float] | None = None) -> None:
         self.frontend_seconds = frontend_seconds or {}
@@ -260,7 +239,7 @@ class Persistence(Compensator):
 
     def to_payload(self) -> dict[str, Any]:
         assert self.frontend is not None, "fit the model first"
-        return {"frontend": {"kind": "persistence", **self.frontend.to_dict()}}
+        return {"frontend": {"kind": PERSISTENCE_KIND, **self.frontend.to_dict()}}
 
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:

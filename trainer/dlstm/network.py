@@ -64,7 +64,7 @@ State = tuple[LayerState, ...]  # one (h, c) per layer
 
 
 @dataclass(frozen=True)
-class DLSTMSpec:
+class LstmShape:
     """Architecture of one individual; everything the flat layout depends on."""
 
     input_size: int
@@ -75,7 +75,7 @@ class DLSTMSpec:
     def __post_init__(self) -> None:
         for name in ("input_size", "hidden_size", "num_layers", "output_size"):
             if int(getattr(self, name)) < 1:
-                raise ValueError(f"DLSTMSpec.{name} must be >= 1, got {getattr(self, name)}")
+                raise ValueError(f"LstmShape.{name} must be >= 1, got {getattr(self, name)}")
 
     def layer_input_size(self, layer: int) -> int:
         return self.input_size if layer == 0 else self.hidden_size
@@ -104,7 +104,7 @@ class DLSTMSpec:
 # --------------------------------------------------------------------------------------------
 
 
-def split_flat(theta: Tensor, spec: DLSTMSpec) -> list[Tensor]:
+def split_flat(theta: Tensor, spec: LstmShape) -> list[Tensor]:
     """Views of a (P, d) parameter matrix as the (P, *shape) tensors of the flat layout."""
     if theta.dim() != 2 or theta.shape[1] != spec.num_params:
         raise ValueError(f"theta must be (P, {spec.num_params}), got {tuple(theta.shape)}")
@@ -116,7 +116,7 @@ def split_flat(theta: Tensor, spec: DLSTMSpec) -> list[Tensor]:
     return params
 
 
-def zero_state(population: int, batch: int, spec: DLSTMSpec, *, dtype: torch.dtype) -> State:
+def zero_state(population: int, batch: int, spec: LstmShape, *, dtype: torch.dtype) -> State:
     """h_0 = C_0 = 0 for every layer (the paper initialises C to 0)."""
     shape = (population, batch, spec.hidden_size)
     return tuple(
@@ -125,7 +125,7 @@ def zero_state(population: int, batch: int, spec: DLSTMSpec, *, dtype: torch.dty
 
 
 def dlstm_step(
-    params: Sequence[Tensor], x_t: Tensor, spec: DLSTMSpec, state: State | None = None
+    params: Sequence[Tensor], x_t: Tensor, spec: LstmShape, state: State | None = None
 ) -> tuple[Tensor, State]:
     """One time step of eq. (2)-(7) for every individual: x_t (P, B, in) or shared (B, in).
 
@@ -159,7 +159,7 @@ def dlstm_step(
 def dlstm_forward(
     params: Sequence[Tensor],
     x: Tensor,
-    spec: DLSTMSpec,
+    spec: LstmShape,
     state: State | None = None,
     *,
     backend: Backend = "packed",
@@ -186,7 +186,7 @@ def dlstm_forward(
 def forward_flat(
     theta: Tensor,
     x: Tensor,
-    spec: DLSTMSpec,
+    spec: LstmShape,
     state: State | None = None,
     *,
     backend: Backend = "packed",
@@ -221,7 +221,7 @@ class PopulationDLSTM(nn.Module):
         super().__init__()
         if population < 1:
             raise ValueError(f"population must be >= 1, got {population}")
-        self.spec = DLSTMSpec(input_size, hidden_size, num_layers, output_size)
+        self.spec = LstmShape(input_size, hidden_size, num_layers, output_size)
         self.backend: Backend = backend
         self.group_size = group_size
         for name, shape in self.spec.param_shapes():
@@ -297,7 +297,7 @@ class PopulationDLSTM(nn.Module):
         first = individuals[0]
         num_layers = sum(1 for name in first if name.startswith("w_h"))
         G, input_size = first["w_x0"].shape
-        spec = DLSTMSpec(input_size, G // 4, num_layers, first["w_out"].shape[0])
+        spec = LstmShape(input_size, G // 4, num_layers, first["w_out"].shape[0])
         model = cls(
             len(individuals),
             spec.input_size,
@@ -356,7 +356,7 @@ def individual_generator(seed: int, k: int) -> torch.Generator:
     return torch.Generator().manual_seed((int(words[0]) << 32 | int(words[1])) & ((1 << 63) - 1))
 
 
-def init_individual(spec: DLSTMSpec, seed: int, k: int, init: Init = "matlab") -> list[Tensor]:
+def init_individual(spec: LstmShape, seed: int, k: int, init: Init = "matlab") -> list[Tensor]:
     """Initial float64 weights of individual ``k`` in flat-layout order.
 
     ``"matlab"`` mirrors MATLAB's lstmLayer/fullyConnectedLayer defaults (the paper used MATLAB):
@@ -402,7 +402,7 @@ def init_individual(spec: DLSTMSpec, seed: int, k: int, init: Init = "matlab") -
 # --------------------------------------------------------------------------------------------
 
 
-def _check_input(x: Tensor, spec: DLSTMSpec, P: int, dtype: torch.dtype, *, time_axis: bool) -> Tensor:
+def _check_input(x: Tensor, spec: LstmShape, P: int, dtype: torch.dtype, *, time_axis: bool) -> Tensor:
     shared_dims = 3 if time_axis else 2
     what = "(B, T, in) or (P, B, T, in)" if time_axis else "(B, in) or (P, B, in)"
     if x.dim() not in (shared_dims, shared_dims + 1) or x.shape[-1] != spec.input_size:
@@ -414,7 +414,7 @@ def _check_input(x: Tensor, spec: DLSTMSpec, P: int, dtype: torch.dtype, *, time
     return x
 
 
-def _check_state(state: State | None, P: int, B: int, spec: DLSTMSpec, dtype: torch.dtype) -> State:
+def _check_state(state: State | None, P: int, B: int, spec: LstmShape, dtype: torch.dtype) -> State:
     if state is None:
         return zero_state(P, B, spec, dtype=dtype)
     expected = (P, B, spec.hidden_size)
@@ -456,7 +456,7 @@ def _unpack_hidden(t: Tensor, P: int) -> Tensor:
 
 
 def _packed_group(
-    params: list[Tensor], x: Tensor, spec: DLSTMSpec, state: State
+    params: list[Tensor], x: Tensor, spec: LstmShape, state: State
 ) -> tuple[Tensor, Tensor, State]:
     """One torch.lstm call for a group; returns (last-layer h sequence (P,B,T,H), y, state)."""
     P, H, L = params[0].shape[0], spec.hidden_size, spec.num_layers
@@ -490,7 +490,7 @@ def _individual_mask(t: Tensor, mask: Tensor) -> Tensor:
 
 
 def _forward_packed(
-    params: list[Tensor], x: Tensor, spec: DLSTMSpec, state: State, group_size: int
+    params: list[Tensor], x: Tensor, spec: LstmShape, state: State, group_size: int
 ) -> tuple[Tensor, State]:
     P = params[0].shape[0]
     per_individual_x = x.dim() == 4

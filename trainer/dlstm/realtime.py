@@ -23,6 +23,11 @@ PAPER_RUN_SMOOTHING_S = 0.5
 DEFAULT_TEMP_SMOOTHING_S = 5.0
 DEFAULT_STEP_S = 1.0
 
+# Front-end kinds, as written in a checkpoint's payload.frontend.kind (docs/realtime.md).
+RECURSIVE_KIND = "recursive"  # the network sees the smoothed output
+TEMPERATURE_KIND = "temperature"  # the network sees the smoothed temperature and its rate
+PERSISTENCE_KIND = "persistence"  # no network: the estimate is the smoothed output itself
+
 
 @dataclass(frozen=True)
 class FrontEnd:

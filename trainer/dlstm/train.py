@@ -24,7 +24,7 @@ import torch
 from torch import Tensor
 from tqdm.auto import tqdm
 
-from trainer.dlstm.network import DLSTMSpec, PopulationDLSTM, forward_flat
+from trainer.dlstm.network import LstmShape, PopulationDLSTM, forward_flat
 
 LossKind = Literal["mse", "half_mse", "mae"]
 # callback(iteration, per-individual losses (P,)) -> True to stop (the paper's "accuracy meets
@@ -76,7 +76,7 @@ def population_loss(
     inputs: Tensor,
     targets: Tensor,
     *,
-    spec: DLSTMSpec | None = None,
+    spec: LstmShape | None = None,
     loss: LossKind = "mse",
 ) -> Tensor:
     """(P,) loss of every individual, no gradient: the sparrow search's fitness.

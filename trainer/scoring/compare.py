@@ -1,9 +1,10 @@
 """``trainer compare``: train every method on one recording and score them on another.
 
-The paper's three DLSTM methods share their gradient-trained population (stage one of the
-fusion), exactly as the paper's comparison does: DLSTM exports the best trained network, DLSTM+SSA
-and DLSTM+ISSA refine the same population. PLA, the flight-stack cubic, the temperature-input
-DLSTM and the persistence predictor complete the table.
+The methods and their order come from :mod:`trainer.methods`. The paper's three DLSTM methods
+(``shares_population``) share their gradient-trained population (stage one of the fusion), exactly
+as the paper's comparison does: DLSTM exports the best trained network, DLSTM+SSA and DLSTM+ISSA
+refine the same population. PLA, the flight-stack cubic, the temperature-input DLSTM and the
+persistence predictor complete the table.
 """
 
 from __future__ import annotations
@@ -14,24 +15,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trainer.baselines.pla import PiecewiseLinear
-from trainer.baselines.poly3 import CubicPolynomial
+from trainer import methods as registry
 from trainer.compensator import Compensator
 from trainer.data.recording import Recording
-from trainer.dlstm.compensators import (
-    Persistence,
-    RecursiveDLSTM,
-    RecursiveDLSTMWithISSA,
-    RecursiveDLSTMWithSSA,
-    TemperatureDLSTM,
-)
 from trainer.dlstm.fusion import FusionSettings, train_stage
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.scoring.evaluate import Evaluation, InputSurvival, evaluate, input_survival
 
 ORACLE = "oracle"  # evaluation only: accel - true_drift_mg, what perfect compensation would score
-METHOD_ORDER = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla", "poly3", "dlstm-temp", "persistence")
-PAPER_METHODS = ("dlstm", "dlstm-ssa", "dlstm-issa", "pla")
 
 
 @dataclass
@@ -48,45 +39,44 @@ def fit_all(
     train: Recording,
     settings: FusionSettings,
     *,
-    methods: tuple[str, ...] = METHOD_ORDER,
+    methods: tuple[str, ...] | None = None,
     progress: bool = True,
     log: Callable[[str], None] = print,
 ) -> tuple[dict[str, Compensator], dict[str, float]]:
-    """Fit every requested method on ``train`` (ground truth hidden)."""
+    """Fit every requested method (default: all) on ``train`` (ground truth hidden), in registry order.
+
+    The methods that share the gradient-trained population are fitted first, from one population
+    trained once (prepared by the first registered sharing method), then every other method.
+    """
     train = train.without_truth()
+    requested = registry.names() if methods is None else methods
+    chosen = [m for m in registry.entries() if m.name in requested]
     models: dict[str, Compensator] = {}
     seconds: dict[str, float] = {}
-    recursive = [m for m in ("dlstm", "dlstm-ssa", "dlstm-issa") if m in methods]
-    if recursive:
+
+    def build(method: registry.Method) -> Compensator:
+        return method.cls(**method.options.compare_kwargs(settings, progress))
+
+    sharing = [m for m in chosen if m.shares_population]
+    if sharing:
         log(f"training the DLSTM population ({settings.population} x {settings.iterations} iterations)")
         start = time.perf_counter()
-        probe = RecursiveDLSTM(settings=settings, progress=progress)
-        x, y = probe.prepare(train)
+        probe = build(next(m for m in registry.entries() if m.shares_population))
+        x, y = probe.prepare(train)  # type: ignore[attr-defined]
         trained = train_stage(x, y, settings, progress=progress)
         shared = time.perf_counter() - start
-        for method, cls in (
-            ("dlstm", RecursiveDLSTM),
-            ("dlstm-ssa", RecursiveDLSTMWithSSA),
-            ("dlstm-issa", RecursiveDLSTMWithISSA),
-        ):
-            if method in recursive:
-                log(f"fitting {method}")
-                start = time.perf_counter()
-                models[method] = cls(settings=settings, progress=progress).fit_from_population(train, trained)
-                seconds[method] = shared + time.perf_counter() - start
-    simple: dict[str, Callable[[], Compensator]] = {
-        "pla": PiecewiseLinear,
-        "poly3": CubicPolynomial,
-        "dlstm-temp": lambda: TemperatureDLSTM(settings=settings, progress=progress),
-        "persistence": Persistence,
-    }
-    for method, make in simple.items():
-        if method in methods:
-            log(f"fitting {method}")
+        for method in sharing:
+            log(f"fitting {method.name}")
             start = time.perf_counter()
-            models[method] = make().fit(train)
-            seconds[method] = time.perf_counter() - start
-    return {m: models[m] for m in METHOD_ORDER if m in models}, seconds
+            models[method.name] = build(method).fit_from_population(train, trained)  # type: ignore[attr-defined]
+            seconds[method.name] = shared + time.perf_counter() - start
+    for method in chosen:
+        if not method.shares_population:
+            log(f"fitting {method.name}")
+            start = time.perf_counter()
+            models[method.name] = build(method).fit(train)
+            seconds[method.name] = time.perf_counter() - start
+    return {m.name: models[m.name] for m in chosen}, seconds
 
 
 def compare(
@@ -96,7 +86,7 @@ def compare(
     *,
     input_tests: tuple[Recording, ...] = (),
     smoothing_s: float = PAPER_RUN_SMOOTHING_S,
-    methods: tuple[str, ...] = METHOD_ORDER,
+    methods: tuple[str, ...] | None = None,
     progress: bool = True,
     log: Callable[[str], None] = print,
 ) -> Comparison:
@@ -111,7 +101,7 @@ def compare(
     evaluation = evaluate(
         valid,
         compensated,
-        out_of_range={name: outside for name in models if name in ("pla", "poly3", "dlstm-temp")},
+        out_of_range={name: outside for name in models if registry.REGISTRY[name].range_checked},
         smoothing_s=smoothing_s,
     )
     comparison = Comparison(models, seconds, evaluation)

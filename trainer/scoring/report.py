@@ -7,22 +7,18 @@ from pathlib import Path
 
 import numpy as np
 
+from trainer import methods as registry
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_TRAIN_SMOOTHING_S
 from trainer.scoring.allan import plot_allan
-from trainer.scoring.compare import PAPER_METHODS, Comparison
+from trainer.scoring.compare import Comparison
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import plot_fit, plot_series
 
-# Guo et al. 2023, Table 1 (validation data and the four methods): value, improvement %.
-PAPER_TABLE_1 = {
-    "raw": {"B": 5.43e-4, "K": 4.33e-5, "R": 1.18e-6},
-    "dlstm": {"B": (6.97e-5, 87.16), "K": (4.19e-6, 90.33), "R": (1.11e-7, 90.59), "Aver": 89.36},
-    "dlstm-ssa": {"B": (6.33e-5, 88.35), "K": (3.39e-6, 92.16), "R": (9.40e-8, 92.05), "Aver": 90.85},
-    "dlstm-issa": {"B": (2.77e-5, 94.89), "K": (1.14e-6, 97.37), "R": (2.63e-8, 97.77), "Aver": 96.68},
-    "pla": {"B": (5.25e-4, 3.29), "K": (3.45e-5, 20.23), "R": (8.24e-7, 30.31), "Aver": 17.94},
-}
+# Guo et al. 2023, Table 1 (validation data): the raw row here, each method's row in its registry
+# entry (trainer/methods.py, ``paper_table1``: value, improvement %).
+PAPER_TABLE_1_RAW = {"B": 5.43e-4, "K": 4.33e-5, "R": 1.18e-6}
 
 HONEST_SCORING = (
     "An Allan-variance improvement rewards any operation that removes low-frequency content: the "
@@ -75,10 +71,11 @@ def paper_side_by_side(comparison: Comparison) -> str:
     header = ["method", "B impr. ours / paper (%)", "K impr. ours / paper (%)", "R impr. ours / paper (%)"]
     header += ["Aver ours / paper (%)"]
     rows = []
-    for name in PAPER_METHODS:
+    for name in registry.paper_names():
         if name not in improvements:
             continue
-        paper = PAPER_TABLE_1[name]
+        paper = registry.REGISTRY[name].paper_table1
+        assert paper is not None
         ours = improvements[name]
         row = [name]
         for term, key in (("B", "b_mg"), ("K", "k_mg_per_rt_s"), ("R", "r_mg_per_s")):
@@ -91,7 +88,8 @@ def paper_side_by_side(comparison: Comparison) -> str:
 def write_figures(comparison: Comparison, train: Recording, valid: Recording, out_dir: Path) -> list[str]:
     """Figures 10-13 of the paper plus the input-survival figure; returns the file names."""
     names = []
-    shown = [m for m in comparison.models if m != "persistence"]  # persistence would hide the data
+    # a reference predictor (persistence) would hide the data
+    shown = [m for m in comparison.models if not registry.REGISTRY[m].reference]
     for rec, name, title in (
         (train, "fig10_training_fit.png", "Fit on training data (drift estimate vs 5 s smoothed output)"),
         (valid, "fig11_validation_fit.png", "Fit on validation data (drift estimate vs 5 s smoothed output)"),
@@ -102,7 +100,11 @@ def write_figures(comparison: Comparison, train: Recording, valid: Recording, ou
         plot_fit(rec.time_s, "output (5 s smoothing)", reference, estimates, out_dir / name, title=title)
         names.append(name)
     evaluation = comparison.evaluation
-    smoothed = {k: v for k, v in evaluation.smoothed.items() if k != "persistence"}
+    smoothed = {
+        k: v
+        for k, v in evaluation.smoothed.items()
+        if k not in registry.REGISTRY or not registry.REGISTRY[k].reference
+    }
     plot_series(
         valid.time_s,
         smoothed,
@@ -139,10 +141,9 @@ def _smooth(x: np.ndarray, rate_hz: float, seconds: float) -> np.ndarray:
 def fusion_lines(comparison: Comparison) -> list[str]:
     """What SSA/ISSA actually changed: the training MSE of the best network before and after."""
     lines = []
-    for name in ("dlstm-ssa", "dlstm-issa"):
-        model = comparison.models.get(name)
+    for name, model in comparison.models.items():
         training = getattr(model, "training", None)
-        if not training or "best_loss_after_gradient" not in training:
+        if not training or "best_loss_after_gradient" not in training or training.get("optimiser") == "none":
             continue
         before, after = training["best_loss_after_gradient"], training["best_loss"]
         change = 100.0 * (before - after) / before if before > 0 else 0.0

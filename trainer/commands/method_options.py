@@ -1,0 +1,68 @@
+"""How a method's command-line options reach its constructor (``trainer fit`` and ``trainer compare``).
+
+An :class:`OptionGroup` adds a method's options to a parser and turns the parsed arguments into
+the keyword arguments of the method's class. Several methods may share one group (the four DLSTM
+methods share :data:`DLSTM_OPTIONS`); ``trainer fit`` adds every distinct group once.
+Nothing here imports torch: the DLSTM group builds its settings only when it is used.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+
+
+def _no_arguments(parser: argparse.ArgumentParser) -> None:
+    del parser
+
+
+def _no_kwargs(*args: Any) -> dict[str, Any]:
+    del args
+    return {}
+
+
+@dataclass(frozen=True, eq=False)
+class OptionGroup:
+    """A method's options: how they are added to a parser and turned into constructor kwargs.
+
+    ``fit_kwargs(args)`` serves ``trainer fit``; ``compare_kwargs(settings, progress)`` serves
+    ``trainer compare``, which builds every method from the shared ``FusionSettings``.
+    """
+
+    add_arguments: Callable[[argparse.ArgumentParser], None] = _no_arguments
+    fit_kwargs: Callable[[argparse.Namespace], dict[str, Any]] = _no_kwargs
+    compare_kwargs: Callable[[Any, bool], dict[str, Any]] = _no_kwargs
+
+
+NO_OPTIONS = OptionGroup()
+
+
+def _add_intervals(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--intervals", type=int, default=10, help="pla: number of temperature intervals (10)")
+
+
+def _add_remove_median(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--remove-median",
+        action="store_true",
+        help="poly3: subtract the axis median first, exactly as PX4 does (offset left to "
+        "the six-position calibration)",
+    )
+
+
+def _dlstm_fit_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    settings, frontend = settings_from_args(args)
+    return {"settings": settings, "frontend_seconds": frontend, "progress": not args.quiet}
+
+
+PLA_OPTIONS = OptionGroup(_add_intervals, lambda args: {"n_intervals": args.intervals})
+POLY3_OPTIONS = OptionGroup(_add_remove_median, lambda args: {"remove_median": args.remove_median})
+DLSTM_OPTIONS = OptionGroup(
+    add_dlstm_options,
+    _dlstm_fit_kwargs,
+    lambda settings, progress: {"settings": settings, "progress": progress},
+)
