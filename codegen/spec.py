@@ -99,6 +99,13 @@ class Checkpoint:
     valid_temp_range_c: tuple[float, float]
 
 
+def frontend_kind(method: registry.Method) -> str:
+    """The ``payload.frontend.kind`` a streaming method's checkpoint carries."""
+    if method.renderer == "mean-stream":
+        return PERSISTENCE_KIND
+    return TEMPERATURE_KIND if method.family == registry.TEMPERATURE_DRIVEN else RECURSIVE_KIND
+
+
 def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:
     fe = payload.sub("frontend")
     kind = fe.raw("kind")

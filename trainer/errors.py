@@ -52,7 +52,6 @@ def check_output_path(path: str | os.PathLike[str]) -> None:
         raise UserError(f"{target}: not writable")
 
 
-
 def _current_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
