@@ -68,6 +68,8 @@ class FusionResult:
     seconds_optimiser: float = 0.0
 
     def summary(self) -> dict[str, Any]:
+        """What the checkpoint records. No wall-clock times: the same inputs must give a
+        byte-identical model.pt (and so the same model id in the generated C)."""
         return {
             "optimiser": self.optimiser,
             "best_loss": self.best_loss,
@@ -75,8 +77,6 @@ class FusionResult:
             "best_loss_after_gradient": float(np.nanmin(self.population_loss_before)),
             "train_loss_per_iteration": self.train_loss_per_iteration,
             "optimiser_best_per_cycle": self.optimiser_history,
-            "seconds_gradient": self.seconds_gradient,
-            "seconds_optimiser": self.seconds_optimiser,
         }
 
 
