@@ -28,9 +28,9 @@ def augmented_config(
     effects = sorted(effects, key=lambda e: order.index(e.identifier))
     noise_values = final.noise_params()
     noise = [NoiseConfig("white_noise", {"n_mg_rt_s": noise_values["white_noise"]["n_mg_rt_s"]})]
-    for term in NOISE_CANDIDATES:
-        if term in noise_values:
-            noise.append(NoiseConfig(term, dict(noise_values[term])))
+    for name in NOISE_CANDIDATES:
+        if name in noise_values:
+            noise.append(NoiseConfig(name, dict(noise_values[name])))
     for index, term in enumerate(final.terms):
         if term.identifier == "rate_ramp":
             noise.append(NoiseConfig("rate_ramp", {"r_mg_per_s": final.linear(index)["r_mg_per_s"]}))

@@ -63,15 +63,15 @@ def scan_regions(
         else:
             merged.append([a, b, z, z])
     out = []
-    for a, b, z, _ in merged:
+    for start, stop, z, _ in merged:
         p = min(1.0, count * 2.0 * float(norm.sf(abs(z))))
-        mean = float(np.mean(residual[int(a) : int(b)]))
+        mean = float(np.mean(residual[int(start) : int(stop)]))
         out.append(
             region(
                 data,
                 profile,
-                int(a),
-                int(b),
+                int(start),
+                int(stop),
                 {"z": z, "p_value": max(p, TINY), "mean_residual_mg": mean},
                 "residual",
             )
