@@ -17,11 +17,11 @@ import pytest
 
 from trainer.data.recording import Recording
 from trainer.diagnose.blocks import block_means, build_blocks, dequantize, detect_lattice
+from trainer.diagnose.fit_summary import full_rate_model
 from trainer.diagnose.gls import Gls, NoiseState, unit_matrices
 from trainer.diagnose.locate import allan_comparison, scan_regions, spectral_peaks
 from trainer.diagnose.model import Term, catalogue_effects, fit_model
 from trainer.diagnose.profile import analyse_profile
-from trainer.diagnose.run import full_rate_model
 from trainer.physics.config import (
     PhysicsConfig,
     ProtocolConfig,

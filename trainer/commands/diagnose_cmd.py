@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from trainer.diagnose.result import Diagnosis
 
 
 def _fraction(text: str) -> float:
@@ -77,32 +81,28 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def summary(result: object) -> str:
+def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
-    doc = result.to_dict()  # type: ignore[attr-defined]
-    fit = doc["fit"]
-    lines = [f"baseline: {', '.join(doc['baseline'])}"]
-    if doc["left_out"]:
-        for e in doc["left_out"]:
-            params = ", ".join(f"{k}={v:.4g}" for k, v in e["params"].items())
-            extra = f" (ambiguous with {', '.join(e['ambiguous_with'])})" if e.get("ambiguous_with") else ""
-            lines.append(
-                f"left out: {e['effect']} [{params}] BIC -{e['evidence']['delta_bic_when_added']:.1f}{extra}"
-            )
+    before, after = result.before, result.after
+    lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
+    if result.left_out:
+        for e in result.left_out:
+            params = ", ".join(f"{k}={v:.4g}" for k, v in e.params.items())
+            extra = f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
+            lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
         lines.append("left out: nothing found beyond the simulation")
-    for n in doc["not_identifiable"]:
-        lines.append(f"not identifiable: {n['effect']} ({n['recommended_test'] or n['reason']})")
+    for n in result.not_identifiable:
+        lines.append(f"not identifiable: {n.effect} ({n.recommended_test or n.reason})")
     lines.append(
-        f"fit: block RMS {fit['before']['rms_block_mg']:.4g} -> {fit['after']['rms_block_mg']:.4g} mg, "
-        f"BIC {fit['before']['bic']:.1f} -> {fit['after']['bic']:.1f}"
+        f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} mg, "
+        f"BIC {before.bic:.1f} -> {after.bic:.1f}"
     )
-    if doc["holdout"]:
-        h = doc["holdout"]
+    if result.holdout:
+        hb, ha = result.holdout.before, result.holdout.after
         lines.append(
-            f"held-out tail: block RMS {h['before']['test_rms_block_mg']:.4g} -> {h['after']['test_rms_block_mg']:.4g} mg"
-            f" (least squares, bare: {h['before']['test_rms_block_mg_ols']:.4g} -> "
-            f"{h['after']['test_rms_block_mg_ols']:.4g} mg)"
+            f"held-out tail: block RMS {hb.test_rms_block_mg:.4g} -> {ha.test_rms_block_mg:.4g} mg"
+            f" (least squares, bare: {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} mg)"
         )
-    lines.append(f"({doc['seconds']:.1f} s)")
+    lines.append(f"({result.seconds:.1f} s)")
     return "\n".join(lines)

@@ -8,6 +8,9 @@
   exponential, which gives a p-value corrected for the number of independent frequencies.
 * Allan deviation of the full-rate residual against the modelled noise (IEEE 952 terms), with
   the IEEE 952 cluster error bars: the tau range where it departs.
+
+The finder's locating as a whole (steps, slow periods, where each found effect shows) is in
+:mod:`.where`, which builds on these scans. Significances are kept unrounded; the report rounds them when it writes them.
 """
 
 from __future__ import annotations
@@ -27,10 +30,7 @@ from trainer.physics.noise import BI_FLAT_UNTIL_S, FLICKER_FLOOR_VAR, bias_insta
 from trainer.scoring.allan import allan_deviation
 
 ALPHA = 1e-3
-
-
-def _p_text(p: float) -> float:
-    return float(f"{max(p, 1e-300):.3g}")
+TINY = 1e-300  # floor of variances, sums of squares and p-values (no log or division of zero)
 
 
 def scan_regions(
@@ -45,7 +45,7 @@ def scan_regions(
         step = max(1, width // 2)
         starts, var = window_variances(cov, width, step)
         sums = cum[starts + width] - cum[starts]
-        z = sums / np.sqrt(np.maximum(var, 1e-300))
+        z = sums / np.sqrt(np.maximum(var, TINY))
         windows.append((width, starts, z))
     count = sum(z.size for _, _, z in windows)
     threshold = float(norm.isf(alpha / 2.0 / max(count, 1)))
@@ -63,16 +63,16 @@ def scan_regions(
         else:
             merged.append([a, b, z, z])
     out = []
-    for a, b, z, _ in merged:
+    for start, stop, z, _ in merged:
         p = min(1.0, count * 2.0 * float(norm.sf(abs(z))))
-        mean = float(np.mean(residual[int(a) : int(b)]))
+        mean = float(np.mean(residual[int(start) : int(stop)]))
         out.append(
             region(
                 data,
                 profile,
-                int(a),
-                int(b),
-                {"z": round(z, 2), "p_value": _p_text(p), "mean_residual_mg": round(mean, 5)},
+                int(start),
+                int(stop),
+                {"z": z, "p_value": max(p, TINY), "mean_residual_mg": mean},
                 "residual",
             )
         )
@@ -112,7 +112,7 @@ def spectral_peaks(
     band = (freqs >= 1.0 / period_max) & (freqs <= 1.0 / period_min)
     if not np.any(band):
         return []
-    ratio = spec / np.maximum(background, 1e-300)
+    ratio = spec / np.maximum(background, TINY)
     independent = max(1.0, (1.0 / period_min - 1.0 / period_max) * m * dt / 2.0)  # Hann: 2 bins wide
     idx = np.flatnonzero(band)
     local_max = idx[
@@ -196,18 +196,6 @@ class AllanComparison:
     adev_err: np.ndarray
     model: np.ndarray
     departures: list[tuple[float, float, float]]  # (tau_min, tau_max, max ratio)
-
-    def to_dict(self) -> dict[str, object]:
-        return {
-            "taus_s": [round(float(v), 6) for v in self.taus_s],
-            "adev_mg": [float(f"{v:.5g}") for v in self.adev],
-            "adev_err_mg": [float(f"{v:.3g}") for v in self.adev_err],
-            "model_adev_mg": [float(f"{v:.5g}") for v in self.model],
-            "departures": [
-                {"tau_min_s": round(a, 4), "tau_max_s": round(b, 4), "max_ratio": round(r, 3)}
-                for a, b, r in self.departures
-            ],
-        }
 
 
 def allan_comparison(

@@ -6,8 +6,6 @@ every file is written, so a failure never leaves a half-written report.
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import shutil
 import tempfile
@@ -16,29 +14,17 @@ from typing import Any
 
 import numpy as np
 
-from trainer.diagnose.run import Diagnosis
+from trainer.diagnose import document
+from trainer.diagnose.document import json_text
+from trainer.diagnose.profile import Region
+from trainer.diagnose.result import Diagnosis, LeftOut
+from trainer.diagnose.select import THRESHOLD
+from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output
 from trainer.physics.config import config_to_toml
 
 REPORT_MARKER = "diagnosis.json"
 BRANCH_COLOURS = {1: ("tab:red", "heating"), -1: ("tab:blue", "cooling"), 0: ("0.55", "hold")}
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, float | np.floating):
-        number = float(value)
-        return number if math.isfinite(number) else None
-    return value
-
-
-def json_text(diagnosis: Diagnosis) -> str:
-    return json.dumps(_json_safe(diagnosis.to_dict()), indent=2) + "\n"
 
 
 def write_json(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
@@ -53,105 +39,116 @@ def _fmt_params(params: dict[str, float]) -> str:
     return ", ".join(f"`{k}` = {v:.4g}" for k, v in params.items())
 
 
-def _fmt_where(where: list[dict[str, Any]]) -> str:
+def _fmt_where(where: list[Region | AllanWhere]) -> str:
     parts = []
     for w in where:
-        if "tau_range_s" in w:
-            parts.append(f"Allan tau {w['tau_range_s'][0]:.3g}..{w['tau_range_s'][1]:.3g} s")
+        if isinstance(w, AllanWhere):
+            parts.append(f"Allan tau {w.tau_range_s[0]:.3g}..{w.tau_range_s[1]:.3g} s")
             continue
         parts.append(
-            f"{w['t_start_s']:.0f}..{w['t_end_s']:.0f} s ({w['segment']}, {w['branch']}, "
-            f"{w['temp_min_c']:.1f}..{w['temp_max_c']:.1f} degC)"
+            f"{w.t_start_s:.0f}..{w.t_end_s:.0f} s ({w.segment}, {w.branch}, "
+            f"{w.temp_min_c:.1f}..{w.temp_max_c:.1f} degC)"
         )
     return "; ".join(parts) or "-"
 
 
-def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
-    doc = diagnosis.to_dict()
-    rec = doc["recording"]
+def _left_out_lines(entry: LeftOut) -> list[str]:
+    ev = entry.evidence
     lines = [
-        f"# Physics mismatch report: {Path(str(rec['source'])).name}",
+        f"- **{entry.effect}**: {_fmt_params(entry.params)}. Evidence: BIC -{ev.delta_bic_when_added:.1f} "
+        f"when added, +{ev.delta_bic_when_dropped:.1f} when dropped from the final model. "
+        f"Where: {_fmt_where(entry.where)}."
+    ]
+    if entry.ambiguous_with:
+        lines.append(f"  Could also be: {', '.join(entry.ambiguous_with)} (see below).")
+    if entry.flags:
+        lines.append("  Note: " + "; ".join(entry.flags) + ".")
+    if entry.advice:
+        lines.append(f"  In practice: {entry.advice}.")
+    return lines
+
+
+def _percent(value: float | None) -> str:
+    return str(None if value is None else round(value, 2))
+
+
+def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
+    d = diagnosis
+    data = d.data
+    lines = [
+        f"# Physics mismatch report: {Path(d.source).name}",
         "",
-        f"{rec['rows']} rows at {rec['sample_rate_hz']:g} Hz, {rec['duration_s']:.0f} s; analysed as {rec['blocks']} "
-        f"block means of {rec['block_s']:.3g} s. Starting model: {', '.join(doc['baseline'])}.",
+        f"{data.full_t.size} rows at {data.fs:g} Hz, {data.duration_s:.0f} s; analysed as {data.n} "
+        f"block means of {data.block_s:.3g} s. Starting model: {', '.join(d.baseline.identifiers)}.",
         "",
-        "Criterion: " + doc["criterion"]["name"] + f"; an effect is added when the BIC drops by at least "
-        f"{doc['criterion']['add_threshold']:g}.",
+        "Criterion: " + document.CRITERION + f"; an effect is added when the BIC drops by at least "
+        f"{THRESHOLD:g}.",
         "",
         "## What was left out",
         "",
     ]
-    if not doc["left_out"]:
+    if not d.left_out:
         lines.append("Nothing: the recording shows no structure beyond the calibrated simulation.")
-    for entry in doc["left_out"]:
-        ev = entry["evidence"]
-        lines.append(
-            f"- **{entry['effect']}**: {_fmt_params(entry['params'])}. Evidence: BIC -{ev['delta_bic_when_added']:.1f} "
-            f"when added, +{ev['delta_bic_when_dropped']:.1f} when dropped from the final model. "
-            f"Where: {_fmt_where(entry['where'])}."
-        )
-        if entry.get("ambiguous_with"):
-            lines.append(f"  Could also be: {', '.join(entry['ambiguous_with'])} (see below).")
-        if entry.get("flags"):
-            lines.append("  Note: " + "; ".join(entry["flags"]) + ".")
-        if entry.get("advice"):
-            lines.append(f"  In practice: {entry['advice']}.")
+    for entry in d.left_out:
+        lines += _left_out_lines(entry)
     lines += ["", "## Ambiguous", ""]
-    lines += [f"- {' vs '.join(a['effects'])}: {a['reason']}" for a in doc["ambiguous"]] or ["None."]
+    lines += [f"- {' vs '.join(a.effects)}: {a.reason}" for a in d.ambiguous] or ["None."]
     lines += ["", "## Not identifiable from this temperature profile", ""]
     lines += [
-        f"- {n['effect']}: {n['reason']}."
-        + (f" Test that would identify it: {n['recommended_test']}." if n["recommended_test"] else "")
-        for n in doc["not_identifiable"]
+        f"- {n.effect}: {n.reason}."
+        + (f" Test that would identify it: {n.recommended_test}." if n.recommended_test else "")
+        for n in d.not_identifiable
     ] or ["None."]
-    if doc["not_supported"]:
+    if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
-        lines += [f"- {n['effect']}: {n['reason']}" for n in doc["not_supported"]]
-    before, after = doc["fit"]["before"], doc["fit"]["after"]
+        lines += [f"- {n.effect}: {n.reason}" for n in d.not_supported]
+    before, after = d.before, d.after
     lines += [
         "",
         "## Fit before and after",
         "",
         "| | before | after |",
         "|---|---:|---:|",
-        f"| residual RMS, full rate (mg) | {before['rms_mg']:.5f} | {after['rms_mg']:.5f} |",
-        f"| residual RMS, block means (mg) | {before['rms_block_mg']:.5f} | {after['rms_block_mg']:.5f} |",
-        f"| BIC | {before['bic']:.1f} | {after['bic']:.1f} |",
+        f"| residual RMS, full rate (mg) | {before.rms_mg:.5f} | {after.rms_mg:.5f} |",
+        f"| residual RMS, block means (mg) | {before.rms_block_mg:.5f} | {after.rms_block_mg:.5f} |",
+        f"| BIC | {before.bic:.1f} | {after.bic:.1f} |",
     ]
-    for b_seg, a_seg in zip(before["per_segment"], after["per_segment"], strict=True):
+    for b_seg, a_seg in zip(before.per_segment, after.per_segment, strict=True):
         lines.append(
-            f"| {b_seg['segment']} {b_seg['t_start_s']:.0f}..{b_seg['t_end_s']:.0f} s, block RMS (mg) | "
-            f"{b_seg['rms_block_mg']:.5f} | {a_seg['rms_block_mg']:.5f} |"
+            f"| {b_seg.segment} {b_seg.t_start_s:.0f}..{b_seg.t_end_s:.0f} s, block RMS (mg) | "
+            f"{b_seg.rms_block_mg:.5f} | {a_seg.rms_block_mg:.5f} |"
         )
-    if doc["holdout"]:
-        h = doc["holdout"]
+    if d.holdout:
+        h = d.holdout
+        hb, ha = h.before, h.after
         lines += [
             "",
-            f"Held-out check (both models fitted on 0..{h['train_t_end_s']:.0f} s, scored on "
-            f"{h['test_t_start_s']:.0f}..{h['test_t_end_s']:.0f} s): block RMS {h['before']['test_rms_block_mg']:.5f} -> "
-            f"{h['after']['test_rms_block_mg']:.5f} mg as fitted (GLS forecast, {h['improvement_percent']} % better); "
-            f"{h['before']['test_rms_block_mg_ols']:.5f} -> {h['after']['test_rms_block_mg_ols']:.5f} mg refitted by "
-            f"least squares and extrapolated bare ({h['improvement_percent_ols']} % better).",
+            f"Held-out check (both models fitted on 0..{h.train_t_end_s:.0f} s, scored on "
+            f"{h.test_t_start_s:.0f}..{h.test_t_end_s:.0f} s): block RMS {hb.test_rms_block_mg:.5f} -> "
+            f"{ha.test_rms_block_mg:.5f} mg as fitted (GLS forecast, {_percent(h.improvement_percent)} % better); "
+            f"{hb.test_rms_block_mg_ols:.5f} -> {ha.test_rms_block_mg_ols:.5f} mg refitted by "
+            f"least squares and extrapolated bare ({_percent(h.improvement_percent_ols)} % better).",
         ]
-        if h.get("note"):
-            lines.append(f"({h['note']}.)")
+        if h.note:
+            lines.append(f"({h.note}.)")
     lines += ["", "## Where the starting model's residual is structured", ""]
-    lines += [_region_line(r) for r in doc["mismatch"]] or ["Nowhere beyond the modelled noise."]
+    lines += [_region_line(r) for r in d.mismatch] or ["Nowhere beyond the modelled noise."]
     lines += ["", "## Still unexplained after the additions", ""]
-    lines += [_region_line(r) for r in doc["unexplained"]] or ["Nothing."]
-    if doc["notes"]:
-        lines += ["", "## Notes", ""] + [f"- {n}" for n in doc["notes"]]
+    lines += [_region_line(r) for r in d.unexplained] or ["Nothing."]
+    notes = d.notes + d.baseline.notes
+    if notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     if files:
         lines += ["", "## Files", ""] + [f"- `{name}`: {what}" for name, what in files.items()]
     return "\n".join(lines) + "\n"
 
 
-def _region_line(r: dict[str, Any]) -> str:
-    sig = ", ".join(f"{k} {v}" for k, v in r["significance"].items())
-    note = f" {r['note']}." if r.get("note") else ""
+def _region_line(r: Region) -> str:
+    sig = ", ".join(f"{k} {v}" for k, v in document.significance(r.significance).items())
+    note = f" {r.note}." if r.note else ""
     return (
-        f"- {r['kind']}: {r['t_start_s']:.0f}..{r['t_end_s']:.0f} s ({r['segment']}, {r['branch']}, "
-        f"{r['temp_min_c']:.1f}..{r['temp_max_c']:.1f} degC), {sig}.{note}"
+        f"- {r.kind}: {r.t_start_s:.0f}..{r.t_end_s:.0f} s ({r.segment}, {r.branch}, "
+        f"{r.temp_min_c:.1f}..{r.temp_max_c:.1f} degC), {sig}.{note}"
     )
 
 
@@ -181,15 +178,15 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     for ax, (name, res) in zip(axes, pairs, strict=True):
         _scatter_by_branch(ax, t_min, res, profile.branch)
         for entry in diagnosis.left_out:
-            for w in entry["where"]:
-                if "tau_range_s" not in w and name == "before":
-                    ax.axvspan(w["t_start_s"] / 60.0, w["t_end_s"] / 60.0, color="gold", alpha=0.15)
+            for w in entry.where:
+                if isinstance(w, Region) and name == "before":
+                    ax.axvspan(w.t_start_s / 60.0, w.t_end_s / 60.0, color="gold", alpha=0.15)
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(f"residual {name} (mg)")
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=7, markerscale=3)
     axes[-1].set_xlabel("time (min)")
-    found = ", ".join(e["effect"] for e in diagnosis.left_out) or "nothing"
+    found = ", ".join(e.effect for e in diagnosis.left_out) or "nothing"
     axes[0].set_title(f"Block-mean residual ({data.block_s:.3g} s blocks); added: {found}")
     fig.tight_layout()
     fig.savefig(directory / "residual_time.png")

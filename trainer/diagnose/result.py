@@ -1,0 +1,108 @@
+"""What a diagnosis found, as typed values (unrounded; :mod:`.document` writes the ``--json`` form)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from trainer.diagnose.baseline import Baseline
+from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.fit_summary import FitSummary
+from trainer.diagnose.holdout import Holdout
+from trainer.diagnose.model import ModelFit
+from trainer.diagnose.profile import Profile, Region
+from trainer.diagnose.select import Selection
+from trainer.diagnose.where import AllanWhere
+from trainer.physics.config import PhysicsConfig
+from trainer.physics.effects import EffectConfig
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """The BIC evidence for a left-out effect (the criterion is always the BIC)."""
+
+    delta_bic_when_added: float
+    delta_bic_when_dropped: float  # from the final model: the effect's importance
+    how: str  # how the candidate was found (grid, spectral peak, ...)
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """An effect (or noise term) the user's simulation leaves out, with its fitted parameters."""
+
+    effect: str
+    params: dict[str, float]
+    where: list[Region | AllanWhere]
+    evidence: Evidence
+    advice: str
+    peak_visible_mg: float | None = None  # None for noise terms
+    flags: list[str] = field(default_factory=list)  # parameters outside the plausible range
+    ambiguous_with: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Ambiguity:
+    """Two effects the data cannot tell apart (swapping one for the other costs little BIC)."""
+
+    effects: tuple[str, str]
+    delta_bic: float
+    preferred: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class NotIdentifiable:
+    effect: str
+    reason: str
+    recommended_test: str
+
+
+@dataclass(frozen=True)
+class NotSupported:
+    """An effect of the user's simulation that the data do not need (dropping it lowers the BIC)."""
+
+    effect: str
+    delta_bic: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class Tested:
+    """A candidate scored in the first round (``delta_bic``, ``how``) or only noted (``note``)."""
+
+    effect: str
+    delta_bic: float | None = None
+    how: str = ""
+    note: str = ""
+
+
+@dataclass
+class Diagnosis:
+    """Everything the report needs; :func:`trainer.diagnose.document.document` is the ``--json`` form."""
+
+    source: str
+    data: BlockData
+    profile: Profile
+    baseline: Baseline
+    baseline_fit: ModelFit
+    baseline_effects: list[EffectConfig]  # the user's effects as calibrated
+    selection: Selection
+    left_out: list[LeftOut]
+    ambiguous: list[Ambiguity]
+    not_identifiable: list[NotIdentifiable]
+    not_supported: list[NotSupported]
+    mismatch: list[Region]
+    unexplained: list[Region]
+    before: FitSummary
+    after: FitSummary
+    tested: list[Tested]
+    augmented: PhysicsConfig
+    holdout: Holdout | None
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``--json`` document (kept for callers; built, and rounded, by :mod:`.document`)."""
+        from trainer.diagnose.document import document
+
+        return document(self)
