@@ -22,6 +22,8 @@ from trainer.diagnose.select import THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output
 from trainer.physics.config import config_to_toml
+from trainer.scoring.markdown import markdown_table
+from trainer.scoring.plots import new_figure, save_figure
 
 REPORT_MARKER = "diagnosis.json"
 BRANCH_COLOURS = {1: ("tab:red", "heating"), -1: ("tab:blue", "cooling"), 0: ("0.55", "hold")}
@@ -107,17 +109,21 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         "",
         "## Fit before and after",
         "",
-        "| | before | after |",
-        "|---|---:|---:|",
-        f"| residual RMS, full rate (mg) | {before.rms_mg:.5f} | {after.rms_mg:.5f} |",
-        f"| residual RMS, block means (mg) | {before.rms_block_mg:.5f} | {after.rms_block_mg:.5f} |",
-        f"| BIC | {before.bic:.1f} | {after.bic:.1f} |",
     ]
-    for b_seg, a_seg in zip(before.per_segment, after.per_segment, strict=True):
-        lines.append(
-            f"| {b_seg.segment} {b_seg.t_start_s:.0f}..{b_seg.t_end_s:.0f} s, block RMS (mg) | "
-            f"{b_seg.rms_block_mg:.5f} | {a_seg.rms_block_mg:.5f} |"
-        )
+    rows = [
+        ["residual RMS, full rate (mg)", f"{before.rms_mg:.5f}", f"{after.rms_mg:.5f}"],
+        ["residual RMS, block means (mg)", f"{before.rms_block_mg:.5f}", f"{after.rms_block_mg:.5f}"],
+        ["BIC", f"{before.bic:.1f}", f"{after.bic:.1f}"],
+    ]
+    rows += [
+        [
+            f"{b_seg.segment} {b_seg.t_start_s:.0f}..{b_seg.t_end_s:.0f} s, block RMS (mg)",
+            f"{b_seg.rms_block_mg:.5f}",
+            f"{a_seg.rms_block_mg:.5f}",
+        ]
+        for b_seg, a_seg in zip(before.per_segment, after.per_segment, strict=True)
+    ]
+    lines.append(markdown_table(["", "before", "after"], rows, align="lrr"))
     if d.holdout:
         h = d.holdout
         hb, ha = h.before, h.after
@@ -164,17 +170,13 @@ def _scatter_by_branch(ax: Any, x: np.ndarray, y: np.ndarray, branch: np.ndarray
 
 def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     """Residual over time and over temperature, before and after, branches coloured."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     data, profile = diagnosis.data, diagnosis.profile
     t_min = data.t / 60.0
     temp = data.temperature(True)
     pairs = (("before", diagnosis.before.residual_block), ("after", diagnosis.after.residual_block))
     files = {}
-    fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), dpi=110, sharex=True, sharey=True)
+    fig = new_figure((11, 6.5), 110)
+    axes = fig.subplots(2, 1, sharex=True, sharey=True)
     for ax, (name, res) in zip(axes, pairs, strict=True):
         _scatter_by_branch(ax, t_min, res, profile.branch)
         for entry in diagnosis.left_out:
@@ -189,10 +191,10 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     found = ", ".join(e.effect for e in diagnosis.left_out) or "nothing"
     axes[0].set_title(f"Block-mean residual ({data.block_s:.3g} s blocks); added: {found}")
     fig.tight_layout()
-    fig.savefig(directory / "residual_time.png")
-    plt.close(fig)
+    save_figure(fig, directory / "residual_time.png")
     files["residual_time.png"] = "block-mean residual over time, before and after (found regions shaded)"
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110, sharey=True)
+    fig = new_figure((11, 4.5), 110)
+    axes = fig.subplots(1, 2, sharey=True)
     for ax, (name, res) in zip(axes, pairs, strict=True):
         _scatter_by_branch(ax, temp, res, profile.branch)
         ax.axhline(0.0, color="k", lw=0.5)
@@ -202,10 +204,10 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
         ax.legend(loc="upper right", fontsize=7, markerscale=3)
     axes[0].set_ylabel("block-mean residual (mg)")
     fig.tight_layout()
-    fig.savefig(directory / "residual_temperature.png")
-    plt.close(fig)
+    save_figure(fig, directory / "residual_temperature.png")
     files["residual_temperature.png"] = "residual over temperature, heating red, cooling blue, holds grey"
-    fig, ax = plt.subplots(figsize=(7.5, 5), dpi=110)
+    fig = new_figure((7.5, 5), 110)
+    ax = fig.subplots()
     for name, summary, colour in (
         ("before", diagnosis.before, "tab:orange"),
         ("after", diagnosis.after, "tab:green"),
@@ -222,8 +224,7 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(directory / "allan.png")
-    plt.close(fig)
+    save_figure(fig, directory / "allan.png")
     files["allan.png"] = "Allan deviation of the residual before/after against the modelled noise"
     return files
 
