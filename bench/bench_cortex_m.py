@@ -280,7 +280,7 @@ def main() -> int:
                     f"{label}: the proposal no longer matches the generated code (codegen changed)",
                     file=sys.stderr,
                 )
-            if patched is not None and model.quantised.layers:
+            if patched is not None and isinstance(model.quantised, QStream) and model.quantised.layers:
                 folder = work / f"p{k}"
                 folder.mkdir()
                 shutil.copy(work / f"m{k}" / f"{name}.h", folder)

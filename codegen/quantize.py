@@ -356,6 +356,7 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)
+    inputs: tuple[QInput, ...]
     if fe.kind == "recursive":
         frac = _mean_frac(fe.accel_window, limits.accel)
         mean_lsb = 1 << frac

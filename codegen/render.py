@@ -193,7 +193,7 @@ def _c_int(value: int, width: int = 32) -> str:
 
 
 def _rows(values: np.ndarray | list[int] | tuple[int, ...], *, width: int = 32, per_line: int = 12) -> str:
-    items = [_c_int(v, width) for v in np.asarray(values, dtype=np.int64).ravel()]
+    items = [_c_int(int(v), width) for v in np.asarray(values, dtype=np.int64).ravel()]
     lines = [", ".join(items[k : k + per_line]) + "," for k in range(0, len(items), per_line)]
     return "\n".join("    " + line for line in lines)
 

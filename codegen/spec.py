@@ -113,20 +113,29 @@ def _frontend(root: _Fields, payload: _Fields, method: str) -> FrontEndSpec:
     if kind != expected:
         root.fail(f"field 'payload.frontend.kind' is {kind!r}; method {method!r} needs {expected!r}")
     n_inputs = 2 if kind == TEMPERATURE_KIND else 1
-    common = {
-        "rate_hz": fe.number("rate_hz", positive=True),
-        "accel_window": fe.integer("accel_window", 1, MAX_WINDOW),
-        "temp_window": fe.integer("temp_window", 1, MAX_WINDOW),
-        "decimation": fe.integer("decimation", 1, MAX_WINDOW),
-    }
+    rate_hz = fe.number("rate_hz", positive=True)
+    accel_window = fe.integer("accel_window", 1, MAX_WINDOW)
+    temp_window = fe.integer("temp_window", 1, MAX_WINDOW)
+    decimation = fe.integer("decimation", 1, MAX_WINDOW)
     if kind == PERSISTENCE_KIND:
         return FrontEndSpec(
-            RECURSIVE_KIND, **common, inputs_mean=(0.0,), inputs_std=(1.0,), output_mean=0.0, output_std=1.0
+            RECURSIVE_KIND,
+            rate_hz,
+            accel_window,
+            temp_window,
+            decimation,
+            inputs_mean=(0.0,),
+            inputs_std=(1.0,),
+            output_mean=0.0,
+            output_std=1.0,
         )
     norm = payload.sub("normalisation")
     return FrontEndSpec(
         kind,
-        **common,
+        rate_hz,
+        accel_window,
+        temp_window,
+        decimation,
         inputs_mean=norm.numbers("inputs_mean", n_inputs),
         inputs_std=norm.numbers("inputs_std", n_inputs, positive=True),
         output_mean=norm.number("output_mean"),

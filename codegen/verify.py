@@ -15,7 +15,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -71,7 +71,7 @@ def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return convert(rec.accel_mg, ACCEL_PER_MG), convert(rec.temp_c, 1000.0)
 
 
-def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, object]]:
+def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]:
     if not out_dir.is_dir():
         raise UserError(f"{out_dir}: no such directory")
     if name is None:
@@ -219,11 +219,12 @@ def verify(
     out = Path(out_dir)
     name, manifest = find_manifest(out, name)
     try:
-        accel_limit_g = float(manifest["input_limits"]["accel_g"][1])  # type: ignore[index]
+        accel_limit_g = float(manifest["input_limits"]["accel_g"][1])
     except (KeyError, TypeError, IndexError, ValueError):
         raise UserError(f"{out / manifest_name(name)}: field 'input_limits.accel_g' is missing") from None
     model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
-    stamped = manifest.get("model", {}).get("sha256")  # type: ignore[union-attr]
+    model_entry = manifest.get("model")
+    stamped = model_entry.get("sha256") if isinstance(model_entry, dict) else None
     if stamped != model.sha256:
         raise UserError(
             f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})"

@@ -155,5 +155,5 @@ def representatives() -> tuple[str, ...]:
         if method.renderer is not None:
             kind = frontend_kind(method) if method.renderer.endswith("stream") else ""
             chosen.setdefault((method.renderer, kind), method.name)
-    order = {renderer: k for k, renderer in enumerate(registry.RENDERERS)}
+    order: dict[str, int] = {renderer: k for k, renderer in enumerate(registry.RENDERERS)}
     return tuple(name for (renderer, _), name in sorted(chosen.items(), key=lambda kv: order[kv[0][0]]))

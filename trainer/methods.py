@@ -33,8 +33,20 @@ FAMILIES: tuple[Family, ...] = (MEMORYLESS, TEMPERATURE_DRIVEN, RECURSIVE)
 Renderer = Literal["lstm-stream", "mean-stream", "piecewise-linear", "cubic"]
 RENDERERS: tuple[Renderer, ...] = ("lstm-stream", "mean-stream", "piecewise-linear", "cubic")
 
-# Guo et al. 2023, Table 1 row of a paper method: (value, improvement %) per Allan term, and the average.
-PaperRow = dict[str, tuple[float, float] | float]
+
+@dataclass(frozen=True)
+class PaperRow:
+    """Guo et al. 2023, Table 1 row of a paper method: (value, improvement %) per Allan term."""
+
+    B: tuple[float, float]  # mg
+    K: tuple[float, float]  # mg/s^1/2
+    R: tuple[float, float]  # mg/s
+    Aver: float  # mean improvement, %
+
+    def term(self, name: str) -> tuple[float, float]:
+        """(value, improvement %) of the Allan term ``name`` (B, K or R)."""
+        value: tuple[float, float] = getattr(self, name)
+        return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,7 +82,8 @@ class Method:
         if not isinstance(self.implementation, str):
             return self.implementation
         module, _, name = self.implementation.partition(":")
-        return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
+        found: type[Compensator] = getattr(importlib.import_module(module), name)
+        return found
 
     @property
     def paper(self) -> bool:
@@ -153,7 +166,7 @@ register(
         DLSTM_OPTIONS,
         renderer="lstm-stream",
         shares_population=True,
-        paper_table1={"B": (6.97e-5, 87.16), "K": (4.19e-6, 90.33), "R": (1.11e-7, 90.59), "Aver": 89.36},
+        paper_table1=PaperRow(B=(6.97e-5, 87.16), K=(4.19e-6, 90.33), R=(1.11e-7, 90.59), Aver=89.36),
     )
 )
 register(
@@ -164,7 +177,7 @@ register(
         DLSTM_OPTIONS,
         renderer="lstm-stream",
         shares_population=True,
-        paper_table1={"B": (6.33e-5, 88.35), "K": (3.39e-6, 92.16), "R": (9.40e-8, 92.05), "Aver": 90.85},
+        paper_table1=PaperRow(B=(6.33e-5, 88.35), K=(3.39e-6, 92.16), R=(9.40e-8, 92.05), Aver=90.85),
     )
 )
 register(
@@ -175,7 +188,7 @@ register(
         DLSTM_OPTIONS,
         renderer="lstm-stream",
         shares_population=True,
-        paper_table1={"B": (2.77e-5, 94.89), "K": (1.14e-6, 97.37), "R": (2.63e-8, 97.77), "Aver": 96.68},
+        paper_table1=PaperRow(B=(2.77e-5, 94.89), K=(1.14e-6, 97.37), R=(2.63e-8, 97.77), Aver=96.68),
     )
 )
 register(
@@ -185,7 +198,7 @@ register(
         MEMORYLESS,
         PLA_OPTIONS,
         renderer="piecewise-linear",
-        paper_table1={"B": (5.25e-4, 3.29), "K": (3.45e-5, 20.23), "R": (8.24e-7, 30.31), "Aver": 17.94},
+        paper_table1=PaperRow(B=(5.25e-4, 3.29), K=(3.45e-5, 20.23), R=(8.24e-7, 30.31), Aver=17.94),
     )
 )
 register(

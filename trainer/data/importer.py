@@ -184,7 +184,11 @@ def import_foreign(path: str | Path, options: ImportOptions) -> Recording:
                 f"use --resample HZ (linear interpolation onto a uniform grid) or, when no sample is "
                 f"missing, --retime"
             )
-        rate = options.rate_hz if options.time_unit == "index" else _median_rate(time)
+        if options.time_unit == "index":
+            assert options.rate_hz is not None, "index time needs --rate (checked by _check_options)"
+            rate = options.rate_hz
+        else:
+            rate = _median_rate(time)
 
     gravity_note = _remove_gravity(columns, options, source)
     meta["sample_rate_hz"] = f"{rate:.10g}"

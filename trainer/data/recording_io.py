@@ -14,6 +14,7 @@ same bytes.
 from __future__ import annotations
 
 import math
+import os
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -145,8 +146,9 @@ def recording_format(path: str | Path) -> RecordingFormat:
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")
 
 
-def read_recording(path: str | Path) -> Recording:
+def read_recording(path: str | os.PathLike[str]) -> Recording:
     """Read and validate a recording (``.csv`` or ``.npz``); every violation is a one-line UserError."""
+    path = Path(path)
     if recording_format(path) == "csv":
         return _read_csv(path)
     return _read_npz(path)
@@ -305,4 +307,4 @@ def _write_npz(rec: Recording, tmp: Path) -> None:
     if rec.meta:
         arrays[NPZ_META] = np.array("\n".join(f"{k}={v}" for k, v in _ordered_meta(rec.meta)))
     with open(tmp, "wb") as out:
-        np.savez(out, **arrays)
+        np.savez(out, allow_pickle=False, **arrays)

@@ -235,7 +235,7 @@ class PopulationDLSTM(nn.Module):
 
     @property
     def population(self) -> int:
-        return self.w_out.shape[0]
+        return int(self.get_parameter("w_out").shape[0])
 
     @property
     def num_params(self) -> int:

@@ -164,6 +164,9 @@ def input_signal(cfg: InputConfig, t: np.ndarray, rng: np.random.Generator) -> n
         for tone in cfg.tones:
             out += tone.amp_mg * np.sin(2.0 * np.pi * tone.freq_hz * t + tone.phase_rad)
         if cfg.singer_sigma_mg > 0 and t.size > 1:
+            assert cfg.singer_tau_s is not None, (
+                "the configuration requires singer_tau_s with singer_sigma_mg"
+            )
             dt = float(t[-1] - t[0]) / (t.size - 1)
             out += gauss_markov(t.size, dt, cfg.singer_tau_s, cfg.singer_sigma_mg, rng)
         return out

@@ -79,8 +79,8 @@ def paper_side_by_side(comparison: Comparison) -> str:
         ours = improvements[name]
         row = [name]
         for term, key in (("B", "b_mg"), ("K", "k_mg_per_rt_s"), ("R", "r_mg_per_s")):
-            row.append(f"{ours[key]:.2f} / {paper[term][1]:.2f}")
-        row.append(f"{average[name]:.2f} / {paper['Aver']:.2f}")
+            row.append(f"{ours[key]:.2f} / {paper.term(term)[1]:.2f}")
+        row.append(f"{average[name]:.2f} / {paper.Aver:.2f}")
         rows.append(row)
     return markdown_table(header, rows)
 
@@ -122,7 +122,9 @@ def write_survival_figure(comparison: Comparison, rec: Recording, out_dir: Path,
     """True input against each compensated output (5 s smoothing) on an input-test recording."""
     blind = rec.without_truth()
     rate = rec.sample_rate_hz
-    series = {"true input": rec.truth("accel_mg")}
+    true_input = rec.truth("accel_mg")
+    assert true_input is not None, "input tests carry true_accel_mg (checked on reading)"
+    series = {"true input": true_input}
     series.update(
         {
             m: _smooth(model.compensate(blind), rate, PAPER_TRAIN_SMOOTHING_S)
