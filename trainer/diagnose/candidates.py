@@ -107,15 +107,16 @@ def scan_periods(current: ModelFit, data: BlockData, periods: np.ndarray) -> np.
     return out
 
 
-def propose_step(current: ModelFit, data: BlockData) -> Proposal:
+def propose_step(current: ModelFit, data: BlockData, effect: str) -> Proposal:
+    """A step-like ``effect`` (``bias_step``) at the best block boundary, then polished."""
     times, rss = scan_steps(current, data)
     k = int(np.argmin(rss))
-    start = Term("bias_step", (float(times[k]),))
+    start = Term(effect, (float(times[k]),))
     fit = polish((*current.terms, start), data, current.gls)
-    return Proposal("bias_step", fit.terms, current.noise.terms, fit)
+    return Proposal(effect, fit.terms, current.noise.terms, fit)
 
 
-def propose_slow_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
     lo = FAST_PERIOD_BLOCKS * data.block_s
     hi = 0.5 * data.duration_s
     if hi <= lo:
@@ -124,9 +125,9 @@ def propose_slow_periodic(current: ModelFit, data: BlockData) -> Proposal | None
     periods = 1.0 / f
     rss = scan_periods(current, data, periods)
     k = int(np.argmin(rss))
-    start = Term("periodic", (float(periods[k]),))
+    start = Term(effect, (float(periods[k]),))
     fit = polish((*current.terms, start), data, current.gls)
-    return Proposal("periodic", fit.terms, current.noise.terms, fit)
+    return Proposal(effect, fit.terms, current.noise.terms, fit)
 
 
 def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
@@ -134,7 +135,7 @@ def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
     return data.fine_accel - np.interp(data.fine_t, data.t, current.prediction)
 
 
-def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+def propose_fast_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
     """A periodic component too fast for the blocks, scored by the spectral test on the fine grid."""
     lo = max(4.0, 2.5 * data.fine_step_s)
     hi = FAST_PERIOD_BLOCKS * data.block_s
@@ -151,10 +152,10 @@ def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None
     peak = peaks[0]
     sine = fit_sine(data.fine_t, x, peak.period_s, data.duration_s)
     evidence = sine.delta_rss / peak.noise_var
-    term = Term("periodic", (sine.period_s,), fixed=True, offset=(sine.amp_mg, sine.phase_rad))
+    term = Term(effect, (sine.period_s,), fixed=True, offset=(sine.amp_mg, sine.phase_rad))
     fit = evaluate((*current.terms, term), data, current.gls)
     return Proposal(
-        "periodic",
+        effect,
         fit.terms,
         current.noise.terms,
         fit,
@@ -184,11 +185,13 @@ def _propose_lattice(current: ModelFit, data: BlockData, effect: str) -> list[Pr
 
 
 def _propose_step(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
-    return [propose_step(current, data)]
+    return [propose_step(current, data, effect)]
 
 
-def _propose_periodic(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
-    return [p for p in (propose_slow_periodic(current, data), propose_fast_periodic(current, data)) if p]
+def _propose_sinusoid(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    slow = propose_slow_periodic(current, data, effect)
+    fast = propose_fast_periodic(current, data, effect)
+    return [p for p in (slow, fast) if p]
 
 
 def _propose_noise(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
@@ -204,7 +207,7 @@ SEARCHES = {
     "linear": _propose_linear,
     "lattice": _propose_lattice,
     "step": _propose_step,
-    "periodic": _propose_periodic,
+    "sinusoid": _propose_sinusoid,
     "noise": _propose_noise,
 }
 

@@ -125,7 +125,7 @@ class Finder:
     ``to_params`` maps a term's nonlinear values and fitted linear values back to catalogue
     parameters. ``search`` names the strategy in ``trainer.diagnose.candidates`` (``profile``: a
     log grid of ``grid_points`` over the single nonlinear parameter within ``bounds(data)``;
-    ``linear``; ``lattice``; ``step``; ``periodic``; ``noise``), ``None`` when the finder never
+    ``linear``; ``lattice``; ``step``; ``sinusoid``; ``noise``), ``None`` when the finder never
     proposes it. ``noise_role`` for noise terms: ``white`` (always fitted, from the full rate),
     ``covariance`` (a correlated term of the block covariance, ``covariance(n, block_s,
     duration_s)`` for unit coefficient), ``trend`` (a deterministic column) or ``None``.
