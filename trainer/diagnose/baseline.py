@@ -13,11 +13,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from trainer.diagnose.model import Term
-from trainer.physics.config import PhysicsConfig
+from trainer.physics.catalogue import BACKBONE, COVARIANCE_NOISE, DEFINITIONS, NOISE, WHITE_NOISE
+from trainer.physics.catalogue.base import StartContext
+from trainer.physics.config import PhysicsConfig, input_setters
 from trainer.physics.profiles import input_signal
 
-DEFAULT_NOISE = ("bias_instability", "rate_random_walk")
-BLOCK_NOISE = ("bias_instability", "rate_random_walk")
+DEFAULT_NOISE = COVARIANCE_NOISE
+BLOCK_NOISE = COVARIANCE_NOISE
 
 
 @dataclass
@@ -32,7 +34,7 @@ class Baseline:
 
 def known_input(cfg: PhysicsConfig, t: np.ndarray) -> np.ndarray | None:
     """The deterministic true input the configuration declares (Singer manoeuvres are unknown)."""
-    given = [e.params["g_in_mg"] for e in cfg.effect_instances("scale_factor_tc") if "g_in_mg" in e.params]
+    given = [effect.params[name] for effect, name in input_setters(cfg.effects)]
     if given:
         return np.full(t.size, float(given[0]))
     if cfg.input.kind == "zero":
@@ -45,9 +47,9 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
     """Terms and noise of the starting model (``t``: the recording's time axis from 0)."""
     if cfg is None:
         return Baseline(
-            terms=(Term("bias_poly"),),
+            terms=(Term(BACKBONE),),
             noise_terms=DEFAULT_NOISE,
-            identifiers=["bias_poly", "white_noise", *DEFAULT_NOISE],
+            identifiers=[BACKBONE, WHITE_NOISE, *DEFAULT_NOISE],
             known_input=None,
             input_varies=False,
             notes=[
@@ -57,49 +59,33 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
     notes: list[str] = []
     g_in = known_input(cfg, t)
     varies = bool(g_in is not None and np.ptp(g_in) > 1.0)
-    terms: list[Term] = [Term("bias_poly")]
-    identifiers = ["bias_poly"]
-    if not cfg.effect_instances("bias_poly"):
-        notes.append("the simulation has no bias_poly; the finder always fits one (the drift's backbone)")
+    # The finder's models always start from the backbone (bias_poly), whatever the simulation says.
+    terms: list[Term] = [Term(BACKBONE)]
+    identifiers = [BACKBONE]
+    if not cfg.effect_instances(BACKBONE):
+        notes.append(f"the simulation has no {BACKBONE}; the finder always fits one (the drift's backbone)")
+    context = StartContext(lattice_lsb_c, varies)
     for effect in cfg.effects:
-        ident, p = effect.identifier, effect.params
-        if ident == "bias_poly":
+        finder = DEFINITIONS[effect.identifier].finder
+        if finder.backbone:
             continue
-        identifiers.append(ident)
-        if ident in ("thermal_lag", "stress_relaxation", "warmup"):
-            terms.append(Term(ident, (p["tau_s"],)))
-        elif ident == "hysteresis":
-            terms.append(Term(ident, (p["width_c"],)))
-        elif ident == "periodic":
-            terms.append(Term(ident, (p["period_s"],)))
-        elif ident == "bias_step":
-            terms.append(Term(ident, (p["t_s"],)))
-        elif ident == "temp_rate":
-            terms.append(Term(ident))
-        elif ident == "temp_quantization":
-            lsb = lattice_lsb_c if lattice_lsb_c is not None else p["lsb_c"]
-            if lattice_lsb_c is None:
-                notes.append("temp_quantization is listed but the thermometer column is not on a lattice")
-            terms.append(Term(ident, (lsb,), fixed=True))
-        elif ident == "scale_factor_tc":
-            terms.append(Term(ident, (p["sf_ppm_per_c"],), fixed=True))
-            if not varies:
-                notes.append(
-                    "scale_factor_tc is kept at the configured value: with a constant input it equals "
-                    "bias_poly's linear term and cannot be calibrated"
-                )
+        identifiers.append(effect.identifier)
+        start = finder.from_config(effect.params, context)  # type: ignore[misc]
+        terms.append(Term(effect.identifier, start.nl, fixed=start.fixed))
+        if start.note:
+            notes.append(start.note)
     noise = []
     for term in cfg.noise:
         identifiers.append(term.identifier)
-        if term.identifier in BLOCK_NOISE:
+        finder = DEFINITIONS[term.identifier].finder
+        if finder.noise_role == "covariance":
             noise.append(term.identifier)
-        elif term.identifier == "rate_ramp":
-            terms.append(Term("rate_ramp"))
-        elif term.identifier == "quantization_noise":
-            notes.append(
-                "quantization_noise only shows at the shortest taus; it is not part of the drift model"
-            )
-    if "white_noise" not in identifiers:
-        notes.append("the simulation has no white_noise; every sensor has some, so it is always fitted")
+        elif finder.from_config is not None:  # a deterministic trend (rate_ramp) is a model term
+            start = finder.from_config(term.params, context)
+            terms.append(Term(term.identifier, start.nl, fixed=start.fixed))
+        elif finder.config_note:
+            notes.append(finder.config_note)
+    if WHITE_NOISE not in identifiers:
+        notes.append(NOISE[WHITE_NOISE].finder.missing_note)
     order = [t for t in BLOCK_NOISE if t in noise]
     return Baseline(tuple(terms), tuple(order), identifiers, g_in, varies, notes)

@@ -26,8 +26,9 @@ from trainer.diagnose.model import (
     polish,
     search_bounds,
 )
+from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS
 
-GRID_POINTS = {"thermal_lag": 18, "hysteresis": 16, "stress_relaxation": 12, "warmup": 16}
+GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
 
 
@@ -106,15 +107,16 @@ def scan_periods(current: ModelFit, data: BlockData, periods: np.ndarray) -> np.
     return out
 
 
-def propose_step(current: ModelFit, data: BlockData) -> Proposal:
+def propose_step(current: ModelFit, data: BlockData, effect: str) -> Proposal:
+    """A step-like ``effect`` (``bias_step``) at the best block boundary, then polished."""
     times, rss = scan_steps(current, data)
     k = int(np.argmin(rss))
-    start = Term("bias_step", (float(times[k]),))
+    start = Term(effect, (float(times[k]),))
     fit = polish((*current.terms, start), data, current.gls)
-    return Proposal("bias_step", fit.terms, current.noise.terms, fit)
+    return Proposal(effect, fit.terms, current.noise.terms, fit)
 
 
-def propose_slow_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
     lo = FAST_PERIOD_BLOCKS * data.block_s
     hi = 0.5 * data.duration_s
     if hi <= lo:
@@ -123,9 +125,9 @@ def propose_slow_periodic(current: ModelFit, data: BlockData) -> Proposal | None
     periods = 1.0 / f
     rss = scan_periods(current, data, periods)
     k = int(np.argmin(rss))
-    start = Term("periodic", (float(periods[k]),))
+    start = Term(effect, (float(periods[k]),))
     fit = polish((*current.terms, start), data, current.gls)
-    return Proposal("periodic", fit.terms, current.noise.terms, fit)
+    return Proposal(effect, fit.terms, current.noise.terms, fit)
 
 
 def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
@@ -133,7 +135,7 @@ def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
     return data.fine_accel - np.interp(data.fine_t, data.t, current.prediction)
 
 
-def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None:
+def propose_fast_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
     """A periodic component too fast for the blocks, scored by the spectral test on the fine grid."""
     lo = max(4.0, 2.5 * data.fine_step_s)
     hi = FAST_PERIOD_BLOCKS * data.block_s
@@ -141,19 +143,19 @@ def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None
         return None
     x = fine_residual(current, data)
     for term in current.terms:  # components already found are removed before looking again
-        if term.identifier == "periodic" and term.offset is not None:
-            amp, phase = term.offset
-            x = x - amp * np.sin(2 * math.pi * data.fine_t / term.nl[0] + phase)
+        fine_offset = DEFINITIONS[term.identifier].finder.fine_offset
+        if fine_offset is not None and term.offset is not None:
+            x = x - fine_offset(term, data.fine_t)
     peaks = spectral_peaks(x, data.fine_step_s, lo, hi, max_peaks=1, alpha=0.5)
     if not peaks:
         return None
     peak = peaks[0]
     sine = fit_sine(data.fine_t, x, peak.period_s, data.duration_s)
     evidence = sine.delta_rss / peak.noise_var
-    term = Term("periodic", (sine.period_s,), fixed=True, offset=(sine.amp_mg, sine.phase_rad))
+    term = Term(effect, (sine.period_s,), fixed=True, offset=(sine.amp_mg, sine.phase_rad))
     fit = evaluate((*current.terms, term), data, current.gls)
     return Proposal(
-        "periodic",
+        effect,
         fit.terms,
         current.noise.terms,
         fit,
@@ -163,39 +165,59 @@ def propose_fast_periodic(current: ModelFit, data: BlockData) -> Proposal | None
     )
 
 
+def _propose_profile(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    fit = _profile_1d(current, data, Term(effect, (1.0,)))
+    return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+
+
+def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    fit = polish((*current.terms, Term(effect)), data, current.gls)
+    return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+
+
+def _propose_lattice(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    """The thermometer's lattice LSB is read off the data, not searched."""
+    if data.lattice_lsb_c is None:
+        return []
+    term = Term(effect, (data.lattice_lsb_c,), fixed=True)
+    fit = polish((*current.terms, term), data, current.gls)
+    return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+
+
+def _propose_step(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    return [propose_step(current, data, effect)]
+
+
+def _propose_sinusoid(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    slow = propose_slow_periodic(current, data, effect)
+    fast = propose_fast_periodic(current, data, effect)
+    return [p for p in (slow, fast) if p]
+
+
+def _propose_noise(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    if effect in current.noise.terms:
+        return []
+    noise = tuple(t for t in COVARIANCE_NOISE if t in current.noise.terms or t == effect)
+    return [Proposal(effect, current.terms, noise, None)]
+
+
+# The search strategies a definition's ``finder.search`` names.
+SEARCHES = {
+    "profile": _propose_profile,
+    "linear": _propose_linear,
+    "lattice": _propose_lattice,
+    "step": _propose_step,
+    "sinusoid": _propose_sinusoid,
+    "noise": _propose_noise,
+}
+
+
 def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     """Proposals for adding ``effect`` (empty when it does not apply to the current model)."""
-    present = set(current.identifiers)
-    single = {"thermal_lag", "temp_rate", "hysteresis", "stress_relaxation", "warmup", "temp_quantization"}
-    if effect in single and effect in present:
+    definition = DEFINITIONS.get(effect)
+    if definition is None or definition.finder.search is None:
+        raise ValueError(f"no search for {effect!r}")
+    finder = definition.finder
+    if sum(1 for i in current.identifiers if i == effect) >= finder.max_terms:
         return []
-    if effect in ("thermal_lag", "hysteresis", "stress_relaxation", "warmup"):
-        fit = _profile_1d(current, data, Term(effect, (1.0,)))
-        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
-    if effect in ("temp_rate", "rate_ramp", "scale_factor_tc"):
-        if effect in present:
-            return []
-        fit = polish((*current.terms, Term(effect)), data, current.gls)
-        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
-    if effect == "temp_quantization":
-        if data.lattice_lsb_c is None:
-            return []
-        term = Term("temp_quantization", (data.lattice_lsb_c,), fixed=True)
-        fit = polish((*current.terms, term), data, current.gls)
-        return [Proposal(effect, fit.terms, current.noise.terms, fit)]
-    if effect == "bias_step":
-        if sum(1 for i in current.identifiers if i == "bias_step") >= 3:
-            return []
-        return [propose_step(current, data)]
-    if effect == "periodic":
-        if sum(1 for i in current.identifiers if i == "periodic") >= 3:
-            return []
-        out = [p for p in (propose_slow_periodic(current, data), propose_fast_periodic(current, data)) if p]
-        return out
-    if effect in ("bias_instability", "rate_random_walk"):
-        if effect in current.noise.terms:
-            return []
-        order = ("bias_instability", "rate_random_walk")
-        noise = tuple(t for t in order if t in current.noise.terms or t == effect)
-        return [Proposal(effect, current.terms, noise, None)]
-    raise ValueError(f"no search for {effect!r}")
+    return SEARCHES[finder.search](current, data, effect)

@@ -22,31 +22,20 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import solve_triangular, toeplitz
+from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpotrf
 from scipy.optimize import minimize
 
-from trainer.physics.noise import BI_FLAT_UNTIL_S, bias_instability_bank
+from trainer.physics.catalogue import COVARIANCE_NOISE, NOISE, WHITE_NOISE
 
-NOISE_CANDIDATES: tuple[str, ...] = ("bias_instability", "rate_random_walk")
+NOISE_CANDIDATES: tuple[str, ...] = COVARIANCE_NOISE
 LOG_RATIO_BOUNDS = (-9.0, 7.0)
 
 
 @lru_cache(maxsize=8)
 def unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
     """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
-    tcs, variances = bias_instability_bank(float(block_s), max(BI_FLAT_UNTIL_S, float(duration_s)))
-    lags = np.arange(n, dtype=np.float64)
-    row = np.zeros(n)
-    for tc, var in zip(tcs, variances, strict=True):
-        row += var * np.exp(-lags * block_s / tc)
-    flicker = toeplitz(row)
-    # Block means of a random walk of unit k started at t = 0: cov = B (min(i, j) + 1/2) between
-    # different blocks (the earlier block's mean time) and B (i + 1/3) on the diagonal.
-    idx = np.arange(n, dtype=np.float64)
-    rw = block_s * (np.minimum.outer(idx, idx) + 0.5)
-    rw[np.diag_indices(n)] = block_s * (idx + 1.0 / 3.0)
-    return {"bias_instability": flicker, "rate_random_walk": rw}
+    return {term: NOISE[term].finder.covariance(n, block_s, duration_s) for term in COVARIANCE_NOISE}
 
 
 @dataclass(frozen=True)
@@ -125,12 +114,11 @@ class Gls:
     def noise_params(self, rss: float) -> dict[str, float]:
         """Catalogue noise coefficients implied by the fitted scale and ratios."""
         s2 = rss / self.n
-        out = {"white_noise": math.sqrt(s2 * self.block_s)}
+        out = {WHITE_NOISE: math.sqrt(s2 * self.block_s)}
         ratios = self.state.ratios()
-        if "bias_instability" in ratios:
-            out["bias_instability"] = math.sqrt(ratios["bias_instability"] * s2)
-        if "rate_random_walk" in ratios:
-            out["rate_random_walk"] = math.sqrt(ratios["rate_random_walk"] * s2)
+        for term in COVARIANCE_NOISE:
+            if term in ratios:
+                out[term] = math.sqrt(ratios[term] * s2)
         return out
 
 
@@ -145,7 +133,7 @@ class GlsResult:
 def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
     """Starting ratios: b and k of the simulator's defaults relative to the measured white noise."""
     s2 = max(white_n, 1e-6) ** 2 / block_s
-    guess = {"bias_instability": 0.02**2 / s2, "rate_random_walk": 5e-4**2 / s2}
+    guess = {term: NOISE[term].finder.start_coefficient ** 2 / s2 for term in COVARIANCE_NOISE}
     logs = tuple(float(np.clip(math.log10(guess[t]), *LOG_RATIO_BOUNDS)) for t in terms)
     return NoiseState(tuple(terms), logs)
 

@@ -26,7 +26,7 @@ from scipy.stats import norm
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import window_variances
 from trainer.diagnose.profile import Profile, Region, region
-from trainer.physics.noise import BI_FLAT_UNTIL_S, FLICKER_FLOOR_VAR, bias_instability_allan_variance
+from trainer.physics.catalogue import NOISE
 from trainer.scoring.allan import allan_deviation
 
 ALPHA = 1e-3
@@ -174,18 +174,10 @@ def modelled_adev(
 ) -> np.ndarray:
     """Allan deviation of the modelled noise terms (catalogue coefficients) at ``taus``."""
     var = np.zeros_like(taus, dtype=np.float64)
-    if "white_noise" in noise:
-        var += noise["white_noise"]["n_mg_rt_s"] ** 2 / taus
-    if "bias_instability" in noise:
-        b = noise["bias_instability"]["b_mg"]
-        if b > 0:
-            flat = max(BI_FLAT_UNTIL_S, duration_s)
-            if dt <= 1.0:
-                var += b * b * bias_instability_allan_variance(taus, dt, flat)
-            else:
-                var += b * b * FLICKER_FLOOR_VAR
-    if "rate_random_walk" in noise:
-        var += noise["rate_random_walk"]["k_mg_per_rt_s"] ** 2 * taus / 3.0
+    for term, definition in NOISE.items():  # catalogue order
+        allan_variance = definition.finder.allan_variance
+        if term in noise and allan_variance is not None:
+            var += allan_variance(taus, dt, duration_s, noise[term])
     return np.sqrt(var)
 
 

@@ -22,60 +22,26 @@ from scipy.optimize import minimize
 
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import Gls, NoiseState, fit_noise, initial_state
-from trainer.physics.effects import T_REF_C, EffectConfig
-from trainer.physics.thermal import lowpass, play_operator
+from trainer.physics import catalogue
+from trainer.physics.catalogue import DEFINITIONS, EFFECTS, NOISE, WHITE_NOISE
+from trainer.physics.catalogue.base import BlockDesign
+from trainer.physics.catalogue.periodic import periodic_columns as periodic_columns
+from trainer.physics.effects import EffectConfig
 
-POLY_SCALE_C = 50.0  # columns ((T - 25) / 50)^k keep the GLS well conditioned
+# Catalogue plausible ranges (physics-catalogue.md, kept next to each parameter in its definition);
+# the search goes somewhat beyond them so a value at the edge is seen as such, and the report flags
+# values outside.
+PLAUSIBLE: dict[tuple[str, str], tuple[float, float]] = catalogue.PLAUSIBLE
 
-NONLINEAR: dict[str, tuple[str, ...]] = {
-    "bias_poly": (),
-    "thermal_lag": ("tau_s",),
-    "temp_rate": (),
-    "hysteresis": ("width_c",),
-    "stress_relaxation": ("tau_s",),
-    "warmup": ("tau_s",),
-    "periodic": ("period_s",),
-    "bias_step": ("t_s",),
-    "temp_quantization": (),
-    "scale_factor_tc": (),
-    "rate_ramp": (),
-}
-LOG_SCALED = frozenset({"tau_s", "width_c", "period_s"})
 
-# Catalogue plausible ranges (physics-catalogue.md); the search goes somewhat beyond them so a
-# value at the edge is seen as such, and the report flags values outside.
-PLAUSIBLE: dict[tuple[str, str], tuple[float, float]] = {
-    ("thermal_lag", "tau_s"): (10.0, 900.0),
-    ("hysteresis", "width_c"): (2.0, 30.0),
-    ("hysteresis", "amp_mg"): (0.02, 2.0),
-    ("stress_relaxation", "tau_s"): (1200.0, 20000.0),
-    ("stress_relaxation", "gain_mg_per_c"): (0.001, 0.05),
-    ("warmup", "tau_s"): (60.0, 1800.0),
-    ("warmup", "amp_mg"): (0.05, 5.0),
-    ("periodic", "period_s"): (5.0, 2000.0),
-    ("periodic", "amp_mg"): (0.005, 1.0),
-    ("temp_rate", "k_mg_per_c_per_min"): (0.01, 2.0),
-    ("bias_step", "step_mg"): (0.02, 5.0),
-    ("temp_quantization", "lsb_c"): (0.0625, 1.0),
-}
+def nonlinear_names(identifier: str) -> tuple[str, ...]:
+    """Names of the nonlinear parameters of ``identifier`` (the order of ``Term.nl``)."""
+    return tuple(name for name, _ in DEFINITIONS[identifier].finder.nonlinear)
 
 
 def search_bounds(identifier: str, data: BlockData) -> tuple[tuple[float, float], ...]:
     """Bounds of each nonlinear parameter of ``identifier`` for this recording."""
-    span = data.duration_s
-    if identifier == "thermal_lag":
-        return ((3.0, 1500.0),)
-    if identifier == "hysteresis":
-        return ((0.5, 40.0),)
-    if identifier == "stress_relaxation":
-        return ((600.0, max(1200.0, min(40000.0, 4.0 * span))),)
-    if identifier == "warmup":
-        return ((max(5.0, 2.0 * data.block_s), max(60.0, min(6000.0, 0.5 * span))),)
-    if identifier == "periodic":
-        return ((max(2.0 * data.fine_step_s * 1.25, 4.0), 0.5 * span),)
-    if identifier == "bias_step":
-        return ((data.starts[2], data.starts[-2]),)
-    return ()
+    return DEFINITIONS[identifier].finder.bounds(data)
 
 
 @dataclass(frozen=True)
@@ -94,16 +60,11 @@ class Term:
 
     @property
     def n_free_nl(self) -> int:
-        """Parameters this term adds to the BIC count besides its linear columns.
-
-        A step time or a period found by scanning hundreds of positions counts twice (the
-        modified BIC for change points, Zhang & Siegmund 2007): the look-elsewhere effect of an
-        exhaustive scan is far larger than that of a smooth time constant.
-        """
-        if self.identifier == "temp_quantization":
-            return 1  # the LSB is estimated (from the lattice of the thermometer column)
-        if self.identifier in ("bias_step", "periodic"):
-            return 2
+        """Parameters this term adds to the BIC count besides its linear columns: its definition's
+        rule (a scanned step time or period counts twice), else its free nonlinear parameters."""
+        rule = DEFINITIONS[self.identifier].finder.bic_nonlinear
+        if rule is not None:
+            return rule
         return 0 if self.fixed else len(self.nl)
 
 
@@ -115,79 +76,32 @@ class Design:
     T_pm: np.ndarray
 
 
-def _sinc(x: np.ndarray | float) -> np.ndarray | float:
-    return np.sinc(np.asarray(x) / np.pi)
-
-
-def periodic_columns(t: np.ndarray, period_s: float, block_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact block means of ``sin`` and ``cos`` of ``2 pi t / P`` (centres ``t``, width ``block_s``)."""
-    w = 2.0 * math.pi / period_s
-    gain = float(_sinc(w * block_s / 2.0))
-    return gain * np.sin(w * t), gain * np.cos(w * t)
-
-
 def build_design(terms: Sequence[Term], data: BlockData) -> Design:
-    """Design matrix of ``terms`` on the block means (poly columns first)."""
-    ids = [term.identifier for term in terms]
-    dequant = "temp_quantization" in ids
+    """Design matrix of ``terms`` on the block means (the backbone's columns first).
+
+    Order of evaluation: the proof-mass temperature (``thermal_lag``), then every other term's
+    columns in term order (``hysteresis`` also sets what the polynomial reads), then the
+    backbone's (``bias_poly``), which read the finished temperature chain.
+    """
+    definitions = [DEFINITIONS[term.identifier].finder for term in terms]
+    dequant = any(d.dequantize for d in definitions)
     T = data.temperature(dequant)
-    rate = data.rate(dequant)
-    B = data.block_s
-    t = data.t
-    T_pm = T
-    for term in terms:
-        if term.identifier == "thermal_lag":
-            T_pm = lowpass(T, term.nl[0], B)
-    T_b = T_pm
-    columns: list[np.ndarray] = []
-    roles: list[tuple[int, str]] = []
-    offset = np.zeros(data.n)
+    state = BlockDesign(data, T, data.rate(dequant), T, T, np.zeros(data.n))
+    for term, d in zip(terms, definitions, strict=True):
+        if d.proof_mass is not None:
+            state.T_pm = d.proof_mass(term, T, data.block_s)
+    state.T_b = state.T_pm
+    first: list[tuple[int, str, np.ndarray]] = []
     extra: list[tuple[int, str, np.ndarray]] = []
-    for index, term in enumerate(terms):
-        ident = term.identifier
-        if ident == "hysteresis":
-            width = term.nl[0]
-            play = play_operator(T_pm, width)
-            T_b = play
-            extra.append((index, "amp_mg", (T_pm - play) / (width / 2.0)))
-        elif ident == "temp_rate":
-            extra.append((index, "k_mg_per_c_per_min", rate))
-        elif ident == "stress_relaxation":
-            extra.append((index, "gain_mg_per_c", T - lowpass(T, term.nl[0], B)))
-        elif ident == "warmup":
-            tau = term.nl[0]
-            x = B / (2.0 * tau)
-            extra.append((index, "amp_mg", np.exp(-t / tau) * (math.sinh(x) / x if x > 1e-8 else 1.0)))
-        elif ident == "periodic":
-            s, c = periodic_columns(t, term.nl[0], B)
-            if term.offset is not None:
-                amp, phase = term.offset
-                offset += amp * (math.cos(phase) * s + math.sin(phase) * c)
-            else:
-                extra.append((index, "sin", s))
-                extra.append((index, "cos", c))
-        elif ident == "bias_step":
-            extra.append((index, "step_mg", np.clip((t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0)))
-        elif ident == "rate_ramp":
-            extra.append((index, "r_mg_per_s", t))
-        elif ident == "temp_quantization":
-            # In a quantised hold the true temperature is only known within +-LSB/2: an unknown
-            # offset per plateau (the polynomial's slope times that temperature error).
-            for k, (p0, p1) in enumerate(data.plateaus):
-                inside = ((t >= p0) & (t < p1)).astype(np.float64)
-                if inside.sum() >= 2:
-                    extra.append((index, f"plateau{k}", inside))
-        elif ident == "scale_factor_tc" and data.known_input_block is not None:
-            extra.append((index, "sf_ppm_per_c", data.known_input_block * 1e-6 * (T_pm - T_REF_C)))
-    poly_index = ids.index("bias_poly")  # always present: the finder's models all start from it
-    u = (T_b - T_REF_C) / POLY_SCALE_C
-    for k in range(4):
-        columns.append(u**k)
-        roles.append((poly_index, f"c{k}"))
-    for index, role, column in extra:
-        columns.append(column)
-        roles.append((index, role))
-    return Design(np.column_stack(columns), roles, offset, T_pm)
+    for index, (term, d) in enumerate(zip(terms, definitions, strict=True)):
+        if d.columns is not None and not d.backbone:
+            extra += [(index, role, column) for role, column in d.columns(term, state)]
+    for index, (term, d) in enumerate(zip(terms, definitions, strict=True)):
+        if d.backbone:
+            first += [(index, role, column) for role, column in d.columns(term, state)]
+    columns = [column for _, _, column in (*first, *extra)]
+    roles = [(index, role) for index, role, _ in (*first, *extra)]
+    return Design(np.column_stack(columns), roles, state.offset, state.T_pm)
 
 
 @dataclass
@@ -224,13 +138,8 @@ class ModelFit:
         """Catalogue noise coefficients. White noise comes from the full-rate first differences:
         on block means it is barely separable from flicker, at the sample rate it dominates."""
         values = self.gls.noise_params(self.rss)
-        values["white_noise"] = self.data.white_n_mg_rt_s
-        names = {
-            "white_noise": "n_mg_rt_s",
-            "bias_instability": "b_mg",
-            "rate_random_walk": "k_mg_per_rt_s",
-        }
-        return {term: {names[term]: value} for term, value in values.items()}
+        values[WHITE_NOISE] = self.data.white_n_mg_rt_s
+        return {term: {NOISE[term].params[0].name: value} for term, value in values.items()}
 
     def linear(self, index: int) -> dict[str, float]:
         return {
@@ -275,9 +184,10 @@ def _free_slots(terms: Sequence[Term], data: BlockData) -> list[tuple[int, int, 
     for i, term in enumerate(terms):
         if term.fixed or term.offset is not None:
             continue
-        names = NONLINEAR[term.identifier]
-        for j, (name, (lo, hi)) in enumerate(zip(names, search_bounds(term.identifier, data), strict=True)):
-            slots.append((i, j, lo, hi, name in LOG_SCALED))
+        names = DEFINITIONS[term.identifier].finder.nonlinear
+        bounds = search_bounds(term.identifier, data)
+        for j, ((_, logged), (lo, hi)) in enumerate(zip(names, bounds, strict=True)):
+            slots.append((i, j, lo, hi, logged))
     return slots
 
 
@@ -370,43 +280,14 @@ def _restrict(start: NoiseState | None, noise_terms: Sequence[str], data: BlockD
 
 
 def catalogue_effects(fit: ModelFit) -> list[EffectConfig]:
-    """The fitted terms as catalogue ``EffectConfig`` instances (identifiers, names, units)."""
+    """The fitted terms as catalogue ``EffectConfig`` instances (identifiers, names, units).
+
+    Model terms that are not catalogue effects (the ``rate_ramp`` noise trend) are left out.
+    """
     effects: list[EffectConfig] = []
     for index, term in enumerate(fit.terms):
-        lin = fit.linear(index)
-        ident = term.identifier
-        params: dict[str, float]
-        if ident == "bias_poly":
-            params = {
-                "c0_mg": lin["c0"],
-                "c1_mg_per_c": lin["c1"] / POLY_SCALE_C,
-                "c2_mg_per_c2": lin["c2"] / POLY_SCALE_C**2,
-                "c3_mg_per_c3": lin["c3"] / POLY_SCALE_C**3,
-            }
-        elif ident == "thermal_lag":
-            params = {"tau_s": term.nl[0]}
-        elif ident == "temp_rate":
-            params = {"k_mg_per_c_per_min": lin["k_mg_per_c_per_min"]}
-        elif ident == "hysteresis":
-            params = {"amp_mg": lin["amp_mg"], "width_c": term.nl[0]}
-        elif ident == "stress_relaxation":
-            params = {"gain_mg_per_c": lin["gain_mg_per_c"], "tau_s": term.nl[0]}
-        elif ident == "warmup":
-            params = {"amp_mg": lin["amp_mg"], "tau_s": term.nl[0]}
-        elif ident == "periodic":
-            if term.offset is not None:
-                amp, phase = term.offset
-            else:
-                amp, phase = math.hypot(lin["sin"], lin["cos"]), math.atan2(lin["cos"], lin["sin"])
-            params = {"amp_mg": amp, "period_s": term.nl[0], "phase_rad": phase}
-        elif ident == "bias_step":
-            params = {"t_s": term.nl[0], "step_mg": lin["step_mg"]}
-        elif ident == "temp_quantization":
-            params = {"lsb_c": term.nl[0]}
-        elif ident == "scale_factor_tc":
-            # Fitted only when the known input varies; otherwise the user's value is kept.
-            params = {"sf_ppm_per_c": lin.get("sf_ppm_per_c", term.nl[0] if term.nl else 0.0)}
-        else:
+        definition = EFFECTS.get(term.identifier)
+        if definition is None or definition.finder.to_params is None:
             continue
-        effects.append(EffectConfig(ident, params))
+        effects.append(EffectConfig(term.identifier, definition.finder.to_params(term, fit.linear(index))))
     return effects

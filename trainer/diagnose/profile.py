@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from trainer.diagnose.blocks import BlockData
+from trainer.physics.catalogue import CANDIDATE_ORDER, DEFINITIONS
+from trainer.physics.catalogue.base import Identifiability
 from trainer.physics.profiles import parse_segments
 
 BRANCH_NAMES = {1: "heating", -1: "cooling", 0: "hold"}
@@ -26,14 +28,6 @@ class Segment:
     label: str
     start_s: float
     end_s: float
-
-
-@dataclass(frozen=True)
-class Identifiability:
-    identifiable: bool
-    reason: str
-    test: str = ""  # the test that would make it identifiable (or separate it better)
-    weak: bool = False
 
 
 @dataclass
@@ -179,92 +173,12 @@ def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: b
 
 
 def identifiability(p: Profile) -> dict[str, Identifiability]:
-    """Which catalogue effects this temperature profile can reveal, and what test would help."""
-    out: dict[str, Identifiability] = {}
-    rate_changes = p.corners >= 1 or len(p.ramp_rates) >= 2 or p.reversals >= 1
-    two_rates_or_corners = p.corners >= 2 or len(p.ramp_rates) >= 2 or p.reversals >= 1
-    if rate_changes:
-        weak = not two_rates_or_corners
-        reason = (
-            f"{p.corners} ramp corner(s), {len(p.ramp_rates)} ramp rate(s), {p.reversals} reversal(s)"
-            + ("; only the start of the ramp separates a lag from a dT/dt term" if weak else "")
-        )
-        for effect in ("thermal_lag", "temp_rate"):
-            out[effect] = Identifiability(
-                True, reason, "a second ramp rate or a hold after the ramp (corners)" if weak else "", weak
-            )
-    else:
-        reason = (
-            "one constant-rate ramp: a lag or a dT/dt term is a constant temperature offset that the "
-            "polynomial absorbs (an uneven heating rate in flight would then skew the compensation)"
-        )
-        for effect in ("thermal_lag", "temp_rate"):
-            out[effect] = Identifiability(
-                False, reason, "ramp at two different rates, or add a hold after the ramp"
-            )
-    overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
-    if p.reversals >= 1 and overlap_span >= 3.0:
-        out["hysteresis"] = Identifiability(
-            True,
-            f"heating and cooling both cover {p.overlap_c[0]:.1f}..{p.overlap_c[1]:.1f} degC",  # type: ignore[index]
-            "" if p.holds_after_ramp_s >= 600 else "a hold at the turning point separates it from a lag",
-        )
-    else:
-        out["hysteresis"] = Identifiability(
-            False,
-            "no reversal of temperature over a common range: one branch cannot show a branch offset",
-            "add a ramp_down over the same temperature range as the ramp_up (then a hold)",
-        )
-    if p.duration_s >= 1200.0 and (p.holds_after_ramp_s >= 600.0 or p.reversals >= 1):
-        out["stress_relaxation"] = Identifiability(
-            True,
-            f"longest hold after a ramp {p.holds_after_ramp_s:.0f} s, {p.reversals} reversal(s)",
-            "" if p.holds_after_ramp_s >= 1800 else "hold >= 1 h after the ramp to see the creep settle",
-            weak=p.holds_after_ramp_s < 1800,
-        )
-    else:
-        out["stress_relaxation"] = Identifiability(
-            False,
-            "no hold after a ramp or reversal long enough for a 20-min-plus creep to show apart from the polynomial",
-            "hold the temperature for >= 1 h after the ramp",
-        )
-    out["warmup"] = Identifiability(
-        True,
-        "the recording starts at power-on"
-        + ("" if p.segments and p.segments[0].label == "soak" else " (no soak)"),
-        "" if p.segments and p.segments[0].label == "soak" else "power on and soak 30 min before ramping",
-        weak=not (p.segments and p.segments[0].label == "soak"),
-    )
-    out["periodic"] = Identifiability(True, f"{p.duration_s:.0f} s of data: periods up to half of it")
-    out["bias_step"] = Identifiability(True, "a step shows anywhere in the run")
-    if p.lattice_lsb_c is not None:
-        out["temp_quantization"] = Identifiability(
-            True, f"the thermometer column lies on a {p.lattice_lsb_c:g} degC lattice (a staircase)"
-        )
-    else:
-        out["temp_quantization"] = Identifiability(
-            False, "the thermometer column is not quantised (no lattice of equal steps)", "", weak=False
-        )
-    if p.known_input_varies:
-        out["scale_factor_tc"] = Identifiability(True, "the known true input changes (a second orientation)")
-    else:
-        out["scale_factor_tc"] = Identifiability(
-            False,
-            "a single static orientation: the scale-factor tempco times a constant input equals the "
-            "polynomial's linear term (a fixture tilt is a constant c0 the same way)",
-            "a 180 degree turn (+1 g / -1 g) at several temperatures, or a tumble",
-        )
-    monotone = p.reversals == 0 and p.hold_s < 0.1 * p.duration_s
-    out["rate_ramp"] = Identifiability(
-        not monotone,
-        "time and temperature move together on one ramp"
-        if monotone
-        else "holds or reversals decouple time from temperature",
-        "add a hold or a reversal" if monotone else "",
-    )
-    out["rate_random_walk"] = Identifiability(True, f"{p.duration_s:.0f} s of data")
-    out["bias_instability"] = Identifiability(True, f"{p.duration_s:.0f} s of data")
-    return out
+    """Which catalogue effects this temperature profile can reveal, and what test would help.
+
+    Each definition carries its own rule (``finder.identifiability``); the finder's candidates
+    are those with a rule.
+    """
+    return {k: rule(p) for k in CANDIDATE_ORDER if (rule := DEFINITIONS[k].finder.identifiability)}
 
 
 @dataclass(frozen=True)

@@ -51,57 +51,9 @@ from trainer.diagnose.where import (
     special_where,
     where_regions,
 )
+from trainer.physics.catalogue import ADVICE, CANDIDATE_ORDER  # the finder's order and advice, per effect
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
-
-CANDIDATE_ORDER: tuple[str, ...] = (
-    "thermal_lag",
-    "temp_rate",
-    "hysteresis",
-    "stress_relaxation",
-    "warmup",
-    "periodic",
-    "bias_step",
-    "temp_quantization",
-    "scale_factor_tc",
-    "rate_ramp",
-    "bias_instability",
-    "rate_random_walk",
-)
-NOISE_EFFECTS = frozenset({"bias_instability", "rate_random_walk"})
-
-ADVICE: dict[str, str] = {
-    "thermal_lag": (
-        "the proof mass lags the thermometer: a polynomial fitted at one heating rate is skewed when the "
-        "rate changes (uneven heating on the pad or in flight); feed the compensator a low-passed temperature"
-    ),
-    "temp_rate": (
-        "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "
-        "at another; add a dT/dt input or calibrate at the flight's heating rates"
-    ),
-    "hysteresis": (
-        "heating and cooling branches differ: a single polynomial splits the difference; calibrate on both "
-        "branches and track the branch (the offset persists in holds)"
-    ),
-    "stress_relaxation": (
-        "package creep after a temperature change: the bias keeps moving for tens of minutes at a constant "
-        "temperature; hold long enough before calibrating or model the creep"
-    ),
-    "warmup": (
-        "self-heating after power-on: the bias settles over the first minutes; let the board warm up "
-        "(about 3 time constants) before calibration and before flight, or model the warm-up"
-    ),
-    "periodic": "a periodic disturbance (chamber compressor, mains beat, fan): it is not temperature drift",
-    "bias_step": "a bias step (shock, mode hop, reset): the compensation is offset after it",
-    "temp_quantization": (
-        "the temperature reading comes in coarse steps: a polynomial on the staircase leaves a sawtooth; "
-        "interpolate or low-pass the temperature before the compensation"
-    ),
-    "scale_factor_tc": "the scale factor drifts with temperature: a compensation at one orientation is off at another",
-    "rate_ramp": "a linear drift in time independent of temperature (ageing, creep of the mount)",
-    "rate_random_walk": "random wander of the bias beyond the modelled noise: no compensator can remove it",
-    "bias_instability": "flicker noise floor beyond the modelled noise",
-}
 
 
 def _param_flags(effect: EffectConfig) -> list[str]:

@@ -18,6 +18,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from trainer.data.recording import Recording
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, NOISE, WHITE_NOISE
+from trainer.physics.catalogue.base import Scenario as BenchSpec
+from trainer.physics.catalogue.bias_poly import polynomial
 from trainer.physics.config import (
     NoiseConfig,
     PhysicsConfig,
@@ -29,30 +32,16 @@ from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import SegmentSpec
 from trainer.physics.simulate import simulate
 
-HIDDEN_EFFECTS: tuple[str, ...] = (
-    "thermal_lag",
-    "temp_rate",
-    "hysteresis",
-    "stress_relaxation",
-    "warmup",
-    "periodic",
-    "bias_step",
-    "temp_quantization",
-    "rate_random_walk",
+# What the bench can conceal (effects, then noise terms, in catalogue order) and which parameters
+# each must recover (time constants and amplitudes), for tests and bench: from the definitions.
+HIDDEN_EFFECTS: tuple[str, ...] = tuple(
+    k for k, d in DEFINITIONS.items() if d.scenario is not None and d.scenario.draw is not None
 )
+CHECKED_PARAMS: dict[str, tuple[str, ...]] = {k: DEFINITIONS[k].scenario.checked for k in HIDDEN_EFFECTS}  # type: ignore[union-attr]
 
-# Which parameters each effect must recover (time constants and amplitudes), for tests and bench.
-CHECKED_PARAMS: dict[str, tuple[str, ...]] = {
-    "thermal_lag": ("tau_s",),
-    "temp_rate": ("k_mg_per_c_per_min",),
-    "hysteresis": ("amp_mg", "width_c"),
-    "stress_relaxation": ("gain_mg_per_c", "tau_s"),
-    "warmup": ("amp_mg", "tau_s"),
-    "periodic": ("amp_mg", "period_s"),
-    "bias_step": ("step_mg",),
-    "temp_quantization": ("lsb_c",),
-    "rate_random_walk": ("k_mg_per_rt_s",),
-}
+
+def _bench(identifier: str) -> BenchSpec:
+    return DEFINITIONS[identifier].scenario or BenchSpec()
 
 
 @dataclass(frozen=True)
@@ -93,49 +82,13 @@ def _protocol(rng: np.random.Generator, reversal: bool, long_holds: bool = False
 def _draw_effect(
     effect: str, rng: np.random.Generator, protocol: ProtocolConfig, slope: float
 ) -> EffectConfig | None:
+    """A concealed instance of bias effect ``effect`` (``None`` for a noise term, drawn earlier)."""
     duration = sum(s.duration_s for s in protocol.segments)
     sign = float(rng.choice([-1.0, 1.0]))
-    if effect == "thermal_lag":
-        return EffectConfig(effect, {"tau_s": float(rng.uniform(60.0, 400.0))})
-    if effect == "temp_rate":
-        return EffectConfig(effect, {"k_mg_per_c_per_min": sign * float(rng.uniform(0.04, 0.2))})
-    if effect == "hysteresis":
-        return EffectConfig(
-            effect, {"amp_mg": sign * float(rng.uniform(0.05, 0.2)), "width_c": float(rng.uniform(2.0, 6.0))}
-        )
-    if effect == "stress_relaxation":
-        return EffectConfig(
-            effect,
-            {
-                "gain_mg_per_c": sign * float(rng.uniform(0.012, 0.03)),
-                "tau_s": float(rng.uniform(1500.0, 4000.0)),
-            },
-        )
-    if effect == "warmup":
-        return EffectConfig(
-            effect, {"amp_mg": sign * float(rng.uniform(0.5, 1.2)), "tau_s": float(rng.uniform(200.0, 900.0))}
-        )
-    if effect == "periodic":
-        period = float(np.exp(rng.uniform(math.log(20.0), math.log(1500.0))))
-        return EffectConfig(
-            effect,
-            {
-                "amp_mg": float(rng.uniform(0.015, 0.06)),
-                "period_s": period,
-                "phase_rad": float(rng.uniform(-3.1, 3.1)),
-            },
-        )
-    if effect == "bias_step":
-        return EffectConfig(
-            effect,
-            {
-                "t_s": float(rng.uniform(0.25, 0.8) * duration),
-                "step_mg": sign * float(rng.uniform(0.15, 0.4)),
-            },
-        )
-    if effect == "temp_quantization":
-        return EffectConfig(effect, {"lsb_c": float(rng.choice([0.5, 0.625]))})
-    return None
+    definition = EFFECTS.get(effect)
+    if definition is None or definition.scenario is None or definition.scenario.draw is None:
+        return None
+    return EffectConfig(effect, definition.scenario.draw(rng, duration, sign))
 
 
 def make_scenario(
@@ -145,14 +98,16 @@ def make_scenario(
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7919]))
     # Hysteresis needs a reversal and a random walk one that decouples time from temperature (else
     # the polynomial absorbs it); creep needs long holds: the tests use protocols that can show them.
-    reversal = bool(rng.random() < 0.75) or "hysteresis" in effects or "rate_random_walk" in effects
-    protocol = _protocol(rng, reversal, long_holds="stress_relaxation" in effects)
+    specs = [_bench(effect) for effect in effects]
+    reversal = bool(rng.random() < 0.75) or any(spec.needs_reversal for spec in specs)
+    protocol = _protocol(rng, reversal, long_holds=any(spec.long_holds for spec in specs))
     fs = float(rng.choice(list(rates)))
     slope = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.05, 0.25))
-    if "temp_quantization" in effects:  # a staircase matters only on a steep enough bias curve
-        slope = math.copysign(max(abs(slope), 0.2), slope)
+    min_slope = max((spec.min_slope_mg_per_c for spec in specs), default=0.0)
+    if min_slope > 0:  # e.g. a staircase matters only on a steep enough bias curve
+        slope = math.copysign(max(abs(slope), min_slope), slope)
     poly = EffectConfig(
-        "bias_poly",
+        BACKBONE,
         {
             "c0_mg": float(rng.uniform(-1.0, 1.0)),
             "c1_mg_per_c": slope,
@@ -160,34 +115,32 @@ def make_scenario(
             "c3_mg_per_c3": float(rng.uniform(-8e-6, 8e-6)),
         },
     )
-    n_white = float(rng.uniform(0.02, 0.08))
-    noise_user = [
-        NoiseConfig("white_noise", {"n_mg_rt_s": n_white}),
-        NoiseConfig("bias_instability", {"b_mg": float(rng.uniform(0.008, 0.025))}),
-    ]
+    # The user's noise model: every noise term with a bench level, in catalogue order (white noise,
+    # bias instability, random walk); a concealed noise term is drawn larger and left out of it.
+    known = {k: d.scenario.known(rng) for k, d in NOISE.items() if d.scenario and d.scenario.known}
     hidden: list[EffectConfig] = []
-    truth_noise = list(noise_user)
-    k_rrw = float(rng.uniform(2e-4, 6e-4))
-    if "rate_random_walk" in effects:
-        k_rrw = float(rng.uniform(3e-3, 6e-3))
-        hidden.append(EffectConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
-        truth_noise.append(NoiseConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
-    else:
-        noise_user.append(NoiseConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
-        truth_noise.append(NoiseConfig("rate_random_walk", {"k_mg_per_rt_s": k_rrw}))
+    for k in known:
+        draw = _bench(k).draw
+        if k in effects and draw is not None:
+            hidden.append(EffectConfig(k, draw(rng, 0.0, 1.0)))
+    hidden_noise = {h.identifier: h.params for h in hidden}
+    noise_user = [NoiseConfig(k, p) for k, p in known.items() if k not in hidden_noise]
+    truth_noise = [NoiseConfig(k, hidden_noise.get(k, p)) for k, p in known.items()]
     temperature = TemperatureConfig(
         case_tau_s=float(rng.uniform(120.0, 300.0)),
         temp_noise_c=float(
-            rng.uniform(0.005, 0.015) if "temp_quantization" in effects else rng.uniform(0.01, 0.04)
+            rng.uniform(0.005, 0.015)
+            if any(spec.fine_thermometer for spec in specs)
+            else rng.uniform(0.01, 0.04)
         ),
     )
     for effect in effects:
         drawn = _draw_effect(effect, rng, protocol, slope)
         if drawn is not None:
             hidden.append(drawn)
-    effect_order = ["bias_poly", *[e for e in HIDDEN_EFFECTS]]
+    effect_order = list(EFFECTS)
     truth_effects = sorted(
-        [poly, *[h for h in hidden if h.identifier != "rate_random_walk"]],
+        [poly, *[h for h in hidden if h.identifier in EFFECTS]],
         key=lambda e: effect_order.index(e.identifier),
     )
     base = PhysicsConfig(
@@ -199,9 +152,7 @@ def make_scenario(
     )
     truth = replace(base, effects=tuple(truth_effects), noise=tuple(truth_noise))
     truth = _conceal(truth, base, hidden, seed)
-    sim = replace(
-        base, noise=tuple(n if n.identifier != "white_noise" else truth.noise[0] for n in noise_user)
-    )
+    sim = replace(base, noise=tuple(n if n.identifier != WHITE_NOISE else truth.noise[0] for n in noise_user))
     name = "+".join(effects) or "clean"
     return Scenario(f"{name}#{seed}", seed, truth, sim, tuple(hidden))
 
@@ -211,8 +162,9 @@ def contribution(
 ) -> np.ndarray:
     """What the concealed effects add to the model's error, sample by sample (mg).
 
-    For bias effects the change of the true drift; for ``temp_quantization`` the error of the
-    polynomial evaluated on the staircase reading; for ``rate_random_walk`` the walk itself.
+    For bias effects the change of the true drift; for an effect on the thermometer reading
+    (``temp_quantization``) the error of the polynomial evaluated on that reading; for a noise
+    term (``rate_random_walk``) the noise it adds.
     """
     with_rec = simulate(truth, seed)
     out = (
@@ -220,17 +172,17 @@ def contribution(
         - simulate(replace(truth, effects=base.effects), seed).columns["true_drift_mg"]
     )
     poly = base.effects[0].params
-    if any(h.identifier == "temp_quantization" for h in hidden):
+    if any(h.identifier in EFFECTS and EFFECTS[h.identifier].thermometer is not None for h in hidden):
 
         def curve(T: np.ndarray) -> np.ndarray:
-            d = T - 25.0
-            return poly["c0_mg"] + d * (
-                poly["c1_mg_per_c"] + d * (poly["c2_mg_per_c2"] + d * poly["c3_mg_per_c3"])
+            return polynomial(
+                T, poly["c0_mg"], poly["c1_mg_per_c"], poly["c2_mg_per_c2"], poly["c3_mg_per_c3"]
             )
 
         out = out + curve(with_rec.columns["true_temp_c"]) - curve(with_rec.columns["temp_c"])
-    if any(h.identifier == "rate_random_walk" for h in hidden):
-        without = replace(truth, noise=tuple(n for n in truth.noise if n.identifier != "rate_random_walk"))
+    hidden_noise = {h.identifier for h in hidden if h.identifier in NOISE}
+    if hidden_noise:
+        without = replace(truth, noise=tuple(n for n in truth.noise if n.identifier not in hidden_noise))
         out = out + with_rec.columns["true_noise_mg"] - simulate(without, seed).columns["true_noise_mg"]
     return out
 
@@ -247,7 +199,7 @@ def _conceal(
     sigma = white.params["n_mg_rt_s"] * math.sqrt(fs)
     if peak <= sigma:
         return truth
-    noise = (NoiseConfig("white_noise", {"n_mg_rt_s": 1.05 * peak / math.sqrt(fs)}), *truth.noise[1:])
+    noise = (NoiseConfig(white.identifier, {"n_mg_rt_s": 1.05 * peak / math.sqrt(fs)}), *truth.noise[1:])
     return replace(truth, noise=noise)
 
 

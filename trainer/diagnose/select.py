@@ -30,59 +30,16 @@ from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.candidates import Proposal, propose
 from trainer.diagnose.gls import NoiseState
 from trainer.diagnose.model import ModelFit, fit_model
+from trainer.physics import catalogue
 
 THRESHOLD = 12.0
 AMBIGUOUS = 6.0
 MAX_ADDED = 4
 TOP_REFIT = 4
-NOISE_EFFECTS = frozenset({"bias_instability", "rate_random_walk"})
-
-CONFUSABLE: dict[str, tuple[str, ...]] = {
-    "thermal_lag": ("temp_rate", "hysteresis", "stress_relaxation", "temp_quantization"),
-    "temp_rate": ("thermal_lag", "hysteresis", "stress_relaxation"),
-    "hysteresis": ("thermal_lag", "temp_rate"),
-    "stress_relaxation": ("thermal_lag", "temp_rate", "warmup"),
-    "warmup": ("stress_relaxation", "bias_step"),
-    "bias_step": ("warmup",),
-    "temp_quantization": ("thermal_lag",),
-    "rate_ramp": ("rate_random_walk",),
-    "rate_random_walk": ("rate_ramp",),
-}
-
-SEPARATING_SIGNATURE: dict[frozenset[str], str] = {
-    frozenset({"thermal_lag", "temp_rate"}): (
-        "a lag scales with the local slope of the bias curve and settles with its own time constant "
-        "after a ramp corner; a dT/dt term follows the rate itself (two ramp rates or a hold separate them)"
-    ),
-    frozenset({"thermal_lag", "hysteresis"}): (
-        "a lag offset decays during a hold and grows with the ramp rate; a hysteresis offset "
-        "persists in a hold and does not depend on the rate"
-    ),
-    frozenset({"temp_rate", "hysteresis"}): (
-        "a dT/dt offset vanishes in a hold and scales with the rate; a hysteresis offset persists"
-    ),
-    frozenset({"thermal_lag", "stress_relaxation"}): (
-        "the time constant: a lag settles within minutes (10-900 s), package creep over 20 min to hours"
-    ),
-    frozenset({"temp_rate", "stress_relaxation"}): (
-        "on ramps both give an offset that follows the rate; a dT/dt term vanishes as soon as the temperature "
-        "stops, creep keeps settling for tens of minutes in a hold"
-    ),
-    frozenset({"bias_step", "warmup"}): (
-        "a step is instantaneous and permanent; a warm-up decays exponentially from power-on (a longer "
-        "soak after power-on, or a higher sample rate at the start, shows the shape)"
-    ),
-    frozenset({"stress_relaxation", "warmup"}): (
-        "creep follows each temperature change; warm-up happens once after power-on"
-    ),
-    frozenset({"temp_quantization", "thermal_lag"}): (
-        "a staircase error is a sawtooth of one LSB period on every ramp and an unknown offset in holds; "
-        "a lag offset is proportional to the rate (a finer thermometer reading settles it)"
-    ),
-    frozenset({"rate_ramp", "rate_random_walk"}): (
-        "a ramp is a straight line in time; a random walk wanders (its Allan slope is +1/2, the ramp's +1)"
-    ),
-}
+NOISE_EFFECTS = catalogue.NOISE_EFFECTS
+# Known confounders of each effect, and what separates each pair (in the effects' definitions).
+CONFUSABLE: dict[str, tuple[str, ...]] = catalogue.CONFUSABLE
+SEPARATING_SIGNATURE: dict[frozenset[str], str] = catalogue.SEPARATING_SIGNATURE
 
 
 @dataclass
@@ -136,9 +93,7 @@ def noise_steps(
     for effect in candidates:
         if effect not in NOISE_EFFECTS or effect in current.noise.terms:
             continue
-        order = [
-            t for t in ("bias_instability", "rate_random_walk") if t in current.noise.terms or t == effect
-        ]
+        order = [t for t in catalogue.COVARIANCE_NOISE if t in current.noise.terms or t == effect]
         with_term = fit_model(current.terms, tuple(order), data, start=current.noise)
         delta = current.bic - with_term.bic
         text = f"BIC improvement {delta:.1f} (noise ML with and without {effect})"
@@ -294,7 +249,7 @@ def baseline_support(baseline: ModelFit, data: BlockData) -> list[dict[str, obje
     """Effects of the user's simulation that the data do not support (dropping them lowers the BIC)."""
     out = []
     for index, term in enumerate(baseline.terms):
-        if term.identifier == "bias_poly":  # the only term the finder adds itself
+        if term.identifier == catalogue.BACKBONE:  # the only term the finder adds itself
             continue
         reduced = drop_term(baseline, index, term.identifier, data)
         gain = baseline.bic - reduced.bic

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -19,8 +20,9 @@ import tomli_w
 
 from trainer.errors import UserError, atomic_output
 from trainer.fields import TableFields, show
-from trainer.physics.effects import EFFECT_PARAMETERS, MULTI_INSTANCE, EffectConfig, Param
-from trainer.physics.noise import NOISE_PARAMETERS
+from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS
+from trainer.physics.catalogue.base import Param
+from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import BUILTIN_PROTOCOLS, PROTOCOL_NAMES, SEGMENT_LABELS, SegmentSpec
 
 INPUT_KINDS: tuple[str, ...] = ("zero", "constant", "steps", "motion")
@@ -302,6 +304,16 @@ def _read_terms(
 _SECTIONS = ("recording", "protocol", "temperature", "input", "effects", "noise")
 
 
+def input_setters(effects: Sequence[EffectConfig]) -> list[tuple[EffectConfig, str]]:
+    """Effect instances whose parameter sets the constant true input (``scale_factor_tc.g_in_mg``)."""
+    out = []
+    for effect in effects:
+        name = EFFECTS[effect.identifier].input_param
+        if name is not None and name in effect.params:
+            out.append((effect, name))
+    return out
+
+
 def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
     """Validate an already-parsed TOML document into a :class:`PhysicsConfig`."""
     for key, value in data.items():
@@ -316,10 +328,11 @@ def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
         NoiseConfig(i, p)
         for i, p in _read_terms(source, "noise", data.get("noise", {}), NOISE_PARAMETERS, frozenset())
     )
-    sf_with_input = [e for e in effects if e.identifier == "scale_factor_tc" and "g_in_mg" in e.params]
+    sf_with_input = input_setters(effects)
     if sf_with_input and "input" in data:
+        effect, name = sf_with_input[0]
         raise UserError(
-            f"{source}: [effects.scale_factor_tc] g_in_mg and [input] both set the true input; give only one"
+            f"{source}: [effects.{effect.identifier}] {name} and [input] both set the true input; give only one"
         )
     return PhysicsConfig(
         recording=_read_recording(source, data.get("recording", {})),
@@ -384,7 +397,7 @@ def config_to_dict(cfg: PhysicsConfig) -> dict[str, Any]:
             "temp_noise_c": cfg.temperature.temp_noise_c,
         },
     }
-    sf_sets_input = any(e.identifier == "scale_factor_tc" and "g_in_mg" in e.params for e in cfg.effects)
+    sf_sets_input = bool(input_setters(cfg.effects))
     if not (sf_sets_input and cfg.input.kind == "zero"):
         doc["input"] = _input_to_dict(cfg.input)
     effects: dict[str, Any] = {}

@@ -13,23 +13,17 @@ from tqdm import tqdm
 from trainer import __version__
 from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.physics.config import PhysicsConfig, config_hash
-from trainer.physics.effects import drift, quantize_temperature
+from trainer.physics.catalogue import EFFECTS, NOISE
+from trainer.physics.config import PhysicsConfig, config_hash, input_setters
+from trainer.physics.effects import drift
 from trainer.physics.noise import noise_term
 from trainer.physics.profiles import build_profile, format_segments, input_signal
 from trainer.physics.thermal import lowpass
 
-# One random stream per source, derived by SeedSequence spawning. Indices are permanent: new
-# streams are appended, so switching one term on or adding a new one never changes the others.
-STREAMS: tuple[str, ...] = (
-    "thermometer",
-    "input",
-    "quantization_noise",
-    "white_noise",
-    "bias_instability",
-    "rate_random_walk",
-    "rate_ramp",
-)
+# One random stream per source, derived by SeedSequence spawning: the thermometer, the input, then
+# one per noise term in catalogue order. Indices are permanent: new streams (new noise terms) are
+# appended, so switching one term on or adding a new one never changes the others.
+STREAMS: tuple[str, ...] = ("thermometer", "input", *NOISE)
 
 
 def stream_rngs(seed: int) -> dict[str, np.random.Generator]:
@@ -50,16 +44,16 @@ def _check(cfg: PhysicsConfig, seed: int, n: int, fs: float) -> None:
                 f"{src}: [input.tones #{index + 1}] freq_hz {tone.freq_hz:g} "
                 f"is not below the Nyquist frequency {fs / 2:g} Hz"
             )
-    for effect in cfg.effect_instances("periodic"):
-        if effect.params["period_s"] <= 2.0 / fs:
-            raise UserError(
-                f"{src}: [effects.periodic] period_s {effect.params['period_s']:g} "
-                f"is not above two sample periods ({2 / fs:g} s)"
-            )
-    sf_input = [e for e in cfg.effect_instances("scale_factor_tc") if "g_in_mg" in e.params]
+    for effect in cfg.effects:
+        check = EFFECTS[effect.identifier].sampling_check
+        problem = None if check is None else check(effect.params, fs)
+        if problem:
+            raise UserError(f"{src}: {problem}")
+    sf_input = input_setters(cfg.effects)
     if sf_input and cfg.input.kind != "zero":
+        effect, name = sf_input[0]
         raise UserError(
-            f"{src}: [effects.scale_factor_tc] g_in_mg and [input] both set the true input; give only one"
+            f"{src}: [effects.{effect.identifier}] {name} and [input] both set the true input; give only one"
         )
 
 
@@ -85,7 +79,7 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     rate = (setpoint - T_die) / tau * 60.0
     stages.update()
 
-    sf_given = [e.params["g_in_mg"] for e in cfg.effect_instances("scale_factor_tc") if "g_in_mg" in e.params]
+    sf_given = [effect.params[name] for effect, name in input_setters(cfg.effects)]
     g_in = np.full(n, sf_given[0]) if sf_given else input_signal(cfg.input, t, rngs["input"])
     stages.update()
 
@@ -93,8 +87,10 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     stages.update()
 
     temp_c = T_die + rngs["thermometer"].standard_normal(n) * cfg.temperature.temp_noise_c
-    for effect in cfg.effect_instances("temp_quantization"):
-        temp_c = quantize_temperature(temp_c, effect.params["lsb_c"])
+    for effect in cfg.effects:
+        reading = EFFECTS[effect.identifier].thermometer
+        if reading is not None:
+            temp_c = reading(temp_c, effect.params)
     stages.update()
 
     noise = np.zeros(n)

@@ -1,0 +1,230 @@
+"""The shape of one catalogue definition: what every part of the tool knows about an effect.
+
+A definition is plain data plus plain functions of arrays. The simulator reads its parameters and
+its formula; the mismatch finder (``trainer/diagnose``) reads :class:`Finder`; the test bench
+(``trainer/diagnose/scenarios.py``) reads :class:`Scenario`. Nothing here imports the finder:
+its objects (block data, model terms, the temperature profile) are passed in and only read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+T_REF_C = 25.0
+
+Bounds = tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of an effect or noise term.
+
+    ``rule`` is ``finite``, ``positive`` (> 0) or ``nonnegative`` (>= 0). ``default`` is used when
+    the key is absent; a parameter with neither ``default`` nor ``optional`` is required.
+    ``plausible`` is the catalogue's plausible range of ``|value|``; the finder flags fitted values
+    outside it when ``flagged``.
+    """
+
+    name: str
+    rule: str = "finite"
+    default: float | None = None
+    optional: bool = False
+    unit: str = ""
+    plausible: tuple[float, float] | None = None
+    flagged: bool = True
+
+
+class Signals:
+    """What an additive formula may read, sample by sample.
+
+    ``T_b`` is the temperature the bias polynomial reads: ``T_pm``, or what ``poly_temperature``
+    makes of it (the play output when ``hysteresis`` is present), computed once when first read.
+    ``rate_c_per_min`` is ``dT_die/dt`` (``None``: the formula takes the numerical derivative);
+    ``g_in_mg`` the true input (``None`` when unknown).
+    """
+
+    def __init__(
+        self,
+        t: np.ndarray,
+        T_die: np.ndarray,
+        T_pm: np.ndarray,
+        *,
+        rate_c_per_min: np.ndarray | None = None,
+        g_in_mg: np.ndarray | float | None = None,
+        poly_temperature: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
+        self.t = t
+        self.T_die = T_die
+        self.T_pm = T_pm
+        self.rate_c_per_min = rate_c_per_min
+        self.g_in_mg = g_in_mg
+        self._poly_temperature = poly_temperature
+
+    @cached_property
+    def T_b(self) -> np.ndarray:  # noqa: N802 (the catalogue's name)
+        return self.T_pm if self._poly_temperature is None else self._poly_temperature(self.T_pm)
+
+
+@dataclass
+class BlockDesign:
+    """Work state of one design matrix on block means (``trainer.diagnose.model.build_design``).
+
+    The temperature-chain hooks set ``T_pm`` (proof mass) and ``T_b`` (what the polynomial reads);
+    a term with held linear parameters adds its known contribution to ``offset``.
+    """
+
+    data: Any  # trainer.diagnose.blocks.BlockData
+    T: np.ndarray  # block temperature (dequantised when a term asks for it)
+    rate: np.ndarray  # block dT/dt in degC/min
+    T_pm: np.ndarray
+    T_b: np.ndarray
+    offset: np.ndarray
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    identifiable: bool
+    reason: str
+    test: str = ""  # the test that would make it identifiable (or separate it better)
+    weak: bool = False
+
+
+@dataclass(frozen=True)
+class StartingTerm:
+    """How an effect of the user's simulation enters the finder's starting model."""
+
+    nl: tuple[float, ...] = ()
+    fixed: bool = False
+    note: str = ""  # a remark for the report
+
+
+@dataclass(frozen=True)
+class StartContext:
+    """What the finder knows when it turns the user's simulation into its starting model."""
+
+    lattice_lsb_c: float | None  # LSB of the thermometer column's lattice, if it lies on one
+    input_varies: bool  # the known true input changes (a second orientation)
+
+
+def _no_bounds(data: Any) -> Bounds:
+    return ()
+
+
+@dataclass(frozen=True)
+class Finder:
+    """How the mismatch finder models, searches, reports and judges one catalogue identifier.
+
+    Model terms (effects and the ``rate_ramp`` trend) split into nonlinear parameters, searched
+    numerically (``nonlinear``: names and whether the search runs on their log), and linear ones,
+    solved by GLS: ``columns`` returns ``(role, column)`` pairs on the block means, and
+    ``to_params`` maps a term's nonlinear values and fitted linear values back to catalogue
+    parameters. ``search`` names the strategy in ``trainer.diagnose.candidates`` (``profile``: a
+    log grid of ``grid_points`` over the single nonlinear parameter within ``bounds(data)``;
+    ``linear``; ``lattice``; ``step``; ``sinusoid``; ``noise``), ``None`` when the finder never
+    proposes it. ``noise_role`` for noise terms: ``white`` (always fitted, from the full rate),
+    ``covariance`` (a correlated term of the block covariance, ``covariance(n, block_s,
+    duration_s)`` for unit coefficient), ``trend`` (a deterministic column) or ``None``.
+    """
+
+    search: str | None = None
+    nonlinear: tuple[tuple[str, bool], ...] = ()
+    bounds: Callable[[Any], Bounds] = _no_bounds
+    grid_points: int = 0
+    max_terms: int = 1  # how many instances the finder may add
+    # BIC: parameters the term adds besides its linear columns (None: its free nonlinear ones)
+    bic_nonlinear: int | None = None
+    columns: Callable[[Any, BlockDesign], list[tuple[str, np.ndarray]]] | None = None
+    proof_mass: Callable[[Any, np.ndarray, float], np.ndarray] | None = None  # (term, T, block_s)
+    dequantize: bool = False  # its presence makes the model read the de-quantised temperature
+    fine_offset: Callable[[Any, np.ndarray], np.ndarray] | None = None  # held part on the fine grid
+    to_params: Callable[[Any, Mapping[str, float]], dict[str, float]] | None = None
+    from_config: Callable[[Mapping[str, float], StartContext], StartingTerm] | None = None
+    backbone: bool = False  # always in the model, its columns first (only bias_poly)
+    identifiability: Callable[[Any], Identifiability] | None = None  # from the temperature profile
+    advice: str = ""
+    confounders: tuple[str, ...] = ()
+    # what separates it from a confounder: {other identifier: signature}, each pair written once
+    separations: Mapping[str, str] = field(default_factory=dict)
+    # noise terms
+    noise_role: str | None = None
+    covariance: Callable[[int, float, float], np.ndarray] | None = None
+    start_coefficient: float | None = None  # starting value of the covariance term's coefficient
+    allan_variance: Callable[[np.ndarray, float, float, Mapping[str, float]], np.ndarray] | None = None
+    config_note: str = ""  # remark when the user's simulation has it but the finder does not model it
+    missing_note: str = ""  # remark when the user's simulation lacks it (white noise)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """How the test bench conceals an instance (``trainer.diagnose.scenarios``).
+
+    ``draw(rng, duration_s, sign)`` returns catalogue parameters (``sign`` is +-1, drawn for every
+    concealed identifier); ``checked`` are the parameters the finder must recover. The protocol
+    flags make the generated test able to show the effect. For noise terms, ``known(rng)`` is the
+    level the user's own model carries when the term is not the concealed one.
+    """
+
+    draw: Callable[[np.random.Generator, float, float], dict[str, float]] | None = None
+    checked: tuple[str, ...] = ()
+    needs_reversal: bool = False
+    long_holds: bool = False
+    min_slope_mg_per_c: float = 0.0  # the bias curve must be this steep for it to matter
+    fine_thermometer: bool = False  # a quieter thermometer (its steps would drown otherwise)
+    known: Callable[[np.random.Generator], dict[str, float]] | None = None
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One bias effect of the catalogue.
+
+    Exactly one of the simulator roles is set: ``contribution(params, signals)`` (additive, mg),
+    ``proof_mass(t, T, params)`` (gives ``T_pm``), ``thermometer(temp_c, params)`` (acts on the
+    reading only). ``bias_temperature(T_pm, params)`` additionally switches what the polynomial
+    reads. ``input_param`` names a parameter that sets the constant true input.
+    """
+
+    identifier: str
+    params: tuple[Param, ...]
+    summary: str
+    contribution: Callable[[Mapping[str, float], Signals], np.ndarray] | None = None
+    proof_mass: Callable[[np.ndarray, np.ndarray, Mapping[str, float]], np.ndarray] | None = None
+    thermometer: Callable[[np.ndarray, Mapping[str, float]], np.ndarray] | None = None
+    bias_temperature: Callable[[np.ndarray, Mapping[str, float]], np.ndarray] | None = None
+    multi_instance: bool = False
+    input_param: str | None = None
+    sampling_check: Callable[[Mapping[str, float], float], str | None] | None = None
+    finder: Finder = Finder()
+    scenario: Scenario | None = None
+
+    @property
+    def temperature_chain(self) -> bool:
+        return self.contribution is None
+
+
+@dataclass(frozen=True)
+class NoiseTerm:
+    """One IEEE Std 952 noise term: ``synthesize(params, n, dt_s, rng)`` gives ``n`` samples (mg)."""
+
+    identifier: str
+    params: tuple[Param, ...]
+    summary: str
+    synthesize: Callable[[Mapping[str, float], int, float, np.random.Generator], np.ndarray]
+    finder: Finder = Finder()
+    scenario: Scenario | None = None
+
+
+def sample_period(t: np.ndarray) -> float:
+    """Mean sample period; the low-pass assumes uniform sampling (recordings allow 1 % jitter)."""
+    if t.size < 2:
+        raise ValueError("need at least two samples")
+    return float(t[-1] - t[0]) / (t.size - 1)
+
+
+def rate_c_per_min(t: np.ndarray, T_die: np.ndarray) -> np.ndarray:
+    """Numerical ``dT_die/dt`` in degC/min (central differences) for callers without the LP state."""
+    return np.gradient(np.asarray(T_die, dtype=np.float64), np.asarray(t, dtype=np.float64)) * 60.0

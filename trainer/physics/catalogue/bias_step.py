@@ -1,0 +1,66 @@
+"""``bias_step``: a bias step (shock, mode hop), ``step * H(t - t_s)`` with ``H(0) = 1`` (repeatable)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from trainer.physics.catalogue.base import (
+    BlockDesign,
+    Effect,
+    Finder,
+    Identifiability,
+    Param,
+    Scenario,
+    StartingTerm,
+)
+
+
+def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
+    return np.where(t >= t_s, step_mg, 0.0)
+
+
+def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+    B = d.data.block_s  # the block mean of a step inside the block is the fraction after it
+    return [("step_mg", np.clip((d.data.t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0))]
+
+
+DEFINITION = Effect(
+    identifier="bias_step",
+    params=(
+        Param("t_s", "nonnegative", unit="s"),
+        Param("step_mg", unit="mg", plausible=(0.02, 5.0)),
+    ),
+    summary="step * H(t - t_s) (shock, mode hop)",
+    contribution=lambda p, s: step(s.t, p["t_s"], p["step_mg"]),
+    multi_instance=True,
+    finder=Finder(
+        search="step",
+        nonlinear=(("t_s", False),),
+        bounds=lambda data: ((data.starts[2], data.starts[-2]),),
+        max_terms=3,
+        # a step time found by an exhaustive scan counts twice (modified BIC for change points,
+        # Zhang & Siegmund 2007): its look-elsewhere effect is far larger than a time constant's
+        bic_nonlinear=2,
+        columns=_columns,
+        to_params=lambda term, lin: {"t_s": term.nl[0], "step_mg": lin["step_mg"]},
+        from_config=lambda p, ctx: StartingTerm((p["t_s"],)),
+        identifiability=lambda p: Identifiability(True, "a step shows anywhere in the run"),
+        advice="a bias step (shock, mode hop, reset): the compensation is offset after it",
+        confounders=("warmup",),
+        separations={
+            "warmup": (
+                "a step is instantaneous and permanent; a warm-up decays exponentially from power-on (a longer "
+                "soak after power-on, or a higher sample rate at the start, shows the shape)"
+            )
+        },
+    ),
+    scenario=Scenario(
+        draw=lambda rng, duration, sign: {
+            "t_s": float(rng.uniform(0.25, 0.8) * duration),
+            "step_mg": sign * float(rng.uniform(0.15, 0.4)),
+        },
+        checked=("step_mg",),
+    ),
+)

@@ -1,0 +1,86 @@
+"""``hysteresis``: heating and cooling branches differ by ``2 amp`` (play operator of ``T_pm``)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from trainer.physics.catalogue.base import (
+    BlockDesign,
+    Effect,
+    Finder,
+    Identifiability,
+    Param,
+    Scenario,
+    Signals,
+    StartingTerm,
+)
+from trainer.physics.thermal import play_operator
+
+
+def branch_offset(T_pm: np.ndarray, play: np.ndarray, amp_mg: float, width_c: float) -> np.ndarray:
+    """``amp * (T_pm - P) / (width_c / 2)`` with ``P`` the play output of full width ``width_c``."""
+    return amp_mg * (T_pm - play) / (width_c / 2.0)
+
+
+def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
+    return branch_offset(s.T_pm, play_operator(s.T_pm, p["width_c"]), p["amp_mg"], p["width_c"])
+
+
+def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+    width = term.nl[0]
+    play = play_operator(d.T_pm, width)
+    d.T_b = play  # the polynomial reads the play output (catalogue: T_b)
+    return [("amp_mg", (d.T_pm - play) / (width / 2.0))]
+
+
+def _identifiability(p: Any) -> Identifiability:
+    overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
+    if p.reversals >= 1 and overlap_span >= 3.0:
+        return Identifiability(
+            True,
+            f"heating and cooling both cover {p.overlap_c[0]:.1f}..{p.overlap_c[1]:.1f} degC",
+            "" if p.holds_after_ramp_s >= 600 else "a hold at the turning point separates it from a lag",
+        )
+    return Identifiability(
+        False,
+        "no reversal of temperature over a common range: one branch cannot show a branch offset",
+        "add a ramp_down over the same temperature range as the ramp_up (then a hold)",
+    )
+
+
+DEFINITION = Effect(
+    identifier="hysteresis",
+    params=(
+        Param("amp_mg", unit="mg", plausible=(0.02, 2.0)),
+        Param("width_c", "positive", unit="degC", plausible=(2.0, 30.0)),
+    ),
+    summary="amp * (T_pm - P) / (width_c / 2), P the play operator of T_pm; bias_poly reads P",
+    contribution=_contribution,
+    bias_temperature=lambda T_pm, p: play_operator(T_pm, p["width_c"]),
+    finder=Finder(
+        search="profile",
+        nonlinear=(("width_c", True),),
+        bounds=lambda data: ((0.5, 40.0),),
+        grid_points=16,
+        columns=_columns,
+        to_params=lambda term, lin: {"amp_mg": lin["amp_mg"], "width_c": term.nl[0]},
+        from_config=lambda p, ctx: StartingTerm((p["width_c"],)),
+        identifiability=_identifiability,
+        advice=(
+            "heating and cooling branches differ: a single polynomial splits the difference; calibrate on both "
+            "branches and track the branch (the offset persists in holds)"
+        ),
+        confounders=("thermal_lag", "temp_rate"),
+    ),
+    scenario=Scenario(
+        draw=lambda rng, duration, sign: {
+            "amp_mg": sign * float(rng.uniform(0.05, 0.2)),
+            "width_c": float(rng.uniform(2.0, 6.0)),
+        },
+        checked=("amp_mg", "width_c"),
+        needs_reversal=True,
+    ),
+)

@@ -1,0 +1,71 @@
+"""``warmup``: self-heating after power-on, ``amp * exp(-t / tau_s)``."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from trainer.physics.catalogue.base import (
+    BlockDesign,
+    Effect,
+    Finder,
+    Identifiability,
+    Param,
+    Scenario,
+    StartingTerm,
+)
+
+
+def settling(t: np.ndarray, amp_mg: float, tau_s: float) -> np.ndarray:
+    return amp_mg * np.exp(-t / tau_s)
+
+
+def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+    tau = term.nl[0]
+    x = d.data.block_s / (2.0 * tau)  # exact block mean of the exponential
+    return [("amp_mg", np.exp(-d.data.t / tau) * (math.sinh(x) / x if x > 1e-8 else 1.0))]
+
+
+def _identifiability(p: Any) -> Identifiability:
+    soak = bool(p.segments and p.segments[0].label == "soak")
+    return Identifiability(
+        True,
+        "the recording starts at power-on" + ("" if soak else " (no soak)"),
+        "" if soak else "power on and soak 30 min before ramping",
+        weak=not soak,
+    )
+
+
+DEFINITION = Effect(
+    identifier="warmup",
+    params=(
+        Param("amp_mg", unit="mg", plausible=(0.05, 5.0)),
+        Param("tau_s", "positive", unit="s", plausible=(60.0, 1800.0)),
+    ),
+    summary="amp * exp(-t / tau_s) (self-heating after power-on)",
+    contribution=lambda p, s: settling(s.t, p["amp_mg"], p["tau_s"]),
+    finder=Finder(
+        search="profile",
+        nonlinear=(("tau_s", True),),
+        bounds=lambda data: ((max(5.0, 2.0 * data.block_s), max(60.0, min(6000.0, 0.5 * data.duration_s))),),
+        grid_points=16,
+        columns=_columns,
+        to_params=lambda term, lin: {"amp_mg": lin["amp_mg"], "tau_s": term.nl[0]},
+        from_config=lambda p, ctx: StartingTerm((p["tau_s"],)),
+        identifiability=_identifiability,
+        advice=(
+            "self-heating after power-on: the bias settles over the first minutes; let the board warm up "
+            "(about 3 time constants) before calibration and before flight, or model the warm-up"
+        ),
+        confounders=("stress_relaxation", "bias_step"),
+    ),
+    scenario=Scenario(
+        draw=lambda rng, duration, sign: {
+            "amp_mg": sign * float(rng.uniform(0.5, 1.2)),
+            "tau_s": float(rng.uniform(200.0, 900.0)),
+        },
+        checked=("amp_mg", "tau_s"),
+    ),
+)
