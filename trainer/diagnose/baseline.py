@@ -16,7 +16,7 @@ from trainer.diagnose.model import Term
 from trainer.physics.catalogue import BACKBONE, COVARIANCE_NOISE, DEFINITIONS, NOISE, WHITE_NOISE
 from trainer.physics.catalogue.base import StartContext
 from trainer.physics.config import PhysicsConfig, input_setters
-from trainer.physics.profiles import input_signal
+from trainer.physics.inputs import input_signal
 
 DEFAULT_NOISE = COVARIANCE_NOISE
 BLOCK_NOISE = COVARIANCE_NOISE

@@ -1,4 +1,4 @@
-"""Temperature set-point protocols (labelled piecewise-linear segments) and the true input.
+"""Temperature set-point protocols (labelled piecewise-linear segments).
 
 The ``segments`` metadata written into every simulated recording is produced and parsed here, so
 that later tools (fitting, the mismatch finder) can name where in a recording something shows.
@@ -8,14 +8,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-from trainer.physics.noise import gauss_markov
-
-if TYPE_CHECKING:
-    from trainer.physics.config import InputConfig
 
 SEGMENT_LABELS: tuple[str, ...] = ("soak", "ramp_up", "hold", "ramp_down")
 PROTOCOL_NAMES: tuple[str, ...] = ("paper-oven", "extended", "custom")
@@ -134,40 +128,3 @@ def parse_segments(text: str) -> list[tuple[str, float, float]]:
             raise ValueError(f"malformed segment {item!r} (need finite start_s < end_s)")
         out.append((parts[0], start, end))
     return out
-
-
-def input_signal(cfg: InputConfig, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """True input ``g_in_mg(t)`` along the sensitive axis.
-
-    - ``zero``: the paper's static test (axis perpendicular to gravity).
-    - ``constant``: ``value_mg`` (a tilt or misalignment component of gravity).
-    - ``steps``: ``value_mg`` of the latest step with ``t_s <= t``, 0 before the first (a tumble
-      or rate-table sequence).
-    - ``motion``: ``offset_mg`` + sum of sinusoidal tones (vibration, coning) + a Singer
-      manoeuvre: a stationary first-order Gauss-Markov acceleration of RMS ``singer_sigma_mg``
-      and correlation time ``singer_tau_s``.
-    """
-    t = np.asarray(t, dtype=np.float64)
-    if cfg.kind == "zero":
-        return np.zeros_like(t)
-    if cfg.kind == "constant":
-        return np.full_like(t, cfg.value_mg)
-    if cfg.kind == "steps":
-        out = np.zeros_like(t)
-        if cfg.steps:
-            times = np.array([s[0] for s in cfg.steps])
-            values = np.array([0.0] + [s[1] for s in cfg.steps])
-            out = values[np.searchsorted(times, t, side="right")]
-        return out
-    if cfg.kind == "motion":
-        out = np.full_like(t, cfg.offset_mg)
-        for tone in cfg.tones:
-            out += tone.amp_mg * np.sin(2.0 * np.pi * tone.freq_hz * t + tone.phase_rad)
-        if cfg.singer_sigma_mg > 0 and t.size > 1:
-            assert cfg.singer_tau_s is not None, (
-                "the configuration requires singer_tau_s with singer_sigma_mg"
-            )
-            dt = float(t[-1] - t[0]) / (t.size - 1)
-            out += gauss_markov(t.size, dt, cfg.singer_tau_s, cfg.singer_sigma_mg, rng)
-        return out
-    raise ValueError(f"unknown input kind {cfg.kind!r}")

@@ -16,8 +16,9 @@ from trainer.errors import UserError
 from trainer.physics.catalogue import EFFECTS, NOISE
 from trainer.physics.config import PhysicsConfig, config_hash, input_setters
 from trainer.physics.effects import drift
+from trainer.physics.inputs import input_signal
 from trainer.physics.noise import noise_term
-from trainer.physics.profiles import build_profile, format_segments, input_signal
+from trainer.physics.profiles import build_profile, format_segments
 from trainer.physics.thermal import lowpass
 
 # One random stream per source, derived by SeedSequence spawning: the thermometer, the input, then
