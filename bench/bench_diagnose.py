@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from trainer.diagnose import diagnose
+from trainer.diagnose.document import document
 from trainer.diagnose.scenarios import CHECKED_PARAMS, HIDDEN_EFFECTS, make_scenario
 
 PAIRS: tuple[tuple[str, str], ...] = (
@@ -77,7 +78,7 @@ def run_case(effects: tuple[str, ...], seed: int) -> dict[str, Any]:
     started = time.perf_counter()
     result = diagnose(rec, scenario.sim, holdout_fraction=0.0)
     seconds = time.perf_counter() - started
-    doc = result.to_dict()
+    doc = document(result)
     hidden = [{"effect": h.identifier, "params": dict(h.params)} for h in scenario.hidden]
     found = [{"effect": e["effect"], "params": e["params"]} for e in doc["left_out"]]
     names = {f["effect"] for f in found}
@@ -118,7 +119,7 @@ def timing_2h_200hz() -> dict[str, Any]:
     return {
         "rows": len(rec),
         "seconds": round(seconds, 2),
-        "found": [e["effect"] for e in result.to_dict()["left_out"]],
+        "found": [e["effect"] for e in document(result)["left_out"]],
     }
 
 

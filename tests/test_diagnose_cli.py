@@ -14,6 +14,7 @@ from trainer.cli import main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
 from trainer.diagnose import diagnose
+from trainer.diagnose.document import document
 from trainer.diagnose.scenarios import make_scenario
 from trainer.errors import run_cli
 from trainer.physics.config import load_config, save_config
@@ -130,10 +131,10 @@ def test_ground_truth_is_never_read() -> None:
     for name in list(poisoned):
         if name.startswith("true_"):
             poisoned[name] = np.full(len(rec), 1e9)
-    a = diagnose(rec, scenario.sim, holdout_fraction=0.0).to_dict()
-    b = diagnose(
-        Recording(poisoned, dict(rec.meta), rec.source), scenario.sim, holdout_fraction=0.0
-    ).to_dict()
+    a = document(diagnose(rec, scenario.sim, holdout_fraction=0.0))
+    b = document(
+        diagnose(Recording(poisoned, dict(rec.meta), rec.source), scenario.sim, holdout_fraction=0.0)
+    )
     for doc in (a, b):
         doc.pop("seconds")
     assert a == b
@@ -194,7 +195,7 @@ def test_real_chamber_run() -> None:
     jumps = means[20:] - means[:-20]
     k = int(np.argmax(np.abs(jumps[200:-200]))) + 200
     t_jump = float(t[k + 20])
-    doc = diagnose(rec).to_dict()
+    doc = document(diagnose(rec))
     steps = [e for e in doc["left_out"] if e["effect"] == "bias_step"]
     assert any(abs(e["params"]["t_s"] - t_jump) < 15.0 for e in steps)
     assert doc["holdout"]["improvement_percent"] > 0 and doc["holdout"]["improvement_percent_ols"] > 0

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from trainer.diagnose import diagnose
+from trainer.diagnose.document import document
 from trainer.diagnose.scenarios import CHECKED_PARAMS, HIDDEN_EFFECTS, concealment, make_scenario
 
 RATES = (20.0, 50.0)
@@ -34,7 +35,7 @@ PAIR_CASES = [
 def _run(effects: tuple[str, ...], seed: int) -> tuple[Any, dict[str, Any]]:
     scenario = make_scenario(list(effects), seed, rates=RATES)
     result = diagnose(scenario.recording(), scenario.sim, holdout_fraction=0.0)
-    return scenario, result.to_dict()
+    return scenario, document(result)
 
 
 def _check_found(scenario: Any, doc: dict[str, Any]) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from trainer.diagnose.baseline import Baseline
 from trainer.diagnose.blocks import BlockData
@@ -100,9 +99,3 @@ class Diagnosis:
     holdout: Holdout | None
     seconds: float
     notes: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``--json`` document (kept for callers; built, and rounded, by :mod:`.document`)."""
-        from trainer.diagnose.document import document
-
-        return document(self)
