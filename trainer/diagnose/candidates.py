@@ -220,4 +220,4 @@ def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     finder = definition.finder
     if sum(1 for i in current.identifiers if i == effect) >= finder.max_terms:
         return []
-    return SEARCHES[finder.search](current, data, effect)
+    return SEARCHES[definition.finder.search](current, data, effect)

@@ -35,7 +35,12 @@ LOG_RATIO_BOUNDS = (-9.0, 7.0)
 @lru_cache(maxsize=8)
 def unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
     """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
-    return {term: NOISE[term].finder.covariance(n, block_s, duration_s) for term in COVARIANCE_NOISE}
+    matrices = {}
+    for term in COVARIANCE_NOISE:
+        covariance = NOISE[term].finder.covariance
+        assert covariance is not None, f"{term}: a covariance noise term defines its covariance"
+        matrices[term] = covariance(n, block_s, duration_s)
+    return matrices
 
 
 @dataclass(frozen=True)
@@ -130,10 +135,16 @@ class GlsResult:
     reml: float  # restricted likelihood: what the noise ratios are estimated by
 
 
+def _start_coefficient(term: str) -> float:
+    value = NOISE[term].finder.start_coefficient
+    assert value is not None, f"{term}: a covariance noise term defines its starting coefficient"
+    return value
+
+
 def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
     """Starting ratios: b and k of the simulator's defaults relative to the measured white noise."""
     s2 = max(white_n, 1e-6) ** 2 / block_s
-    guess = {term: NOISE[term].finder.start_coefficient ** 2 / s2 for term in COVARIANCE_NOISE}
+    guess = {term: _start_coefficient(term) ** 2 / s2 for term in COVARIANCE_NOISE}
     logs = tuple(float(np.clip(math.log10(guess[t]), *LOG_RATIO_BOUNDS)) for t in terms)
     return NoiseState(tuple(terms), logs)
 
