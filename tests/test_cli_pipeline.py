@@ -248,6 +248,12 @@ def test_fit_dlstm_from_the_cli(recordings: tuple[Path, Path], tmp_path: Path) -
     _, checkpoint = load_model(out)
     assert checkpoint["payload"]["training"]["settings"]["population"] == 2
     assert checkpoint["payload"]["frontend"]["decimation"] == 50  # 1 s steps at 50 Hz
+    # The same inputs give the same bytes (so the same model id in the generated C): the
+    # checkpoint holds no wall-clock time. Fitted again into the same path, it must not change.
+    first = out.read_bytes()
+    args = ["--population", "2", "--iterations", "3", "--cycles", "2", "--quiet"]
+    assert main(["fit", "--method", "dlstm-issa", str(recordings[0]), "-o", str(out), *args]) == 0
+    assert out.read_bytes() == first
 
 
 def test_fit_dlstm_rejects_bad_settings(recordings: tuple[Path, Path], tmp_path: Path) -> None:
