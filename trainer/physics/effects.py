@@ -115,7 +115,7 @@ def drift(
         if definition.proof_mass is not None:
             T_pm = definition.proof_mass(t, T_pm, effect.params)
         if definition.bias_temperature is not None and poly_temperature is None:
-            poly_temperature = (lambda d, p: lambda T: d.bias_temperature(T, p))(definition, effect.params)
+            poly_temperature = (lambda f, p: lambda T: f(T, p))(definition.bias_temperature, effect.params)
     signals = Signals(
         t,
         np.asarray(T_die, dtype=np.float64),
