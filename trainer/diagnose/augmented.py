@@ -11,6 +11,7 @@ from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import NOISE_CANDIDATES
 from trainer.diagnose.model import ModelFit, catalogue_effects
 from trainer.diagnose.profile import Profile
+from trainer.physics.catalogue import DEFINITIONS, NOISE, WHITE_NOISE
 from trainer.physics.config import NoiseConfig, PhysicsConfig, ProtocolConfig, RecordingConfig
 from trainer.physics.effects import EFFECT_PARAMETERS
 from trainer.physics.profiles import SegmentSpec
@@ -27,17 +28,17 @@ def augmented_config(
     order = list(EFFECT_PARAMETERS)
     effects = sorted(effects, key=lambda e: order.index(e.identifier))
     noise_values = final.noise_params()
-    noise = [NoiseConfig("white_noise", {"n_mg_rt_s": noise_values["white_noise"]["n_mg_rt_s"]})]
+    noise = [NoiseConfig(WHITE_NOISE, dict(noise_values[WHITE_NOISE]))]
     for name in NOISE_CANDIDATES:
         if name in noise_values:
             noise.append(NoiseConfig(name, dict(noise_values[name])))
-    for index, term in enumerate(final.terms):
-        if term.identifier == "rate_ramp":
-            noise.append(NoiseConfig("rate_ramp", {"r_mg_per_s": final.linear(index)["r_mg_per_s"]}))
-    if sim is not None:
-        if any(n.identifier == "quantization_noise" for n in sim.noise):
-            noise.insert(0, next(n for n in sim.noise if n.identifier == "quantization_noise"))
-        return replace(sim, effects=tuple(effects), noise=tuple(noise))
+    for index, term in enumerate(final.terms):  # deterministic noise trends, fitted as columns
+        finder = DEFINITIONS[term.identifier].finder
+        if finder.noise_role == "trend" and finder.to_params is not None:
+            noise.append(NoiseConfig(term.identifier, finder.to_params(term, final.linear(index))))
+    if sim is not None:  # the user's noise terms the finder does not model are kept, first
+        kept = [n for n in sim.noise if NOISE[n.identifier].finder.noise_role is None]
+        return replace(sim, effects=tuple(effects), noise=(*kept, *noise))
     start_c, specs = _protocol(data, profile, rec)
     sensor = rec.meta.get("sensor", "diagnosed").strip() or "diagnosed"
     return PhysicsConfig(

@@ -215,9 +215,9 @@ SEARCHES = {
 def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     """Proposals for adding ``effect`` (empty when it does not apply to the current model)."""
     definition = DEFINITIONS.get(effect)
-    if definition is None or definition.finder.search is None:
+    search = None if definition is None else definition.finder.search
+    if definition is None or search is None:
         raise ValueError(f"no search for {effect!r}")
-    finder = definition.finder
-    if sum(1 for i in current.identifiers if i == effect) >= finder.max_terms:
+    if sum(1 for i in current.identifiers if i == effect) >= definition.finder.max_terms:
         return []
-    return SEARCHES[definition.finder.search](current, data, effect)
+    return SEARCHES[search](current, data, effect)

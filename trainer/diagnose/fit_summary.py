@@ -10,7 +10,8 @@ import numpy as np
 from trainer.diagnose.locate import AllanComparison, allan_comparison
 from trainer.diagnose.model import ModelFit, catalogue_effects, fit_model
 from trainer.diagnose.profile import Profile
-from trainer.physics.effects import T_REF_C, drift
+from trainer.physics.catalogue import DEFINITIONS
+from trainer.physics.effects import drift
 
 
 @dataclass(frozen=True)
@@ -44,9 +45,10 @@ def rms(x: np.ndarray) -> float:
 
 
 def full_rate_model(fit: ModelFit) -> np.ndarray:
-    """The fitted model re-simulated at the full rate with ``physics.effects.drift`` (the rerun)."""
+    """The fitted model re-simulated at the full rate with ``physics.effects.drift`` (the rerun),
+    plus what the terms' ``full_rate`` hooks add (a noise trend, the scale factor on the input)."""
     data = fit.data
-    dequant = "temp_quantization" in fit.identifiers
+    dequant = any(DEFINITIONS[identifier].finder.dequantize for identifier in fit.identifiers)
     T_full = np.interp(data.full_t, data.t, data.temperature(dequant))
     rate_full = np.interp(data.full_t, data.t, data.rate(dequant))
     effects = catalogue_effects(fit)
@@ -54,13 +56,10 @@ def full_rate_model(fit: ModelFit) -> np.ndarray:
     breakdown = drift(effects, data.full_t, T_full, g_in_mg=g_in, dT_die_dt_c_per_min=rate_full)
     out = np.asarray(breakdown.total, dtype=np.float64).copy()
     for index, term in enumerate(fit.terms):
-        if term.identifier == "rate_ramp":
-            out += fit.linear(index)["r_mg_per_s"] * data.full_t
-        if term.identifier == "scale_factor_tc" and data.known_input_block is not None:
-            lin = fit.linear(index)
-            if "sf_ppm_per_c" in lin:
-                g = np.interp(data.full_t, data.t, data.known_input_block)
-                out += g * 1e-6 * lin["sf_ppm_per_c"] * (breakdown.T_pm - T_REF_C)
+        hook = DEFINITIONS[term.identifier].finder.full_rate
+        extra = None if hook is None else hook(fit.linear(index), data, breakdown.T_pm)
+        if extra is not None:
+            out += extra
     return out
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -32,15 +32,17 @@ NOISE_CANDIDATES: tuple[str, ...] = COVARIANCE_NOISE
 LOG_RATIO_BOUNDS = (-9.0, 7.0)
 
 
+def covariance_term(term: str) -> tuple[Callable[[int, float, float], np.ndarray], float]:
+    """A covariance noise term's unit covariance and starting coefficient (its role sets both)."""
+    finder = NOISE[term].finder
+    assert finder.covariance is not None and finder.start_coefficient is not None, term
+    return finder.covariance, finder.start_coefficient
+
+
 @lru_cache(maxsize=8)
 def unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
     """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
-    matrices = {}
-    for term in COVARIANCE_NOISE:
-        covariance = NOISE[term].finder.covariance
-        assert covariance is not None, f"{term}: a covariance noise term defines its covariance"
-        matrices[term] = covariance(n, block_s, duration_s)
-    return matrices
+    return {term: covariance_term(term)[0](n, block_s, duration_s) for term in COVARIANCE_NOISE}
 
 
 @dataclass(frozen=True)
@@ -135,16 +137,10 @@ class GlsResult:
     reml: float  # restricted likelihood: what the noise ratios are estimated by
 
 
-def _start_coefficient(term: str) -> float:
-    value = NOISE[term].finder.start_coefficient
-    assert value is not None, f"{term}: a covariance noise term defines its starting coefficient"
-    return value
-
-
 def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
     """Starting ratios: b and k of the simulator's defaults relative to the measured white noise."""
     s2 = max(white_n, 1e-6) ** 2 / block_s
-    guess = {term: _start_coefficient(term) ** 2 / s2 for term in COVARIANCE_NOISE}
+    guess = {term: covariance_term(term)[1] ** 2 / s2 for term in COVARIANCE_NOISE}
     logs = tuple(float(np.clip(math.log10(guess[t]), *LOG_RATIO_BOUNDS)) for t in terms)
     return NoiseState(tuple(terms), logs)
 

@@ -10,6 +10,7 @@ from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.fit_summary import rms
 from trainer.diagnose.gls import unit_matrices
 from trainer.diagnose.model import ModelFit, Term, build_design, fit_model
+from trainer.physics.catalogue import DEFINITIONS
 
 MIN_TRAIN_BLOCKS = 120  # fewer blocks than this to fit on: no check
 MIN_TEST_BLOCKS = 20  # fewer held-out blocks than this to score on: no check
@@ -90,13 +91,18 @@ def holdout_check(
     train = data.subset(n_train)
     cut = float(data.starts[n_train])
 
+    def after_cut(t: Term) -> bool:  # an event (a step) inside the held-out part
+        return DEFINITIONS[t.identifier].finder.event_time and t.nl[0] >= cut - data.block_s
+
     def learnable(fit: ModelFit) -> list[Term]:
-        return [t for t in fit.terms if not (t.identifier == "bias_step" and t.nl[0] >= cut - data.block_s)]
+        return [t for t in fit.terms if not after_cut(t)]
 
     note = ""
-    if len(learnable(final)) < len(final.terms):
+    unlearnable = dict.fromkeys(t.identifier for t in final.terms if after_cut(t))
+    if unlearnable:
         note = (
-            "a bias_step inside the held-out part cannot be learned from the fitting part; left out of both"
+            f"a {' or '.join(unlearnable)} inside the held-out part cannot be learned from the fitting part; "
+            "left out of both"
         )
     scores = []
     for fit in (baseline_fit, final):

@@ -97,8 +97,7 @@ def build_design(terms: Sequence[Term], data: BlockData) -> Design:
         if d.columns is not None and not d.backbone:
             extra += [(index, role, column) for role, column in d.columns(term, state)]
     for index, (term, d) in enumerate(zip(terms, definitions, strict=True)):
-        if d.backbone:
-            assert d.columns is not None, "the backbone (bias_poly) has columns"
+        if d.backbone and d.columns is not None:
             first += [(index, role, column) for role, column in d.columns(term, state)]
     columns = [column for _, _, column in (*first, *extra)]
     roles = [(index, role) for index, role, _ in (*first, *extra)]

@@ -51,7 +51,12 @@ from trainer.diagnose.where import (
     special_where,
     where_regions,
 )
-from trainer.physics.catalogue import ADVICE, CANDIDATE_ORDER  # the finder's order and advice, per effect
+from trainer.physics.catalogue import (  # the finder's order and advice, per effect
+    ADVICE,
+    CANDIDATE_ORDER,
+    DEFINITIONS,
+    EFFECTS,
+)
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
 
@@ -136,7 +141,9 @@ def _diagnose(
     not_identifiable = [
         NotIdentifiable(effect, info.reason, info.test)
         for effect, info in ident.items()
-        if not info.identifiable and effect not in present and effect != "temp_quantization"
+        if not info.identifiable
+        and effect not in present
+        and not DEFINITIONS[effect].finder.absent_when_unidentifiable
     ]
     tested = [Tested(t.effect, delta_bic=t.delta_bic, how=t.note) for t in selection.tested_first_round]
     for effect, info in ident.items():
@@ -152,15 +159,12 @@ def _diagnose(
     stages.close()
     notes = []
     found = [e.effect for e in left_out]
-    if (
-        data.lattice_lsb_c is not None
-        and "temp_quantization" not in found
-        and "temp_quantization" not in present
-    ):
-        notes.append(
-            f"the thermometer column is quantised ({data.lattice_lsb_c:g} degC) but modelling the staircase "
-            "does not improve the fit"
-        )
+    for identifier, definition in EFFECTS.items():  # shown by the recording, not kept by the fit
+        unused_note = definition.finder.unused_note
+        if unused_note is None or identifier in found or identifier in present:
+            continue
+        if note := unused_note(data):
+            notes.append(note)
     return Diagnosis(
         source=rec.source,
         data=data,
@@ -233,7 +237,7 @@ def _left_out(
             params = dict(noise_params.get(step.effect, {}))
             where = list(noise_where(step.effect, noise_params, data, profile, before.allan))
         else:
-            effect = effects_by_index.get(index) or _rate_ramp_effect(final, index)
+            effect = effects_by_index.get(index) or _trend_effect(final, index)
             params = dict(effect.params)
             visible = final.prediction - reduced.prediction
             special = special_where(effect, data, profile, baseline_fit.residual, cov, step.evidence)
@@ -263,6 +267,9 @@ def _left_out(
     return out
 
 
-def _rate_ramp_effect(final: ModelFit, index: int) -> EffectConfig:
-    """``rate_ramp`` is a catalogue noise term with a deterministic trend; report it like an effect."""
-    return EffectConfig("rate_ramp", {"r_mg_per_s": final.linear(index)["r_mg_per_s"]})
+def _trend_effect(final: ModelFit, index: int) -> EffectConfig:
+    """A model term that is a noise term's deterministic trend (``rate_ramp``), reported like an effect."""
+    term = final.terms[index]
+    to_params = DEFINITIONS[term.identifier].finder.to_params
+    assert to_params is not None, f"{term.identifier} has no catalogue parameters"
+    return EffectConfig(term.identifier, to_params(term, final.linear(index)))

@@ -19,12 +19,13 @@ from trainer.diagnose.locate import TINY, AllanComparison, modelled_adev, scan_r
 from trainer.diagnose.model import ModelFit
 from trainer.diagnose.profile import Profile, Region, region
 from trainer.diagnose.select import THRESHOLD
+from trainer.physics.catalogue import DEFINITIONS
+from trainer.physics.catalogue.base import WhereContext
+from trainer.physics.catalogue.periodic import REGION_KIND as PERIODIC_KIND
 from trainer.physics.effects import EffectConfig
 
 ENVELOPE_FRACTION = 0.02  # moving-RMS window of an effect's visible part, as a fraction of the run
 MAX_EFFECT_REGIONS = 4
-STEP_WINDOW_BLOCKS = 10  # blocks either side of a step whose residual is tested
-WARMUP_TIME_CONSTANTS = 3.0
 
 
 @dataclass(frozen=True)
@@ -91,27 +92,18 @@ def where_regions(
 def special_where(
     effect: EffectConfig, data: BlockData, profile: Profile, residual: np.ndarray, cov: np.ndarray, step: str
 ) -> list[Region] | None:
-    """Effects whose location is a parameter: a step's time, a warm-up's start, a period."""
-    p = effect.params
-    if effect.identifier == "bias_step":
-        j = int(np.clip(np.searchsorted(data.starts, p["t_s"]), 1, data.n - 1))
-        a, b = max(0, j - 1), min(data.n, j + 1)
-        before_z = window_z(residual, cov, max(0, j - STEP_WINDOW_BLOCKS), j)
-        after_z = window_z(residual, cov, j, min(data.n, j + STEP_WINDOW_BLOCKS))
-        sig = {"z_before": before_z, "z_after": after_z}
-        return [
-            region(
-                data, profile, a, b, sig, "change_point", f"step of {p['step_mg']:.4g} mg at {p['t_s']:.1f} s"
-            )
-        ]
-    if effect.identifier == "warmup":
-        b = int(np.clip(np.searchsorted(data.starts, WARMUP_TIME_CONSTANTS * p["tau_s"]), 2, data.n))
-        sig = {"z": window_z(residual, cov, 0, b)}
-        return [region(data, profile, 0, b, sig, "effect", "first three warm-up time constants")]
-    if effect.identifier == "periodic":
-        sig = {"evidence": step}  # type: ignore[dict-item]
-        return [region(data, profile, 0, data.n, sig, "periodic", f"period {p['period_s']:.4g} s, whole run")]
-    return None
+    """Effects whose location is a parameter (a step's time, a warm-up's start, a period): the
+    definition's ``where`` hook; ``None`` when it has none."""
+    hook = DEFINITIONS[effect.identifier].finder.where
+    if hook is None:
+        return None
+    context = WhereContext(
+        data,
+        step,
+        lambda a, b: window_z(residual, cov, a, b),
+        lambda a, b, sig, kind, note: region(data, profile, a, b, sig, kind, note),
+    )
+    return hook(effect.params, context)
 
 
 def noise_where(
@@ -167,17 +159,17 @@ def locate_mismatch(
         if lr - 3.0 * penalty > THRESHOLD:  # a sine: amplitude, phase and period
             sig = {"likelihood_ratio": lr, "delta_bic": lr - 3.0 * penalty}
             note = f"slow periodic component near {1.0 / freqs[k]:.0f} s (GLS scan)"
-            out.append(region(data, profile, 0, data.n, sig, "periodic", note))
+            out.append(region(data, profile, 0, data.n, sig, PERIODIC_KIND, note))
     x = fine_residual(fit, data)
-    for term in fit.terms:
-        if term.identifier == "periodic" and term.offset is not None:
-            amp, phase = term.offset
-            x = x - amp * np.sin(2 * math.pi * data.fine_t / term.nl[0] + phase)
+    for term in fit.terms:  # components fitted on the fine grid are removed before looking
+        fine_offset = DEFINITIONS[term.identifier].finder.fine_offset
+        if fine_offset is not None and term.offset is not None:
+            x = x - fine_offset(term, data.fine_t)
     lo = max(4.0, 2.5 * data.fine_step_s)
     for peak in spectral_peaks(x, data.fine_step_s, lo, lo_slow):
         sig = {"p_value": peak.p_value, "peak_over_background": peak.ratio}
         note = f"spectral peak at period {peak.period_s:.2f} s"
-        out.append(region(data, profile, 0, data.n, sig, "periodic", note))
+        out.append(region(data, profile, 0, data.n, sig, PERIODIC_KIND, note))
     for a, b, ratio in allan.departures:
         note = f"Allan deviation above the modelled noise for tau {a:.3g}..{b:.3g} s"
         out.append(region(data, profile, 0, data.n, {"max_adev_ratio": ratio}, "allan", note))

@@ -9,7 +9,7 @@ simulated one are evaluated by the same code.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -92,13 +92,6 @@ def effect_contribution(
     return _additive(identifier, params, signals)
 
 
-def _bind(
-    bias_temperature: Callable[[np.ndarray, Mapping[str, float]], np.ndarray], params: Mapping[str, float]
-) -> Callable[[np.ndarray], np.ndarray]:
-    """``T -> bias_temperature(T, params)``: what the polynomial reads, with the effect's parameters."""
-    return lambda T: bias_temperature(T, params)
-
-
 def drift(
     effects: Iterable[EffectConfig],
     t: np.ndarray,
@@ -122,7 +115,7 @@ def drift(
         if definition.proof_mass is not None:
             T_pm = definition.proof_mass(t, T_pm, effect.params)
         if definition.bias_temperature is not None and poly_temperature is None:
-            poly_temperature = _bind(definition.bias_temperature, effect.params)
+            poly_temperature = (lambda f, p: lambda T: f(T, p))(definition.bias_temperature, effect.params)
     signals = Signals(
         t,
         np.asarray(T_die, dtype=np.float64),

@@ -111,6 +111,20 @@ class StartContext:
     input_varies: bool  # the known true input changes (a second orientation)
 
 
+@dataclass(frozen=True)
+class WhereContext:
+    """What a ``where`` hook reads: the block data and the finder's helpers, bound to the residual.
+
+    ``window_z(a, b)`` is the starting model's residual summed over blocks ``a:b`` over its standard
+    deviation; ``region(a, b, significance, kind, note)`` is the finder's region over blocks ``a:b``.
+    """
+
+    data: Any  # trainer.diagnose.blocks.BlockData
+    evidence: str  # the selection step's evidence for the effect
+    window_z: Callable[[int, int], float]
+    region: Callable[[int, int, dict[str, Any], str, str], Any]
+
+
 def _no_bounds(data: Any) -> Bounds:
     return ()
 
@@ -128,7 +142,14 @@ class Finder:
     ``linear``; ``lattice``; ``step``; ``sinusoid``; ``noise``), ``None`` when the finder never
     proposes it. ``noise_role`` for noise terms: ``white`` (always fitted, from the full rate),
     ``covariance`` (a correlated term of the block covariance, ``covariance(n, block_s,
-    duration_s)`` for unit coefficient), ``trend`` (a deterministic column) or ``None``.
+    duration_s)`` for unit coefficient), ``trend`` (a deterministic column) or ``None`` (not
+    modelled: the user's value is kept in the augmented simulation). Hooks for special cases:
+
+    - ``event_time``: the first nonlinear parameter is an event time (not learnable after a cut).
+    - ``full_rate(lin, data, T_pm)``: the full-rate contribution ``physics.effects.drift`` leaves out.
+    - ``where(params, ctx)``: the regions that locate the effect (:class:`WhereContext`), else its visible part.
+    - ``absent_when_unidentifiable``: unidentifiable means absent (not listed as not identifiable).
+    - ``unused_note(data)``: remark when the recording shows it but the fit does not keep it.
     """
 
     search: str | None = None
@@ -155,6 +176,12 @@ class Finder:
     covariance: Callable[[int, float, float], np.ndarray] | None = None
     start_coefficient: float | None = None  # starting value of the covariance term's coefficient
     allan_variance: Callable[[np.ndarray, float, float, Mapping[str, float]], np.ndarray] | None = None
+    # special cases (see the docstring)
+    event_time: bool = False
+    full_rate: Callable[[Mapping[str, float], Any, np.ndarray], np.ndarray | None] | None = None
+    where: Callable[[Mapping[str, float], WhereContext], list[Any]] | None = None
+    absent_when_unidentifiable: bool = False
+    unused_note: Callable[[Any], str] | None = None
     config_note: str = ""  # remark when the user's simulation has it but the finder does not model it
     missing_note: str = ""  # remark when the user's simulation lacks it (white noise)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,10 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     StartingTerm,
+    WhereContext,
 )
+
+STEP_WINDOW_BLOCKS = 10  # blocks either side of a step whose residual is tested
 
 
 def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
@@ -24,6 +28,17 @@ def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
 def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     B = d.data.block_s  # the block mean of a step inside the block is the fraction after it
     return [("step_mg", np.clip((d.data.t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0))]
+
+
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+    """The blocks around the step, with the residual's z on either side of it."""
+    data = ctx.data
+    j = int(np.clip(np.searchsorted(data.starts, p["t_s"]), 1, data.n - 1))
+    a, b = max(0, j - 1), min(data.n, j + 1)
+    before_z = ctx.window_z(max(0, j - STEP_WINDOW_BLOCKS), j)
+    after_z = ctx.window_z(j, min(data.n, j + STEP_WINDOW_BLOCKS))
+    sig = {"z_before": before_z, "z_after": after_z}
+    return [ctx.region(a, b, sig, "change_point", f"step of {p['step_mg']:.4g} mg at {p['t_s']:.1f} s")]
 
 
 DEFINITION = Effect(
@@ -43,9 +58,11 @@ DEFINITION = Effect(
         # a step time found by an exhaustive scan counts twice (modified BIC for change points,
         # Zhang & Siegmund 2007): its look-elsewhere effect is far larger than a time constant's
         bic_nonlinear=2,
+        event_time=True,
         columns=_columns,
         to_params=lambda term, lin: {"t_s": term.nl[0], "step_mg": lin["step_mg"]},
         from_config=lambda p, ctx: StartingTerm((p["t_s"],)),
+        where=_where,
         identifiability=lambda p: Identifiability(True, "a step shows anywhere in the run"),
         advice="a bias step (shock, mode hop, reset): the compensation is offset after it",
         confounders=("warmup",),

@@ -16,7 +16,10 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     StartingTerm,
+    WhereContext,
 )
+
+REGION_KIND = "periodic"  # how a periodic component of a residual is reported
 
 
 def sinusoid(t: np.ndarray, amp_mg: float, period_s: float, phase_rad: float) -> np.ndarray:
@@ -46,6 +49,12 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
 def _fine_offset(term: Any, t: np.ndarray) -> np.ndarray:
     amp, phase = term.offset
     return amp * np.sin(2 * math.pi * t / term.nl[0] + phase)
+
+
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+    """The whole run, with the selection's evidence."""
+    note = f"period {p['period_s']:.4g} s, whole run"
+    return [ctx.region(0, ctx.data.n, {"evidence": ctx.evidence}, REGION_KIND, note)]
 
 
 def _to_params(term: Any, lin: Mapping[str, float]) -> dict[str, float]:
@@ -92,6 +101,7 @@ DEFINITION = Effect(
         columns=_columns,
         fine_offset=_fine_offset,
         to_params=_to_params,
+        where=_where,
         from_config=lambda p, ctx: StartingTerm((p["period_s"],)),
         identifiability=lambda p: Identifiability(
             True, f"{p.duration_s:.0f} s of data: periods up to half of it"

@@ -37,6 +37,10 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
+def _full_rate(lin: Mapping[str, float], data: Any, T_pm: np.ndarray) -> np.ndarray:
+    return lin["r_mg_per_s"] * data.full_t
+
+
 DEFINITION = NoiseTerm(
     identifier="rate_ramp",
     params=(Param("r_mg_per_s", unit="mg/s"),),
@@ -47,6 +51,7 @@ DEFINITION = NoiseTerm(
         noise_role="trend",  # a column of the drift model, reported like an effect
         columns=_columns,
         to_params=lambda term, lin: {"r_mg_per_s": lin["r_mg_per_s"]},
+        full_rate=_full_rate,  # a noise term: not in physics.effects.drift
         from_config=lambda p, ctx: StartingTerm(),
         identifiability=_identifiability,
         advice="a linear drift in time independent of temperature (ageing, creep of the mount)",

@@ -38,6 +38,14 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("sf_ppm_per_c", g * 1e-6 * (d.T_pm - T_REF_C))]
 
 
+def _full_rate(lin: Mapping[str, float], data: Any, T_pm: np.ndarray) -> np.ndarray | None:
+    """The fitted tempco on the known input (drift() runs at a zero input)."""
+    if data.known_input_block is None or "sf_ppm_per_c" not in lin:
+        return None
+    g = np.interp(data.full_t, data.t, data.known_input_block)
+    return scale_error(g, T_pm, lin["sf_ppm_per_c"])
+
+
 def _from_config(p: Mapping[str, float], ctx: StartContext) -> StartingTerm:
     note = (
         ""
@@ -74,6 +82,7 @@ DEFINITION = Effect(
         columns=_columns,
         # fitted only when the known input varies; otherwise the user's value is kept
         to_params=lambda term, lin: {"sf_ppm_per_c": lin.get("sf_ppm_per_c", term.nl[0] if term.nl else 0.0)},
+        full_rate=_full_rate,
         from_config=_from_config,
         identifiability=_identifiability,
         advice="the scale factor drifts with temperature: a compensation at one orientation is off at another",

@@ -53,6 +53,15 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
+def _unused_note(data: Any) -> str:
+    if data.lattice_lsb_c is None:
+        return ""
+    return (
+        f"the thermometer column is quantised ({data.lattice_lsb_c:g} degC) but modelling the staircase "
+        "does not improve the fit"
+    )
+
+
 DEFINITION = Effect(
     identifier="temp_quantization",
     params=(Param("lsb_c", "positive", unit="degC", plausible=(0.0625, 1.0)),),
@@ -62,6 +71,8 @@ DEFINITION = Effect(
         search="lattice",  # the LSB is read off the thermometer column's lattice, not searched
         bic_nonlinear=1,  # ... but it is estimated
         dequantize=True,
+        absent_when_unidentifiable=True,  # no lattice: the thermometer is not quantised
+        unused_note=_unused_note,
         columns=_columns,
         to_params=lambda term, lin: {"lsb_c": term.nl[0]},
         from_config=_from_config,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,10 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     StartingTerm,
+    WhereContext,
 )
+
+WARMUP_TIME_CONSTANTS = 3.0  # the part of the run a warm-up is located in
 
 
 def settling(t: np.ndarray, amp_mg: float, tau_s: float) -> np.ndarray:
@@ -38,6 +42,13 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+    """The first three time constants after power-on."""
+    data = ctx.data
+    b = int(np.clip(np.searchsorted(data.starts, WARMUP_TIME_CONSTANTS * p["tau_s"]), 2, data.n))
+    return [ctx.region(0, b, {"z": ctx.window_z(0, b)}, "effect", "first three warm-up time constants")]
+
+
 DEFINITION = Effect(
     identifier="warmup",
     params=(
@@ -54,6 +65,7 @@ DEFINITION = Effect(
         columns=_columns,
         to_params=lambda term, lin: {"amp_mg": lin["amp_mg"], "tau_s": term.nl[0]},
         from_config=lambda p, ctx: StartingTerm((p["tau_s"],)),
+        where=_where,
         identifiability=_identifiability,
         advice=(
             "self-heating after power-on: the bias settles over the first minutes; let the board warm up "
