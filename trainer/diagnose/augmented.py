@@ -12,6 +12,7 @@ from trainer.diagnose.gls import NOISE_CANDIDATES
 from trainer.diagnose.model import ModelFit, catalogue_effects
 from trainer.diagnose.profile import Profile
 from trainer.physics.catalogue import DEFINITIONS, NOISE, WHITE_NOISE
+from trainer.physics.catalogue.base import catalogue_params
 from trainer.physics.config import NoiseConfig, PhysicsConfig, ProtocolConfig, RecordingConfig
 from trainer.physics.effects import EFFECT_PARAMETERS
 from trainer.physics.profiles import SegmentSpec
@@ -33,9 +34,11 @@ def augmented_config(
         if name in noise_values:
             noise.append(NoiseConfig(name, dict(noise_values[name])))
     for index, term in enumerate(final.terms):  # deterministic noise trends, fitted as columns
-        finder = DEFINITIONS[term.identifier].finder
-        if finder.noise_role == "trend" and finder.to_params is not None:
-            noise.append(NoiseConfig(term.identifier, finder.to_params(term, final.linear(index))))
+        definition = DEFINITIONS[term.identifier]
+        if definition.finder.noise_role == "trend":
+            noise.append(
+                NoiseConfig(term.identifier, catalogue_params(definition, term, final.linear(index)))
+            )
     if sim is not None:  # the user's noise terms the finder does not model are kept, first
         kept = [n for n in sim.noise if NOISE[n.identifier].finder.noise_role is None]
         return replace(sim, effects=tuple(effects), noise=(*kept, *noise))

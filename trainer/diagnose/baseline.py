@@ -14,7 +14,7 @@ import numpy as np
 
 from trainer.diagnose.model import Term
 from trainer.physics.catalogue import BACKBONE, COVARIANCE_NOISE, DEFINITIONS, NOISE, WHITE_NOISE
-from trainer.physics.catalogue.base import StartContext
+from trainer.physics.catalogue.base import StartContext, starting_term
 from trainer.physics.config import PhysicsConfig, input_setters
 from trainer.physics.inputs import input_signal
 
@@ -66,11 +66,11 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
         notes.append(f"the simulation has no {BACKBONE}; the finder always fits one (the drift's backbone)")
     context = StartContext(lattice_lsb_c, varies)
     for effect in cfg.effects:
-        finder = DEFINITIONS[effect.identifier].finder
-        if finder.backbone:
+        definition = DEFINITIONS[effect.identifier]
+        if definition.finder.backbone:
             continue
         identifiers.append(effect.identifier)
-        start = finder.from_config(effect.params, context)  # type: ignore[misc]
+        start = starting_term(definition, effect.params, context)
         terms.append(Term(effect.identifier, start.nl, fixed=start.fixed))
         if start.note:
             notes.append(start.note)
@@ -80,8 +80,8 @@ def build_baseline(cfg: PhysicsConfig | None, t: np.ndarray, lattice_lsb_c: floa
         finder = DEFINITIONS[term.identifier].finder
         if finder.noise_role == "covariance":
             noise.append(term.identifier)
-        elif finder.from_config is not None:  # a deterministic trend (rate_ramp) is a model term
-            start = finder.from_config(term.params, context)
+        elif finder.noise_role == "trend":  # a deterministic trend (rate_ramp) is a model term
+            start = starting_term(DEFINITIONS[term.identifier], term.params, context)
             terms.append(Term(term.identifier, start.nl, fixed=start.fixed))
         elif finder.config_note:
             notes.append(finder.config_note)

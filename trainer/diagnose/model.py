@@ -24,7 +24,7 @@ from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import Gls, NoiseState, fit_noise, initial_state
 from trainer.physics import catalogue
 from trainer.physics.catalogue import DEFINITIONS, EFFECTS, NOISE, WHITE_NOISE
-from trainer.physics.catalogue.base import BlockDesign
+from trainer.physics.catalogue.base import BlockDesign, catalogue_params
 from trainer.physics.catalogue.periodic import periodic_columns as periodic_columns
 from trainer.physics.effects import EffectConfig
 
@@ -287,7 +287,7 @@ def catalogue_effects(fit: ModelFit) -> list[EffectConfig]:
     effects: list[EffectConfig] = []
     for index, term in enumerate(fit.terms):
         definition = EFFECTS.get(term.identifier)
-        if definition is None or definition.finder.to_params is None:
+        if definition is None:
             continue
-        effects.append(EffectConfig(term.identifier, definition.finder.to_params(term, fit.linear(index))))
+        effects.append(EffectConfig(term.identifier, catalogue_params(definition, term, fit.linear(index))))
     return effects

@@ -57,6 +57,7 @@ from trainer.physics.catalogue import (  # the finder's order and advice, per ef
     DEFINITIONS,
     EFFECTS,
 )
+from trainer.physics.catalogue.base import catalogue_params
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
 
@@ -270,6 +271,6 @@ def _left_out(
 def _trend_effect(final: ModelFit, index: int) -> EffectConfig:
     """A model term that is a noise term's deterministic trend (``rate_ramp``), reported like an effect."""
     term = final.terms[index]
-    to_params = DEFINITIONS[term.identifier].finder.to_params
-    assert to_params is not None, f"{term.identifier} has no catalogue parameters"
-    return EffectConfig(term.identifier, to_params(term, final.linear(index)))
+    return EffectConfig(
+        term.identifier, catalogue_params(DEFINITIONS[term.identifier], term, final.linear(index))
+    )

@@ -255,3 +255,34 @@ def sample_period(t: np.ndarray) -> float:
 def rate_c_per_min(t: np.ndarray, T_die: np.ndarray) -> np.ndarray:
     """Numerical ``dT_die/dt`` in degC/min (central differences) for callers without the LP state."""
     return np.gradient(np.asarray(T_die, dtype=np.float64), np.asarray(t, dtype=np.float64)) * 60.0
+
+
+def catalogue_params(
+    definition: Effect | NoiseTerm, term: Any, linear: Mapping[str, float]
+) -> dict[str, float]:
+    """A fitted model term as catalogue parameters (catalogue order).
+
+    The definition's ``to_params`` when it has one; otherwise each parameter is the term's linear
+    coefficient of that name or its nonlinear value of that name (optional ones absent from both
+    are left out), which is what almost every effect needs.
+    """
+    if definition.finder.to_params is not None:
+        return definition.finder.to_params(term, linear)
+    nonlinear = [name for name, _ in definition.finder.nonlinear]
+    params: dict[str, float] = {}
+    for param in definition.params:
+        if param.name in linear:
+            params[param.name] = linear[param.name]
+        elif param.name in nonlinear:
+            params[param.name] = term.nl[nonlinear.index(param.name)]
+    return params
+
+
+def starting_term(
+    definition: Effect | NoiseTerm, params: Mapping[str, float], context: StartContext
+) -> StartingTerm:
+    """How a configured instance enters the finder's starting model: the definition's
+    ``from_config`` when it has one, else its nonlinear parameters as configured, searched."""
+    if definition.finder.from_config is not None:
+        return definition.finder.from_config(params, context)
+    return StartingTerm(tuple(params[name] for name, _ in definition.finder.nonlinear))

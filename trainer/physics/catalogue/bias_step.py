@@ -14,7 +14,6 @@ from trainer.physics.catalogue.base import (
     Identifiability,
     Param,
     Scenario,
-    StartingTerm,
     WhereContext,
 )
 
@@ -60,8 +59,6 @@ DEFINITION = Effect(
         bic_nonlinear=2,
         event_time=True,
         columns=_columns,
-        to_params=lambda term, lin: {"t_s": term.nl[0], "step_mg": lin["step_mg"]},
-        from_config=lambda p, ctx: StartingTerm((p["t_s"],)),
         where=_where,
         identifiability=lambda p: Identifiability(True, "a step shows anywhere in the run"),
         advice="a bias step (shock, mode hop, reset): the compensation is offset after it",

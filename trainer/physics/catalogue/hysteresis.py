@@ -15,7 +15,6 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     Signals,
-    StartingTerm,
 )
 from trainer.physics.thermal import play_operator
 
@@ -66,8 +65,6 @@ DEFINITION = Effect(
         bounds=lambda data: ((0.5, 40.0),),
         grid_points=16,
         columns=_columns,
-        to_params=lambda term, lin: {"amp_mg": lin["amp_mg"], "width_c": term.nl[0]},
-        from_config=lambda p, ctx: StartingTerm((p["width_c"],)),
         identifiability=_identifiability,
         advice=(
             "heating and cooling branches differ: a single polynomial splits the difference; calibrate on both "

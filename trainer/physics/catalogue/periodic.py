@@ -15,7 +15,6 @@ from trainer.physics.catalogue.base import (
     Identifiability,
     Param,
     Scenario,
-    StartingTerm,
     WhereContext,
 )
 
@@ -102,7 +101,6 @@ DEFINITION = Effect(
         fine_offset=_fine_offset,
         to_params=_to_params,
         where=_where,
-        from_config=lambda p, ctx: StartingTerm((p["period_s"],)),
         identifiability=lambda p: Identifiability(
             True, f"{p.duration_s:.0f} s of data: periods up to half of it"
         ),

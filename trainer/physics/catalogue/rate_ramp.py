@@ -13,7 +13,6 @@ from trainer.physics.catalogue.base import (
     Identifiability,
     NoiseTerm,
     Param,
-    StartingTerm,
 )
 
 
@@ -50,9 +49,7 @@ DEFINITION = NoiseTerm(
         search="linear",
         noise_role="trend",  # a column of the drift model, reported like an effect
         columns=_columns,
-        to_params=lambda term, lin: {"r_mg_per_s": lin["r_mg_per_s"]},
         full_rate=_full_rate,  # a noise term: not in physics.effects.drift
-        from_config=lambda p, ctx: StartingTerm(),
         identifiability=_identifiability,
         advice="a linear drift in time independent of temperature (ageing, creep of the mount)",
         confounders=("rate_random_walk",),

@@ -15,7 +15,6 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     Signals,
-    StartingTerm,
     sample_period,
 )
 from trainer.physics.thermal import lowpass
@@ -62,8 +61,6 @@ DEFINITION = Effect(
         bounds=lambda data: ((600.0, max(1200.0, min(40000.0, 4.0 * data.duration_s))),),
         grid_points=12,
         columns=_columns,
-        to_params=lambda term, lin: {"gain_mg_per_c": lin["gain_mg_per_c"], "tau_s": term.nl[0]},
-        from_config=lambda p, ctx: StartingTerm((p["tau_s"],)),
         identifiability=_identifiability,
         advice=(
             "package creep after a temperature change: the bias keeps moving for tens of minutes at a constant "

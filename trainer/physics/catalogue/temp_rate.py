@@ -15,7 +15,6 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     Signals,
-    StartingTerm,
     rate_c_per_min,
 )
 
@@ -41,8 +40,6 @@ DEFINITION = Effect(
     finder=Finder(
         search="linear",
         columns=_columns,
-        to_params=lambda term, lin: {"k_mg_per_c_per_min": lin["k_mg_per_c_per_min"]},
-        from_config=lambda p, ctx: StartingTerm(),
         identifiability=rules.rate_changes,
         advice=(
             "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "

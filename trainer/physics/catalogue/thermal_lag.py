@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from trainer.physics.catalogue import rules
-from trainer.physics.catalogue.base import Effect, Finder, Param, Scenario, StartingTerm, sample_period
+from trainer.physics.catalogue.base import Effect, Finder, Param, Scenario, sample_period
 from trainer.physics.thermal import lowpass
 
 
@@ -26,8 +26,6 @@ DEFINITION = Effect(
         bounds=lambda data: ((3.0, 1500.0),),
         grid_points=18,
         proof_mass=lambda term, T, block_s: lowpass(T, term.nl[0], block_s),
-        to_params=lambda term, lin: {"tau_s": term.nl[0]},
-        from_config=lambda p, ctx: StartingTerm((p["tau_s"],)),
         identifiability=rules.rate_changes,
         advice=(
             "the proof mass lags the thermometer: a polynomial fitted at one heating rate is skewed when the "

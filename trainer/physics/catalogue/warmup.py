@@ -15,7 +15,6 @@ from trainer.physics.catalogue.base import (
     Identifiability,
     Param,
     Scenario,
-    StartingTerm,
     WhereContext,
 )
 
@@ -63,8 +62,6 @@ DEFINITION = Effect(
         bounds=lambda data: ((max(5.0, 2.0 * data.block_s), max(60.0, min(6000.0, 0.5 * data.duration_s))),),
         grid_points=16,
         columns=_columns,
-        to_params=lambda term, lin: {"amp_mg": lin["amp_mg"], "tau_s": term.nl[0]},
-        from_config=lambda p, ctx: StartingTerm((p["tau_s"],)),
         where=_where,
         identifiability=_identifiability,
         advice=(
