@@ -1,4 +1,4 @@
-"""Choosing the left-out effects: forward selection by BIC, then telling confounded ones apart.
+"""Choosing the left-out effects: stepwise selection by BIC, then telling confounded ones apart.
 
 The criterion is the BIC of the GLS likelihood of the block means, with the noise covariance
 (white + flicker + random walk) re-estimated by maximum likelihood for every compared model: a
@@ -6,14 +6,20 @@ missing effect inflates the starting model's noise estimate (a creep passes for 
 a branch offset for a huge one), so only models with their own noise compare fairly.
 
 1. Noise terms missing from the user's model (random walk, flicker) are tested first, by the BIC
-   of the starting model with and without them; otherwise a random walk would be explained away
+   of the current model with and without them; otherwise a random walk would be explained away
    one slow deterministic shape (a ramp, a step, a long period) at a time.
 2. Each round scores every candidate's best version at the current noise (cheap, a lower bound on
    the refitted gain), refits the ``TOP_REFIT`` most promising with their own noise estimate and adds the
    best if it lowers the BIC by at least ``THRESHOLD`` (12: "very strong" on the Kass-Raftery
    scale is 10; on 40 clean generated recordings the best candidate never exceeded 4.2, while a
    second, spurious effect after a true one reached 11); this repeats until nothing passes.
-3. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
+3. Backward elimination: every accepted term, noise terms included, is re-tested against the
+   final model by the same criterion, and the weakest is dropped while it earns less than
+   ``THRESHOLD`` (against the starting model any structured residual looks like a random walk;
+   once the deterministic effect is in, the random walk no longer earns its place). Each accepted
+   effect is then searched again with all the others in the model. If anything changed, steps 1-3
+   run again (at most ``MAX_ROUNDS`` passes).
+4. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
    with temp_rate, hysteresis or stress_relaxation, ...); when the swap costs less than
    ``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported.
 """
