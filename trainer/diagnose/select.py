@@ -232,6 +232,65 @@ def _reprofile(current: ModelFit, steps: list[Step], data: BlockData) -> tuple[M
     return current, changed
 
 
+@dataclass
+class _Path:
+    """One stepwise search: its final model, accepted steps and what it tested and dropped."""
+
+    current: ModelFit
+    steps: list[Step]
+    first: list[Tested]
+    noise_tested: list[Tested]
+    dropped: list[Tested]
+
+
+def _stepwise(
+    baseline: ModelFit, data: BlockData, candidates: Sequence[str], bar: tqdm, *, noise_last: bool = False
+) -> _Path:
+    """Noise terms, forward search, backward elimination and re-search, repeated while anything
+    changes. ``noise_last``: the first pass tests the missing noise terms after the deterministic
+    effects instead of before them."""
+    deterministic = [c for c in candidates if c not in NOISE_EFFECTS]
+    path = _Path(baseline, [], [], [], [])
+    current = baseline
+    for pass_index in range(MAX_ROUNDS):
+        gone = {t.effect for t in path.dropped}  # a dropped noise term is not offered again
+        offered = [c for c in candidates if c not in gone]
+        first = path.first if pass_index == 0 else None
+        if noise_last and pass_index == 0:
+            current = _forward(current, data, deterministic, path.steps, first, bar)
+        noise, tested_now, _ = noise_steps(current, data, offered)
+        if pass_index == 0:
+            path.noise_tested = tested_now
+        path.steps += noise
+        current = noise[-1].fit if noise else current
+        if not (noise_last and pass_index == 0):
+            current = _forward(current, data, deterministic, path.steps, first, bar)
+        changed = False
+        while path.steps:
+            retested = _retest(current, path.steps, data)
+            if not retested:
+                break
+            delta, number, reduced = min(retested, key=lambda item: item[0])
+            if delta >= THRESHOLD:
+                break
+            step = path.steps.pop(number)
+            path.dropped.append(
+                Tested(
+                    step.effect,
+                    delta,
+                    f"dropped: re-tested against the final model it earns a BIC improvement of only "
+                    f"{delta:.1f} (< {THRESHOLD:g}; {step.delta_bic:.1f} when added)",
+                )
+            )
+            current = reduced
+            changed = True
+        current, moved = _reprofile(current, path.steps, data)
+        if not (changed or moved):
+            break
+    path.current = current
+    return path
+
+
 def forward_select(
     baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
 ) -> Selection:
@@ -244,52 +303,41 @@ def forward_select(
        (a random walk accepted against the starting model usually was a deterministic effect's
        structure). Each accepted effect is then searched again with all others in the model.
     3. If anything changed, search again (at most ``MAX_ROUNDS`` passes).
+    4. If a noise term was accepted in the first pass, the search is run again with the noise
+       terms judged after the deterministic effects (a random walk accepted first can leave no
+       deterministic candidate its margin, and then nothing can drop it); the lower final BIC wins.
     """
     bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
-    deterministic = [c for c in candidates if c not in NOISE_EFFECTS]
-    steps: list[Step] = []
-    first: list[Tested] = []
-    noise_tested: list[Tested] = []
-    dropped: list[Tested] = []
-    current = baseline
-    for pass_index in range(MAX_ROUNDS):
-        gone = {t.effect for t in dropped}  # a dropped noise term is not offered again
-        noise, tested_now, _ = noise_steps(current, data, [c for c in candidates if c not in gone])
-        if pass_index == 0:
-            noise_tested = tested_now
-        steps += noise
-        current = noise[-1].fit if noise else current
-        current = _forward(current, data, deterministic, steps, first if pass_index == 0 else None, bar)
-        changed = False
-        while steps:
-            retested = _retest(current, steps, data)
-            if not retested:
-                break
-            delta, number, reduced = min(retested, key=lambda item: item[0])
-            if delta >= THRESHOLD:
-                break
-            step = steps.pop(number)
-            dropped.append(
+    path = _stepwise(baseline, data, candidates, bar)
+    if any(t.delta_bic >= THRESHOLD for t in path.noise_tested):
+        other = _stepwise(baseline, data, candidates, bar, noise_last=True)
+        if other.current.bic < path.current.bic:
+            accepted = {s.effect for s in other.steps}
+            noise_dropped = [
                 Tested(
-                    step.effect,
-                    delta,
-                    f"dropped: re-tested against the final model it earns a BIC improvement of only "
-                    f"{delta:.1f} (< {THRESHOLD:g}; {step.delta_bic:.1f} when added)",
+                    t.effect,
+                    t.delta_bic,
+                    f"dropped: with the deterministic effects searched first it earns a BIC improvement "
+                    f"of only {t.delta_bic:.1f} (< {THRESHOLD:g}), and that model's BIC is lower by "
+                    f"{path.current.bic - other.current.bic:.1f}",
                 )
-            )
-            current = reduced
-            changed = True
-        current, moved = _reprofile(current, steps, data)
-        if not (changed or moved):
-            break
+                for t in other.noise_tested
+                if t.delta_bic < THRESHOLD
+                and t.effect not in accepted
+                and any(s.effect == t.effect for s in path.steps)
+            ]
+            other.first, other.noise_tested = path.first, path.noise_tested
+            other.dropped = [*noise_dropped, *other.dropped]
+            path = other
     bar.close()
+    steps, current = path.steps, path.current
     for step, index in zip(steps, step_positions(steps, current), strict=True):
         step.term_index = index
     best_first: dict[str, Tested] = {}
-    for item in [*noise_tested, *first]:
+    for item in [*path.noise_tested, *path.first]:
         if item.effect not in best_first or item.delta_bic > best_first[item.effect].delta_bic:
             best_first[item.effect] = item
-    tested = sorted(best_first.values(), key=lambda t: -t.delta_bic) + dropped
+    tested = sorted(best_first.values(), key=lambda t: -t.delta_bic) + path.dropped
     return Selection(steps, current, current, tested, current.noise)
 
 
