@@ -18,7 +18,9 @@ a branch offset for a huge one), so only models with their own noise compare fai
    ``THRESHOLD`` (against the starting model any structured residual looks like a random walk;
    once the deterministic effect is in, the random walk no longer earns its place). Each accepted
    effect is then searched again with all the others in the model. If anything changed, steps 1-3
-   run again (at most ``MAX_ROUNDS`` passes).
+   run again (at most ``MAX_ROUNDS`` passes). When a noise term was accepted in the first pass,
+   the search is repeated with the noise terms judged after the deterministic effects and the
+   lower final BIC wins.
 4. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
    with temp_rate, hysteresis or stress_relaxation, ...); when the swap costs less than
    ``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported.
