@@ -315,6 +315,7 @@ def forward_select(
         other = _stepwise(baseline, data, candidates, bar, noise_last=True)
         if other.current.bic < path.current.bic:
             accepted = {s.effect for s in other.steps}
+            first_noise = {t.effect for t in path.noise_tested if t.delta_bic >= THRESHOLD}
             noise_dropped = [
                 Tested(
                     t.effect,
@@ -324,9 +325,7 @@ def forward_select(
                     f"{path.current.bic - other.current.bic:.1f}",
                 )
                 for t in other.noise_tested
-                if t.delta_bic < THRESHOLD
-                and t.effect not in accepted
-                and any(s.effect == t.effect for s in path.steps)
+                if t.delta_bic < THRESHOLD and t.effect not in accepted and t.effect in first_noise
             ]
             other.first, other.noise_tested = path.first, path.noise_tested
             other.dropped = [*noise_dropped, *other.dropped]
