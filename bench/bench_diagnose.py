@@ -32,6 +32,20 @@ import numpy as np
 from trainer.diagnose import diagnose
 from trainer.diagnose.document import document
 from trainer.diagnose.scenarios import CHECKED_PARAMS, HIDDEN_EFFECTS, make_scenario
+from trainer.physics.catalogue import rate_random_walk
+from trainer.physics.config import PhysicsConfig
+
+RANDOM_WALK = rate_random_walk.DEFINITION.identifier
+# How the user's simulation is handed to the finder: ``truth`` (the truth minus the concealed
+# effects), ``no-rrw`` (as a user would write it: bias polynomial, white noise and bias instability
+# but no random walk; the recordings are then generated without a random walk too), ``none`` (no
+# ``--sim``: the finder's default physics as the starting model).
+SIM_MODES = ("truth", "no-rrw", "none")
+
+
+def without_random_walk(config: PhysicsConfig) -> PhysicsConfig:
+    return replace(config, noise=tuple(n for n in config.noise if n.identifier != RANDOM_WALK))
+
 
 PAIRS: tuple[tuple[str, str], ...] = (
     ("thermal_lag", "periodic"),
@@ -43,12 +57,15 @@ PAIRS: tuple[tuple[str, str], ...] = (
 )
 
 
-def case_list(per_effect: int, clean: int, pairs: int, offset: int) -> list[tuple[tuple[str, ...], int]]:
+def case_list(
+    per_effect: int, clean: int, pairs: int, offset: int, sim_mode: str = "truth"
+) -> list[tuple[tuple[str, ...], int]]:
     cases: list[tuple[tuple[str, ...], int]] = []
     seed = 1000 + offset
     for effect in HIDDEN_EFFECTS:
         for _ in range(per_effect):
-            cases.append(((effect,), seed))
+            if not (sim_mode == "no-rrw" and effect == RANDOM_WALK):  # no random walk to conceal
+                cases.append(((effect,), seed))
             seed += 1
     for k in range(pairs):
         cases.append((PAIRS[k % len(PAIRS)], seed))
@@ -72,11 +89,17 @@ def relative_errors(hidden: list[dict[str, Any]], found: list[dict[str, Any]]) -
     return out
 
 
-def run_case(effects: tuple[str, ...], seed: int) -> dict[str, Any]:
+def run_case(effects: tuple[str, ...], seed: int, sim_mode: str = "truth") -> dict[str, Any]:
     scenario = make_scenario(list(effects), seed, rates=(5.0, 10.0, 20.0, 50.0))
+    sim: PhysicsConfig | None = scenario.sim
+    if sim_mode == "no-rrw":
+        scenario = replace(scenario, truth=without_random_walk(scenario.truth))
+        sim = without_random_walk(scenario.sim)
+    elif sim_mode == "none":
+        sim = None
     rec = scenario.recording()
     started = time.perf_counter()
-    result = diagnose(rec, scenario.sim, holdout_fraction=0.0)
+    result = diagnose(rec, sim, holdout_fraction=0.0)
     seconds = time.perf_counter() - started
     doc = document(result)
     hidden = [{"effect": h.identifier, "params": dict(h.params)} for h in scenario.hidden]
@@ -84,6 +107,7 @@ def run_case(effects: tuple[str, ...], seed: int) -> dict[str, Any]:
     names = {f["effect"] for f in found}
     return {
         "case": scenario.name,
+        "sim_mode": sim_mode,
         "effects": list(effects),
         "rate_hz": scenario.truth.recording.sample_rate_hz,
         "rows": len(rec),
@@ -140,10 +164,20 @@ def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
         }
     pair_rows = [r for r in effect_cases if len(r["effects"]) > 1]
     all_errs = [v for r in effect_cases for v in r["errors"].values()]
+    pair_errs = [v for r in pair_rows for v in r["errors"].values()]
+    per_effect["pairs"] = {
+        "cases": len(pair_rows),
+        "identified": sum(r["identified"] for r in pair_rows),
+        "with_extra": sum(bool(r["extra"]) for r in pair_rows),
+        "param_err_median": float(np.median(pair_errs)) if pair_errs else None,
+        "param_err_max": float(np.max(pair_errs)) if pair_errs else None,
+        "params_within_25pct": f"{sum(e <= 0.25 for e in pair_errs)}/{len(pair_errs)}",
+    }
     return {
         "cases": len(results),
         "identification_accuracy": sum(r["identified"] for r in effect_cases) / max(1, len(effect_cases)),
         "pairs_identified": f"{sum(r['identified'] for r in pair_rows)}/{len(pair_rows)}",
+        "clean_with_finding": f"{sum(bool(r['extra']) for r in clean_cases)}/{len(clean_cases)}",
         "false_positive_rate_clean": sum(bool(r["extra"]) for r in clean_cases) / max(1, len(clean_cases)),
         "cases_with_extra_effect": sum(bool(r["extra"]) for r in effect_cases) / max(1, len(effect_cases)),
         "param_within_25pct": sum(e <= 0.25 for e in all_errs) / max(1, len(all_errs)),
@@ -165,14 +199,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="1 case per effect, 6 clean, 5 pairs, no timing")
     parser.add_argument("--no-timing", action="store_true")
     parser.add_argument("--json", help="write all results here")
+    parser.add_argument(
+        "--sim-mode",
+        choices=SIM_MODES,
+        default="truth",
+        help="the user's simulation: the truth minus the concealed effects (default), the same without "
+        "a random walk (and recordings without one), or no --sim at all",
+    )
     args = parser.parse_args(argv)
     if args.quick:
         args.per_effect, args.clean, args.pairs, args.no_timing = 1, 6, 5, True
-    cases = case_list(args.per_effect, args.clean, args.pairs, args.offset)
+    cases = case_list(args.per_effect, args.clean, args.pairs, args.offset, args.sim_mode)
     started = time.perf_counter()
     results: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(run_case, effects, seed) for effects, seed in cases]
+        futures = [pool.submit(run_case, effects, seed, args.sim_mode) for effects, seed in cases]
         for done, future in enumerate(futures, 1):
             row = future.result()
             results.append(row)
@@ -184,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
     summary = summarise(results)
+    summary["sim_mode"] = args.sim_mode
     summary["wall_seconds"] = round(time.perf_counter() - started, 1)
     if not args.no_timing:
         summary["timing_2h_200hz"] = timing_2h_200hz()

@@ -32,6 +32,8 @@ from trainer.physics.effects import EffectConfig
 # the search goes somewhat beyond them so a value at the edge is seen as such, and the report flags
 # values outside.
 PLAUSIBLE: dict[tuple[str, str], tuple[float, float]] = catalogue.PLAUSIBLE
+POLISH_EVALS = 120
+POLISH_EVALS_PER_PARAM = 60
 
 
 def nonlinear_names(identifier: str) -> tuple[str, ...]:
@@ -201,11 +203,18 @@ def with_values(terms: Sequence[Term], slots: list, z: np.ndarray) -> list[Term]
     return out
 
 
-def polish(terms: Sequence[Term], data: BlockData, gls: Gls, *, max_evals: int = 120) -> ModelFit:
-    """Joint local optimisation of all free nonlinear parameters at fixed noise ratios."""
+def polish(terms: Sequence[Term], data: BlockData, gls: Gls, *, max_evals: int | None = None) -> ModelFit:
+    """Joint local optimisation of all free nonlinear parameters at fixed noise ratios.
+
+    The evaluation budget grows with the number of free parameters (``POLISH_EVALS_PER_PARAM``
+    each, at least ``POLISH_EVALS``): with two or three accepted effects a fixed budget stopped
+    the simplex before the parameters of the earlier ones had moved.
+    """
     slots = _free_slots(terms, data)
     if not slots:
         return evaluate(terms, data, gls)
+    if max_evals is None:
+        max_evals = max(POLISH_EVALS, POLISH_EVALS_PER_PARAM * len(slots))
     z0 = np.array([math.log10(terms[i].nl[j]) if lg else terms[i].nl[j] for i, j, _, _, lg in slots])
     steps = np.array([0.08 if lg else max(data.block_s, 0.01 * (hi - lo)) for _, _, lo, hi, lg in slots])
 

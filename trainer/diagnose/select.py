@@ -1,4 +1,4 @@
-"""Choosing the left-out effects: forward selection by BIC, then telling confounded ones apart.
+"""Choosing the left-out effects: stepwise selection by BIC, then telling confounded ones apart.
 
 The criterion is the BIC of the GLS likelihood of the block means, with the noise covariance
 (white + flicker + random walk) re-estimated by maximum likelihood for every compared model: a
@@ -6,14 +6,22 @@ missing effect inflates the starting model's noise estimate (a creep passes for 
 a branch offset for a huge one), so only models with their own noise compare fairly.
 
 1. Noise terms missing from the user's model (random walk, flicker) are tested first, by the BIC
-   of the starting model with and without them; otherwise a random walk would be explained away
+   of the current model with and without them; otherwise a random walk would be explained away
    one slow deterministic shape (a ramp, a step, a long period) at a time.
 2. Each round scores every candidate's best version at the current noise (cheap, a lower bound on
    the refitted gain), refits the ``TOP_REFIT`` most promising with their own noise estimate and adds the
    best if it lowers the BIC by at least ``THRESHOLD`` (12: "very strong" on the Kass-Raftery
    scale is 10; on 40 clean generated recordings the best candidate never exceeded 4.2, while a
    second, spurious effect after a true one reached 11); this repeats until nothing passes.
-3. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
+3. Backward elimination: every accepted term, noise terms included, is re-tested against the
+   final model by the same criterion, and the weakest is dropped while it earns less than
+   ``THRESHOLD`` (against the starting model any structured residual looks like a random walk;
+   once the deterministic effect is in, the random walk no longer earns its place). Each accepted
+   effect is then searched again with all the others in the model. If anything changed, steps 1-3
+   run again (at most ``MAX_ROUNDS`` passes). When a noise term was accepted in the first pass,
+   the search is repeated with the noise terms judged after the deterministic effects and the
+   lower final BIC wins.
+4. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
    with temp_rate, hysteresis or stress_relaxation, ...); when the swap costs less than
    ``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported.
 """
@@ -22,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from tqdm import tqdm
 
@@ -35,6 +43,8 @@ from trainer.physics import catalogue
 THRESHOLD = 12.0
 AMBIGUOUS = 6.0
 MAX_ADDED = 4
+MAX_ROUNDS = 3  # forward/backward passes of the stepwise search
+REPROFILE_GAIN = 0.5  # BIC a re-searched effect must gain to replace its accepted version
 TOP_REFIT = 4
 NOISE_EFFECTS = catalogue.NOISE_EFFECTS
 # Known confounders of each effect, and what separates each pair (in the effects' definitions).
@@ -124,33 +134,37 @@ def _refit(current: ModelFit, proposal: Proposal, data: BlockData) -> tuple[floa
     return delta, fit, f"BIC improvement {delta:.1f} (GLS, noise re-estimated by ML)"
 
 
-def forward_select(
-    baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
-) -> Selection:
-    """Noise terms first, then add the best effect while the BIC improves by ``THRESHOLD`` or more.
+def _forward(
+    current: ModelFit,
+    data: BlockData,
+    deterministic: Sequence[str],
+    steps: list[Step],
+    first: list[Tested] | None,
+    bar: tqdm,
+) -> ModelFit:
+    """Add the best deterministic effect while the BIC improves by ``THRESHOLD`` or more.
 
-    Every round scores all proposals at the current noise (cheap), then refits the ``TOP_REFIT``
-    most promising with their own ML noise: a missing effect inflates the current noise estimate
-    (a creep passes for a random walk), so only the refit compares fairly.
+    Every round re-profiles every candidate against the current model (all accepted nonlinear
+    parameters polished jointly with the new one), scores it at the current noise (cheap), then
+    refits the ``TOP_REFIT`` most promising with their own ML noise: a missing effect inflates the
+    current noise estimate (a creep passes for a random walk), so only the refit compares fairly.
+    ``first`` collects the first round's scores (``None``: not recorded).
     """
-    bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
-    steps, noise_tested, _ = noise_steps(baseline, data, candidates)
-    current = steps[-1].fit if steps else baseline
-    deterministic = [c for c in candidates if c not in NOISE_EFFECTS]
-    first: list[Tested] = []
     for round_index in range(MAX_ADDED):
+        if sum(1 for s in steps if s.term_index is not None) >= MAX_ADDED:
+            break
         proposals = [p for effect in deterministic for p in propose(current, data, effect)]
         ranked = sorted(proposals, key=lambda p: -_fixed_score(current, p))
         scored = []
         for rank, proposal in enumerate(ranked):
             if rank < TOP_REFIT or proposal.spectral_evidence is not None:
                 scored.append((*_refit(current, proposal, data), proposal))
-            elif round_index == 0:
+            elif first is not None and round_index == 0:
                 first.append(
                     Tested(proposal.effect, _fixed_score(current, proposal), "BIC at the current noise")
                 )
         bar.update()
-        if round_index == 0:
+        if first is not None and round_index == 0:
             first += [Tested(p.effect, delta, text) for delta, _, text, p in scored]
         if not scored:
             break
@@ -159,12 +173,172 @@ def forward_select(
             break
         steps.append(Step(proposal.effect, fit, delta, text, _new_term_index(current, fit)))
         current = fit
+    return current
+
+
+def step_positions(steps: Sequence[Step], fit: ModelFit) -> list[int | None]:
+    """Index in ``fit.terms`` of each step's term (``None`` for noise terms).
+
+    Steps of one effect are in the order of their terms: both are appended when a term is accepted,
+    and removed or moved to the end together.
+    """
+    out: list[int | None] = []
+    seen: dict[str, int] = {}
+    for step in steps:
+        if step.term_index is None:
+            out.append(None)
+            continue
+        occurrence = seen.get(step.effect, 0)
+        seen[step.effect] = occurrence + 1
+        positions = [k for k, term in enumerate(fit.terms) if term.identifier == step.effect]
+        out.append(positions[occurrence])
+    return out
+
+
+def _retest(current: ModelFit, steps: Sequence[Step], data: BlockData) -> list[tuple[float, int, ModelFit]]:
+    """(BIC lost when dropped, step number, reduced fit) of every accepted term, against ``current``.
+
+    The same criterion and units as when it was added: both models with their own ML noise. A fast
+    periodic component scored on the fine grid (held offset, no block columns) is not re-tested:
+    its evidence is spectral, not in the block likelihood.
+    """
+    out = []
+    for number, (step, index) in enumerate(zip(steps, step_positions(steps, current), strict=True)):
+        if index is not None and current.terms[index].offset is not None:
+            continue
+        reduced = drop_term(current, index, step.effect, data)
+        out.append((reduced.bic - current.bic, number, reduced))
+    return out
+
+
+def _reprofile(current: ModelFit, steps: list[Step], data: BlockData) -> tuple[ModelFit, bool]:
+    """Search each accepted effect again with all the others in the model (pairs: a step placed
+    before a staircase was modelled, a time constant fitted under a wrong noise model). The new
+    version replaces the old when the model's BIC improves; its term and step move to the end."""
+    changed = False
+    for step in list(steps):
+        number = next(k for k, other in enumerate(steps) if other is step)
+        index = step_positions(steps, current)[number]
+        if index is None or current.terms[index].offset is not None:
+            continue
+        reduced = drop_term(current, index, step.effect, data)
+        proposals = [p for p in propose(reduced, data, step.effect) if p.spectral_evidence is None]
+        if not proposals:
+            continue
+        best = min(proposals, key=lambda p: _fixed_score(reduced, p) * -1.0)
+        fit = _refit(reduced, best, data)[1]
+        if fit.bic < current.bic - REPROFILE_GAIN:
+            steps.append(replace(steps.pop(number), fit=fit))
+            current = fit
+            changed = True
+    return current, changed
+
+
+@dataclass
+class _Path:
+    """One stepwise search: its final model, accepted steps and what it tested and dropped."""
+
+    current: ModelFit
+    steps: list[Step]
+    first: list[Tested]
+    noise_tested: list[Tested]
+    dropped: list[Tested]
+
+
+def _stepwise(
+    baseline: ModelFit, data: BlockData, candidates: Sequence[str], bar: tqdm, *, noise_last: bool = False
+) -> _Path:
+    """Noise terms, forward search, backward elimination and re-search, repeated while anything
+    changes. ``noise_last``: the first pass tests the missing noise terms after the deterministic
+    effects instead of before them."""
+    deterministic = [c for c in candidates if c not in NOISE_EFFECTS]
+    path = _Path(baseline, [], [], [], [])
+    current = baseline
+    for pass_index in range(MAX_ROUNDS):
+        gone = {t.effect for t in path.dropped}  # a dropped noise term is not offered again
+        offered = [c for c in candidates if c not in gone]
+        first = path.first if pass_index == 0 else None
+        if noise_last and pass_index == 0:
+            current = _forward(current, data, deterministic, path.steps, first, bar)
+        noise, tested_now, _ = noise_steps(current, data, offered)
+        if pass_index == 0:
+            path.noise_tested = tested_now
+        path.steps += noise
+        current = noise[-1].fit if noise else current
+        if not (noise_last and pass_index == 0):
+            current = _forward(current, data, deterministic, path.steps, first, bar)
+        changed = False
+        while path.steps:
+            retested = _retest(current, path.steps, data)
+            if not retested:
+                break
+            delta, number, reduced = min(retested, key=lambda item: item[0])
+            if delta >= THRESHOLD:
+                break
+            step = path.steps.pop(number)
+            path.dropped.append(
+                Tested(
+                    step.effect,
+                    delta,
+                    f"dropped: re-tested against the final model it earns a BIC improvement of only "
+                    f"{delta:.1f} (< {THRESHOLD:g}; {step.delta_bic:.1f} when added)",
+                )
+            )
+            current = reduced
+            changed = True
+        current, moved = _reprofile(current, path.steps, data)
+        if not (changed or moved):
+            break
+    path.current = current
+    return path
+
+
+def forward_select(
+    baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
+) -> Selection:
+    """Stepwise selection: forward search, then every accepted term re-tested against the final model.
+
+    1. Noise terms missing from the starting model are judged on the current model (first: the
+       starting one), then deterministic effects are added while the BIC improves by ``THRESHOLD``.
+    2. Every accepted term (noise terms included) is re-tested against the resulting model by the
+       same criterion: the one that earns least is dropped while it earns less than ``THRESHOLD``
+       (a random walk accepted against the starting model usually was a deterministic effect's
+       structure). Each accepted effect is then searched again with all others in the model.
+    3. If anything changed, search again (at most ``MAX_ROUNDS`` passes).
+    4. If a noise term was accepted in the first pass, the search is run again with the noise
+       terms judged after the deterministic effects (a random walk accepted first can leave no
+       deterministic candidate its margin, and then nothing can drop it); the lower final BIC wins.
+    """
+    bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
+    path = _stepwise(baseline, data, candidates, bar)
+    if any(t.delta_bic >= THRESHOLD for t in path.noise_tested):
+        other = _stepwise(baseline, data, candidates, bar, noise_last=True)
+        if other.current.bic < path.current.bic:
+            accepted = {s.effect for s in other.steps}
+            first_noise = {t.effect for t in path.noise_tested if t.delta_bic >= THRESHOLD}
+            noise_dropped = [
+                Tested(
+                    t.effect,
+                    t.delta_bic,
+                    f"dropped: with the deterministic effects searched first it earns a BIC improvement "
+                    f"of only {t.delta_bic:.1f} (< {THRESHOLD:g}), and that model's BIC is lower by "
+                    f"{path.current.bic - other.current.bic:.1f}",
+                )
+                for t in other.noise_tested
+                if t.delta_bic < THRESHOLD and t.effect not in accepted and t.effect in first_noise
+            ]
+            other.first, other.noise_tested = path.first, path.noise_tested
+            other.dropped = [*noise_dropped, *other.dropped]
+            path = other
     bar.close()
+    steps, current = path.steps, path.current
+    for step, index in zip(steps, step_positions(steps, current), strict=True):
+        step.term_index = index
     best_first: dict[str, Tested] = {}
-    for item in [*noise_tested, *first]:
+    for item in [*path.noise_tested, *path.first]:
         if item.effect not in best_first or item.delta_bic > best_first[item.effect].delta_bic:
             best_first[item.effect] = item
-    tested = sorted(best_first.values(), key=lambda t: -t.delta_bic)
+    tested = sorted(best_first.values(), key=lambda t: -t.delta_bic) + path.dropped
     return Selection(steps, current, current, tested, current.noise)
 
 
