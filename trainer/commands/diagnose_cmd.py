@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
+    from trainer.diagnose.next_steps import next_steps, terminal_lines
+
     before, after = result.before, result.after
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
     if result.left_out:
@@ -92,17 +94,27 @@ def summary(result: Diagnosis) -> str:
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
         lines.append("left out: nothing found beyond the simulation")
+    for a in result.ambiguous:
+        if a.implausible is not None:
+            lines.append(f"ambiguous (not named): {a.reason}")
+        else:
+            lines.append(f"ambiguous: {' vs '.join(a.effects)} (BIC {a.delta_bic:+.1f})")
     for n in result.not_identifiable:
         lines.append(f"not identifiable: {n.effect} ({n.recommended_test or n.reason})")
+    for t in result.tested:
+        if t.note.startswith("weakly identifiable"):
+            lines.append(f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}', 1)}")
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} mg, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"
     )
     if result.holdout:
         hb, ha = result.holdout.before, result.holdout.after
+        # One figure: the least-squares refit extrapolated bare (see holdout.HEADLINE).
         lines.append(
-            f"held-out tail: block RMS {hb.test_rms_block_mg:.4g} -> {ha.test_rms_block_mg:.4g} mg"
-            f" (least squares, bare: {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} mg)"
+            f"held-out tail: block RMS {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} mg"
+            " (refitted on the rest, extrapolated as a compensator would)"
         )
+    lines += terminal_lines(next_steps(result))
     lines.append(f"({result.seconds:.1f} s)")
     return "\n".join(lines)

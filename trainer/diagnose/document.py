@@ -12,7 +12,7 @@ from trainer.diagnose.fit_summary import FitSummary
 from trainer.diagnose.holdout import Holdout, HoldoutScore
 from trainer.diagnose.locate import AllanComparison
 from trainer.diagnose.profile import Region
-from trainer.diagnose.result import Diagnosis, LeftOut, Tested
+from trainer.diagnose.result import Ambiguity, Diagnosis, LeftOut, Tested
 from trainer.diagnose.select import AMBIGUOUS, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.physics.effects import MULTI_INSTANCE, EffectConfig
@@ -167,6 +167,22 @@ def holdout(h: Holdout) -> dict[str, Any]:
     return out
 
 
+def ambiguity(a: Ambiguity) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "effects": list(a.effects),
+        "delta_bic": round(a.delta_bic, 2),
+        "preferred": a.preferred,
+        "reason": a.reason,
+    }
+    if a.implausible is not None:  # the implausible best fit, kept with its flags, not named
+        out["best_fit"] = left_out(a.implausible)
+        out["alternatives"] = [
+            {"effects": list(alt.effects), "delta_bic": round(alt.delta_bic, 2), "flags": alt.flags}
+            for alt in a.alternatives
+        ]
+    return out
+
+
 def tested(t: Tested) -> dict[str, Any]:
     if t.delta_bic is None:
         return {"effect": t.effect, "note": t.note}
@@ -209,15 +225,7 @@ def document(d: Diagnosis) -> dict[str, Any]:
         },
         "mismatch": [region(r) for r in d.mismatch],
         "left_out": [left_out(e) for e in d.left_out],
-        "ambiguous": [
-            {
-                "effects": list(a.effects),
-                "delta_bic": round(a.delta_bic, 2),
-                "preferred": a.preferred,
-                "reason": a.reason,
-            }
-            for a in d.ambiguous
-        ],
+        "ambiguous": [ambiguity(a) for a in d.ambiguous],
         "not_identifiable": [
             {"effect": n.effect, "reason": n.reason, "recommended_test": n.recommended_test}
             for n in d.not_identifiable

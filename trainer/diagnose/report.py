@@ -16,6 +16,8 @@ import numpy as np
 
 from trainer.diagnose import document
 from trainer.diagnose.document import json_text
+from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
+from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut
 from trainer.diagnose.select import THRESHOLD
@@ -130,10 +132,10 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += [
             "",
             f"Held-out check (both models fitted on 0..{h.train_t_end_s:.0f} s, scored on "
-            f"{h.test_t_start_s:.0f}..{h.test_t_end_s:.0f} s): block RMS {hb.test_rms_block_mg:.5f} -> "
-            f"{ha.test_rms_block_mg:.5f} mg as fitted (GLS forecast, {_percent(h.improvement_percent)} % better); "
-            f"{hb.test_rms_block_mg_ols:.5f} -> {ha.test_rms_block_mg_ols:.5f} mg refitted by "
-            f"least squares and extrapolated bare ({_percent(h.improvement_percent_ols)} % better).",
+            f"{h.test_t_start_s:.0f}..{h.test_t_end_s:.0f} s): block RMS {hb.test_rms_block_mg_ols:.5f} -> "
+            f"{ha.test_rms_block_mg_ols:.5f} mg ({_percent(h.improvement_percent_ols)} % better), both "
+            "refitted by least squares and extrapolated bare, as a compensator would be (the JSON also "
+            "has the GLS forecast, which includes the noise model's prediction of the tail).",
         ]
         if h.note:
             lines.append(f"({h.note}.)")
@@ -146,6 +148,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     if files:
         lines += ["", "## Files", ""] + [f"- `{name}`: {what}" for name, what in files.items()]
+    lines += ["", *next_steps_lines(next_steps(d))]
     return "\n".join(lines) + "\n"
 
 

@@ -40,13 +40,25 @@ class LeftOut:
 
 
 @dataclass(frozen=True)
-class Ambiguity:
-    """Two effects the data cannot tell apart (swapping one for the other costs little BIC)."""
+class Alternative:
+    """A plausible stand-in (one effect or a pair) for an implausible best fit, and its BIC cost."""
 
-    effects: tuple[str, str]
+    effects: tuple[str, ...]
+    delta_bic: float  # BIC of the model with it minus that with the implausible best fit
+    flags: list[str] = field(default_factory=list)  # its own implausible parameters, if any
+
+
+@dataclass(frozen=True)
+class Ambiguity:
+    """Effects the data cannot tell apart (swapping one for the other costs little BIC), or an
+    implausible best fit (``implausible``) and the plausible ``alternatives`` fitted in its place."""
+
+    effects: tuple[str, ...]
     delta_bic: float
     preferred: str
     reason: str
+    alternatives: tuple[Alternative, ...] = ()
+    implausible: LeftOut | None = None  # the best-fitting shape, with its flags; not named
 
 
 @dataclass(frozen=True)

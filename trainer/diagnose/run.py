@@ -19,6 +19,7 @@ from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
 from trainer.diagnose.fit_summary import FitSummary, summarise
 from trainer.diagnose.holdout import holdout_check
+from trainer.diagnose.implausible import resolve_implausible
 from trainer.diagnose.model import (
     PLAUSIBLE,
     ModelFit,
@@ -135,6 +136,8 @@ def _diagnose(
     after.bic_common = final.bic
 
     left_out = _left_out(selection, data, profile, baseline_common, cov_final, before)
+    # An implausible best fit is not named: its plausible confounders are fitted in its place.
+    left_out, implausible = resolve_implausible(selection, data, identifiable, left_out, _param_flags)
     mismatch = locate_mismatch(baseline_common, data, profile, cov_final, before.allan)
     unexplained = locate_mismatch(final, data, profile, cov_final, after.allan)
     stages.update()
@@ -175,7 +178,7 @@ def _diagnose(
         baseline_effects=catalogue_effects(baseline_common),
         selection=selection,
         left_out=left_out,
-        ambiguous=_ambiguous(selection),
+        ambiguous=_ambiguous(selection) + implausible,
         not_identifiable=not_identifiable,
         not_supported=not_supported,
         mismatch=mismatch,

@@ -1,0 +1,121 @@
+"""A best fit with an implausible parameter is reported as ambiguous, not named.
+
+When the effect the search would name fits with a parameter outside the catalogue's plausible
+range (a creep gain nine times the largest plausible one), the shape is right but the physics
+probably is not: a plausible confounder (or two together) may describe the same residual. Each of
+the effect's ``confounders`` is fitted in its place, singly and in pairs, and the choice is reported
+as one :class:`~trainer.diagnose.result.Ambiguity` listing the candidates and their BIC differences.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from itertools import combinations
+
+from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.candidates import propose
+from trainer.diagnose.model import ModelFit, catalogue_effects
+from trainer.diagnose.result import Alternative, Ambiguity, LeftOut
+from trainer.diagnose.select import (
+    CONFUSABLE,
+    NOISE_EFFECTS,
+    SEPARATING_SIGNATURE,
+    THRESHOLD,
+    Selection,
+    _refit,
+    final_indices,
+)
+from trainer.physics.effects import EffectConfig
+
+MAX_ALTERNATIVES = 4  # confounders tried singly, and in pairs (6)
+
+
+def _best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
+    """``base`` plus the best version of ``effect`` (its own ML noise), or ``None``."""
+    proposals = [p for p in propose(base, data, effect) if p.spectral_evidence is None]
+    if not proposals:
+        return None
+    return min((_refit(base, p, data)[1] for p in proposals), key=lambda f: f.bic)
+
+
+def _added_flags(fit: ModelFit, base: ModelFit, flags: Callable[[EffectConfig], list[str]]) -> list[str]:
+    """The plausibility flags of the effects ``fit`` has beyond ``base``."""
+    old = len(catalogue_effects(base))
+    return [f"{e.identifier}: {text}" for e in catalogue_effects(fit)[old:] for text in flags(e)]
+
+
+def resolve_implausible(
+    selection: Selection,
+    data: BlockData,
+    identifiable: set[str],
+    left_out: Sequence[LeftOut],
+    flags: Callable[[EffectConfig], list[str]],
+) -> tuple[list[LeftOut], list[Ambiguity]]:
+    """(left-out effects still named, new ambiguities) after checking every named effect's plausibility."""
+    final = selection.final
+    kept = list(left_out)
+    ambiguities = []
+    seen: dict[str, int] = {}
+    for step in selection.steps:
+        occurrence = seen.get(step.effect, 0)
+        seen[step.effect] = occurrence + 1
+        entry = next(
+            (e for e in kept if e.effect == step.effect and e.flags and e.peak_visible_mg is not None), None
+        )
+        index = final_indices(selection).get((step.effect, occurrence))
+        if entry is None or index is None or (step.effect, occurrence) not in selection.drop_one:
+            continue
+        reduced = selection.drop_one[(step.effect, occurrence)][1]
+        # Its confounders, then theirs (a creep on a cycle also passes for a hysteresis through a lag).
+        direct = CONFUSABLE.get(step.effect, ())
+        around = [c for a in direct for c in CONFUSABLE.get(a, ())]
+        names = [
+            a
+            for a in dict.fromkeys([*direct, *around])
+            if a != step.effect
+            and a in identifiable
+            and a not in final.identifiers
+            and a not in NOISE_EFFECTS
+        ][:MAX_ALTERNATIVES]
+        singles = {a: _best_with(reduced, data, a) for a in names}
+        alternatives = []
+        for a, fit in singles.items():
+            if fit is not None:
+                alternatives.append(Alternative((a,), fit.bic - final.bic, _added_flags(fit, reduced, flags)))
+        for a, b in combinations(names, 2):
+            first = singles[a]
+            pair = None if first is None else _best_with(first, data, b)
+            if pair is not None:
+                alternatives.append(
+                    Alternative((a, b), pair.bic - final.bic, _added_flags(pair, reduced, flags))
+                )
+        alternatives.sort(key=lambda alt: alt.delta_bic)
+        plausible = [alt for alt in alternatives if not alt.flags]
+        best = plausible[0] if plausible else None
+        separations = [
+            SEPARATING_SIGNATURE[key]
+            for a in names
+            if (key := frozenset({step.effect, a})) in SEPARATING_SIGNATURE
+        ]
+        listed = "; ".join(f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in alternatives)
+        reason = (
+            f"the best-fitting shape, {step.effect}, is implausible ({'; '.join(entry.flags)}); "
+            f"fitted in its place (BIC difference from it): {listed or 'nothing fits'}"
+            + (f"; what would separate them: {'; '.join(separations)}" if separations else "")
+        )
+        if best is None or best.delta_bic >= THRESHOLD:
+            reason += (
+                "; no plausible alternative comes close: the residual's shape is real, its physics unsettled"
+            )
+        ambiguities.append(
+            Ambiguity(
+                (step.effect, *names),
+                best.delta_bic if best else float("nan"),
+                " + ".join(best.effects) if best else "",
+                reason,
+                alternatives=tuple(alternatives),
+                implausible=entry,
+            )
+        )
+        kept.remove(entry)
+    return kept, ambiguities

@@ -1,0 +1,105 @@
+"""What the user should do next: the compensator the findings call for, what it will leave per
+branch, and the chamber profile that would settle what remains ambiguous (report and terminal)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from trainer.diagnose.fit_summary import rms
+from trainer.diagnose.profile import BRANCH_NAMES
+from trainer.diagnose.result import Diagnosis
+from trainer.diagnose.select import THRESHOLD
+from trainer.physics.catalogue import BACKBONE, SEPARATING_SIGNATURE
+
+COMPENSATOR = "physics compensator (`trainer fit --method physics`, coming in the next release)"
+GENERIC_PROFILE = (
+    "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a 180 degree flip "
+    "(+1 g / -1 g) at two temperatures"
+)
+
+
+@dataclass(frozen=True)
+class BranchResidual:
+    branch: str  # heating, cooling, hold
+    blocks: int
+    before_mg: float  # block RMS of the starting model's residual on this branch
+    after_mg: float  # ... of the final model's (its deterministic part: what a compensator removes)
+
+
+@dataclass(frozen=True)
+class NextSteps:
+    structure: str
+    branches: list[BranchResidual]
+    profile: list[str]  # tests, most specific first; the generic profile last
+
+
+def next_steps(d: Diagnosis) -> NextSteps:
+    named = [e.effect for e in d.left_out if e.peak_visible_mg is not None]
+    terms = [f"{BACKBONE} (bias polynomial) in a lagged die temperature", *named]
+    choices = [a for a in d.ambiguous if a.implausible is not None]
+    for a in choices:
+        assert a.implausible is not None
+        earned = a.implausible.evidence.delta_bic_when_dropped - THRESHOLD  # beats leaving it out
+        options = [
+            " + ".join(alt.effects) for alt in a.alternatives if not alt.flags and alt.delta_bic < earned
+        ]
+        if options:
+            terms.append(f"one of {' | '.join(options)} (in place of the implausible {a.effects[0]})")
+        else:
+            terms.append(
+                f"a term for the residual {a.effects[0]} fits (implausibly); no plausible catalogue term "
+                "explains it yet: record the next profile first"
+            )
+    for a in d.ambiguous:
+        if a.implausible is None:
+            terms.append(f"{a.preferred} (or {' / '.join(e for e in a.effects if e != a.preferred)})")
+    structure = f"{COMPENSATOR}: " + " + ".join(terms)
+
+    before, after = d.baseline_fit.residual, d.selection.final.residual
+    branches = []
+    for code, name in BRANCH_NAMES.items():
+        mask = np.asarray(d.profile.branch) == code
+        if mask.any():
+            branches.append(BranchResidual(name, int(mask.sum()), rms(before[mask]), rms(after[mask])))
+
+    profile: list[str] = []
+    for a in d.ambiguous:
+        for pair in combinations(a.effects, 2):
+            if text := SEPARATING_SIGNATURE.get(frozenset(pair)):
+                profile.append(f"{pair[0]} vs {pair[1]}: {text}")
+    unsettled = {e for a in d.ambiguous for e in a.effects} | {n.effect for n in d.not_identifiable}
+    for effect, info in d.profile.identifiability.items():
+        if info.test and (effect in unsettled or info.weak) and (not info.identifiable or info.weak):
+            profile.append(f"{effect}: {info.test}")
+    profile.append(GENERIC_PROFILE)
+    return NextSteps(structure, branches, list(dict.fromkeys(profile)))
+
+
+def markdown_lines(steps: NextSteps) -> list[str]:
+    lines = ["## What to do next", "", f"Compensator: {steps.structure}.", ""]
+    if steps.branches:
+        lines += [
+            "Residual per branch (block RMS, mg), starting model -> after the fit (what the compensator "
+            "would leave):",
+            "",
+            "| branch | blocks | before | after |",
+            "|:--|--:|--:|--:|",
+        ]
+        lines += [
+            f"| {b.branch} | {b.blocks} | {b.before_mg:.3f} | {b.after_mg:.3f} |" for b in steps.branches
+        ]
+        lines.append("")
+    lines += ["Next chamber profile, to settle what remains ambiguous:", ""]
+    lines += [f"- {p}" for p in steps.profile]
+    return lines
+
+
+def terminal_lines(steps: NextSteps) -> list[str]:
+    per_branch = ", ".join(f"{b.branch} {b.before_mg:.3g} -> {b.after_mg:.3g}" for b in steps.branches)
+    return [
+        f"next: {steps.structure}",
+        f"next: residual per branch (block RMS, mg) {per_branch}; next profile: {steps.profile[0]}",
+    ]
