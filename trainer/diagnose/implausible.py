@@ -77,6 +77,8 @@ def resolve_implausible(
             and a not in final.identifiers
             and a not in NOISE_EFFECTS
         ][:MAX_ALTERNATIVES]
+        if not names:  # nothing plausible to compare it with: it stays named, with its flags
+            continue
         singles = {a: _best_with(reduced, data, a) for a in names}
         alternatives = []
         for a, fit in singles.items():

@@ -50,8 +50,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
             terms.append(f"one of {' | '.join(options)} (in place of the implausible {a.effects[0]})")
         else:
             terms.append(
-                f"a term for the residual {a.effects[0]} fits (implausibly); no plausible catalogue term "
-                "explains it yet: record the next profile first"
+                f"an open term where {a.effects[0]} fits implausibly (settle it with the profile below)"
             )
     for a in d.ambiguous:
         if a.implausible is None:
