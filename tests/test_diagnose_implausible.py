@@ -64,13 +64,14 @@ def test_summary_and_report(huge_creep: Diagnosis) -> None:
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 
 
+@pytest.mark.slow  # about 20 s alone, up to 45 s on a busy machine
 @pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
 def test_real_run_names_no_implausible_effect() -> None:
     from trainer.data.importer import import_foreign, options_with_preset
 
     started = time.perf_counter()
     d = diagnose(import_foreign(REAL, options_with_preset("tofupilot")))
-    assert time.perf_counter() - started < 60.0
+    assert time.perf_counter() - started < 120.0
     assert all(not e.flags for e in d.left_out if e.peak_visible_mg is not None)
     assert any(a.implausible is not None for a in d.ambiguous)
     text = summary(d)

@@ -91,12 +91,19 @@ def summary(result: Diagnosis) -> str:
         for e in result.left_out:
             params = ", ".join(f"{k}={v:.4g}" for k, v in e.params.items())
             extra = f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
+            extra += f" (implausible: {'; '.join(e.flags)})" if e.flags else ""
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
         lines.append("left out: nothing found beyond the simulation")
     for a in result.ambiguous:
         if a.implausible is not None:
-            lines.append(f"ambiguous (not named): {a.reason}")
+            shown = [
+                f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags
+            ]
+            lines.append(
+                f"ambiguous (not named): {a.effects[0]} fits best but implausibly ({'; '.join(a.implausible.flags)}); "
+                f"plausible in its place, BIC: {', '.join(shown[:3]) or 'none'}"
+            )
         else:
             lines.append(f"ambiguous: {' vs '.join(a.effects)} (BIC {a.delta_bic:+.1f})")
     for n in result.not_identifiable:
