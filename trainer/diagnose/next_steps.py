@@ -26,7 +26,7 @@ class BranchResidual:
     branch: str  # heating, cooling, hold
     blocks: int
     before_mg: float  # block RMS of the starting model's residual on this branch
-    after_mg: float  # ... of the final model's (its deterministic part: what a compensator removes)
+    after_mg: float  # ... of the final model's least-squares fit (what a compensator would leave)
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,9 @@ def next_steps(d: Diagnosis) -> NextSteps:
             terms.append(f"{a.preferred} (or {' / '.join(e for e in a.effects if e != a.preferred)})")
     structure = f"{COMPENSATOR}: " + " + ".join(terms)
 
-    before, after = d.baseline_fit.residual, d.selection.final.residual
+    # The least-squares residuals of the summaries (a GLS fit under a strong random walk pins the
+    # level loosely); the after fit is what a compensator with these terms would leave.
+    before, after = d.before.residual_block, d.after.residual_block
     branches = []
     for code, name in BRANCH_NAMES.items():
         mask = np.asarray(d.profile.branch) == code
