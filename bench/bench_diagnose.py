@@ -147,32 +147,29 @@ def timing_2h_200hz() -> dict[str, Any]:
     }
 
 
+def _group_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Cases, identified, with an extra finding, parameter errors of one group of cases."""
+    errs = [v for r in rows for v in r["errors"].values()]
+    return {
+        "cases": len(rows),
+        "identified": sum(r["identified"] for r in rows),
+        "with_extra": sum(bool(r["extra"]) for r in rows),
+        "param_err_median": float(np.median(errs)) if errs else None,
+        "param_err_max": float(np.max(errs)) if errs else None,
+        "params_within_25pct": f"{sum(e <= 0.25 for e in errs)}/{len(errs)}",
+    }
+
+
 def summarise(results: list[dict[str, Any]]) -> dict[str, Any]:
     effect_cases = [r for r in results if r["effects"]]
     clean_cases = [r for r in results if not r["effects"]]
-    per_effect: dict[str, dict[str, Any]] = {}
-    for effect in HIDDEN_EFFECTS:
-        rows = [r for r in effect_cases if r["effects"] == [effect]]
-        errs = [v for r in rows for k, v in r["errors"].items()]
-        per_effect[effect] = {
-            "cases": len(rows),
-            "identified": sum(r["identified"] for r in rows),
-            "with_extra": sum(bool(r["extra"]) for r in rows),
-            "param_err_median": float(np.median(errs)) if errs else None,
-            "param_err_max": float(np.max(errs)) if errs else None,
-            "params_within_25pct": f"{sum(e <= 0.25 for e in errs)}/{len(errs)}",
-        }
+    per_effect = {
+        effect: _group_summary([r for r in effect_cases if r["effects"] == [effect]])
+        for effect in HIDDEN_EFFECTS
+    }
     pair_rows = [r for r in effect_cases if len(r["effects"]) > 1]
     all_errs = [v for r in effect_cases for v in r["errors"].values()]
-    pair_errs = [v for r in pair_rows for v in r["errors"].values()]
-    per_effect["pairs"] = {
-        "cases": len(pair_rows),
-        "identified": sum(r["identified"] for r in pair_rows),
-        "with_extra": sum(bool(r["extra"]) for r in pair_rows),
-        "param_err_median": float(np.median(pair_errs)) if pair_errs else None,
-        "param_err_max": float(np.max(pair_errs)) if pair_errs else None,
-        "params_within_25pct": f"{sum(e <= 0.25 for e in pair_errs)}/{len(pair_errs)}",
-    }
+    per_effect["pairs"] = _group_summary(pair_rows)
     return {
         "cases": len(results),
         "identification_accuracy": sum(r["identified"] for r in effect_cases) / max(1, len(effect_cases)),
