@@ -12,7 +12,8 @@ from trainer.diagnose.fit_summary import rms
 from trainer.diagnose.profile import BRANCH_NAMES
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.select import THRESHOLD
-from trainer.physics.catalogue import BACKBONE, SEPARATING_SIGNATURE
+from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
+from trainer.scoring.markdown import markdown_table
 
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, coming in the next release)"
 GENERIC_PROFILE = (
@@ -32,13 +33,17 @@ class BranchResidual:
 @dataclass(frozen=True)
 class NextSteps:
     structure: str
+    not_compensated: list[str]  # named events and set-up effects: to check, not to compensate
     branches: list[BranchResidual]
     profile: list[str]  # tests, most specific first; the generic profile last
 
 
 def next_steps(d: Diagnosis) -> NextSteps:
     named = [e.effect for e in d.left_out if e.peak_visible_mg is not None]
-    terms = [f"{BACKBONE} (bias polynomial) in a lagged die temperature", *named]
+    compensated = [e for e in named if EFFECTS[e].compensable]
+    lagged = any(EFFECTS[e].proof_mass is not None for e in compensated)
+    temperature = "the lagged (proof-mass) temperature" if lagged else "the die temperature"
+    terms = [f"{BACKBONE} (bias polynomial) in {temperature}", *compensated]
     choices = [a for a in d.ambiguous if a.implausible is not None]
     for a in choices:
         assert a.implausible is not None
@@ -76,23 +81,33 @@ def next_steps(d: Diagnosis) -> NextSteps:
         if info.test and (effect in unsettled or info.weak) and (not info.identifiable or info.weak):
             profile.append(f"{effect}: {info.test}")
     profile.append(GENERIC_PROFILE)
-    return NextSteps(structure, branches, list(dict.fromkeys(profile)))
+    not_compensated = list(dict.fromkeys(e for e in named if not EFFECTS[e].compensable))
+    return NextSteps(structure, not_compensated, branches, list(dict.fromkeys(profile)))
 
 
 def markdown_lines(steps: NextSteps) -> list[str]:
     lines = ["## What to do next", "", f"Compensator: {steps.structure}.", ""]
+    if steps.not_compensated:
+        lines += [
+            f"Not for the compensator (events or the test set-up; check the recording and the rig): "
+            f"{', '.join(steps.not_compensated)}.",
+            "",
+        ]
     if steps.branches:
         lines += [
             "Residual per branch (block RMS, mg), starting model -> after the fit (what the compensator "
             "would leave):",
             "",
-            "| branch | blocks | before | after |",
-            "|:--|--:|--:|--:|",
+            markdown_table(
+                ["branch", "blocks", "before", "after"],
+                [
+                    [b.branch, str(b.blocks), f"{b.before_mg:.3f}", f"{b.after_mg:.3f}"]
+                    for b in steps.branches
+                ],
+                align="lrrr",
+            ),
+            "",
         ]
-        lines += [
-            f"| {b.branch} | {b.blocks} | {b.before_mg:.3f} | {b.after_mg:.3f} |" for b in steps.branches
-        ]
-        lines.append("")
     lines += ["Next chamber profile, to settle what remains ambiguous:", ""]
     lines += [f"- {p}" for p in steps.profile]
     return lines
@@ -100,7 +115,14 @@ def markdown_lines(steps: NextSteps) -> list[str]:
 
 def terminal_lines(steps: NextSteps) -> list[str]:
     per_branch = ", ".join(f"{b.branch} {b.before_mg:.3g} -> {b.after_mg:.3g}" for b in steps.branches)
+    check = (
+        [f"next: not for the compensator (events or the test set-up): {', '.join(steps.not_compensated)}"]
+        if steps.not_compensated
+        else []
+    )
     return [
         f"next: {steps.structure}",
-        f"next: residual per branch (block RMS, mg) {per_branch}; next profile: {steps.profile[0]}",
+        *check,
+        f"next: residual per branch (block RMS, mg) {per_branch}; next profile: {steps.profile[0]}"
+        + (f" (+{len(steps.profile) - 1} more in the report)" if len(steps.profile) > 1 else ""),
     ]

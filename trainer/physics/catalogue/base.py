@@ -212,7 +212,10 @@ class Effect:
     Exactly one of the simulator roles is set: ``contribution(params, signals)`` (additive, mg),
     ``proof_mass(t, T, params)`` (gives ``T_pm``), ``thermometer(temp_c, params)`` (acts on the
     reading only). ``bias_temperature(T_pm, params)`` additionally switches what the polynomial
-    reads. ``input_param`` names a parameter that sets the constant true input.
+    reads. ``input_param`` names a parameter that sets the constant true input. ``compensable``:
+    a property of the sensor that a temperature-drift compensator models (lag, rate, hysteresis,
+    creep, warm-up), as opposed to an event or a property of the test set-up (a step, a chamber
+    oscillation, the thermometer's resolution).
     """
 
     identifier: str
@@ -224,6 +227,7 @@ class Effect:
     bias_temperature: Callable[[np.ndarray, Mapping[str, float]], np.ndarray] | None = None
     multi_instance: bool = False
     input_param: str | None = None
+    compensable: bool = False
     sampling_check: Callable[[Mapping[str, float], float], str | None] | None = None
     finder: Finder = Finder()
     scenario: Scenario | None = None

@@ -52,6 +52,7 @@ def _identifiability(p: Any) -> Identifiability:
 
 DEFINITION = Effect(
     identifier="hysteresis",
+    compensable=True,
     params=(
         Param("amp_mg", unit="mg", plausible=(0.02, 2.0)),
         Param("width_c", "positive", unit="degC", plausible=(2.0, 30.0)),

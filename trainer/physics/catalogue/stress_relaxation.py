@@ -49,6 +49,7 @@ def _identifiability(p: Any) -> Identifiability:
 
 DEFINITION = Effect(
     identifier="stress_relaxation",
+    compensable=True,
     params=(
         Param("gain_mg_per_c", unit="mg/degC", plausible=(0.001, 0.05)),
         Param("tau_s", "positive", unit="s", plausible=(1200.0, 20000.0)),

@@ -34,6 +34,7 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
 
 DEFINITION = Effect(
     identifier="temp_rate",
+    compensable=True,
     params=(Param("k_mg_per_c_per_min", unit="mg per degC/min", plausible=(0.01, 2.0)),),
     summary="k * dT_die/dt (thermal-gradient stress, dT/dt in degC/min)",
     contribution=_contribution,

@@ -17,6 +17,7 @@ def proof_mass(t: np.ndarray, T_die: np.ndarray, p: Mapping[str, float]) -> np.n
 
 DEFINITION = Effect(
     identifier="thermal_lag",
+    compensable=True,
     params=(Param("tau_s", "positive", unit="s", plausible=(10.0, 900.0)),),
     summary="T_pm = LP(T_die, tau_s): the proof mass lags the thermometer",
     proof_mass=proof_mass,

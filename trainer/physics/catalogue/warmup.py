@@ -50,6 +50,7 @@ def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
 
 DEFINITION = Effect(
     identifier="warmup",
+    compensable=True,
     params=(
         Param("amp_mg", unit="mg", plausible=(0.05, 5.0)),
         Param("tau_s", "positive", unit="s", plausible=(60.0, 1800.0)),
