@@ -42,6 +42,29 @@ CHANNEL_NAME = re.compile(r"(accel|gyro)([0-9])_([xyz])|(baro)([0-9])")
 
 
 @dataclass(frozen=True)
+class ChannelName:
+    """A parsed channel name: ``accel0_z`` -> (accel, 0, z); ``baro1`` -> (baro, 1, None)."""
+
+    sensor: str
+    instance: int
+    axis: str | None
+
+    @property
+    def unit(self) -> str:
+        return SENSOR_UNITS[self.sensor]
+
+
+def parse_channel(name: str) -> ChannelName | None:
+    """The parts of a channel name of the recording format, or None when it is not one."""
+    match = CHANNEL_NAME.fullmatch(name)
+    if match is None:
+        return None
+    if match.group(4):
+        return ChannelName("baro", int(match.group(5)), None)
+    return ChannelName(match.group(1), int(match.group(2)), match.group(3))
+
+
+@dataclass(frozen=True)
 class LogChannel:
     """One sensor axis of one instance: its own time base, values and temperature."""
 
