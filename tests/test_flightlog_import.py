@@ -9,7 +9,7 @@ import pytest
 
 from tests.flightlogs import DataFlashWriter, baro_topic, imu_topic, write_ulog
 from trainer.cli import main
-from trainer.data.flightlog import read_flight_log
+from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import ImportOptions, import_foreign
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording

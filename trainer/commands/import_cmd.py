@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 import math
 
-from trainer.data.flightlog import KIND_NAMES, log_kind, read_flight_log
+from trainer.data.flightlog import KIND_NAMES, log_kind
+from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
     DEFAULT_CHANNEL,

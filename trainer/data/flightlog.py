@@ -8,7 +8,8 @@ step (:func:`trainer.data.importer.import_flight_log`). Channel names follow the
 channels" section of ``shared/specs/recording-format.md``: ``accel0_z``, ``gyro1_x``, ``baro0``.
 
 The kind of a file is decided by its magic bytes, never by its extension, so a binary log never
-reaches the delimiter sniffer of the CSV importer.
+reaches the delimiter sniffer of the CSV importer. The readers live in ``ulog_reader`` and
+``dataflash_reader``; :func:`trainer.data.flightlog_io.read_flight_log` picks one.
 """
 
 from __future__ import annotations
@@ -153,26 +154,6 @@ def log_kind(path: str | Path) -> str | None:
     except OSError as exc:
         raise UserError(f"{path}: cannot read ({exc.strerror})") from None
     return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
-
-
-def read_flight_log(path: str | Path) -> FlightLog:
-    """Read a ULog or DataFlash log (decided by magic bytes) into channels."""
-    kind = log_kind(path)
-    if kind is None:
-        raise UserError(f"{path}: not a PX4 ULog or ArduPilot DataFlash log (magic bytes do not match)")
-    if kind == "ulog":
-        from trainer.data.ulog_reader import read_ulog
-
-        log = read_ulog(path)
-    else:
-        from trainer.data.dataflash_reader import read_dataflash
-
-        log = read_dataflash(path)
-    if not log.channels:
-        raise UserError(
-            f"{path}: a {KIND_NAMES[kind]} log without accelerometer, gyroscope or barometer data"
-        )
-    return log
 
 
 def quiet_library_call(source: str, kind: str, call: Callable[[], T]) -> T:

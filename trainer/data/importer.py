@@ -24,8 +24,9 @@ from typing import Literal
 import numpy as np
 
 from trainer.data.csv_table import Table, read_table
-from trainer.data.flightlog import KIND_NAMES, MG_PER_MPS2, log_kind, read_flight_log
+from trainer.data.flightlog import KIND_NAMES, MG_PER_MPS2, log_kind
 from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
+from trainer.data.flightlog_io import read_flight_log
 from trainer.data.plausibility import Plausibility
 from trainer.data.recording import Recording
 from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
