@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import os
 import pickle
+import re
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,7 @@ from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
 
 FORMAT_NAME = "mems-tdc-model"
+_UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
 FORMAT_VERSION = 1
 
 
@@ -60,8 +62,16 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         checkpoint = torch.load(p, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "unsafe content"
-        raise UserError(f"{p}: refused to load (not a plain mems-tdc checkpoint: {first})") from None
+        # torch's message advises loading with weights_only=False: never forward that advice.
+        found = _UNSUPPORTED_GLOBAL.search(str(exc))
+        what = (
+            f"a Python object of type {found.group(1)}"
+            if found
+            else "content beyond tensors and plain values"
+        )
+        raise UserError(
+            f"{p}: refused to load: it holds {what} (not a plain mems-tdc checkpoint; such files are never unpickled)"
+        ) from None
     except Exception as exc:  # torch's loader raises many types on damaged files; all mean the same
         raise UserError(
             f"{p}: not a readable model file (truncated or corrupted: {type(exc).__name__})"

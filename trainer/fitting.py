@@ -32,7 +32,26 @@ def training_stats(rec: Recording) -> dict[str, Any]:
         "temp_max_c": float(np.max(rec.temp_c)),
         "accel_mean_mg": float(np.mean(rec.accel_mg)),
         "accel_std_mg": float(np.std(rec.accel_mg)),
+        **_channel_stats(rec),
     }
+
+
+def _channel_stats(rec: Recording) -> dict[str, Any]:
+    """The sensor channel ``accel_mg`` came from and its device id, when the recording says so.
+
+    Flight-stack parameters (``codegen export --format px4-params``) are keyed by them.
+    """
+    from trainer.data.flightlog import parse_channel
+
+    name = rec.meta.get("channel", "")
+    channel = parse_channel(name)
+    if channel is None:
+        return {}
+    stats: dict[str, Any] = {"channel": name}
+    device_id = rec.meta.get(f"device_id_{channel.sensor}{channel.instance}", "")
+    if device_id.isdigit():
+        stats["device_id"] = int(device_id)
+    return stats
 
 
 def fit_compensator(method: str, train: Recording, options: dict[str, Any] | None = None) -> Compensator:

@@ -17,6 +17,11 @@ def add_parser(subparsers: Any) -> None:
         "--method", required=True, choices=methods.fit_cli_names(), help="compensation method"
     )
     parser.add_argument("-o", "--output", required=True, help="checkpoint to write (model.pt)")
+    parser.add_argument(
+        "--accept-implausible",
+        action="store_true",
+        help="warn instead of refusing implausible rates, units or a too small temperature span",
+    )
     groups = []  # each method's options once, however many methods share them
     for method in methods.entries():
         if method.in_fit_cli and method.options not in groups:
@@ -29,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from trainer.checkpoint import save_model
+    from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
     from trainer.fitting import fit_compensator, training_stats
@@ -36,7 +42,9 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output)  # fail before a long training run, not after it
     options = methods.get(args.method).options.fit_kwargs(args)
     train = read_recording(args.train)
+    checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
     model = fit_compensator(args.method, train, options)
+    checks.print_warnings()
     stats = training_stats(train)
     residual = train.accel_mg - model.predict_drift(train.without_truth())
     stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
