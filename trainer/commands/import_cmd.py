@@ -11,6 +11,7 @@ from trainer.data.importer import (
     GRAVITY_MODES,
     PRESETS,
     TIME_UNIT_SECONDS,
+    ImportOptions,
     import_foreign,
     options_with_preset,
 )
@@ -89,9 +90,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    recording_format(args.output)  # reject a bad extension before any work
-    options = options_with_preset(
+def import_options(args: argparse.Namespace) -> ImportOptions:
+    """The parsed ``trainer import`` options as :class:`ImportOptions` (``trainer fleet`` reuses it)."""
+    return options_with_preset(
         args.preset,
         time=args.time,
         time_unit=args.time_unit,
@@ -106,7 +107,11 @@ def run(args: argparse.Namespace) -> int:
         retime=args.retime or None,
         delimiter=args.delimiter,
     )
-    rec = import_foreign(args.foreign, options)
+
+
+def run(args: argparse.Namespace) -> int:
+    recording_format(args.output)  # reject a bad extension before any work
+    rec = import_foreign(args.foreign, import_options(args))
     write_recording(rec, args.output)
     how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
     rate_hz = float(rec.meta["sample_rate_hz"])
