@@ -11,7 +11,9 @@ import json
 import os
 import shutil
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,6 +24,7 @@ from trainer.cli import main
 from trainer.data.recording_io import read_recording
 from trainer.errors import UserError, run_cli
 from trainer.fleet.cache import unit_key
+from trainer.fleet.cluster import open_client
 from trainer.fleet.manifest import load_manifest
 from trainer.fleet.outliers import Z_LIMIT, find_out_of_family
 from trainer.fleet.run import FleetRun, run_fleet
@@ -43,7 +46,14 @@ def _files(out: Path) -> dict[str, tuple[int, bytes]]:
 
 
 @pytest.fixture(scope="module")
-def fleet(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FleetRun]:
+def client() -> Iterator[Any]:
+    """One 2-worker LocalCluster for the module (starting one costs seconds)."""
+    with open_client(None, 2) as active:
+        yield active
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory, client: Any) -> tuple[Path, FleetRun]:
     root = tmp_path_factory.mktemp("fleet")
     manifest = write_fleet(root, N_UNITS)
     good = read_recording(root / "runs" / "U01_run1.npz")
@@ -56,7 +66,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FleetRun]:
     data = load_toml(manifest)
     data["unit"].append({"id": BAD, "recordings": [f"runs/{BAD}_run1.csv", "runs/U01_run2.npz"]})
     manifest.write_text(tomli_w.dumps(data))
-    return manifest, run_fleet(manifest, root / "out", workers=2, progress=False)
+    return manifest, run_fleet(manifest, root / "out", progress=False, client=client)
 
 
 def load_toml(path: Path) -> dict:
@@ -134,13 +144,19 @@ def test_restart_skips_finished_units(
 ) -> None:
     manifest, run = fleet
     before = _files(run.out_dir)
-    # a unit interrupted before it was written: its directory is missing, a staging directory is left
+    assert run_cli(main, ["fleet", str(manifest), "-o", str(run.out_dir), "--quiet"]) == 1  # 1: BAD01 failed
+    assert f"({0} computed, {N_UNITS + 1} already done)" in capsys.readouterr().out
+    assert _files(run.out_dir) == before  # nothing rewritten, nothing recomputed
+
+
+def test_interrupted_unit_is_computed_again_alone(fleet: tuple[Path, FleetRun], client: Any) -> None:
+    manifest, run = fleet
+    before = _files(run.out_dir)
+    # killed while U03 was running: no U03 directory, a staging directory left behind
     shutil.rmtree(run.out_dir / "units" / "U03")
     (run.out_dir / "units" / ".U03.x.part").mkdir()
-    assert (
-        run_cli(main, ["fleet", str(manifest), "-o", str(run.out_dir), "--workers", "1", "--quiet"]) == 1
-    )  # BAD01
-    assert "(1 computed, 24 already done)" in capsys.readouterr().out
+    again = run_fleet(manifest, run.out_dir, progress=False, client=client)
+    assert again.computed == ["U03"] and len(again.skipped) == N_UNITS
     after = _files(run.out_dir)
     assert after.keys() == before.keys() and not (run.out_dir / "units" / ".U03.x.part").exists()
     for path, (mtime, content) in before.items():

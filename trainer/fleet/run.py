@@ -7,6 +7,7 @@ disk of every unit in the manifest (computed now or by an earlier run).
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,8 +64,13 @@ def run_fleet(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: bool = True,
+    client: Any | None = None,
 ) -> FleetRun:
-    """Run every unit of the manifest not already done in ``out_dir``, then write the report."""
+    """Run every unit of the manifest not already done in ``out_dir``, then write the report.
+
+    ``client``: a ``distributed.Client`` to use instead of opening one (``scheduler`` and
+    ``workers`` are then ignored); a caller running several fleets keeps one cluster up.
+    """
     from tqdm import tqdm
 
     from trainer.fleet.report import write_report
@@ -103,8 +109,8 @@ def run_fleet(
 
         from trainer.fleet.cluster import open_client
 
-        with open_client(scheduler, workers) as client:
-            futures = {_submit(client, unit, key, settings, sim_text): (unit, key) for unit, key in todo}
+        with nullcontext(client) if client is not None else open_client(scheduler, workers) as active:
+            futures = {_submit(active, unit, key, settings, sim_text): (unit, key) for unit, key in todo}
             bar = tqdm(total=len(futures), unit="unit", desc="fleet", disable=None if progress else True)
             for future in as_completed(futures):
                 unit, key = futures[future]
