@@ -85,6 +85,8 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
+        # no dashboard, and the scheduler's HTTP endpoints on a free port rather than on a busy 8787
+        scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
         silence_logs=logging.ERROR,
         env=ONE_THREAD_ENV,
     )
