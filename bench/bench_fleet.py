@@ -16,6 +16,7 @@ ratio of throughputs is only as good as the cores the other processes leave free
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import platform
 import tempfile
@@ -52,10 +53,8 @@ def load_average() -> str:
 
 def warm() -> None:
     """Import what a unit's tasks import, so that the timed run does not pay for it."""
-    import codegen.verify  # noqa: F401
-    import trainer.diagnose  # noqa: F401
-    import trainer.fitting  # noqa: F401
-    import trainer.scoring.evaluate  # noqa: F401
+    for module in ("codegen.verify", "trainer.diagnose", "trainer.fitting", "trainer.scoring.evaluate"):
+        importlib.import_module(module)
 
 
 def noop(x: int) -> int:
@@ -94,7 +93,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench-fleet-") as tmp:
         root = Path(tmp)
         manifest = write_fleet(root, args.units)
-        tasks_per_unit = 3 + len(load_manifest(manifest).units[0].methods)  # load, diagnose, methods, assemble
+        # load, diagnose, one per method, assemble
+        tasks_per_unit = 3 + len(load_manifest(manifest).units[0].methods)
         rates: dict[int, float] = {}
         overhead: tuple[float, float] | None = None
         for size in sizes:
