@@ -256,6 +256,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
                 "sign_off": verdicts[u],
                 "status": results.get(u, {}).get("status", "missing"),
                 "out_of_family": [f.reason for f in by_unit[u]],
+                "errors": [e["error"] for e in results.get(u, {}).get("errors", [])],
             }
             for u in units
         ],

@@ -87,8 +87,7 @@ def run_fleet(
     if settings.sim is not None:
         sim_text = settings.sim.read_text(encoding="utf-8")
         parse_config_text(sim_text, str(settings.sim))  # a bad simulation fails the run before any work
-    out.mkdir(exist_ok=True)
-    clean_staging(out)
+    clean_staging(out)  # OUTDIR itself is created by the first result: a run that cannot start leaves none
     run = FleetRun(manifest, out)
 
     todo: list[tuple[UnitSpec, str]] = []
@@ -127,5 +126,6 @@ def run_fleet(
         result = read_result(out, unit.id)
         if result is not None:
             run.results[unit.id] = result
+    out.mkdir(exist_ok=True)
     run.report = write_report(manifest, out, run.results)
     return run
