@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from codegen.render import validate_name
+from trainer import methods as registry
 from trainer.data.importer import ImportOptions
 from trainer.errors import UserError
 from trainer.fields import TableFields, show
 from trainer.fleet import options
 
-DEFAULT_METHODS: tuple[str, ...] = ("poly3", "pla")  # cheap: a fleet of DLSTM fits takes hours
 DEFAULT_EVAL_FRACTION = 0.25
 DEFAULT_DIAGNOSE_HOLDOUT = 0.25
 LIST_SEPARATOR = ";"  # inside one CSV cell
@@ -44,7 +44,7 @@ CSV_COLUMNS = ("id", "recordings", "methods", "export_name", "import")
 class FleetSettings:
     """What every unit shares. ``method_options``: method -> its ``trainer fit`` option text."""
 
-    methods: tuple[str, ...] = DEFAULT_METHODS
+    methods: tuple[str, ...] = field(default_factory=lambda: default_methods())
     method_options: dict[str, str] = field(default_factory=dict)
     import_text: str = ""
     sim: Path | None = None  # the physics the finder starts from (default: bias_poly + noise)
@@ -71,6 +71,12 @@ class Manifest:
     source: Path
     settings: FleetSettings
     units: tuple[UnitSpec, ...]
+
+
+def default_methods() -> tuple[str, ...]:
+    """The registry's memoryless methods (closed-form fits, well under a second per unit), in
+    registry order: a fleet of DLSTM fits takes minutes per unit, so those are asked for by name."""
+    return tuple(m.name for m in registry.entries() if m.family == registry.MEMORYLESS and m.in_fit_cli)
 
 
 def default_export_name(unit_id: str) -> str:
@@ -101,7 +107,7 @@ def _methods(value: Any, where: str) -> tuple[str, ...]:
 def _settings(table: TableFields, base: Path) -> FleetSettings:
     table.only(FLEET_KEYS)
     where = f"{table.source}: [fleet]"
-    methods = _methods(table.raw("methods"), where) if table.has("methods") else DEFAULT_METHODS
+    methods = _methods(table.raw("methods"), where) if table.has("methods") else default_methods()
     method_options: dict[str, str] = {}
     if table.has("method_options"):
         sub = table.sub("method_options")

@@ -123,12 +123,13 @@ def write_fleet(
     *,
     defects: dict[str, str] | None = None,
     seed: int = 0,
-    methods: tuple[str, ...] = ("poly3", "pla"),
+    methods: tuple[str, ...] | None = None,
     diagnose_blocks: int | None = 150,
 ) -> Path:
     """Simulate the batch into ``directory/runs/`` and write ``directory/fleet.toml``; returns its path.
 
-    Unit ids are ``U01``, ``U02``, ...; ``defects`` maps unit id -> one of :data:`DEFECTS`.
+    Unit ids are ``U01``, ``U02``, ...; ``defects`` maps unit id -> one of :data:`DEFECTS`;
+    ``methods`` None leaves the manifest's default (the cheap memoryless methods).
     """
     defects = DEFAULT_DEFECTS if defects is None else defects
     base = sensor()
@@ -146,7 +147,7 @@ def write_fleet(
             write_recording(rec, directory / name)
             names.append(name)
         units.append({"id": unit_id, "recordings": names})
-    fleet: dict[str, object] = {"methods": list(methods)}
+    fleet: dict[str, object] = {} if methods is None else {"methods": list(methods)}
     if diagnose_blocks is not None:
         fleet["diagnose_blocks"] = diagnose_blocks
     manifest = directory / "fleet.toml"
