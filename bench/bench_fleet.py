@@ -1,7 +1,7 @@
 """Benchmark ``trainer fleet``: units per minute on 1 and 2 workers in one run, and the scheduler's cost.
 
 The simulated fleet of ``trainer.fleet.simulated`` (short units: 9,900 samples, the default
-methods, the finder on 150 blocks) runs on a fresh ``LocalCluster`` of each size. The cluster is started and
+methods, the finder on 120 blocks) runs on a fresh ``LocalCluster`` of each size. The cluster is started and
 every worker has imported the pipeline before the clock starts, so the figure is the steady
 throughput a long production run sees (start-up is printed apart). The scheduler's overhead per
 task is measured on the largest cluster with tasks that do nothing: the wall time per task of a

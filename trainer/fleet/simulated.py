@@ -124,7 +124,7 @@ def write_fleet(
     defects: dict[str, str] | None = None,
     seed: int = 0,
     methods: tuple[str, ...] | None = None,
-    diagnose_blocks: int | None = 150,
+    diagnose_blocks: int | None = 120,
 ) -> Path:
     """Simulate the batch into ``directory/runs/`` and write ``directory/fleet.toml``; returns its path.
 
