@@ -58,3 +58,14 @@ def fit_compensator(method: str, train: Recording, options: dict[str, Any] | Non
     """Fit ``method`` on ``train`` with every ground-truth column hidden from it."""
     model = make_compensator(method, options)
     return model.fit(train.without_truth())
+
+
+def fit_with_stats(
+    method: str, train: Recording, options: dict[str, Any] | None = None
+) -> tuple[Compensator, dict[str, Any]]:
+    """Fit ``method`` and return it with its checkpoint's ``train_stats`` (incl. the fit residual RMS)."""
+    model = fit_compensator(method, train, options)
+    stats = training_stats(train)
+    residual = train.accel_mg - model.predict_drift(train.without_truth())
+    stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
+    return model, stats

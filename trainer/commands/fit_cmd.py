@@ -31,23 +31,18 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from trainer.checkpoint import save_model
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
-    from trainer.fitting import fit_compensator, training_stats
+    from trainer.fitting import fit_with_stats
 
     check_output_path(args.output)  # fail before a long training run, not after it
     options = methods.get(args.method).options.fit_kwargs(args)
     train = read_recording(args.train)
     checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
-    model = fit_compensator(args.method, train, options)
+    model, stats = fit_with_stats(args.method, train, options)
     checks.print_warnings()
-    stats = training_stats(train)
-    residual = train.accel_mg - model.predict_drift(train.without_truth())
-    stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
     save_model(
         model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
     )

@@ -20,6 +20,7 @@ from trainer.data.importer import (
     PRESETS,
     TEMP_UNIT_OFFSET_C,
     TIME_UNIT_SECONDS,
+    ImportOptions,
     LogImportOptions,
     import_flight_log,
     import_foreign,
@@ -191,7 +192,12 @@ def _import_text(args: argparse.Namespace, checks: Plausibility) -> Recording:
         raise UserError(
             f"{args.foreign}: --channel applies to flight logs; map a delimited file's columns with --accel"
         )
-    options = options_with_preset(
+    return import_foreign(args.foreign, import_options(args), checks)
+
+
+def import_options(args: argparse.Namespace) -> ImportOptions:
+    """The parsed ``trainer import`` options of a delimited file (``trainer fleet`` reuses it)."""
+    return options_with_preset(
         args.preset,
         time=args.time,
         time_unit=args.time_unit,
@@ -209,4 +215,3 @@ def _import_text(args: argparse.Namespace, checks: Plausibility) -> Recording:
         decimal_comma=args.decimal_comma or None,
         fill_temp=args.fill_temp,
     )
-    return import_foreign(args.foreign, options, checks)
