@@ -12,13 +12,16 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from codegen.manifest import build_manifest
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, QuantModel, quantise_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
-from trainer.checkpoint import load_checkpoint
+from trainer import methods as registry
+from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
+from trainer.reference import RECURSIVE_NOTE, OffsetRecord, check_constant, removes_sustained_input
 
 
 @dataclass(frozen=True)
@@ -29,6 +32,7 @@ class LoadedModel:
     sha256: str
     checkpoint: Checkpoint
     quantised: QuantModel
+    notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
 
 
 def load_for_codegen(
@@ -43,7 +47,32 @@ def load_for_codegen(
         quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
-    return LoadedModel(p, sha256, ckpt, quantised)
+    return LoadedModel(p, sha256, ckpt, quantised, offset_notes(p, raw))
+
+
+def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
+    """The constant the module removes (trainer/reference.py), or the recursive-method warning.
+
+    A file without an offset record (written before the policy existed) removes its fitted
+    constant: it is measured at the mid-point of the valid range and refused above the limit.
+    """
+    method = registry.REGISTRY[raw["method"]]
+    if removes_sustained_input(method):
+        return (RECURSIVE_NOTE,)
+    if "offset" in raw:
+        try:
+            record = OffsetRecord.from_dict(raw["offset"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
+    else:
+        model, _ = load_model(path)
+        lo, hi = (float(v) for v in raw["valid_temp_range_c"])
+        frontend = raw["payload"].get("frontend", {}) if isinstance(raw["payload"], dict) else {}
+        rate_hz = float(frontend.get("rate_hz", raw["train_stats"].get("sample_rate_hz", 1.0)))
+        t_ref = 0.5 * (lo + hi)
+        record = OffsetRecord("absolute", t_ref, model.drift_at_reference(t_ref, rate_hz))
+    check_constant(record, str(path))
+    return (record.describe(),)
 
 
 def manifest_name(name: str) -> str:
@@ -53,7 +82,7 @@ def manifest_name(name: str) -> str:
 def generate(model: LoadedModel, name: str) -> dict[str, str]:
     """File name -> content of the three output files (pure; nothing touches the disk)."""
     name = validate_name(name)
-    files = render_sources(model.quantised, name, model.sha256)
+    files = render_sources(model.quantised, name, model.sha256, notes=model.notes)
     manifest = build_manifest(
         model.quantised,
         name=name,
