@@ -21,7 +21,8 @@ from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods as registry
 from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
-from trainer.reference import RECURSIVE_NOTE, OffsetRecord, check_constant, removes_sustained_input
+from trainer.fitting import removes_sustained_input
+from trainer.reference import RECURSIVE_NOTE, OffsetRecord, check_constant
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ REFERENCE_SETTLE_S = 600.0
 class Compensator(ABC):
     """Fit on a training recording, then estimate the drift of any recording.
 
-    ``offset`` records what :func:`trainer.reference.apply_offset_policy` did with the constant
+    ``offset`` records what :func:`trainer.fitting.apply_offset_policy` did with the constant
     (None: recursive, or not applied). Temperature-driven methods implement :meth:`shift_drift`.
 
     Subclasses implement the four abstract methods. ``to_payload`` must return only tensors and plain Python values (str, int, float, bool, None, lists, dicts) so that the checkpoint loads with ``torch.load(weights_only=True)``.

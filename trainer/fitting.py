@@ -11,7 +11,13 @@ from trainer import methods
 from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.reference import OffsetPolicy, apply_offset_policy
+from trainer.reference import (
+    OFFSET_OPTION,
+    OffsetPolicy,
+    OffsetRecord,
+    check_constant,
+    reference_temperature,
+)
 
 
 def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:
@@ -60,3 +66,35 @@ def fit_compensator(
     model.fit(blind)
     apply_offset_policy(model, methods.get(method), blind, policy or OffsetPolicy())
     return model
+
+
+def removes_sustained_input(method: methods.Method) -> bool:
+    """A recursive method removes any sustained acceleration (no reference temperature)."""
+    return method.family == methods.RECURSIVE
+
+
+def apply_offset_policy(
+    model: Compensator, method: methods.Method, train: Recording, policy: OffsetPolicy
+) -> OffsetRecord | None:
+    """Shift a fitted temperature-driven ``model`` as ``policy`` says; None for a recursive method.
+
+    The model is fitted with its constant (least squares needs one); the policy then moves the
+    constant out through :meth:`Compensator.shift_drift`, which every temperature-driven method
+    implements so that the exported C carries the same shift.
+    """
+    if removes_sustained_input(method):
+        return None
+    t_ref = reference_temperature(train.temp_c, policy.t_ref_c)
+    constant = model.drift_at_reference(t_ref, train.sample_rate_hz)
+    record = OffsetRecord(policy.mode, t_ref, constant)
+    check_constant(record, f"{method.name} fitted on {train.source}")
+    if record.relative:
+        try:
+            model.shift_drift(-constant)
+        except NotImplementedError:
+            raise UserError(
+                f"method {method.name!r} cannot model the drift relative to T_ref (its class does not "
+                f"implement Compensator.shift_drift); use {OFFSET_OPTION} absolute"
+            ) from None
+    model.offset = record
+    return record

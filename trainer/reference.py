@@ -20,6 +20,9 @@ Recursive methods learn from the past output and remove any sustained accelerati
 change of attitude, gravity) along with the drift; they have no reference temperature, and
 :data:`RECURSIVE_NOTE` says so wherever they are exported.
 
+This module is a leaf (no project imports but errors): the compensator interface and the fitting
+code import it. :func:`trainer.fitting.apply_offset_policy` applies the policy to a fitted model.
+
 Scoring follows the same reference: on simulated data a relative method's drift left is measured
 against ``true_drift - true_drift(T_ref)`` (:func:`value_at_temperature`).
 """
@@ -27,16 +30,11 @@ against ``true_drift - true_drift(T_ref)`` (:func:`value_at_temperature`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 
 from trainer.errors import UserError
-
-if TYPE_CHECKING:
-    from trainer.compensator import Compensator
-    from trainer.data.recording import Recording
-    from trainer.methods import Method
 
 OffsetMode = Literal["relative", "absolute", "absolute-unbounded"]
 OFFSET_MODES: tuple[OffsetMode, ...] = ("relative", "absolute", "absolute-unbounded")
@@ -132,40 +130,6 @@ def check_constant(record: OffsetRecord, what: str) -> None:
             f"the accelerometer calibration owns); fit with {OFFSET_OPTION} relative (the default) or "
             f"{OFFSET_OPTION} absolute-unbounded"
         )
-
-
-def removes_sustained_input(method: Method) -> bool:
-    """A recursive method removes any sustained acceleration (no reference temperature)."""
-    from trainer.methods import RECURSIVE
-
-    return method.family == RECURSIVE
-
-
-def apply_offset_policy(
-    model: Compensator, method: Method, train: Recording, policy: OffsetPolicy
-) -> OffsetRecord | None:
-    """Shift a fitted temperature-driven ``model`` as ``policy`` says; None for a recursive method.
-
-    The model is fitted with its constant (least squares needs one); the policy then moves the
-    constant out through :meth:`Compensator.shift_drift`, which every temperature-driven method
-    implements so that the exported C carries the same shift.
-    """
-    if removes_sustained_input(method):
-        return None
-    t_ref = reference_temperature(train.temp_c, policy.t_ref_c)
-    constant = model.drift_at_reference(t_ref, train.sample_rate_hz)
-    record = OffsetRecord(policy.mode, t_ref, constant)
-    check_constant(record, f"{method.name} fitted on {train.source}")
-    if record.relative:
-        try:
-            model.shift_drift(-constant)
-        except NotImplementedError:
-            raise UserError(
-                f"method {method.name!r} cannot model the drift relative to T_ref (its class does not "
-                f"implement Compensator.shift_drift); use {OFFSET_OPTION} absolute"
-            ) from None
-    model.offset = record
-    return record
 
 
 def value_at_temperature(temp_c: np.ndarray, values: np.ndarray, t_ref_c: float) -> float:

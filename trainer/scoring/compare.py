@@ -20,7 +20,8 @@ from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.dlstm.fusion import FusionSettings, train_stage
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.reference import RECURSIVE_NOTE, OffsetPolicy, apply_offset_policy
+from trainer.fitting import apply_offset_policy
+from trainer.reference import RECURSIVE_NOTE, OffsetPolicy
 from trainer.scoring.evaluate import Evaluation, InputSurvival, evaluate, input_survival
 from trainer.scoring.inject import injected_input, input_kept
 
