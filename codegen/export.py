@@ -22,7 +22,7 @@ from trainer import methods as registry
 from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
 from trainer.fitting import removes_sustained_input
-from trainer.reference import RECURSIVE_NOTE, OffsetRecord, check_constant
+from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, RECURSIVE_NOTE, OffsetRecord, check_constant
 
 
 @dataclass(frozen=True)
@@ -54,8 +54,9 @@ def load_for_codegen(
 def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
     """The constant the module removes (trainer/reference.py), or the recursive-method warning.
 
-    A file without an offset record (written before the policy existed) removes its fitted
-    constant: it is measured at the mid-point of the valid range and refused above the limit.
+    ``trainer fit`` refuses a constant above the limit; a file without an offset record (written
+    before the policy existed, or by hand) removes its fitted constant: it is measured at the
+    mid-point of the valid range and reported, with a warning above the limit.
     """
     method = registry.REGISTRY[raw["method"]]
     if removes_sustained_input(method):
@@ -65,15 +66,27 @@ def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
             record = OffsetRecord.from_dict(raw["offset"])
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
-    else:
+        check_constant(record, str(path))
+        return (record.describe(),)
+    try:
         model, _ = load_model(path)
-        lo, hi = (float(v) for v in raw["valid_temp_range_c"])
-        frontend = raw["payload"].get("frontend", {}) if isinstance(raw["payload"], dict) else {}
-        rate_hz = float(frontend.get("rate_hz", raw["train_stats"].get("sample_rate_hz", 1.0)))
-        t_ref = 0.5 * (lo + hi)
-        record = OffsetRecord("absolute", t_ref, model.drift_at_reference(t_ref, rate_hz))
-    check_constant(record, str(path))
-    return (record.describe(),)
+    except UserError:  # a layout the generator reads but the trainer does not (hand-made files)
+        return (f"offset: not recorded in {path.name} and not measurable by the trainer; check it",)
+    lo, hi = (float(v) for v in raw["valid_temp_range_c"])
+    frontend = raw["payload"].get("frontend", {}) if isinstance(raw["payload"], dict) else {}
+    rate_hz = float(frontend.get("rate_hz", raw["train_stats"].get("sample_rate_hz", 1.0)))
+    t_ref = 0.5 * (lo + hi)
+    constant = model.drift_at_reference(t_ref, rate_hz)
+    note = (
+        f"offset: not recorded in {path.name} (fitted before the offset policy): it removes its fitted "
+        f"constant, {constant:.4g} mg at T_ref {t_ref:.2f} degC"
+    )
+    if abs(constant) > OFFSET_LIMIT_MG:
+        note += (
+            f"; WARNING: above {OFFSET_LIMIT_MG:g} mg, gravity or a static offset: refit with "
+            f"'trainer fit' ({OFFSET_OPTION} relative, the default)"
+        )
+    return (note,)
 
 
 def manifest_name(name: str) -> str:
