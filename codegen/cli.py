@@ -35,6 +35,8 @@ def _export(args: argparse.Namespace) -> int:
         f"flash tables {sizes['flash_table_bytes']} B, state RAM {sizes['ram_state_bytes']} B, "
         f"model sha256:{model.sha256[:16]}..."
     )
+    for note in model.notes:
+        print(f"{model.checkpoint.method}: {note}")
     return 0
 
 

@@ -3,7 +3,11 @@
 The file is a ``torch.save`` of a plain dict::
 
     {"format": "mems-tdc-model", "format_version": 1, "method": "pla", "payload": {...},
-     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0"}
+     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0",
+     "offset": {"mode": "relative", "t_ref_c": ..., "drift_at_t_ref_mg": ...}}
+
+``offset`` (optional; absent for recursive methods and older files) is the
+:class:`trainer.reference.OffsetRecord` of a temperature-driven model.
 
 and is always read with ``torch.load(weights_only=True)``, which refuses pickled code.
 """
@@ -22,6 +26,7 @@ import torch
 from trainer import __version__, methods
 from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
+from trainer.reference import OffsetRecord
 
 FORMAT_NAME = "mems-tdc-model"
 _UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
@@ -45,6 +50,8 @@ def save_model(
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
         "created_by": f"mems-tdc {__version__}",
     }
+    if model.offset is not None:
+        checkpoint["offset"] = model.offset.to_dict()
     # torch.save names the archive's root folder after the file it writes; serialising to memory
     # first keeps that name fixed ("archive"), so the same model gives byte-identical files
     # (and the same model_id in the generated C) whatever the output path.
@@ -103,4 +110,9 @@ def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None
+    if "offset" in checkpoint:
+        try:
+            model.offset = OffsetRecord.from_dict(checkpoint["offset"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
     return model, checkpoint

@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from trainer import methods
+from trainer.commands.offset_options import add_offset_options, policy_from_args
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -27,6 +28,7 @@ def add_parser(subparsers: Any) -> None:
         if method.in_fit_cli and method.options not in groups:
             groups.append(method.options)
             method.options.add_arguments(parser)
+    add_offset_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -36,12 +38,14 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
     from trainer.fitting import fit_with_stats
+    from trainer.reference import RECURSIVE_NOTE
 
     check_output_path(args.output)  # fail before a long training run, not after it
     options = methods.get(args.method).options.fit_kwargs(args)
+    policy = policy_from_args(args)
     train = read_recording(args.train)
     checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
-    model, stats = fit_with_stats(args.method, train, options)
+    model, stats = fit_with_stats(args.method, train, options, policy)
     checks.print_warnings()
     save_model(
         model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
@@ -51,4 +55,5 @@ def run(args: argparse.Namespace) -> int:
         f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
         f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}"
     )
+    print(f"{args.method}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
     return 0
