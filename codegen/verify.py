@@ -150,6 +150,15 @@ class Table1Check:
     within_half_unit: int
     text: str
     worst_half_unit_fraction: float = 0.0  # max |quantised - float| / (half a unit in the last place)
+    max_improvement_diff_pp: float = 0.0  # max |quantised - float| of the Allan improvements, points
+    drift_left_mg: tuple[float, float] | None = None  # RMS drift left (float, quantised), with truth
+
+    @property
+    def drift_left_ratio(self) -> float | None:
+        """|quantised / float - 1| of the drift left (the budget: at most 1 %)."""
+        if self.drift_left_mg is None or self.drift_left_mg[0] <= 0:
+            return None
+        return abs(self.drift_left_mg[1] / self.drift_left_mg[0] - 1.0)
 
     @property
     def ok(self) -> bool:
@@ -174,9 +183,11 @@ def _figures(table: AllanTable, column: str) -> list[tuple[float, str]]:
     return out
 
 
-def _check(table: AllanTable, reference: str, quantised: str) -> Table1Check:
+def _check(
+    table: AllanTable, reference: str, quantised: str, drift: tuple[float, float] | None = None
+) -> Table1Check:
     identical = near = 0
-    worst = 0.0
+    worst = points = 0.0
     pairs = list(zip(_figures(table, reference), _figures(table, quantised), strict=True))
     for (a, kind), (b, _) in pairs:
         if not (np.isfinite(a) and np.isfinite(b)):
@@ -185,11 +196,13 @@ def _check(table: AllanTable, reference: str, quantised: str) -> Table1Check:
         text = (lambda v: f"{v:.2e}") if kind == "sci" else (lambda v: f"{v:.2f}")
         half = _half_unit_sci(a) if kind == "sci" else 0.005
         worst = max(worst, abs(a - b) / half)
+        if kind == "pct":
+            points = max(points, abs(a - b))
         if text(a) == text(b):
             identical += 1
         elif abs(a - b) < half:
             near += 1
-    return Table1Check(len(pairs), identical, near, table.to_text(), worst)
+    return Table1Check(len(pairs), identical, near, table.to_text(), worst, points, drift)
 
 
 def compare_table1(
@@ -200,8 +213,18 @@ def compare_table1(
     from trainer.scoring.evaluate import evaluate
 
     columns = {method: golden_mg, "float": float_mg, "float, integer inputs": float_on_ints_mg}
-    table = evaluate(rec, columns).table
-    return _check(table, "float", method), _check(table, "float, integer inputs", method)
+    result = evaluate(rec, columns)
+    table, drift = result.table, result.drift
+
+    def left(reference: str) -> tuple[float, float] | None:
+        if reference not in drift or method not in drift:
+            return None
+        return drift[reference].residual_rms_mg, drift[method].residual_rms_mg
+
+    return (
+        _check(table, "float", method, left("float")),
+        _check(table, "float, integer inputs", method, left("float, integer inputs")),
+    )
 
 
 def verify(
@@ -309,6 +332,14 @@ def report_lines(result: VerifyResult) -> list[str]:
                 else ""
             )
             + ("" if t.ok else "; SOME DIFFER MORE")
-            + f" (largest difference {t.worst_half_unit_fraction:.2g} of half a unit in the last place)"
+            + f" (largest difference {t.worst_half_unit_fraction:.2g} of half a unit in the last place; "
+            f"improvements within {t.max_improvement_diff_pp:.2g} percentage points"
+            + (
+                f"; drift left {t.drift_left_mg[1]:.4g} mg vs {t.drift_left_mg[0]:.4g} mg, "
+                f"{100 * (t.drift_left_ratio or 0.0):.2g} %"
+                if t.drift_left_mg is not None
+                else ""
+            )
+            + ")"
         )
     return lines
