@@ -58,7 +58,7 @@ def _f(value: float) -> str:
 
 
 def _floats(values: np.ndarray) -> str:
-    return ", ".join(_f(v) for v in np.asarray(values, dtype=np.float32).ravel())
+    return ", ".join(_f(float(v)) for v in np.asarray(values, dtype=np.float32).ravel())
 
 
 def write_float_module(spec: DlstmModelSpec, q: QStream, name: str, out_dir: Path, variant: str) -> None:
