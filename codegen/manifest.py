@@ -11,7 +11,7 @@ import math
 from codegen import __version__
 from codegen.activations import ACT_ERROR_LSB
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
-from codegen.qformats import C_FRAC, GATE_FRAC, H_FRAC, TANH_FRAC, X_FRAC
+from codegen.qformats import C_FRAC, GATE_FRAC, H_FRAC, TANH_FRAC, X_FRAC, X_MIN_FRAC
 from codegen.quantize import (
     ACCEL_PER_MG,
     QLayer,
@@ -96,8 +96,9 @@ def _stream(model: QStream) -> dict[str, object]:
     out["quantisation"] = {
         "rounding": "network: half up (floor(x + 1/2)); inputs, head: half away from zero",
         "formats": {
-            "inputs_x": f"int16 Q4.{X_FRAC}, clamped to +-16 (flagged)",
-            "weights": f"int16; per layer Q(A - {X_FRAC}) for the layer-0 input, Q(A - {H_FRAC}) otherwise",
+            "inputs_x": f"int16 Q{X_FRAC} (+-8) or wider, down to Q{X_MIN_FRAC} (+-32), when layer 0 loses no "
+            "accumulator bit (x_frac_bits per input); clamping is flagged",
+            "weights": f"int16; per layer Q(A - x frac) for each layer-0 input, Q(A - {H_FRAC}) otherwise",
             "accumulators": "int32 Q(A) per gate row, initialised with the int32 bias; bounded below 2^31",
             "gates_i_f_o": f"Q{GATE_FRAC} (table sigmoid)",
             "g_and_tanh_c": f"Q{TANH_FRAC} (table tanh)",
@@ -118,6 +119,7 @@ def _stream(model: QStream) -> dict[str, object]:
                 "inv_q": q.inv_q,
                 "shift": q.shift,
                 "d_max": q.d_max,
+                "x_frac_bits": q.frac,
                 "product_headroom_bits": _num(q.product_headroom),
             }
             for q in model.inputs

@@ -32,7 +32,8 @@ class QFormat:
 
 
 FORMATS: tuple[QFormat, ...] = (
-    QFormat("X_FRAC", 12, "network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged)"),
+    QFormat("X_FRAC", 12, "network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged) ..."),
+    QFormat("X_MIN_FRAC", 10, "... or wider, down to Q5.10 (+-32), when layer 0 loses no accumulator bit"),
     QFormat("H_FRAC", 15, "hidden states h: int16 Q15, |h| <= 32767"),
     QFormat("GATE_FRAC", 16, "sigmoid gates i, f, o: Q16 in 1 .. 65535 (a forget gate stays below 1)"),
     QFormat("TANH_FRAC", 15, "tanh of the g gate and of the cell: Q15 in -32767 .. 32767"),
@@ -54,6 +55,7 @@ FORMATS: tuple[QFormat, ...] = (
 
 _BY_NAME = {f.name: f.value for f in FORMATS}
 X_FRAC = _BY_NAME["X_FRAC"]
+X_MIN_FRAC = _BY_NAME["X_MIN_FRAC"]
 H_FRAC = _BY_NAME["H_FRAC"]
 GATE_FRAC = _BY_NAME["GATE_FRAC"]
 TANH_FRAC = _BY_NAME["TANH_FRAC"]

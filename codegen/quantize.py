@@ -12,8 +12,9 @@ temperature in         int32        milli-degC
 window sums            int64        exact: a running sum from the window's start phase, plus one
                                     sum per decimation period when the window is longer
 window means           int64        Q24 of the input unit (fewer bits only when W * range needs it)
-network inputs x       int16        Q4.11, clamped to +-16 standard deviations (flagged)
-weights                int16        per layer: Q(A - 11) for the layer-0 input, Q(A - 15) for h
+network inputs x       int16        Q3.12 (+-8 standard deviations) or wider, down to Q5.10 (+-32),
+                                    when it costs layer 0 no accumulator bit; clamping is flagged
+weights                int16        per layer: Q(A - x frac) per layer-0 input, Q(A - 15) for h
 biases, accumulators   int32        Q(A), one per gate row; |b| + sum |w| |v| < 2**31 proved
 gates i, f, o          Q16          table sigmoid, 1 .. 65535
 g, tanh(c)             Q15          table tanh, -32767 .. 32767
@@ -28,8 +29,8 @@ cubic coefficients     int32        accel LSB, of u^k with u = (T - T_ref) / 2**
 A layer's accumulator format Q(A) is the largest A (16 .. 30) such that every weight fits int16
 *and* the worst case of every row, ``|b_q| + sum_j |w_q| * 32767``, stays below 2**31: the int32
 multiply-accumulates (two per SMLAD on a Cortex-M4) can then never overflow, which is proved here,
-not hoped for. Both matrices of a layer share the accumulator (the layer-0 input is Q11, h is Q15:
-their weight formats differ by 4 bits). The accumulator indexes the activation table directly
+not hoped for. Both matrices of a layer share the accumulator (each layer-0 input column has
+its own weight format, Q(A - 12) .. Q(A - 10); h's weights are Q(A - 15)). The accumulator indexes the activation table directly
 (no rounding step): the gate rows read it with shift A - 4 (tanh) or A - 3 (sigmoid).
 
 Why 16 bits: the budget (docs/codegen.md) is golden minus float at most 1e-3 mg RMS and 5e-3 mg
@@ -70,6 +71,7 @@ from codegen.qformats import (
     TANH_FRAC,
     X_FRAC,
     X_MAX,
+    X_MIN_FRAC,
 )
 from codegen.spec import Checkpoint, DlstmModelSpec, FrontEndSpec, PersistenceSpec, PlaSpec, Poly3Spec
 from trainer.errors import UserError
@@ -137,6 +139,7 @@ class QInput:
     mean: float
     std: float
     unit: str
+    frac: int  # x_q is Q(frac): X_FRAC, or wider down to X_MIN_FRAC when layer 0 loses no bit
 
     @property
     def product_headroom(self) -> float:
@@ -311,19 +314,28 @@ def _gate_max(z_max: np.ndarray, kind: str) -> np.ndarray:
 
 
 def _layer(
-    spec_w_x: np.ndarray, spec_w_h: np.ndarray, spec_b: np.ndarray, index: int, hidden_slots: int
+    spec_w_x: np.ndarray,
+    spec_w_h: np.ndarray,
+    spec_b: np.ndarray,
+    index: int,
+    hidden_slots: int,
+    input_fracs: tuple[int, ...],
 ) -> QLayer:
-    in_frac = X_FRAC if index == 0 else H_FRAC
+    """``input_fracs``: the Q format of each input of the layer (layer 0: per network input)."""
+    in_frac = max(input_fracs)
     w_x = np.atleast_2d(np.asarray(spec_w_x, dtype=np.float64))
     w_h = np.atleast_2d(np.asarray(spec_w_h, dtype=np.float64))
     b = np.asarray(spec_b, dtype=np.float64)
     for acc_frac in range(MAX_ACC_FRAC, MIN_ACC_FRAC - 1, -1):  # the largest A that fits
-        qx = _quantise_or_none(w_x, acc_frac - in_frac)
+        columns = [_quantise_or_none(w_x[:, k], acc_frac - f) for k, f in enumerate(input_fracs)]
+        qx = None if any(c is None for c in columns) else np.stack(columns, axis=1)  # type: ignore[arg-type]
         qh = _quantise_or_none(w_h, acc_frac - H_FRAC)
         b_q = _quantise_or_none(b, acc_frac)
         if qx is None or qh is None or b_q is None or not (_fits_int16(qx) and _fits_int16(qh)):
             continue
-        wx = QMatrix(qx, acc_frac - in_frac, X_MAX if index == 0 else H_MAX, in_frac)
+        wx = QMatrix(
+            qx, acc_frac - in_frac, X_MAX if index == 0 else H_MAX, in_frac
+        )  # frac: the finest column
         wh = QMatrix(qh, acc_frac - H_FRAC, H_MAX, H_FRAC)
         rows = [
             int(rx) + int(rh) + abs(int(bb))
@@ -365,11 +377,13 @@ def _layer(
     )
 
 
-def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str) -> QInput:
+def _input(
+    name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str, frac: int = X_FRAC
+) -> QInput:
     mu_q = round_half_away(Fraction(mean) / unit_per_lsb)
     if abs(mu_q) >= INT64_SAFE // 2:
         raise UserError(f"input '{name}': mean {mean:g} {unit} is far outside the input range")
-    gain = unit_per_lsb / Fraction(std) * (1 << X_FRAC)  # x_q per LSB of v
+    gain = unit_per_lsb / Fraction(std) * (1 << frac)  # x_q per LSB of v
     # inv_q gets 31 significant bits: the product d_max * inv_q is then about 2**(31 + shift), so
     # shift <= 30 keeps it in int64; a fine input unit (gain < 1) is first shifted right by
     # pre_shift (rounding), which costs nothing measurable and leaves inv_q its 31 bits.
@@ -384,7 +398,7 @@ def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: floa
         saturating = -(-(X_MAX + 1) * (1 << shift) // inv_q)  # ceil: from here on x clamps anyway
         d_max = min(v_span, saturating)
         if d_max * inv_q < INT64_SAFE:
-            return QInput(name, mu_q, pre_shift, inv_q, shift, d_max, mean, std, unit)
+            return QInput(name, mu_q, pre_shift, inv_q, shift, d_max, mean, std, unit, frac)
         shift -= 1
     raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
@@ -434,20 +448,14 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)
-    inputs: tuple[QInput, ...]
+    # (name, largest |v| in mean LSB, unit per LSB, mean, std, unit) of each network input
+    features: list[tuple[str, int, Fraction, float, float, str]]
     if fe.kind == "recursive":
         frac = _mean_frac(fe.accel_window, limits.accel)
         mean_lsb = 1 << frac
-        inputs = (
-            _input(
-                "accel",
-                limits.accel * mean_lsb,
-                Fraction(1, ACCEL_PER_MG * mean_lsb),
-                fe.inputs_mean[0],
-                fe.inputs_std[0],
-                "mg",
-            ),
-        )
+        features = [
+            ("accel", limits.accel * mean_lsb, Fraction(1, ACCEL_PER_MG * mean_lsb), 0.0, 0.0, "mg"),
+        ]
     else:
         t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
         span = limits.temp_hi_mdegc - limits.temp_lo_mdegc
@@ -456,20 +464,41 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
         rate_unit = (
             Fraction(60) * Fraction(fe.rate_hz) / (fe.decimation * 1000 * mean_lsb)
         )  # degC/min per LSB
-        inputs = (
-            _input(
-                "temp",
-                t_max * mean_lsb,
-                Fraction(1, 1000 * mean_lsb),
-                fe.inputs_mean[0],
-                fe.inputs_std[0],
-                "degC",
-            ),
-            _input("rate", span * mean_lsb, rate_unit, fe.inputs_mean[1], fe.inputs_std[1], "degC/min"),
-        )
+        features = [
+            ("temp", t_max * mean_lsb, Fraction(1, 1000 * mean_lsb), 0.0, 0.0, "degC"),
+            ("rate", span * mean_lsb, rate_unit, 0.0, 0.0, "degC/min"),
+        ]
+    features = [
+        (name, v_max, unit_lsb, fe.inputs_mean[k], fe.inputs_std[k], unit)
+        for k, (name, v_max, unit_lsb, _, _, unit) in enumerate(features)
+    ]
     hidden = spec.layers[0].w_h.shape[1] if spec.layers else 0
     slots = hidden + hidden % 2
-    layers = tuple(_layer(layer.w_x, layer.w_h, layer.b, k, slots) for k, layer in enumerate(spec.layers))
+
+    def first_layer(fracs: list[int]) -> QLayer:
+        layer = spec.layers[0]
+        return _layer(layer.w_x, layer.w_h, layer.b, 0, slots, tuple(fracs))
+
+    # A difference of means (the rate input) is heavy-tailed (the first steps after a reset, sensor
+    # noise): clamped at +-8 sigma it cost a trained dlstm-temp 0.07 mg. It gets the widest range
+    # (down to Q10: +-32 sigma) that costs layer 0 no accumulator bit. Levels keep Q12: a wider
+    # format costs them resolution (6e-4 instead of 4e-4 mg RMS) and they stay within +-8 sigma.
+    fracs = [X_FRAC] * len(features)
+    base = first_layer(fracs).acc_frac
+    for k in [k for k, feature in enumerate(features) if feature[0] == "rate"]:
+        for wider in range(X_FRAC - 1, X_MIN_FRAC - 1, -1):
+            trial = [*fracs[:k], wider, *fracs[k + 1 :]]
+            try:
+                if first_layer(trial).acc_frac < base:
+                    break
+            except UserError:
+                break
+            fracs = trial
+    inputs = tuple(_input(*feature, frac=f) for feature, f in zip(features, fracs, strict=True))
+    layers = tuple(
+        _layer(layer.w_x, layer.w_h, layer.b, k, slots, tuple(fracs) if k == 0 else (H_FRAC,) * hidden)
+        for k, layer in enumerate(spec.layers)
+    )
     return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec), frac)
 
 

@@ -130,6 +130,7 @@ def _assert_within_budget(table: Table1Check | None) -> None:
     assert table.max_improvement_diff_pp < IMPROVEMENT_PP, table.text
     ratio = table.drift_left_ratio
     assert ratio is not None and ratio < DRIFT_LEFT_RATIO, table.drift_left_mg
+    assert table.within_budget
 
 
 def _check_trained(method: str, train: Path, valid: Path, work: Path, cycles: int) -> None:

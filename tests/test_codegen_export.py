@@ -195,8 +195,8 @@ def test_manifest_documents_rates_ranges_bounds_and_sizes(exported: dict[str, Pa
     for index, layer in enumerate(manifest["quantisation"]["layers"]):
         assert layer["acc_bound"] <= layer["acc_limit"] == 2**31 - 1 and layer["acc_headroom_bits"] >= 0
         assert layer["acc_bound"] >= layer["w_x"]["acc_share_bound"] + layer["w_h"]["acc_share_bound"]
-        # one accumulator format per layer: the Q11 input's weights carry 4 more bits than h's (Q15)
-        assert layer["w_x"]["frac_bits"] - layer["w_h"]["frac_bits"] == (4 if index == 0 else 0)
+        # one accumulator format per layer: the Q12 input's weights carry 3 more bits than h's (Q15)
+        assert layer["w_x"]["frac_bits"] - layer["w_h"]["frac_bits"] == (3 if index == 0 else 0)
         assert layer["w_h"]["storage"] == "int16" and layer["acc_frac_bits"] >= 16
     head = manifest["quantisation"]["head"]
     assert head["acc_bound"] < 2**62 and head["estimate_headroom_bits"] > 0
@@ -228,10 +228,11 @@ def test_verify_detects_a_tampered_module(
     shutil.copytree(exported["dlstm-issa"], out)
     source = out / "tdc_dlstm_issa.c"
     text = source.read_text()
-    # change the first packed weight pair of layer 0 by one LSB of its first (int16) weight
+    # change the first packed weight pair of layer 0 by 2**10 LSB of its first (int16) weight (one
+    # LSB, 2**-15 of the input weight, may change no output sample: only the final state)
     match = re.search(r"(static const int32_t tdc_dlstm_issa_l0_w\[\d+\] = \{\n    )(-?\d+)", text)
     assert match
-    text = text[: match.start(2)] + str(int(match.group(2)) + 1) + text[match.end(2) :]
+    text = text[: match.start(2)] + str(int(match.group(2)) + 1024) + text[match.end(2) :]
     source.write_text(text)
     result = _cli("verify", str(models["dlstm-issa"]), str(out), str(recording[1]), "--no-table")
     assert result.returncode == 1 and "mismatches: 0\n" not in result.stdout

@@ -43,7 +43,8 @@
 #endif
 
 /* BEGIN Q FORMATS: written by `python -m codegen.qformats --write` from codegen/qformats.py */
-#define TDCK_X_FRAC         12 /* network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged) */
+#define TDCK_X_FRAC         12 /* network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged) ... */
+#define TDCK_X_MIN_FRAC     10 /* ... or wider, down to Q5.10 (+-32), when layer 0 loses no accumulator bit */
 #define TDCK_H_FRAC         15 /* hidden states h: int16 Q15, |h| <= 32767 */
 #define TDCK_GATE_FRAC      16 /* sigmoid gates i, f, o: Q16 in 1 .. 65535 (a forget gate stays below 1) */
 #define TDCK_TANH_FRAC      15 /* tanh of the g gate and of the cell: Q15 in -32767 .. 32767 */
@@ -269,10 +270,10 @@ static inline int64_t tdck_dot_wide(const int32_t *w, const int16_t *h, uint32_t
     return acc;
 }
 
-/* A network input as int16 Q11: clamp(rshift_round(clamp(rshift_round(centred, pre), +-d_max) inv,
- * shift), +-32767); the outer clamp sets `sat_bit`. |d| >= d_max saturates anyway; clamping it first
+/* A network input as int16 (Q12 or Q10, the scale is in inv): clamp(rshift_round(clamp(
+ * rshift_round(centred, pre), +-d_max) inv, shift), +-32767); the outer clamp sets `sat_bit`. |d| >= d_max saturates anyway; clamping it first
  * keeps the product in int64 (d_max inv < 2^62, proved by the quantiser). */
-static inline int16_t tdck_input_q11(int64_t centred, unsigned pre, int64_t d_max, int64_t inv, unsigned shift,
+static inline int16_t tdck_input_x(int64_t centred, unsigned pre, int64_t d_max, int64_t inv, unsigned shift,
     uint32_t *flags, uint32_t sat_bit)
 {
     int64_t d = tdck_rshift_round64(centred, pre);

@@ -106,7 +106,7 @@ static void run(const int64_t *in, int64_t *out)
         break;
     }
     case K_INPUT:
-        out[0] = tdck_input_q11(in[1], (unsigned)in[2], in[3], in[4], (unsigned)in[5], &flags, 4u);
+        out[0] = tdck_input_x(in[1], (unsigned)in[2], in[3], in[4], (unsigned)in[5], &flags, 4u);
         out[1] = flags;
         break;
     case K_HOLD: {
