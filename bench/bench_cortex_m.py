@@ -16,12 +16,12 @@ batch, and repeats every timed loop with an empty function of the same signature
 is the cost of the NAME_step calls (call and return included). QEMU counts instructions, not
 cycles (no wait states, no pipeline effects).
 
-    python bench/bench_cortex_m.py [--model model.pt ...] [--proposal]
+    python bench/bench_cortex_m.py [--model model.pt ...]
 
---proposal additionally measures a hand-patched copy of each generated network (the change proposed
-for codegen's templates: plain int32 accumulation of the MACs whose bounds the quantiser proves,
-32-bit rounding shifts, and an optional SMLAD/QADD path under -DTDC_USE_DSP), after checking on
-the target that the patched module is bit-exact against the golden model.
+Anchors, in the same run, for every DLSTM: the generated module with its SMLAD path (the default on
+a Cortex-M4) and with the portable path (-DTDCK_PORTABLE), both checked bit-exact against the
+golden model on the target, and the same network as plain float32 C (bench/float_anchor.py) with
+libm activations and with a rational fast tanh; the ratio of the network-step costs is printed.
 """
 
 from __future__ import annotations
@@ -29,8 +29,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import platform
-import re
-import shutil
 import sys
 import tempfile
 from dataclasses import dataclass
@@ -39,11 +37,13 @@ from types import ModuleType
 from typing import Any
 
 import numpy as np
+from float_anchor import write_float_module
 
 from codegen.export import LoadedModel, export
 from codegen.golden import golden_for
 from codegen.hostbuild import write_vectors
 from codegen.quantize import QPla, QPoly3, QStream
+from codegen.spec import DlstmModelSpec
 from codegen.verify import to_step_units
 from trainer import methods as registry
 from trainer.cli import main as trainer_main
@@ -110,78 +110,6 @@ def bit_exact_on_target(
     return int(np.count_nonzero(result.outputs.astype(np.int64) != golden)), result.state_bytes
 
 
-# ------------------------------------------------------------------------- the proposed change
-
-
-def propose(source: str) -> str | None:
-    """The proposed template change applied to generated C (None if the code no longer matches)."""
-    m = re.search(r"static int32_t (\w+)network\(", source)
-    if m is None:
-        return None
-    p = m.group(1)
-    out, n_plain = re.subn(rf"(\w+) = {p}sat_add32\(\1, (\(int32_t\)[^;]*)\);", r"\1 += \2;", source)
-    round32 = re.compile(
-        rf"static int32_t {p}rshift_round32\(int32_t x, unsigned s\)\n\{{\n    return \(int32_t\){p}rshift_round64\(\(int64_t\)x, s\);\n\}}"
-    )
-    sat_add = re.compile(
-        rf"static int32_t {p}sat_add32\(int32_t a, int32_t b\)\n\{{\n    return {p}sat32\(\(int64_t\)a \+ \(int64_t\)b\);\n\}}"
-    )
-    dot = re.compile(
-        r"for \(j = 0u; j < (\d+)u; \+\+j\) \{\n\s*(\w+) \+= \(int32_t\)(\w+)(\[r\])?\[j\] \* \(int32_t\)([^;]*?)\[j\];\n\s*\}"
-    )
-    if n_plain == 0 or not round32.search(out) or not sat_add.search(out):
-        return None
-    out = round32.sub(
-        f"""static int32_t {p}rshift_round32(int32_t x, unsigned s)
-{{
-    uint32_t mag = (x < 0) ? (0u - (uint32_t)x) : (uint32_t)x; /* <= 2^31: adding 2^(s-1) cannot wrap */
-    if (s == 0u) {{
-        return x;
-    }}
-    mag = (mag + (1u << (s - 1u))) >> s;
-    return (x < 0) ? -(int32_t)mag : (int32_t)mag;
-}}""",
-        out,
-    )
-    out = sat_add.sub(
-        f"""static int32_t {p}sat_add32(int32_t a, int32_t b)
-{{
-#if TDC_DSP
-    return __qadd(a, b);
-#else
-    return {p}sat32((int64_t)a + (int64_t)b);
-#endif
-}}
-
-/* acc + sum_j w[j] v[j], int16 x int16 into int32: the quantiser bounds every row's partial sums
- * below INT32_MAX, so the accumulation is exact; SMLAD does two of them per instruction. */
-static int32_t {p}dot_q15(const int16_t *w, const int16_t *v, uint32_t n, int32_t acc)
-{{
-    uint32_t j = 0u;
-#if TDC_DSP
-    for (; j + 1u < n; j += 2u) {{
-        int32_t a;
-        int32_t b;
-        __builtin_memcpy(&a, &w[j], sizeof a);
-        __builtin_memcpy(&b, &v[j], sizeof b);
-        acc = __smlad(a, b, acc);
-    }}
-#endif
-    for (; j < n; ++j) {{
-        acc += (int32_t)w[j] * (int32_t)v[j];
-    }}
-    return acc;
-}}""",
-        out,
-    )
-    out = dot.sub(lambda g: f"{g[2]} = {p}dot_q15({g[3]}{g[4] or ''}, {g[5]}, {g[1]}u, {g[2]});", out)
-    header = (
-        "\n#if defined(TDC_USE_DSP) && defined(__ARM_FEATURE_DSP)\n#include <arm_acle.h>\n#define TDC_DSP 1\n"
-        "#else\n#define TDC_DSP 0\n#endif\n"
-    )
-    return re.sub(r'(#include "\w+\.h"\n)', lambda g: g[1] + header, out, count=1)
-
-
 # ------------------------------------------------------------------------------------ models
 
 
@@ -210,7 +138,7 @@ class Row:
     module: Any  # cm.Size of NAME.o
     state_bytes: int
     stack_bytes: int
-    mismatches: int
+    mismatches: int | None  # None: not a fixed-point module (the float32 anchors)
 
 
 def measure(
@@ -221,10 +149,16 @@ def measure(
     vectors: Path,
     stream: tuple[np.ndarray, np.ndarray],
     work: Path,
+    exact: bool = True,
 ) -> Row:
-    """Bit-exactness, instruction counts, sizes of one build."""
+    """Bit-exactness (fixed-point modules), instruction counts, sizes of one build."""
     build.make("module")
-    mismatches, state_bytes = bit_exact_on_target(build, model, *stream, work / "exact")
+    mismatches: int | None = None
+    if exact:
+        mismatches, state_bytes = bit_exact_on_target(build, model, *stream, work / "exact")
+    else:
+        zeros = np.zeros(stream[0].size, dtype=np.int64)
+        state_bytes = cm.stream(build, stream[0], stream[1], zeros, work / "run").state_bytes
     counts = cm.bench(build, work / "bench", vectors)
     (module,) = cm.sizes(Path(build.out) / f"{build.name}.o")
     return Row(
@@ -242,7 +176,6 @@ def measure(
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", action="append", type=Path, help="model.pt to measure (repeatable)")
-    parser.add_argument("--proposal", action="store_true", help="also measure the proposed template change")
     args = parser.parse_args()
     reason = cm.ensure_toolchain()
     if reason is not None:
@@ -260,41 +193,38 @@ def main() -> int:
         write_vectors(vectors, accel, temp, np.zeros(accel.size, dtype=np.int64))
         for k, (label, path) in enumerate(models):
             name = f"bench{k}"
-            model, files = export(path, work / f"m{k}", name=name)
+            model, _ = export(path, work / f"m{k}", name=name)
             build = cm.Build(work / f"m{k}", name, work / f"build{k}")
-            rows.append(measure(label, "as generated", model, build, vectors, (accel, temp), work / f"r{k}"))
+            network = isinstance(model.quantised, QStream) and bool(model.quantised.layers)
+            variant = "generated, SMLAD" if network else "generated"
+            rows.append(measure(label, variant, model, build, vectors, (accel, temp), work / f"r{k}"))
             build.make("test-app", "bench-app")
             apps += [build.elf("test_app"), build.elf("bench_app")] if k == 0 else []
-            patched = (
-                propose(files[f"{name}.c"])
-                if args.proposal and isinstance(model.quantised, QStream)
-                else None
+            q, spec = model.quantised, model.checkpoint.model
+            if not (isinstance(q, QStream) and q.layers and isinstance(spec, DlstmModelSpec)):
+                continue
+            portable = cm.Build(work / f"m{k}", name, work / f"pbuild{k}", extra_cflags="-DTDCK_PORTABLE")
+            rows.append(
+                measure(label, "generated, portable", model, portable, vectors, (accel, temp), work / f"p{k}")
             )
-            if (
-                args.proposal
-                and isinstance(model.quantised, QStream)
-                and model.quantised.layers
-                and patched is None
-            ):
-                print(
-                    f"{label}: the proposal no longer matches the generated code (codegen changed)",
-                    file=sys.stderr,
+            for variant in ("libm", "fast"):
+                folder = work / f"f{k}{variant}"
+                write_float_module(spec, q, name, folder, variant)
+                fb = cm.Build(folder, name, work / f"fb{k}{variant}", ldlibs="-lm")
+                row = measure(
+                    label,
+                    f"float32, {variant}",
+                    model,
+                    fb,
+                    vectors,
+                    (accel, temp),
+                    work / f"fr{k}{variant}",
+                    exact=False,
                 )
-            if patched is not None and isinstance(model.quantised, QStream) and model.quantised.layers:
-                folder = work / f"p{k}"
-                folder.mkdir()
-                shutil.copy(work / f"m{k}" / f"{name}.h", folder)
-                (folder / f"{name}.c").write_text(patched)
-                for variant, flags in (("proposal, portable", ""), ("proposal, SMLAD", "-DTDC_USE_DSP")):
-                    pb = cm.Build(folder, name, work / f"pb{k}{bool(flags)}", extra_cflags=flags)
-                    rows.append(
-                        measure(
-                            label, variant, model, pb, vectors, (accel, temp), work / f"pr{k}{bool(flags)}"
-                        )
-                    )
+                rows.append(row)
         app_sizes = cm.sizes(*apps) if apps else []
     report(rows, app_sizes, accel.size)
-    return 0 if all(r.mismatches == 0 for r in rows) else 1
+    return 0 if all(r.mismatches in (0, None) for r in rows) else 1
 
 
 def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
@@ -312,7 +242,8 @@ def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
         print(
             f"{r.label:<25} {r.variant:<19} {c.average:>7.1f} {c.worst:>7.0f} {c.plain:>6.1f} "
             f"{r.bound.per_step:>9} {r.bound.per_sample:>8.2f} {ratio:>9.1f} {c.worst / CLOCK_MHZ:>7.1f} "
-            f"{r.module.flash:>8} {r.state_bytes:>8} {r.stack_bytes:>8} {'yes' if r.mismatches == 0 else 'NO':>6}"
+            f"{r.module.flash:>8} {r.state_bytes:>8} {r.stack_bytes:>8} "
+            f"{'n/a' if r.mismatches is None else 'yes' if r.mismatches == 0 else 'NO':>6}"
         )
     print()
     print("avg   = instructions per sample averaged over the stream (streaming models: whole 1 s periods)")
@@ -324,7 +255,7 @@ def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
         "        (PLA, poly3: per sample), the lower bound: one MAC per instruction (SMLABB), two with SMLAD;"
     )
     for r in rows:
-        if r.variant == "as generated" and r.bound.per_step > 1:
+        if r.variant == "generated, SMLAD" and r.bound.per_step > 1:
             print(
                 f"        {r.label}: {r.bound.text} = {r.bound.per_step} MACs (+ {r.bound.bias_adds} bias adds)"
             )
@@ -337,6 +268,16 @@ def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
         "        NAME_state_t (RAM, one per instance); stack = sum of all the module's frames (upper bound)"
     )
     print("exact = the module on the target equals the golden model on every sample of the stream\n")
+    by_label: dict[str, dict[str, Row]] = {}
+    for r in rows:
+        by_label.setdefault(r.label, {})[r.variant] = r
+    for label, variants in by_label.items():
+        gen = variants.get("generated, SMLAD")
+        for anchor in ("float32, libm", "float32, fast"):
+            if gen is not None and anchor in variants:
+                ratio = variants[anchor].counts.worst / gen.counts.worst
+                print(f"{label}: network step of {anchor} / generated (SMLAD) = {ratio:.2f}")
+    print()
     for s in app_sizes:
         print(f"whole app {s.path.name:<14} text {s.text:>7} data {s.data:>6} bss {s.bss:>7}  (newlib stdio and "
               "semihosting included; bss holds the I/O buffers)")  # fmt: skip

@@ -28,10 +28,10 @@ def _export(args: argparse.Namespace) -> int:
     from codegen.export import export, manifest_name
 
     model, files = export(args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
-    name = next(f for f in files if f.endswith(".h"))[:-2]
+    name = next(f for f in files if f.endswith(".manifest.json"))[: -len(".manifest.json")]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
-        f"wrote {args.out_dir}/{{{name}.h, {name}.c, {manifest_name(name)}}}: method {model.checkpoint.method}, "
+        f"wrote {args.out_dir}/{{{', '.join(files)}}}: method {model.checkpoint.method}, "
         f"flash tables {sizes['flash_table_bytes']} B, state RAM {sizes['ram_state_bytes']} B, "
         f"model sha256:{model.sha256[:16]}..."
     )

@@ -1,16 +1,20 @@
 """The golden model: numpy, exactly the integer arithmetic of the generated C, state included.
 
-It is written from the same rules as the templates but independently of them, and it is what the
-C is compared with bit for bit (``codegen verify``, the tests). Streams can be fed in chunks of
-any length, with resets in between, and the state (``state()``) has the C struct's fields.
+It is written from the same rules as the C kernel library (``codegen/kernels/tdc_kernels.h``) but
+independently of it, and it is what the C is compared with bit for bit (``codegen verify``, the
+tests). Streams can be fed in chunks of any length, with resets in between, and the state
+(``state()``) has the C struct's fields.
 
-Speed: the front end is vectorised over a whole chunk (exact int64 cumulative sums of the clamped
-samples give every window sum the C's running sum holds); only the network, which runs once every
-``D`` samples, is a Python loop over steps (numpy over the units).
+Speed: the window sums are vectorised over a whole chunk (exact int64 cumulative sums of the
+clamped samples over a private history give every window sum by its definition, the last
+min(n + 1, W) samples); the C's running sums (``window_current``, ``window_ring``) are tracked
+separately for the state comparison, so the two descriptions check each other. Only the network,
+which runs once every ``D`` samples, is a Python loop over steps (numpy over the units).
 
-The C accumulates each gate row in int64 starting from the bias; :mod:`codegen.quantize` proves
-every partial sum stays below the row bound < 2**62, so the C never wraps and the exact int64 dot
-products here are the same numbers.
+The C accumulates each gate row in int32 starting from the bias (SMLAD on a Cortex-M4);
+:mod:`codegen.quantize` proves every partial sum stays below 2**31, so the exact int64 dot products
+here are the same numbers. The golden rounding is written as floor divisions on int64 (numpy's
+``>>``), the C's as unsigned shifts of offset values: the same function, two derivations.
 
 For the error budget the model also keeps, per network step, the estimate before its final
 rounding to the output LSB (``fine_estimates``): that rounding is part of the API's unit, not of
@@ -21,17 +25,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from codegen.activations import ACT_FRAC, sigmoid_act, tanh_act
+from codegen.activations import sigmoid_q16, tanh_q15
 from codegen.fixedpoint import INT32_MAX, INT32_MIN, rdiv_round, rshift_round, sat32
+from codegen.qformats import ACT_STEP_BITS, C_FRAC, EST_FRAC, GATE_FRAC, TANH_FRAC, X_MAX
 from codegen.quantize import (
-    C_FRAC,
-    EST_FRAC,
     EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
-    X_MAX,
-    Z_FRAC,
+    X_SLOTS,
     QPla,
     QPoly3,
     QStream,
@@ -130,8 +132,13 @@ class GoldenPoly3(_Golden):
         return self._output(accel, drift)
 
 
+def _half_up_shift(x: np.ndarray | int, shift: int) -> np.ndarray:
+    """floor(x / 2**shift + 1/2) on int64 (the C ``tdck_round_shift32/64``)."""
+    return (np.asarray(x, dtype=np.int64) + (1 << (shift - 1))) >> shift
+
+
 class GoldenStream(_Golden):
-    """DLSTM methods and persistence: ring-buffer means, decimated network, zero-order hold."""
+    """DLSTM methods and persistence: window means, decimated network, zero-order hold."""
 
     model: QStream
     fine_estimates: list[float] | None = None  # set to [] to record (accel LSB, before rounding)
@@ -139,36 +146,54 @@ class GoldenStream(_Golden):
     def reset(self) -> None:
         m = self.model
         L, H = len(m.layers), m.hidden_size
-        self.window = np.zeros(m.window, dtype=np.int64)
-        self.window_sum = 0
-        self.window_pos = 0
-        self.window_fill = 0
+        self.history = np.zeros(0, dtype=np.int64)  # the last <= W clamped samples (not C state)
+        self.window_current = 0  # the C's running sum and ring of completed chunk sums
+        self.window_ring = np.zeros(m.chunks, dtype=np.int64)
+        self.ring_pos = 0
         self.phase = 0
         self.steps = 0
         self.estimate_q16 = 0  # the held estimate, Q16 accel LSB (C: estimate + estimate_frac / 2**16)
         self.shaper = 0
         self.prev_mean = 0
-        self.h = np.zeros((L, H), dtype=np.int64)
+        self.vec = np.zeros(m.vector_slots, dtype=np.int64)  # x pair, then h of each layer (padded)
         self.c = np.zeros((L, H), dtype=np.int64)
 
     def state(self) -> dict[str, np.ndarray | int]:
+        m = self.model
         out: dict[str, np.ndarray | int] = {
             **super().state(),
-            "window": self.window.copy(),
-            "window_sum": self.window_sum,
-            "window_pos": self.window_pos,
-            "window_fill": self.window_fill,
+            "window_current": self.window_current,
             "phase": self.phase,
             "steps": self.steps,
             "estimate": self.estimate_q16 >> EST_FRAC,  # floor (Python's >> on ints)
             "estimate_frac": self.estimate_q16 & (EST_ONE - 1),
             "shaper": self.shaper,
         }
-        if self.model.kind == "temperature":
+        if m.chunks:
+            out["window_ring"] = self.window_ring.copy()
+            out["ring_pos"] = self.ring_pos
+        if m.kind == "temperature":
             out["prev_mean"] = self.prev_mean
-        if self.model.layers:
-            out["h"], out["c"] = self.h.copy(), self.c.copy()
+        if m.layers:
+            out["vec"], out["c"] = self.vec.copy(), self.c.copy()
         return out
+
+    def _chunk_sums(self, signal: np.ndarray) -> None:
+        """The C's running sum: restarts at phase chunk_start, the completed sums go to the ring."""
+        m = self.model
+        D = m.frontend.decimation
+        starts = np.flatnonzero((self.phase + np.arange(signal.size)) % D == m.chunk_start)
+        if not starts.size:
+            self.window_current += int(signal.sum())
+            return
+        pieces = np.add.reduceat(signal, starts)
+        completed = [self.window_current + int(signal[: starts[0]].sum()), *(int(v) for v in pieces[:-1])]
+        if m.chunks:  # the C writes every completed sum in turn; only the last `chunks` remain
+            self.ring_pos = (self.ring_pos + max(0, len(completed) - m.chunks)) % m.chunks
+            for value in completed[-m.chunks :]:
+                self.window_ring[self.ring_pos] = value
+                self.ring_pos = (self.ring_pos + 1) % m.chunks
+        self.window_current = int(pieces[-1])
 
     def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
         m = self.model
@@ -177,14 +202,14 @@ class GoldenStream(_Golden):
             signal = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
         else:
             signal = self._clamp(accel, -m.limits.accel, m.limits.accel)
-        fill0, pos0 = self.window_fill, self.window_pos
-        history = self.window[:fill0] if fill0 < W else np.roll(self.window, -pos0)
-        extended = np.concatenate((history, signal))
+        extended = np.concatenate((self.history, signal))
         sums = np.concatenate(([0], np.cumsum(extended)))  # exact: |sum| < 2**52
         step_at = np.arange((D - self.phase) % D, n, D)  # chunk indices where phase == 0
-        position = fill0 + step_at
-        count = np.minimum(position + 1, W)
-        window_sums = sums[position + 1] - sums[position + 1 - count]
+        position = self.history.size + step_at
+        count = np.minimum(self.steps + np.arange(step_at.size), m.full_steps) * D + 1
+        count = np.minimum(count, W)  # min(n + 1, W): n = steps * D at a step
+        window_sums = sums[position + 1] - sums[position + 1 - np.minimum(count, position + 1)]
+        self._chunk_sums(signal)
         estimates = self._steps(window_sums, count)
 
         held = np.full(n, self.estimate_q16, dtype=np.int64)
@@ -199,12 +224,7 @@ class GoldenStream(_Golden):
         carries = np.diff(cumulative >> EST_FRAC, prepend=0)
         if n:
             self.shaper = int(cumulative[-1] & (EST_ONE - 1))
-        # Ring buffer, as the C leaves it: sample i of the chunk went to slot (pos0 + i) % W.
-        last = min(n, W)
-        self.window[(pos0 + np.arange(n - last, n)) % W] = signal[n - last :]
-        self.window_pos = (pos0 + n) % W
-        self.window_fill = min(fill0 + n, W)
-        self.window_sum = int(sums[fill0 + n] - sums[fill0 + n - self.window_fill])
+        self.history = extended[-W:] if W else extended[:0]
         self.phase = (self.phase + n) % D
         self.steps = min(self.steps + step_at.size, UINT32_MAX)
         return self._output(accel, whole + carries)
@@ -243,30 +263,31 @@ class GoldenStream(_Golden):
 
     def _network(self, x: np.ndarray) -> int:
         m = self.model
-        H = m.hidden_size
-        inp = x
-        for layer_index, layer in enumerate(m.layers):
-            h, c = self.h[layer_index], self.c[layer_index]
-            # |w_q| < 2**31, |in| < 2**31: products < 2**62 and row sums < 2**62 (proved), exact in int64
-            acc = layer.b + layer.wx.q @ inp + layer.wh.q @ h
-            z = sat32(rshift_round(acc, layer.z_shift))  # harmless saturation: activations flat there
-            gates = sigmoid_act(z, Z_FRAC)  # all rows at once; the g rows are replaced by tanh
-            i, f, o = gates[0:H], gates[H : 2 * H], gates[3 * H :]
-            g = tanh_act(z[2 * H : 3 * H], Z_FRAC)
-            # f*c is Q(30+24) < 2**61; i*g is Q60, rounded to Q54 first (it would overflow lifted)
-            wide = rshift_round(f * c + rshift_round(i * g, ACT_FRAC - C_FRAC), ACT_FRAC)
-            c_new = sat32(wide)
-            if np.any(c_new != wide):
+        H, slots = m.hidden_size, m.hidden_slots
+        self.vec[: x.size] = x
+        for index, layer in enumerate(m.layers):
+            v = self.vec[layer.offset : layer.offset + 2 * layer.pairs]
+            acc = layer.b + layer.w_padded @ v  # |partial sums| < 2**31 (proved): the C's int32 sums
+            s = layer.shift
+            i, f, o = sigmoid_q16(acc[0:H], s), sigmoid_q16(acc[H : 2 * H], s), sigmoid_q16(acc[3 * H :], s)
+            g = tanh_q15(acc[2 * H : 3 * H], s)
+            # c' = f c + i g: Q16 x Q24 and Q16 x Q15 lifted to Q40, rounded half up to Q24
+            wide = f * self.c[index] + (i * g) * (1 << (C_FRAC + GATE_FRAC - GATE_FRAC - TANH_FRAC))
+            rounded = _half_up_shift(wide, GATE_FRAC)
+            c_new = sat32(rounded)
+            if np.any(c_new != rounded):
                 self.flags |= FLAG_SATURATED
-            h_new = rshift_round(o * tanh_act(c_new, C_FRAC), ACT_FRAC)
-            self.c[layer_index], self.h[layer_index] = c_new, h_new
-            inp = h_new
+            h_new = _half_up_shift(o * tanh_q15(c_new, C_FRAC - ACT_STEP_BITS), GATE_FRAC)
+            self.c[index] = c_new
+            start = X_SLOTS + index * slots
+            self.vec[start : start + H] = h_new
         head = m.head
         assert head is not None
-        acc = head.bias_q + int(head.w.q[0] @ inp)
+        last = X_SLOTS + (len(m.layers) - 1) * slots
+        acc_head = head.bias_q + int(head.w.q[0] @ self.vec[last : last + H])
         if self.fine_estimates is not None:
-            self.fine_estimates.append(acc / 2.0**head.shift)
-        estimate = int(rshift_round(acc, head.shift - EST_FRAC))
+            self.fine_estimates.append(acc_head / 2.0**head.shift)
+        estimate = int(rshift_round(acc_head, head.shift - EST_FRAC))
         if abs(estimate) > EST_LIMIT:
             self.flags |= FLAG_SATURATED
             estimate = EST_LIMIT if estimate > 0 else -EST_LIMIT

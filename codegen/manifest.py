@@ -9,14 +9,11 @@ from __future__ import annotations
 import math
 
 from codegen import __version__
-from codegen.activations import ACT_ERROR_LSB, ACT_FRAC, ONE
+from codegen.activations import ACT_ERROR_LSB
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
+from codegen.qformats import C_FRAC, GATE_FRAC, H_FRAC, TANH_FRAC, X_FRAC, X_MIN_FRAC
 from codegen.quantize import (
     ACCEL_PER_MG,
-    C_FRAC,
-    INT64_SAFE,
-    X_FRAC,
-    Z_FRAC,
     QLayer,
     QMatrix,
     QPla,
@@ -24,11 +21,11 @@ from codegen.quantize import (
     QStream,
     QuantModel,
 )
-from codegen.render import FLAGS, activation_summary, state_bytes, state_fields, table_bytes
+from codegen.render import FLAGS, KERNEL_FILE, activation_summary, state_bytes, state_fields, table_bytes
 from trainer.dlstm.realtime import PERSISTENCE_KIND
 
 FORMAT = "mems-tdc-codegen-manifest"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 CELL_LIMIT = INT32_MAX / 2.0**C_FRAC
 
 
@@ -39,9 +36,9 @@ def _num(value: float) -> float | str:
     return float(f"{value:.6g}")
 
 
-def _matrix(m: QMatrix) -> dict[str, object]:
+def _matrix(m: QMatrix, storage: str) -> dict[str, object]:
     return {
-        "storage": "int32",
+        "storage": storage,
         "frac_bits": m.frac,
         "input_frac_bits": m.input_frac,
         "input_max": m.input_max,
@@ -50,21 +47,20 @@ def _matrix(m: QMatrix) -> dict[str, object]:
 
 
 def _layer(layer: QLayer) -> dict[str, object]:
-    z_real = layer.z_bound / 2.0**Z_FRAC
     return {
-        "w_x": _matrix(layer.wx),
-        "w_h": _matrix(layer.wh),
-        "bias_format": f"int64 Q{layer.acc_frac}",
-        "accumulator": f"int64 Q{layer.acc_frac}, initialised with the bias",
+        "w_x": _matrix(layer.wx, "int16"),
+        "w_h": _matrix(layer.wh, "int16"),
+        "bias_format": f"int32 Q{layer.acc_frac}",
+        "accumulator": f"int32 Q{layer.acc_frac}, initialised with the bias (SMLAD on a Cortex-M4)",
         "acc_frac_bits": layer.acc_frac,
         "acc_bound": layer.acc_bound,
-        "acc_limit": INT64_SAFE,
-        "acc_headroom_bits": _num(headroom_bits(layer.acc_bound, INT64_MAX)),
-        "z_shift": layer.z_shift,
-        "z_bound": _num(z_real),
-        "z_saturation_reachable": bool(layer.z_bound >= INT32_MAX),
-        "z_saturation_note": "z saturates at +-32, where both activations are already constant (exact)",
-        "forget_gate_max": _num(layer.forget_max_q / ONE),
+        "acc_limit": INT32_MAX,
+        "acc_headroom_bits": _num(layer.acc_headroom),
+        "activation_shift": layer.shift,
+        "z_bound": _num(layer.z_bound),
+        "z_note": "the accumulator indexes the activation table directly; beyond the table (|z| >= 8 for "
+        "tanh, 16 for sigmoid) the functions are constant",
+        "forget_gate_max": _num(layer.forget_max_q / 2.0**GATE_FRAC),
         "cell_bound": _num(layer.cell_bound),
         "cell_limit": _num(CELL_LIMIT),
         "cell_headroom_bits": _num(headroom_bits(layer.cell_bound, CELL_LIMIT)),
@@ -86,7 +82,8 @@ def _stream(model: QStream) -> dict[str, object]:
             "window_samples": model.window,
             "accel_window": fe.accel_window,
             "temp_window": fe.temp_window,
-            "mean": "exact int64 running sum, one rounding division per step"
+            "window_sums": f"running sum from phase {model.chunk_start} and {model.chunks} period sums (exact)",
+            "mean": "one rounding division per step"
             + (f" to Q{model.mean_frac}" if model.layers else " (the estimate, accel LSB)"),
         },
     }
@@ -97,14 +94,16 @@ def _stream(model: QStream) -> dict[str, object]:
     head = model.head
     assert head is not None
     out["quantisation"] = {
-        "rounding": "half away from zero (on unsigned magnitudes in C)",
+        "rounding": "network: half up (floor(x + 1/2)); inputs, head: half away from zero",
         "formats": {
-            "inputs_x": f"int32 Q4.{X_FRAC}, clamped to +-16 (flagged)",
-            "weights": f"int32; per layer Q(A - {X_FRAC}) for the layer-0 input, Q(A - {ACT_FRAC}) otherwise",
-            "accumulators": "int64 Q(A) per gate row, initialised with the int64 bias; bounded below 2^62",
-            "pre_activation_z": f"int32 Q5.{Z_FRAC}, saturated at +-32 (activations constant there)",
-            "gates_tanh_sigmoid_h": f"int32 Q{ACT_FRAC}",
-            "cell_state": f"int32 Q7.{C_FRAC}, saturated at +-128 (flagged)",
+            "inputs_x": f"int16 Q{X_FRAC} (+-8) or wider, down to Q{X_MIN_FRAC} (+-32), when layer 0 loses no "
+            "accumulator bit (x_frac_bits per input); clamping is flagged",
+            "weights": f"int16; per layer Q(A - x frac) for each layer-0 input, Q(A - {H_FRAC}) otherwise",
+            "accumulators": "int32 Q(A) per gate row, initialised with the int32 bias; bounded below 2^31",
+            "gates_i_f_o": f"Q{GATE_FRAC} (table sigmoid)",
+            "g_and_tanh_c": f"Q{TANH_FRAC} (table tanh)",
+            "h": f"int16 Q{H_FRAC}",
+            "cell_state": f"int32 Q7.{C_FRAC}, saturated at the int32 limits (flagged)",
             "head": "int32 weights, int64 bias and accumulator, estimate int32 accel LSB (flagged)",
             "window_mean": f"int64 Q{model.mean_frac} of the input unit (1/16 ug or mdegC)",
         },
@@ -120,13 +119,14 @@ def _stream(model: QStream) -> dict[str, object]:
                 "inv_q": q.inv_q,
                 "shift": q.shift,
                 "d_max": q.d_max,
+                "x_frac_bits": q.frac,
                 "product_headroom_bits": _num(q.product_headroom),
             }
             for q in model.inputs
         ],
         "layers": [_layer(layer) for layer in model.layers],
         "head": {
-            "w": _matrix(head.w),
+            "w": _matrix(head.w, "int32"),
             "shift": head.shift,
             "bias_q": head.bias_q,
             "acc_bound": head.acc_bound,
@@ -137,7 +137,7 @@ def _stream(model: QStream) -> dict[str, object]:
             "output_std_mg": model.frontend.output_std,
         },
     }
-    out["activations"] = activation_summary()
+    out["activations"] = activation_summary(min(layer.acc_frac for layer in model.layers))
     out["architecture"] = {
         "input_size": len(model.inputs),
         "hidden_size": model.hidden_size,
@@ -199,7 +199,7 @@ def build_manifest(
         "generator": f"mems-tdc codegen {__version__}",
         "name": name,
         "method": model.method,
-        "files": {"header": f"{name}.h", "source": f"{name}.c"},
+        "files": {"header": f"{name}.h", "source": f"{name}.c", "kernels": KERNEL_FILE},
         "model": {"sha256": sha256, "id": f"sha256:{sha256}"},
         "api": {
             "init": f"void {name}_init({name}_state_t *state)",

@@ -1,39 +1,42 @@
 """Float specs -> fixed-point models, with every scale, shift and worst-case bound decided offline.
 
-Formats (Qm.n = n fractional bits; all power-of-two scales, all rounding half away from zero):
+The formats of the streaming network are declared once in :mod:`codegen.qformats` (which also
+writes them into the C kernel library); the memoryless models keep their own (below). All scales
+are powers of two except the normalisation multipliers.
 
 =====================  ===========  ======================================================
 quantity               storage      format
 =====================  ===========  ======================================================
 acceleration in/out    int32        Q4 micro-g: 1 LSB = 1/16 ug (62.5 ng), range +-134 g
 temperature in         int32        milli-degC
+window sums            int64        exact: a running sum from the window's start phase, plus one
+                                    sum per decimation period when the window is longer
 window means           int64        Q24 of the input unit (fewer bits only when W * range needs it)
-network inputs x       int32        Q4.27, clamped to +-16 standard deviations
-weights                int32        per layer: Q(A - 27) for the layer-0 input, Q(A - 30) for h
-MAC accumulators       int64        Q(A), one per gate row, initialised with the bias (int64 Q(A))
-gate pre-activation z  int32        Q5.26 (one rounding from Q(A); saturation at +-32 is harmless)
-gates, h, tanh, sigma  int32        Q30
-cell state c           int32        Q7.24, explicit saturation at +-128 (flagged)
-head                   int32/int64  weights in accel LSB per unit of h, Q(f); bias, accumulator Q(f+30)
+network inputs x       int16        Q3.12 (+-8 standard deviations) or wider, down to Q5.10 (+-32),
+                                    when it costs layer 0 no accumulator bit; clamping is flagged
+weights                int16        per layer: Q(A - x frac) per layer-0 input, Q(A - 15) for h
+biases, accumulators   int32        Q(A), one per gate row; |b| + sum |w| |v| < 2**31 proved
+gates i, f, o          Q16          table sigmoid, 1 .. 65535
+g, tanh(c)             Q15          table tanh, -32767 .. 32767
+hidden state h         int16        Q15
+cell state c           int32        Q7.24, saturated at the int32 limits (flagged)
+head                   int32/int64  weights in accel LSB per unit of h, Q(f); bias, accumulator Q(f+15)
 held estimate          int64        Q16 accel LSB, saturated at +-(2**31 - 1) LSB (flagged)
 PLA slopes/intercepts  int32/int64  accel LSB per mdegC and accel LSB, Q(f_pla)
 cubic coefficients     int32        accel LSB, of u^k with u = (T - T_ref) / 2**p, Q(f_poly)
 =====================  ===========  ======================================================
 
-A layer's accumulator format Q(A) is the largest such that every weight fits int32 *and* the
-worst case of every row, ``|b_q| + sum_j |w_q| * max|input_q|``, stays below 2**62: the int64
-MACs can then never overflow, which is proved here, not hoped for. Both matrices of a layer share
-the accumulator (the layer-0 input is Q27, h is Q30: their weight formats differ by 3 bits), so
-each gate row is one chain of int32 x int32 -> int64 multiply-accumulates (an SMLAL each on a
-Cortex-M4) rounded once to Q5.26. The manifest records each bound and its headroom in bits.
+A layer's accumulator format Q(A) is the largest A (16 .. 30) such that every weight fits int16
+*and* the worst case of every row, ``|b_q| + sum_j |w_q| * 32767``, stays below 2**31: the int32
+multiply-accumulates (two per SMLAD on a Cortex-M4) can then never overflow, which is proved here,
+not hoped for. Both matrices of a layer share the accumulator (each layer-0 input column has
+its own weight format, Q(A - 12) .. Q(A - 10); h's weights are Q(A - 15)). The accumulator indexes the activation table directly
+(no rounding step): the gate rows read it with shift A - 4 (tanh) or A - 3 (sigmoid).
 
-Why this precision: a recursive model whitens the residual to a few micro-g, and the paper's
-Table 1 prints its Allan coefficients to three digits; with int16 weights and Q15 gates the
-quantised network's slowly varying error (0.2 ug RMS) moved the last digit. Here every stage
-resolves 2**-24 or better: A = 57 .. 59 on trained 2x10 models, so the weights are exact copies of
-the float32 ones for |w| >= 2**-4; z resolves 2**-26, gates and h 2**-30, c 2**-24, the
-activations 1e-8, the normalisation gain 2**-31. The network's own error is 0.2 ng RMS on a
-trained 2x10 model (docs/codegen.md, "Error budget").
+Why 16 bits: the budget (docs/codegen.md) is golden minus float at most 1e-3 mg RMS and 5e-3 mg
+maximum on the 2 h validation run, 300 times below the sensor's 0.354 mg noise; 16-bit operands
+meet it with a margin and run in a quarter of the instructions of the former int32 x int32 -> int64
+network (int32 weights had errors near 1e-7 mg: 10,000 times below the noise).
 
 Why the window mean is Q24: the temperature model's rate input differentiates two 5 s means 1 s
 apart, and Q8 cost 0.13 ug RMS there. A fine mean unit is shifted right (``pre_shift``, rounding)
@@ -48,29 +51,37 @@ from fractions import Fraction
 
 import numpy as np
 
-from codegen.activations import ACT_ERROR_LSB, ACT_FRAC, ACT_MAX, ONE
+from codegen.activations import ACT_ERROR_LSB, T_MAX, sigmoid_q16, tanh_q15
 from codegen.fixedpoint import (
+    INT16_MAX,
     INT32_MAX,
     INT64_MAX,
     headroom_bits,
     quantise_array,
     round_half_away,
 )
+from codegen.qformats import (
+    ACT_STEP_BITS,
+    EST_FRAC,
+    GATE_FRAC,
+    H_FRAC,
+    H_MAX,
+    MAX_ACC_FRAC,
+    MIN_ACC_FRAC,
+    TANH_FRAC,
+    X_FRAC,
+    X_MAX,
+    X_MIN_FRAC,
+)
 from codegen.spec import Checkpoint, DlstmModelSpec, FrontEndSpec, PersistenceSpec, PlaSpec, Poly3Spec
 from trainer.errors import UserError
 
-X_FRAC = 27
-H_FRAC = ACT_FRAC
-Z_FRAC = 26
-C_FRAC = 24
-EST_FRAC = 16  # the held estimate: Q16 accel LSB, rounded per sample with error feedback
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
 MAX_MEAN_FRAC = 24  # window means: Q24 of the input unit when the window allows (the rate input needs it)
 ACCEL_FRAC = 4  # the step API's acceleration unit is 2**-4 ug
 ACCEL_PER_MG = 1000 << ACCEL_FRAC
-MAX_ACC_FRAC = 60  # accumulator fractional bits when the weights are tiny (z shift <= 34)
-X_MAX = INT32_MAX  # |x_q| clamp: 16 standard deviations
-H_MAX = ACT_MAX  # |h_q| = |o * tanh(c)| < 1
+MAX_HEAD_FRAC = 45  # head weights' fractional bits when they are tiny
+X_SLOTS = 2  # the network inputs take two int16 slots of the state vector (one pair)
 INT64_SAFE = 1 << 62  # every int64 intermediate stays below this (one bit of margin)
 DEFAULT_ACCEL_LIMIT_G = 16.0
 MAX_ACCEL_LIMIT_G = 128.0  # 128 g * 16e6 LSB/g < 2**31
@@ -93,7 +104,8 @@ class Limits:
 
 @dataclass(frozen=True)
 class QMatrix:
-    """An int32 weight matrix, its fractional bits, and its share of the accumulator bound."""
+    """A weight matrix (int16 in the layers, int32 in the head), its fractional bits, and its share of
+    the accumulator bound."""
 
     q: np.ndarray  # int64 values within int32
     frac: int
@@ -127,6 +139,7 @@ class QInput:
     mean: float
     std: float
     unit: str
+    frac: int  # x_q is Q(frac): X_FRAC, or wider down to X_MIN_FRAC when layer 0 loses no bit
 
     @property
     def product_headroom(self) -> float:
@@ -135,34 +148,57 @@ class QInput:
 
 @dataclass(frozen=True)
 class QLayer:
-    """One LSTM layer: ``z = rshift_round(b + W_x in + W_h h, acc_frac - 26)`` per gate row."""
+    """One LSTM layer: per gate row ``acc = b + W v`` in int32 Q(acc_frac), v = (input, own h).
+
+    ``w_padded`` holds both matrices in the columns of the layer's slice of the state vector
+    (``vec[offset : offset + 2 * pairs]``: the inputs padded to a pair, then h), zeros at the
+    padding; the C kernel reads it interleaved per unit (:meth:`kernel_weights`).
+    """
 
     wx: QMatrix
     wh: QMatrix
-    b: np.ndarray  # int64, Q(acc_frac): the accumulators' initial values
+    b: np.ndarray  # int64 values within int32, Q(acc_frac): the accumulators' initial values
+    w_padded: np.ndarray  # (4H, 2 pairs) int64 values within int16
+    offset: int  # first slot of the layer's input in the state vector
     acc_frac: int
-    acc_bound: int  # worst-case |accumulator| over the rows, Q(acc_frac)
-    z_bound: int  # Q5.26, capped at INT32_MAX (where z saturates)
+    acc_bound: int  # worst-case |accumulator| over the rows, Q(acc_frac), < 2**31
+    z_bound: float  # worst-case |pre-activation| (real)
     cell_bound: float  # worst-case |c| (real units) from the gate bounds
-    forget_max_q: int  # Q30
+    forget_max_q: int  # Q16
 
     @property
     def hidden_size(self) -> int:
         return self.wh.q.shape[1]
 
     @property
-    def z_shift(self) -> int:
-        return self.acc_frac - Z_FRAC
+    def pairs(self) -> int:
+        return self.w_padded.shape[1] // 2
+
+    @property
+    def shift(self) -> int:
+        """The gate rows' activation shift: tanh reads acc / 2**(shift + 4), sigmoid one bit more."""
+        return self.acc_frac - ACT_STEP_BITS
 
     @property
     def acc_headroom(self) -> float:
-        return headroom_bits(self.acc_bound, INT64_MAX)
+        return headroom_bits(self.acc_bound, INT32_MAX)
+
+    def kernel_weights(self) -> np.ndarray:
+        """Packed int32 words ``w[j][p][r] = hi 2**16 + (lo mod 2**16)`` with ``lo, hi =
+        w_padded[r H + j][2p], w_padded[r H + j][2p + 1]``: unit j's rows i, f, g, o pair by pair."""
+        H = self.hidden_size
+        blocks = self.w_padded.reshape(4, H, self.pairs, 2).transpose(1, 2, 0, 3)  # [j][p][r][e]
+        return blocks[..., 1] * 65536 + (blocks[..., 0] & 0xFFFF)
+
+    def kernel_biases(self) -> np.ndarray:
+        """``b[j][r] = b[r H + j]``."""
+        return self.b.reshape(4, self.hidden_size).T.copy()
 
 
 @dataclass(frozen=True)
 class QHead:
     w: QMatrix  # (1, H), accel LSB per unit of h
-    shift: int  # frac + 30
+    shift: int  # frac + 15
     bias_q: int  # int64, Q(shift) accel LSB (head bias * std + mean): the accumulator's initial value
     acc_bound: int  # worst-case |accumulator|
     estimate_bound: float  # accel LSB
@@ -189,6 +225,30 @@ class QStream:
     @property
     def hidden_size(self) -> int:
         return self.layers[0].hidden_size if self.layers else 0
+
+    @property
+    def hidden_slots(self) -> int:
+        """Slots of one layer's h in the state vector: H padded to a pair."""
+        return self.hidden_size + self.hidden_size % 2
+
+    @property
+    def vector_slots(self) -> int:
+        return X_SLOTS + len(self.layers) * self.hidden_slots if self.layers else 0
+
+    @property
+    def chunks(self) -> int:
+        """Completed decimation periods the window needs besides the running sum: (W - 1) div D."""
+        return (self.window - 1) // self.frontend.decimation
+
+    @property
+    def chunk_start(self) -> int:
+        """The phase at which the running sum restarts: (1 - W) mod D."""
+        return (1 - self.window) % self.frontend.decimation
+
+    @property
+    def full_steps(self) -> int:
+        """From this network step on the window is full: ceil((W - 1) / D)."""
+        return -(-(self.window - 1) // self.frontend.decimation)
 
     def macs_per_step(self) -> int:
         """Multiply-accumulates of one network step (the lower bound of its cost)."""
@@ -240,58 +300,90 @@ def _ceil_shift(value: int, shift: int) -> int:
     return (value + (1 << shift) - 1) >> shift if shift else value
 
 
-def _act_bound(exact: np.ndarray) -> np.ndarray:
-    """Upper bound (Q30) of an integer activation whose exact value is at most ``exact``."""
-    return np.minimum(np.ceil(exact * ONE) + ACT_ERROR_LSB + 1, ACT_MAX).astype(np.int64)
+def _fits_int16(q: np.ndarray) -> bool:
+    return int(np.max(np.abs(q), initial=0)) <= INT16_MAX
 
 
-def _layer(spec_w_x: np.ndarray, spec_w_h: np.ndarray, spec_b: np.ndarray, index: int) -> QLayer:
-    in_frac, in_max = (X_FRAC, X_MAX) if index == 0 else (H_FRAC, H_MAX)
+def _gate_max(z_max: np.ndarray, kind: str) -> np.ndarray:
+    """Largest integer gate (Q16 sigmoid or Q15 tanh) for |z| <= z_max, with the table's error."""
+    z_q = np.minimum(np.ceil(z_max * 2.0**MIN_ACC_FRAC), INT32_MAX).astype(np.int64)
+    shift = MIN_ACC_FRAC - ACT_STEP_BITS
+    if kind == "sigmoid":
+        return np.minimum(sigmoid_q16(z_q, shift) + ACT_ERROR_LSB, T_MAX)
+    return np.minimum(tanh_q15(z_q, shift) + ACT_ERROR_LSB, (1 << TANH_FRAC) - 1)
+
+
+def _layer(
+    spec_w_x: np.ndarray,
+    spec_w_h: np.ndarray,
+    spec_b: np.ndarray,
+    index: int,
+    hidden_slots: int,
+    input_fracs: tuple[int, ...],
+) -> QLayer:
+    """``input_fracs``: the Q format of each input of the layer (layer 0: per network input)."""
+    in_frac = max(input_fracs)
     w_x = np.atleast_2d(np.asarray(spec_w_x, dtype=np.float64))
     w_h = np.atleast_2d(np.asarray(spec_w_h, dtype=np.float64))
     b = np.asarray(spec_b, dtype=np.float64)
-    for acc_frac in range(
-        MAX_ACC_FRAC, Z_FRAC - 1, -1
-    ):  # the largest A that fits; 57 .. 59 on trained 2x10 models
-        qx = _quantise_or_none(w_x, acc_frac - in_frac)
+    for acc_frac in range(MAX_ACC_FRAC, MIN_ACC_FRAC - 1, -1):  # the largest A that fits
+        columns = [_quantise_or_none(w_x[:, k], acc_frac - f) for k, f in enumerate(input_fracs)]
+        qx = None if any(c is None for c in columns) else np.stack(columns, axis=1)  # type: ignore[arg-type]
         qh = _quantise_or_none(w_h, acc_frac - H_FRAC)
         b_q = _quantise_or_none(b, acc_frac)
-        if qx is None or qh is None or b_q is None or not (_fits_int32(qx) and _fits_int32(qh)):
+        if qx is None or qh is None or b_q is None or not (_fits_int16(qx) and _fits_int16(qh)):
             continue
-        wx = QMatrix(qx, acc_frac - in_frac, in_max, in_frac)
+        wx = QMatrix(
+            qx, acc_frac - in_frac, X_MAX if index == 0 else H_MAX, in_frac
+        )  # frac: the finest column
         wh = QMatrix(qh, acc_frac - H_FRAC, H_MAX, H_FRAC)
         rows = [
             int(rx) + int(rh) + abs(int(bb))
             for rx, rh, bb in zip(wx.row_bounds, wh.row_bounds, b_q, strict=True)
         ]
         bound = max(rows, default=0)
-        if bound < INT64_SAFE:
+        if bound <= INT32_MAX:
             break
     else:
         real = np.sum(np.abs(w_x), axis=1) * 16.0 + np.sum(np.abs(w_h), axis=1) + np.abs(b)
         raise UserError(
-            f"layer {index}: weights too large for int32 with a safe int64 accumulator "
-            f"(largest row sum of 16 |w_x| + |w_h| + |b| = {float(np.max(real)):.4g})"
+            f"layer {index}: weights too large for int16 with a safe int32 accumulator of at least "
+            f"{MIN_ACC_FRAC} fractional bits (largest row sum of 16 |w_x| + |w_h| + |b| = {float(np.max(real)):.4g})"
         )
-    shift = acc_frac - Z_FRAC
-    z_rows = np.array([min(_ceil_shift(int(r), shift), INT32_MAX) for r in rows], dtype=np.int64)
     H = wh.q.shape[1]
-    z_real = z_rows / 2.0**Z_FRAC
-    i_max = _act_bound(0.5 * (1 + np.tanh(0.5 * z_real[0:H]))) / ONE
-    f_max_q = _act_bound(0.5 * (1 + np.tanh(0.5 * z_real[H : 2 * H])))
-    g_max = _act_bound(np.tanh(z_real[2 * H : 3 * H])) / ONE
-    # |c'| <= f |c| + i |g| + 2**-25 + 2**-55 (two roundings) -> geometric bound; f <= 1 - 2**-30 always.
-    cell = (i_max * g_max + 2.0**-24) / (1.0 - f_max_q / ONE)
+    n_in = wx.q.shape[1]
+    in_slots = X_SLOTS if index == 0 else hidden_slots
+    padded = np.zeros((4 * H, in_slots + hidden_slots), dtype=np.int64)
+    padded[:, :n_in] = wx.q
+    padded[:, in_slots : in_slots + H] = wh.q
+    offset = 0 if index == 0 else X_SLOTS + (index - 1) * hidden_slots
+    z_real = np.asarray(rows, dtype=np.float64) / 2.0**acc_frac
+    i_max = _gate_max(z_real[0:H], "sigmoid") / 2.0**GATE_FRAC
+    f_max_q = _gate_max(z_real[H : 2 * H], "sigmoid")
+    g_max = _gate_max(z_real[2 * H : 3 * H], "tanh") / 2.0**TANH_FRAC
+    # |c'| <= f |c| + i |g| + 2**-25 (one rounding) -> geometric bound; f <= 1 - 2**-16 always.
+    cell = (i_max * g_max + 2.0**-25) / (1.0 - f_max_q / 2.0**GATE_FRAC)
     return QLayer(
-        wx, wh, b_q, acc_frac, bound, int(np.max(z_rows)), float(np.max(cell)), int(np.max(f_max_q))
+        wx,
+        wh,
+        b_q,
+        padded,
+        offset,
+        acc_frac,
+        bound,
+        float(np.max(z_real, initial=0.0)),
+        float(np.max(cell, initial=0.0)),
+        int(np.max(f_max_q, initial=0)),
     )
 
 
-def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str) -> QInput:
+def _input(
+    name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: float, unit: str, frac: int = X_FRAC
+) -> QInput:
     mu_q = round_half_away(Fraction(mean) / unit_per_lsb)
     if abs(mu_q) >= INT64_SAFE // 2:
         raise UserError(f"input '{name}': mean {mean:g} {unit} is far outside the input range")
-    gain = unit_per_lsb / Fraction(std) * (1 << X_FRAC)  # x_q per LSB of v
+    gain = unit_per_lsb / Fraction(std) * (1 << frac)  # x_q per LSB of v
     # inv_q gets 31 significant bits: the product d_max * inv_q is then about 2**(31 + shift), so
     # shift <= 30 keeps it in int64; a fine input unit (gain < 1) is first shifted right by
     # pre_shift (rounding), which costs nothing measurable and leaves inv_q its 31 bits.
@@ -306,18 +398,18 @@ def _input(name: str, v_max: int, unit_per_lsb: Fraction, mean: float, std: floa
         saturating = -(-(X_MAX + 1) * (1 << shift) // inv_q)  # ceil: from here on x clamps anyway
         d_max = min(v_span, saturating)
         if d_max * inv_q < INT64_SAFE:
-            return QInput(name, mu_q, pre_shift, inv_q, shift, d_max, mean, std, unit)
+            return QInput(name, mu_q, pre_shift, inv_q, shift, d_max, mean, std, unit, frac)
         shift -= 1
     raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
 
 def _head(spec: DlstmModelSpec) -> QHead:
-    """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 30)``: y * std + mean folded in, int64."""
+    """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 15)``: y * std + mean folded in, int64."""
     fe = spec.frontend
     scale = Fraction(fe.output_std) * ACCEL_PER_MG  # accel LSB per unit of y
     w_real = np.asarray(spec.head_w, dtype=np.float64) * float(scale)
     bias = (Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean)) * ACCEL_PER_MG
-    for frac in range(MAX_ACC_FRAC - H_FRAC, EST_FRAC - H_FRAC - 1, -1):
+    for frac in range(MAX_HEAD_FRAC, EST_FRAC - H_FRAC - 1, -1):
         q = _quantise_or_none(w_real[None, :], frac)
         if q is None or not _fits_int32(q):
             continue
@@ -356,20 +448,14 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)
-    inputs: tuple[QInput, ...]
+    # (name, largest |v| in mean LSB, unit per LSB, mean, std, unit) of each network input
+    features: list[tuple[str, int, Fraction, float, float, str]]
     if fe.kind == "recursive":
         frac = _mean_frac(fe.accel_window, limits.accel)
         mean_lsb = 1 << frac
-        inputs = (
-            _input(
-                "accel",
-                limits.accel * mean_lsb,
-                Fraction(1, ACCEL_PER_MG * mean_lsb),
-                fe.inputs_mean[0],
-                fe.inputs_std[0],
-                "mg",
-            ),
-        )
+        features = [
+            ("accel", limits.accel * mean_lsb, Fraction(1, ACCEL_PER_MG * mean_lsb), 0.0, 0.0, "mg"),
+        ]
     else:
         t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
         span = limits.temp_hi_mdegc - limits.temp_lo_mdegc
@@ -378,18 +464,41 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
         rate_unit = (
             Fraction(60) * Fraction(fe.rate_hz) / (fe.decimation * 1000 * mean_lsb)
         )  # degC/min per LSB
-        inputs = (
-            _input(
-                "temp",
-                t_max * mean_lsb,
-                Fraction(1, 1000 * mean_lsb),
-                fe.inputs_mean[0],
-                fe.inputs_std[0],
-                "degC",
-            ),
-            _input("rate", span * mean_lsb, rate_unit, fe.inputs_mean[1], fe.inputs_std[1], "degC/min"),
-        )
-    layers = tuple(_layer(layer.w_x, layer.w_h, layer.b, k) for k, layer in enumerate(spec.layers))
+        features = [
+            ("temp", t_max * mean_lsb, Fraction(1, 1000 * mean_lsb), 0.0, 0.0, "degC"),
+            ("rate", span * mean_lsb, rate_unit, 0.0, 0.0, "degC/min"),
+        ]
+    features = [
+        (name, v_max, unit_lsb, fe.inputs_mean[k], fe.inputs_std[k], unit)
+        for k, (name, v_max, unit_lsb, _, _, unit) in enumerate(features)
+    ]
+    hidden = spec.layers[0].w_h.shape[1] if spec.layers else 0
+    slots = hidden + hidden % 2
+
+    def first_layer(fracs: list[int]) -> QLayer:
+        layer = spec.layers[0]
+        return _layer(layer.w_x, layer.w_h, layer.b, 0, slots, tuple(fracs))
+
+    # A difference of means (the rate input) is heavy-tailed (the first steps after a reset, sensor
+    # noise): clamped at +-8 sigma it cost a trained dlstm-temp 0.07 mg. It gets the widest range
+    # (down to Q10: +-32 sigma) that costs layer 0 no accumulator bit. Levels keep Q12: a wider
+    # format costs them resolution (6e-4 instead of 4e-4 mg RMS) and they stay within +-8 sigma.
+    fracs = [X_FRAC] * len(features)
+    base = first_layer(fracs).acc_frac
+    for k in [k for k, feature in enumerate(features) if feature[0] == "rate"]:
+        for wider in range(X_FRAC - 1, X_MIN_FRAC - 1, -1):
+            trial = [*fracs[:k], wider, *fracs[k + 1 :]]
+            try:
+                if first_layer(trial).acc_frac < base:
+                    break
+            except UserError:
+                break
+            fracs = trial
+    inputs = tuple(_input(*feature, frac=f) for feature, f in zip(features, fracs, strict=True))
+    layers = tuple(
+        _layer(layer.w_x, layer.w_h, layer.b, k, slots, tuple(fracs) if k == 0 else (H_FRAC,) * hidden)
+        for k, layer in enumerate(spec.layers)
+    )
     return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec), frac)
 
 

@@ -16,28 +16,14 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.activations import (
-    ACT_FRAC,
-    ACT_MAX,
-    EXTRA_BITS,
-    RAW_FRAC,
-    RAW_MAX,
-    SLOPE_SHIFT,
-    TABLE_FRAC,
-    TABLE_LAST,
-    TABLE_STEP_BITS,
-    TANH_TABLE,
-    activation_errors,
-)
+from codegen.activations import ACT_SLOPE, ACT_VALUE, activation_errors
+from codegen.qformats import ACT_SEGMENTS, C_FRAC, EST_FRAC, header_with_block
+from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.quantize import (
-    C_FRAC,
-    EST_FRAC,
     EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
-    X_MAX,
-    Z_FRAC,
     QPla,
     QStream,
     QuantModel,
@@ -123,7 +109,8 @@ class Field:
 
 
 def state_fields(model: QuantModel) -> list[Field]:
-    """State struct members, widest alignment first (no interior padding)."""
+    """State struct members, widest alignment first (no interior padding; the int16 vector starts
+    at a multiple of 4 bytes, so the DSP path's 32-bit reads of it are aligned)."""
     common = [
         Field("uint32_t", "flags", (), "sticky FLAG_* bits"),
         Field("uint32_t", "samples", (), "samples since init (saturating)"),
@@ -131,29 +118,39 @@ def state_fields(model: QuantModel) -> list[Field]:
     if not isinstance(model, QStream):
         return common
     unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
-    fields = [
-        Field("int64_t", "window_sum", (), f"exact sum of the window, {unit}"),
-        Field("int32_t", "window", (model.window,), f"ring buffer of clamped inputs, {unit}"),
-    ]
+    fields = [Field("int64_t", "window_current", (), f"running sum since the window's start phase, {unit}")]
+    if model.chunks:
+        fields.append(
+            Field("int64_t", "window_ring", (model.chunks,), f"sums of the last decimation periods, {unit}")
+        )
+    if model.kind == "temperature":
+        fields.append(
+            Field("int64_t", "prev_mean", (), f"window mean at the previous step, Q{model.mean_frac} mdegC")
+        )
     L, H = len(model.layers), model.hidden_size
     if L:
-        fields.append(Field("int32_t", "c", (L, H), "cell states, Q7.24"))
-        fields.append(Field("int32_t", "h", (L, H), "hidden states, Q30"))
-    fields.append(Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug, whole part (floor)"))
-    if model.kind == "temperature":
-        fields.insert(
-            1,
-            Field("int64_t", "prev_mean", (), f"window mean at the previous step, Q{model.mean_frac} mdegC"),
-        )
+        fields.append(Field("int32_t", "c", (L, H), f"cell states, Q7.{C_FRAC}"))
     fields += [
+        Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug, whole part (floor)"),
         Field("uint32_t", "estimate_frac", (), "its fraction, 1/2^16 of 1/16 ug"),
         Field("uint32_t", "shaper", (), "output rounding: accumulated fractions, 1/2^16 of 1/16 ug"),
-        Field("uint32_t", "window_pos", (), "next ring slot"),
-        Field("uint32_t", "window_fill", (), "samples in the window"),
+    ]
+    if model.chunks:
+        fields.append(Field("uint32_t", "ring_pos", (), "next slot of window_ring"))
+    fields += [
         Field("uint32_t", "phase", (), "n mod decimation; the network steps at 0"),
         Field("uint32_t", "steps", (), "network steps since reset (saturating)"),
         *common,
     ]
+    if L:
+        fields.append(
+            Field(
+                "int16_t",
+                "vec",
+                (model.vector_slots,),
+                "network inputs x (Q11, a pair), then h of each layer (Q15)",
+            )
+        )
     return fields
 
 
@@ -172,11 +169,9 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
     sizes = {"model_id_string": len("sha256:") + 64 + 1}
     if isinstance(model, QStream):
         if model.layers:
-            sizes["tanh_table"] = 4 * len(TANH_TABLE)
-            sizes["weights"] = sum(4 * (lay.wx.q.size + lay.wh.q.size) for lay in model.layers) + 4 * (
-                model.hidden_size
-            )
-            sizes["biases"] = sum(8 * lay.b.size for lay in model.layers)
+            sizes["activation_table"] = 2 * (ACT_VALUE.size + ACT_SLOPE.size)
+            sizes["weights"] = sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size
+            sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
     elif isinstance(model, QPla):
         sizes["pla_tables"] = (
             4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
@@ -244,25 +239,31 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             decimation=fe.decimation,
             step_hz=f"{fe.rate_hz / fe.decimation:g}",
             window=model.window,
+            chunks=model.chunks,
+            vector_slots=model.vector_slots,
+            chunk_start=model.chunk_start,
+            full_steps=model.full_steps,
             mean_scale=f"INT64_C({1 << model.mean_frac})",
             mean_frac=model.mean_frac,
             est_frac=EST_FRAC,
-            est_one=1 << EST_FRAC,
             est_limit=_c_int(EST_LIMIT, 64),
             layers=[
                 {
                     "rows": lay.wx.q.shape[0],
                     "n_in": lay.wx.q.shape[1],
+                    "pairs": lay.pairs,
+                    "offset": lay.offset,
+                    "h_start": model.vector_slots - (len(model.layers) - k) * model.hidden_slots,
                     "wx_frac": lay.wx.frac,
                     "wh_frac": lay.wh.frac,
                     "acc_frac": lay.acc_frac,
                     "acc_bound_text": _bound_text(lay.acc_bound),
-                    "wx": _matrix_rows(lay.wx.q),
-                    "wh": _matrix_rows(lay.wh.q),
-                    "b": _rows(lay.b, width=64, per_line=4),
-                    "shift": lay.z_shift,
+                    "w": _rows(lay.kernel_weights(), per_line=8),
+                    "w_size": lay.w_padded.size,
+                    "b": _rows(lay.kernel_biases(), per_line=4),
+                    "shift": lay.shift,
                 }
-                for lay in model.layers
+                for k, lay in enumerate(model.layers)
             ],
             hidden=model.hidden_size,
             inputs=[
@@ -276,25 +277,9 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 }
                 for q in model.inputs
             ],
-            x_max=X_MAX,
-            tanh_table=_rows(TANH_TABLE, per_line=8),
-            table_last=TABLE_LAST,
-            raw_last=_c_int(int(TANH_TABLE[TABLE_LAST]) << EXTRA_BITS, 64),
-            raw_max=_c_int(RAW_MAX, 64),
-            raw_one=_c_int(1 << RAW_FRAC, 64),
-            one_q62=f"UINT64_C({1 << (2 * TABLE_FRAC)})",
-            slope_shift=SLOPE_SHIFT,
-            extra_scale=1 << EXTRA_BITS,
-            tanh_round=1 << (RAW_FRAC - ACT_FRAC - 1),
-            tanh_out_shift=RAW_FRAC - ACT_FRAC,
-            sigmoid_round=1 << (RAW_FRAC - ACT_FRAC),
-            sigmoid_out_shift=RAW_FRAC + 1 - ACT_FRAC,
-            act_max=ACT_MAX,
-            act_frac=ACT_FRAC,
-            tanh_shift=Z_FRAC - TABLE_STEP_BITS,
-            sigmoid_shift=Z_FRAC + 1 - TABLE_STEP_BITS,
-            cell_tanh_shift=C_FRAC - TABLE_STEP_BITS,
-            ig_shift=ACT_FRAC - C_FRAC,
+            act_value=_rows(ACT_VALUE, per_line=12),
+            act_slope=_rows(ACT_SLOPE, per_line=12),
+            act_segments=ACT_SEGMENTS,
         )
         if model.head is not None:
             ctx["head"] = {
@@ -303,6 +288,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 "shift": model.head.shift,
                 "bias": _c_int(model.head.bias_q, 64),
                 "acc_bound_text": _bound_text(model.head.acc_bound),
+                "h_start": model.vector_slots - model.hidden_slots,
             }
         macros += [
             ("SAMPLE_RATE_HZ", f"{fe.rate_hz:g}"),
@@ -344,14 +330,26 @@ def _environment() -> jinja2.Environment:
     )
 
 
+KERNEL_FILE = "tdc_kernels.h"
+
+
+def kernel_header() -> str:
+    """The kernel library as shipped (its Q-format block checked against codegen.qformats)."""
+    text = KERNEL_HEADER.read_text(encoding="utf-8")
+    if header_with_block(text) != text:
+        raise UserError(f"{KERNEL_HEADER}: Q-format block out of date (python -m codegen.qformats --write)")
+    return text
+
+
 def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = ()) -> dict[str, str]:
-    """``{NAME.h: text, NAME.c: text}``; ``notes`` are lines for the header's comment."""
+    """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}``; ``notes`` are lines for the header's comment."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
     return {
         f"{name}.h": env.get_template("module.h.j2").render(ctx),
         f"{name}.c": env.get_template("module.c.j2").render(ctx),
+        KERNEL_FILE: kernel_header(),
     }
 
 
@@ -366,12 +364,13 @@ def manifest_json(manifest: dict[str, object]) -> str:
     return json.dumps(manifest, indent=2, sort_keys=True) + "\n"
 
 
-def activation_summary() -> dict[str, object]:
-    errors = activation_errors(Z_FRAC, C_FRAC)
+def activation_summary(acc_frac: int) -> dict[str, object]:
+    errors = activation_errors(acc_frac, C_FRAC)
     return {
-        "method": f"tanh table of {TABLE_LAST + 1} uint32 Q31 entries (step 1/{1 << TABLE_STEP_BITS}, inputs "
-        f"0..{TABLE_LAST >> TABLE_STEP_BITS}) with cubic Hermite interpolation (slopes 1 - tanh^2 from the "
-        "entries); sigmoid(z) = (1 + tanh(z/2)) / 2; outputs Q30, rounded once",
-        "table_bytes": 4 * len(TANH_TABLE),
+        "method": f"one table of tanh(x) + 1 in Q15 over x in -8 .. 8, {ACT_SEGMENTS} segments with "
+        "offline-computed value and slope (uint16 each), linear interpolation; sigmoid(z) = the same "
+        "table at z / 2, in Q16; tanh in Q15",
+        "table_bytes": 2 * (ACT_VALUE.size + ACT_SLOPE.size),
+        "measured_at_acc_frac_bits": acc_frac,
         **{kind: err.to_dict() for kind, err in errors.items()},
     }

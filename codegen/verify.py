@@ -136,6 +136,10 @@ def integer_recording(rec: Recording, accel: np.ndarray, temp: np.ndarray) -> Re
     return Recording(columns, dict(rec.meta), rec.source)
 
 
+IMPROVEMENT_BUDGET_PP = 0.1  # the quantised model's Allan improvements within 0.1 percentage point
+DRIFT_LEFT_BUDGET = 0.01  # and its drift left within 1 % of the float model's
+
+
 @dataclass(frozen=True)
 class Table1Check:
     """Table 1 of the quantised model against the float model's, figure by figure.
@@ -150,6 +154,23 @@ class Table1Check:
     within_half_unit: int
     text: str
     worst_half_unit_fraction: float = 0.0  # max |quantised - float| / (half a unit in the last place)
+    max_improvement_diff_pp: float = 0.0  # max |quantised - float| of the Allan improvements, points
+    drift_left_mg: tuple[float, float] | None = None  # RMS drift left (float, quantised), with truth
+
+    @property
+    def within_budget(self) -> bool:
+        """Allan improvements within 0.1 percentage point, drift left within 1 % (docs/codegen.md)."""
+        ratio = self.drift_left_ratio
+        return self.max_improvement_diff_pp < IMPROVEMENT_BUDGET_PP and (
+            ratio is None or ratio < DRIFT_LEFT_BUDGET
+        )
+
+    @property
+    def drift_left_ratio(self) -> float | None:
+        """|quantised / float - 1| of the drift left (the budget: at most 1 %)."""
+        if self.drift_left_mg is None or self.drift_left_mg[0] <= 0:
+            return None
+        return abs(self.drift_left_mg[1] / self.drift_left_mg[0] - 1.0)
 
     @property
     def ok(self) -> bool:
@@ -174,9 +195,11 @@ def _figures(table: AllanTable, column: str) -> list[tuple[float, str]]:
     return out
 
 
-def _check(table: AllanTable, reference: str, quantised: str) -> Table1Check:
+def _check(
+    table: AllanTable, reference: str, quantised: str, drift: tuple[float, float] | None = None
+) -> Table1Check:
     identical = near = 0
-    worst = 0.0
+    worst = points = 0.0
     pairs = list(zip(_figures(table, reference), _figures(table, quantised), strict=True))
     for (a, kind), (b, _) in pairs:
         if not (np.isfinite(a) and np.isfinite(b)):
@@ -185,11 +208,13 @@ def _check(table: AllanTable, reference: str, quantised: str) -> Table1Check:
         text = (lambda v: f"{v:.2e}") if kind == "sci" else (lambda v: f"{v:.2f}")
         half = _half_unit_sci(a) if kind == "sci" else 0.005
         worst = max(worst, abs(a - b) / half)
+        if kind == "pct":
+            points = max(points, abs(a - b))
         if text(a) == text(b):
             identical += 1
         elif abs(a - b) < half:
             near += 1
-    return Table1Check(len(pairs), identical, near, table.to_text(), worst)
+    return Table1Check(len(pairs), identical, near, table.to_text(), worst, points, drift)
 
 
 def compare_table1(
@@ -200,8 +225,18 @@ def compare_table1(
     from trainer.scoring.evaluate import evaluate
 
     columns = {method: golden_mg, "float": float_mg, "float, integer inputs": float_on_ints_mg}
-    table = evaluate(rec, columns).table
-    return _check(table, "float", method), _check(table, "float, integer inputs", method)
+    result = evaluate(rec, columns)
+    table, drift = result.table, result.drift
+
+    def left(reference: str) -> tuple[float, float] | None:
+        if reference not in drift or method not in drift:
+            return None
+        return drift[reference].residual_rms_mg, drift[method].residual_rms_mg
+
+    return (
+        _check(table, "float", method, left("float")),
+        _check(table, "float, integer inputs", method, left("float, integer inputs")),
+    )
 
 
 def verify(
@@ -302,13 +337,15 @@ def report_lines(result: VerifyResult) -> list[str]:
         if t is None:
             continue
         lines.append(
-            f"Table 1 (quantised vs {label}): {t.identical} of {t.figures} figures print identically"
+            f"Table 1 (quantised vs {label}): {t.identical} of {t.figures} figures print identically; "
+            f"improvements within {t.max_improvement_diff_pp:.2g} percentage points"
             + (
-                f", {t.within_half_unit} differ by less than half a unit in the last place (rounding boundary)"
-                if t.within_half_unit
+                f", drift left {t.drift_left_mg[1]:.4g} mg vs {t.drift_left_mg[0]:.4g} mg "
+                f"({100 * (t.drift_left_ratio or 0.0):.2g} %)"
+                if t.drift_left_mg is not None
                 else ""
             )
-            + ("" if t.ok else "; SOME DIFFER MORE")
-            + f" (largest difference {t.worst_half_unit_fraction:.2g} of half a unit in the last place)"
+            + (": within the budget" if t.within_budget else ": OUTSIDE THE BUDGET")
+            + f" ({IMPROVEMENT_BUDGET_PP:g} pp, {100 * DRIFT_LEFT_BUDGET:g} %)"
         )
     return lines

@@ -54,6 +54,7 @@ class Build:
     name: str
     out: Path
     extra_cflags: str = ""
+    ldlibs: str = ""  # e.g. "-lm" (the float32 anchors of the benchmark)
 
     def make(self, *targets: str, **variables: str) -> str:
         """Run firmware_c/Makefile; a failure (warnings are errors) raises with the compiler output."""
@@ -66,6 +67,7 @@ class Build:
             f"NAME={self.name}",
             f"OUT={self.out.resolve()}",
             f"EXTRA_CFLAGS={self.extra_cflags}",
+            f"LDLIBS={self.ldlibs}",
             *(f"{k}={v}" for k, v in variables.items()),
             *targets,
         ]

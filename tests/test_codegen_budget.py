@@ -1,6 +1,7 @@
-"""The golden model against the trainer's float models: the error budget, the Table 1 figures of
-trained networks (the issue's requirement), the cell state's precision over a 2 h stream, the
-output's error feedback, the documented saturation of the cell state, and (slow) the full verify."""
+"""The golden model against the trainer's float models: the error budget (golden minus float at
+most 1e-3 mg RMS and 5e-3 mg maximum, Allan improvements within 0.1 percentage point, drift left
+within 1 % of the float model's), the cell state's precision over a 2 h stream, the documented
+saturation of the cell state, and (slow) the full verify."""
 
 from __future__ import annotations
 
@@ -32,16 +33,17 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
 
 LSB_MG = 1.0 / ACCEL_PER_MG  # the output's unit, 1/16 ug
-# Documented budget of the integer arithmetic alone (golden minus float on the same integer inputs),
-# in mg. Per sample it is the output's rounding to 1/16 ug: uniform (0.29 LSB RMS) for the memoryless
-# methods, error feedback (0.41 LSB RMS, at most one LSB) for the streaming ones. Before that
-# rounding (the model's own arithmetic) it is below 1 ng, and so it is after the paper's 0.5 s
-# smoothing for the streaming methods (the error feedback averages out within a few samples).
-ARITHMETIC_RMS_MG = {"dlstm": 0.45, "dlstm-temp": 0.45, "persistence": 0.45, "pla": 0.32, "poly3": 0.32}
-ARITHMETIC_MAX_LSB = {"dlstm": 1.0, "dlstm-temp": 1.0, "persistence": 1.0, "pla": 0.5, "poly3": 0.5}
-NETWORK_RMS_MG, NETWORK_MAX_MG = 3e-7, 1e-6  # 0.3 ng and 1 ng; measured 0.05 .. 0.2 ng RMS
-SMOOTHED_RMS_MG = 1e-6  # streaming methods; the memoryless ones' white rounding averages to 0.03 LSB
-SMOOTHED_RMS_LSB = {"dlstm": 0.016, "dlstm-temp": 0.016, "persistence": 0.016, "pla": 0.04, "poly3": 0.04}
+# The budget of the generated arithmetic (golden minus float on the same integer inputs), mg: the
+# issue's restatement for the networks (16-bit operands, table activations); the memoryless methods
+# and persistence keep the output's rounding to 1/16 ug as their only error (uniform, 0.29 LSB RMS;
+# persistence: error feedback, 0.41 LSB RMS, at most one LSB).
+BUDGET_RMS_MG, BUDGET_MAX_MG = 1e-3, 5e-3
+ARITHMETIC_RMS_MG = {"dlstm": BUDGET_RMS_MG, "dlstm-temp": BUDGET_RMS_MG, "persistence": 0.45 * LSB_MG}
+ARITHMETIC_RMS_MG |= {"pla": 0.32 * LSB_MG, "poly3": 0.32 * LSB_MG}
+ARITHMETIC_MAX_MG = {"dlstm": BUDGET_MAX_MG, "dlstm-temp": BUDGET_MAX_MG, "persistence": 1.0 * LSB_MG + 1e-6}
+ARITHMETIC_MAX_MG |= {"pla": 0.5 * LSB_MG + 1e-6, "poly3": 0.5 * LSB_MG + 1e-6}
+IMPROVEMENT_PP = 0.1  # Allan improvements of the quantised model within 0.1 percentage point
+DRIFT_LEFT_RATIO = 0.01  # drift left within 1 % of the float model's
 
 
 @pytest.fixture(scope="module")
@@ -88,13 +90,12 @@ def test_golden_against_the_trainers_float_model(method: str, recording: Recordi
         recording.sample_rate_hz,
         fine,
     )
-    assert budget.arithmetic_rms_mg < ARITHMETIC_RMS_MG[method] * LSB_MG
-    assert budget.arithmetic_max_abs_mg < ARITHMETIC_MAX_LSB[method] * LSB_MG + NETWORK_MAX_MG
-    assert budget.smoothed_rms_mg < SMOOTHED_RMS_LSB[method] * LSB_MG
-    if fine is not None:
+    assert budget.arithmetic_rms_mg < ARITHMETIC_RMS_MG[method]
+    assert budget.arithmetic_max_abs_mg < ARITHMETIC_MAX_MG[method]
+    if fine is not None and method != "persistence":
         assert budget.network_rms_mg is not None and budget.network_max_abs_mg is not None
-        assert budget.network_rms_mg < NETWORK_RMS_MG and budget.network_max_abs_mg < NETWORK_MAX_MG
-    assert budget.rms_mg < budget.noise_mg / 1000
+        assert budget.network_rms_mg < BUDGET_RMS_MG and budget.network_max_abs_mg < BUDGET_MAX_MG
+    assert budget.rms_mg < budget.noise_mg / 300  # 300 times below the sensor's white noise
 
 
 # ------------------------------------------------------------------------- trained networks, Table 1
@@ -124,10 +125,12 @@ def _on_the_mdegc_grid(path: Path, directory: Path) -> Path:
     return grid
 
 
-def _assert_identical(table: Table1Check | None, margin: float) -> None:
+def _assert_within_budget(table: Table1Check | None) -> None:
     assert table is not None
-    assert table.identical == table.figures == 7, table.text
-    assert table.worst_half_unit_fraction < margin  # far from any rounding boundary
+    assert table.max_improvement_diff_pp < IMPROVEMENT_PP, table.text
+    ratio = table.drift_left_ratio
+    assert ratio is not None and ratio < DRIFT_LEFT_RATIO, table.drift_left_mg
+    assert table.within_budget
 
 
 def _check_trained(method: str, train: Path, valid: Path, work: Path, cycles: int) -> None:
@@ -143,24 +146,25 @@ def _check_trained(method: str, train: Path, valid: Path, work: Path, cycles: in
     assert result.mismatches == 0 and result.state_equal
     b = result.budget
     assert b.network_rms_mg is not None and b.network_max_abs_mg is not None
-    assert b.network_rms_mg < NETWORK_RMS_MG and b.network_max_abs_mg < NETWORK_MAX_MG
-    assert b.smoothed_rms_mg < SMOOTHED_RMS_MG
-    # the generator's share: the float model fed the C's integer inputs prints the same Table 1
-    _assert_identical(result.table1_integer_inputs, 0.05)
+    assert b.network_rms_mg < BUDGET_RMS_MG and b.network_max_abs_mg < BUDGET_MAX_MG
+    assert b.arithmetic_rms_mg < BUDGET_RMS_MG and b.arithmetic_max_abs_mg < BUDGET_MAX_MG
+    _assert_within_budget(result.table1_integer_inputs)
     if method == "dlstm-temp":
         # the rate input differentiates 5 s temperature means: the API's 1 mdegC rounding of the
-        # simulation's float temperatures moves the float model's own B by up to 5 half-units, so
-        # the comparison with the float model is made on temperatures a digital sensor could give
+        # simulation's float temperatures moves the float model's own figures, so the comparison
+        # with the float model is made on temperatures a digital sensor could give
         result = verify(model, work / "out", _on_the_mdegc_grid(valid, work))
-    _assert_identical(result.table1, 0.25)
+    b = result.budget
+    assert b.rms_mg < BUDGET_RMS_MG and b.max_abs_mg < BUDGET_MAX_MG
+    _assert_within_budget(result.table1)
+    print(f"{method}: {b.rms_mg:.3g} mg RMS, {b.max_abs_mg:.3g} mg max; {result.table1}")
 
 
 @pytest.mark.parametrize(("method", "cycles"), [("dlstm-issa", 2), ("dlstm-temp", 0)])
 def test_trained_networks_print_the_float_models_table1(
     method: str, cycles: int, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
 ) -> None:
-    """The issue's requirement on small but real DLSTMs (30 min training and validation runs):
-    the quantised model's Table 1 equals the float model's to the printed digit, with margin."""
+    """The error budget on small but real DLSTMs (30 min training and validation runs)."""
     train, valid = _simulate_pair(tmp_path_factory.getbasetemp() / "paper_short", 1800)
     _check_trained(method, train, valid, tmp_path, cycles)
 
@@ -214,16 +218,16 @@ def test_cell_state_does_not_drift_over_a_two_hour_stream(
     assert err.size == n_steps
     quarter = err.size // 4
     first, last = np.sqrt(np.mean(err[:quarter] ** 2)), np.sqrt(np.mean(err[-quarter:] ** 2))
-    assert last < 1.5 * first + 1e-8
-    assert np.max(np.abs(err)) < 2e-5  # mg; this network amplifies perturbations (float too)
-    assert np.sqrt(np.mean(err**2)) < 2e-7
+    assert last < 1.5 * first + 1e-6
+    assert np.max(np.abs(err)) < BUDGET_MAX_MG  # mg; this network amplifies perturbations (float too)
+    assert np.sqrt(np.mean(err**2)) < BUDGET_RMS_MG
     print(
         f"RMS {np.sqrt(np.mean(err**2)):.3g} first {first:.3g} last {last:.3g} max {np.max(np.abs(err)):.3g}"
     )
 
 
 def test_cell_state_saturates_explicitly_and_is_flagged(recording: Recording, tmp_path: Path) -> None:
-    """Forget gate = 1 in fixed point and i*g = 1: c grows by 1 per step until it saturates at 128."""
+    """Forget gate = 1 - 2**-16 and i*g = 1: c grows by about 1 per step until it saturates at 128."""
     H = 1
     weights = {
         "w_x0": torch.zeros(4 * H, 1),
@@ -268,7 +272,3 @@ def test_full_paper_recording_verifies_with_zero_mismatches(
     printed = capsys.readouterr().out
     assert "samples compared: 1440000" in printed and "mismatches: 0\n" in printed
     assert "final state identical: yes" in printed
-    same = "7 of 7 figures print identically"
-    assert f"Table 1 (quantised vs float on the same integer inputs): {same}" in printed
-    if method != "dlstm-temp":  # see _check_trained: the temperature's 1 mdegC rounding, not the C
-        assert f"Table 1 (quantised vs float): {same}" in printed

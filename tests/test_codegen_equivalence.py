@@ -1,6 +1,7 @@
 """The generated C equals the golden model bit for bit: outputs and states, every method, random
 models and inputs (hypothesis) including saturation extremes, resets, side-by-side instances, and
-under AddressSanitizer + UndefinedBehaviorSanitizer."""
+under AddressSanitizer + UndefinedBehaviorSanitizer (the kernel library alone:
+tests/test_codegen_kernels.py)."""
 
 from __future__ import annotations
 
@@ -9,27 +10,23 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import cffi
 import numpy as np
 import pytest
 import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from codegen.activations import TABLE_STEP_BITS, TANH_TABLE, sigmoid_act, tanh_act
 from codegen.export import LoadedModel, export
 from codegen.golden import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
     CMD_RESET,
     build_harness,
-    compile_c,
     load_module,
     load_modules,
     run_harness,
     write_vectors,
 )
-from codegen.quantize import C_FRAC, Z_FRAC
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from tests import testmodels as tm
@@ -329,45 +326,7 @@ def test_under_address_and_undefined_behaviour_sanitizers(
     assert_states_equal(host.state_from_bytes(state_bytes), golden.state())
 
 
-# ------------------------------------------------------------------------------------ activations
-
-
-def test_c_activations_equal_the_golden_ones_on_millions_of_inputs(
-    recording: Recording, tmp_path: Path
-) -> None:
-    """The module's static tanh and sigmoid, reached by including the generated source in a small
-    wrapper, against the golden functions: every input near each table knot, an odd-strided grid
-    over the whole int32 range of z and the extremes."""
-    export_checkpoint(checkpoint_for("dlstm", recording), tmp_path, "act")
-    wrapper = tmp_path / "act_wrapper.c"
-    wrapper.write_text(
-        '#include "act.c"\n'
-        "void act_eval(const int32_t *z, int32_t *t, int32_t *s, int32_t *c, size_t n);\n"
-        "void act_eval(const int32_t *z, int32_t *t, int32_t *s, int32_t *c, size_t n)\n"
-        "{\n"
-        "    size_t k;\n"
-        "    for (k = 0u; k < n; ++k) {\n"
-        f"        t[k] = act_tanh_q30(z[k], {Z_FRAC - TABLE_STEP_BITS}u);\n"
-        "        s[k] = act_sigmoid_q30(z[k]);\n"
-        f"        c[k] = act_tanh_q30(z[k], {C_FRAC - TABLE_STEP_BITS}u);\n"
-        "    }\n"
-        "}\n"
-    )
-    library = tmp_path / "libact.so"
-    compile_c([wrapper], library, include_dirs=[tmp_path / "out"], shared=True)
-    ffi = cffi.FFI()
-    ffi.cdef("void act_eval(const int32_t *z, int32_t *t, int32_t *s, int32_t *c, size_t n);")
-    lib = ffi.dlopen(str(library))
-    knots = np.arange(0, 2 * (TANH_TABLE.size + 1), dtype=np.int64) << (Z_FRAC - TABLE_STEP_BITS - 1)
-    near = (knots[:, None] + np.arange(-300, 301)[None, :]).ravel()
-    grid = np.arange(-(2**31), 2**31, 1_999, dtype=np.int64)
-    z = np.concatenate((near, -near, grid, [INT32_MIN, INT32_MIN + 1, INT32_MAX, 0]))
-    z = np.clip(z, INT32_MIN, INT32_MAX).astype(np.int32)
-    out = [np.empty_like(z) for _ in range(3)]
-    lib.act_eval(*(ffi.from_buffer("int32_t[]", a) for a in (z, *out)), z.size)
-    np.testing.assert_array_equal(out[0], tanh_act(z, Z_FRAC))
-    np.testing.assert_array_equal(out[1], sigmoid_act(z, Z_FRAC))
-    np.testing.assert_array_equal(out[2], tanh_act(z, C_FRAC))
+# ------------------------------------------------------------------------------------ output rounding
 
 
 def test_output_rounding_errors_cancel_over_any_run_of_samples(recording: Recording, tmp_path: Path) -> None:

@@ -115,8 +115,10 @@ def test_export_writes_header_source_and_manifest(models: dict[str, Path], expor
     for method, out in exported.items():
         name = _name(method)
         assert sorted(p.name for p in out.iterdir()) == sorted(
-            [f"{name}.h", f"{name}.c", f"{name}.manifest.json"]
+            [f"{name}.h", f"{name}.c", "tdc_kernels.h", f"{name}.manifest.json"]
         )
+        shipped = (Path(__file__).resolve().parents[1] / "codegen" / "kernels" / "tdc_kernels.h").read_bytes()
+        assert (out / "tdc_kernels.h").read_bytes() == shipped
         manifest = json.loads((out / f"{name}.manifest.json").read_text())
         digest = hashlib.sha256(models[method].read_bytes()).hexdigest()
         assert manifest["model"]["sha256"] == digest and manifest["method"] == method
@@ -162,10 +164,13 @@ def test_generated_c_has_no_libm_stdio_malloc_or_mutable_globals(
     exported: dict[str, Path], tmp_path: Path
 ) -> None:
     for method, out in exported.items():
-        source = (out / f"{_name(method)}.c").read_text() + (out / f"{_name(method)}.h").read_text()
+        source = "".join(
+            (out / f).read_text() for f in (f"{_name(method)}.c", f"{_name(method)}.h", "tdc_kernels.h")
+        )
         source = re.sub(r"/\*.*?\*/", "", source, flags=re.S)  # code only, not the comments
         includes = set(re.findall(r"#include\s*[<\"]([^>\"]+)", source))
-        assert includes == {"stddef.h", "stdint.h", f"{_name(method)}.h"}
+        # arm_acle.h: only on a core with the DSP extension (SMLAD)
+        assert includes == {"stddef.h", "stdint.h", f"{_name(method)}.h", "tdc_kernels.h", "arm_acle.h"}
         assert not re.search(
             r"\b(float|double|malloc|free|printf|static\s+(?!const)\w+\s+\w+\s*[=;\[])", source
         )
@@ -188,19 +193,21 @@ def test_manifest_documents_rates_ranges_bounds_and_sizes(exported: dict[str, Pa
     assert manifest["architecture"] == {"input_size": 1, "hidden_size": 10, "num_layers": 2}
     assert manifest["macs_per_network_step"] == 4 * 10 * (1 + 10) + 4 * 10 * (10 + 10) + 10
     for index, layer in enumerate(manifest["quantisation"]["layers"]):
-        assert layer["acc_bound"] < layer["acc_limit"] == 2**62 and layer["acc_headroom_bits"] > 1
+        assert layer["acc_bound"] <= layer["acc_limit"] == 2**31 - 1 and layer["acc_headroom_bits"] >= 0
         assert layer["acc_bound"] >= layer["w_x"]["acc_share_bound"] + layer["w_h"]["acc_share_bound"]
-        # one accumulator format per layer: the Q27 input's weights carry 3 more bits than h's (Q30)
+        # one accumulator format per layer: the Q12 input's weights carry 3 more bits than h's (Q15)
         assert layer["w_x"]["frac_bits"] - layer["w_h"]["frac_bits"] == (3 if index == 0 else 0)
-        assert layer["acc_frac_bits"] >= 50  # trained-size weights keep 20 fractional bits or more
+        assert layer["w_h"]["storage"] == "int16" and layer["acc_frac_bits"] >= 16
     head = manifest["quantisation"]["head"]
     assert head["acc_bound"] < 2**62 and head["estimate_headroom_bits"] > 0
     tables = manifest["sizes"]["flash_tables"]
-    assert tables["weights"] == 4 * (40 * 1 + 40 * 10 + 40 * 10 + 40 * 10 + 10)
-    assert tables["biases"] == 8 * 80 and tables["tanh_table"] == 4 * 385
+    # int16 weights padded to pairs: layer 0 reads (x, pad, h0), layer 1 (h0, h1); head int32
+    assert tables["weights"] == 2 * (40 * 12 + 40 * 20) + 4 * 10
+    assert tables["biases"] == 4 * 80 and tables["activation_table"] == 4 * 512
     assert manifest["sizes"]["flash_table_bytes"] == sum(tables.values())
-    assert manifest["activations"]["tanh"]["max_abs_error"] < 12 / 2**30
-    assert manifest["activations"]["sigmoid"]["max_abs_error"] < 12 / 2**30
+    assert manifest["sizes"]["ram_state_bytes"] < 256
+    assert manifest["activations"]["tanh"]["max_abs_error"] < 3 / 2**15
+    assert manifest["activations"]["sigmoid"]["max_abs_error"] < 3 / 2**16
     lo, hi = manifest["valid_temp_range_c"]
     assert manifest["valid_temp_range_mdegc"] == [int(np.ceil(lo * 1000)), int(np.floor(hi * 1000))]
 
@@ -221,15 +228,11 @@ def test_verify_detects_a_tampered_module(
     shutil.copytree(exported["dlstm-issa"], out)
     source = out / "tdc_dlstm_issa.c"
     text = source.read_text()
-    # change one weight of the recurrent matrix by 2**-20 (one LSB, ~1e-8, may change no output sample)
-    frac = json.loads((out / "tdc_dlstm_issa.manifest.json").read_text())["quantisation"]["layers"][0]["w_h"]
-    match = re.search(r"(static const int32_t tdc_dlstm_issa_l0_wh\[40\]\[10\] = \{\n    \{ )(-?\d+)", text)
+    # change the first packed weight pair of layer 0 by 2**10 LSB of its first (int16) weight (one
+    # LSB, 2**-15 of the input weight, may change no output sample: only the final state)
+    match = re.search(r"(static const int32_t tdc_dlstm_issa_l0_w\[\d+\] = \{\n    )(-?\d+)", text)
     assert match
-    text = (
-        text[: match.start(2)]
-        + str(int(match.group(2)) + (1 << (frac["frac_bits"] - 20)))
-        + text[match.end(2) :]
-    )
+    text = text[: match.start(2)] + str(int(match.group(2)) + 1024) + text[match.end(2) :]
     source.write_text(text)
     result = _cli("verify", str(models["dlstm-issa"]), str(out), str(recording[1]), "--no-table")
     assert result.returncode == 1 and "mismatches: 0\n" not in result.stdout

@@ -1,0 +1,194 @@
+/*
+ * kernel_app.c -- runs the kernels of codegen/kernels/tdc_kernels.h on recorded inputs, on the host
+ * (tests/test_codegen_kernels.py: strict warnings, ASan + UBSan) and on the Cortex-M4 under QEMU
+ * (firmware_c/Makefile `kernel-app`, semihosting files). Not part of any flight module.
+ *
+ * Usage: kernel_app INPUTS OUTPUTS
+ * INPUTS: little-endian int64 records of KERNEL_IN values: kernel id, then its arguments;
+ * OUTPUTS: one record of KERNEL_OUT int64 values per input record (unused values 0). The tables of
+ * tdck_act are the first 2 ACT_SEGMENTS records' arguments 0 (value) and 1 (slope) under id 0.
+ */
+#include <stdio.h>
+#include <string.h>
+
+#include "tdc_kernels.h"
+
+#if defined(TDC_SEMIHOSTING)
+#include "semihost.h"
+#endif
+
+#define KERNEL_IN 11
+#define KERNEL_OUT 5
+
+enum kernel {
+    K_TABLE = 0,
+    K_ACT = 1,
+    K_ROUND_SHIFT64 = 2,
+    K_ROUND_SHIFT32 = 3,
+    K_RSHIFT_ROUND64 = 4,
+    K_RDIV_ROUND64 = 5,
+    K_DOT4 = 6,
+    K_CELL = 7,
+    K_INPUT = 8,
+    K_HOLD = 9,
+    K_SAT = 10,
+    K_CLAMP = 11,
+    K_SHAPE = 12,
+    K_WINDOW = 13
+};
+
+static uint16_t act_value[TDCK_ACT_SEGMENTS];
+static uint16_t act_slope[TDCK_ACT_SEGMENTS];
+
+/* window stream state (K_WINDOW: in = chunks, chunk_start, phase, v, reset; out = current, sum, pos) */
+static int64_t window_current;
+static int64_t window_ring[8];
+static uint32_t window_pos;
+
+static void run(const int64_t *in, int64_t *out)
+{
+    uint32_t flags = 0u;
+    memset(out, 0, KERNEL_OUT * sizeof out[0]);
+    switch ((int)in[0]) {
+    case K_TABLE:
+        act_value[in[1]] = (uint16_t)in[2];
+        act_slope[in[1]] = (uint16_t)in[3];
+        break;
+    case K_ACT:
+        out[0] = tdck_act(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
+        out[1] = tdck_sigmoid_q16(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
+        out[2] = tdck_tanh_q15(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
+        break;
+    case K_ROUND_SHIFT64:
+        out[0] = tdck_round_shift64(in[1], (unsigned)in[2]);
+        break;
+    case K_ROUND_SHIFT32:
+        out[0] = tdck_round_shift32((int32_t)in[1], (unsigned)in[2]);
+        break;
+    case K_RSHIFT_ROUND64:
+        out[0] = tdck_rshift_round64(in[1], (unsigned)in[2]);
+        break;
+    case K_RDIV_ROUND64:
+        out[0] = tdck_rdiv_round64(in[1], (uint32_t)in[2]);
+        break;
+    case K_DOT4: {
+        /* in = w0..w3 (the packed words of pair 0), v0, v1, b0, b1, pairs (1 or 2); pair 1 has the
+         * words in reverse order and the vector pair (v1, v0); the biases are b0, b1, -b0, -b1 */
+        int32_t w[8];
+        int16_t v[4];
+        int32_t bias[4];
+        int32_t acc[4];
+        int k;
+        for (k = 0; k < 4; ++k) {
+            w[k] = (int32_t)in[1 + k];
+            w[4 + k] = (int32_t)in[4 - k];
+        }
+        bias[0] = (int32_t)in[7];
+        bias[1] = (int32_t)in[8];
+        bias[2] = -(int32_t)in[7];
+        bias[3] = -(int32_t)in[8];
+        v[0] = (int16_t)in[5];
+        v[1] = (int16_t)in[6];
+        v[2] = (int16_t)in[6];
+        v[3] = (int16_t)in[5];
+        tdck_dot4(w, v, (uint32_t)in[9], bias, acc);
+        for (k = 0; k < 4; ++k) {
+            out[k] = acc[k];
+        }
+        break;
+    }
+    case K_CELL: {
+        int32_t c = (int32_t)in[5];
+        out[0] = tdck_lstm_cell((int32_t)in[1], (int32_t)in[2], (int32_t)in[3], (int32_t)in[4], &c, act_value,
+            act_slope, &flags, 4u);
+        out[1] = c;
+        out[2] = flags;
+        break;
+    }
+    case K_INPUT:
+        out[0] = tdck_input_x(in[1], (unsigned)in[2], in[3], in[4], (unsigned)in[5], &flags, 4u);
+        out[1] = flags;
+        break;
+    case K_HOLD: {
+        int32_t whole;
+        uint32_t frac;
+        tdck_hold(in[1], &whole, &frac);
+        out[0] = whole;
+        out[1] = frac;
+        break;
+    }
+    case K_SAT:
+        out[0] = tdck_sat32_flag(in[1], &flags, 4u);
+        out[1] = flags;
+        break;
+    case K_CLAMP:
+        out[0] = tdck_clamp32_flag((int32_t)in[1], (int32_t)in[2], (int32_t)in[3], &flags, 2u);
+        out[1] = flags;
+        break;
+    case K_SHAPE: {
+        uint32_t shaper = (uint32_t)in[1];
+        out[0] = tdck_shape(&shaper, (uint32_t)in[2]);
+        out[1] = shaper;
+        break;
+    }
+    case K_WINDOW:
+        if (in[5] != 0) {
+            memset(window_ring, 0, sizeof window_ring);
+            window_current = 0;
+            window_pos = 0u;
+        }
+        tdck_window_add(&window_current, window_ring, (uint32_t)in[1], &window_pos, (uint32_t)in[3],
+            (uint32_t)in[2], (int32_t)in[4]);
+        out[0] = window_current;
+        out[1] = tdck_window_sum(window_current, window_ring, (uint32_t)in[1]);
+        out[2] = window_pos;
+        break;
+    default:
+        out[0] = -1;
+        break;
+    }
+}
+
+static int run_files(int argc, char **argv)
+{
+    static int64_t in[KERNEL_IN];
+    static int64_t out[KERNEL_OUT];
+    FILE *fin;
+    FILE *fout;
+    unsigned long n = 0u;
+    if (argc < 3) {
+        printf("usage: kernel_app INPUTS OUTPUTS\n");
+        return 2;
+    }
+    fin = fopen(argv[1], "rb");
+    fout = fopen(argv[2], "wb");
+    if (fin == NULL || fout == NULL) {
+        printf("error: cannot open the files\n");
+        return 3;
+    }
+    while (fread(in, sizeof in[0], KERNEL_IN, fin) == KERNEL_IN) {
+        run(in, out);
+        if (fwrite(out, sizeof out[0], KERNEL_OUT, fout) != KERNEL_OUT) {
+            return 4;
+        }
+        ++n;
+    }
+    fclose(fin);
+    printf("records %lu dsp %d\n", n, TDCK_DSP);
+    return fclose(fout) == 0 ? 0 : 5;
+}
+
+#if defined(TDC_SEMIHOSTING)
+int main(void)
+{
+    static char cmdline[512];
+    char *argv[4];
+    int argc = semihost_args(cmdline, sizeof cmdline, argv, 3);
+    return run_files(argc, argv);
+}
+#else
+int main(int argc, char **argv)
+{
+    return run_files(argc, argv);
+}
+#endif

@@ -1,0 +1,314 @@
+"""The C kernel library (codegen/kernels/tdc_kernels.h) on its own, independently of any model:
+every kernel against a reference written here in Python integers (floor divisions and fractions,
+not the C's offset tricks), on random inputs with the extremes each kernel's precondition allows
+(hypothesis draws the seeds and the edge cases). Run by firmware_c/harness/kernel_app.c on the
+host under AddressSanitizer + UndefinedBehaviorSanitizer, and on the Cortex-M4 under QEMU with the
+SMLAD path and with the portable path. Also: the header is warning-free with gcc and clang under
+the strict flags, and its Q-format block is the one codegen/qformats.py writes."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from fractions import Fraction
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from codegen import qformats
+from codegen.activations import ACT_SLOPE, ACT_VALUE
+from codegen.hostbuild import SANITIZER_FLAGS, STRICT_FLAGS, compile_c
+from codegen.qformats import ACT_POS_BITS, ACT_SEGMENTS, ACT_SLOPE_BITS, ACT_STEP_BITS, C_FRAC
+
+ROOT = Path(__file__).resolve().parents[1]
+HARNESS = ROOT / "firmware_c" / "harness" / "kernel_app.c"
+KERNELS = ROOT / "codegen" / "kernels"
+N_IN, N_OUT = 11, 5
+K_TABLE, K_ACT, K_RS64, K_RS32, K_RR64, K_RDIV, K_DOT4, K_CELL, K_INPUT, K_HOLD, K_SAT, K_CLAMP, K_SHAPE = (
+    range(13)
+)
+K_WINDOW = 13
+I32 = (-(2**31), 2**31 - 1)
+
+
+# ------------------------------------------------------------------------------ references
+
+
+def _act(acc: int, shift: int) -> int:
+    k = min(max(acc // 2**shift + ACT_SEGMENTS // 2, 0), ACT_SEGMENTS - 1)
+    pos = (acc // 2 ** (shift - ACT_POS_BITS)) % 2**ACT_POS_BITS
+    return int(ACT_VALUE[k]) + (int(ACT_SLOPE[k]) * pos + 2 ** (ACT_SLOPE_BITS - 1)) // 2**ACT_SLOPE_BITS
+
+
+def _half_up(x: int, s: int) -> int:
+    return int(np.floor(Fraction(x, 2**s) + Fraction(1, 2)))
+
+
+def _half_away(q: Fraction) -> int:
+    n = int(np.floor(abs(q) + Fraction(1, 2)))
+    return -n if q < 0 else n
+
+
+def _unpack(word: int) -> tuple[int, int]:
+    """word = hi 2**16 + (lo mod 2**16)"""
+    lo = ((word & 0xFFFF) ^ 0x8000) - 0x8000
+    return lo, (word - (word & 0xFFFF)) // 65536
+
+
+def expected(record: list[int], window: dict[str, object]) -> list[int]:
+    kid, a = record[0], record[1:]
+    if kid == K_TABLE:
+        return []
+    if kid == K_ACT:
+        return [_act(a[0], a[1]), _act(a[0], a[1] + 1), _act(a[0], a[1]) - 2**15]
+    if kid in (K_RS64, K_RS32):
+        return [_half_up(a[0], a[1])]
+    if kid == K_RR64:
+        return [_half_away(Fraction(a[0], 2 ** a[1]))]
+    if kid == K_RDIV:
+        return [_half_away(Fraction(a[0], a[1]))]
+    if kid == K_DOT4:
+        words, (v0, v1), (b0, b1), pairs = a[0:4], a[4:6], a[6:8], a[8]
+        out = []
+        for r, bias in enumerate((b0, b1, -b0, -b1)):
+            lo, hi = _unpack(words[r])
+            acc = bias + lo * v0 + hi * v1
+            if pairs == 2:
+                lo, hi = _unpack(words[3 - r])
+                acc += lo * v1 + hi * v0
+            out.append(acc)
+        return out
+    if kid == K_CELL:
+        gi, gf, gg, go, c = a[0:5]
+        rounded = _half_up(gf * c + gi * gg * 2 ** (C_FRAC - 15), 16)
+        cell = min(max(rounded, I32[0]), I32[1])
+        th = _act(cell, C_FRAC - ACT_STEP_BITS) - 2**15
+        return [_half_up(go * th, 16), cell, 4 if cell != rounded else 0]
+    if kid == K_INPUT:
+        centred, pre, d_max, inv, shift = a[0:5]
+        d = min(max(_half_away(Fraction(centred, 2**pre)), -d_max), d_max)
+        x = _half_away(Fraction(d * inv, 2**shift))
+        return [min(max(x, -32767), 32767), 4 if abs(x) > 32767 else 0]
+    if kid == K_HOLD:
+        return [a[0] // 65536, a[0] % 65536]
+    if kid == K_SAT:
+        y = min(max(a[0], I32[0]), I32[1])
+        return [y, 4 if y != a[0] else 0]
+    if kid == K_CLAMP:
+        y = min(max(a[0], a[1]), a[2])
+        return [y, 2 if y != a[0] else 0]
+    if kid == K_SHAPE:
+        total = a[0] + a[1]
+        return [total >> 16, total & 0xFFFF]
+    assert kid == K_WINDOW  # the window sum by its definition: the samples since the last chunk start
+    chunks, start, phase, v, reset = a[0:5]
+    if reset:
+        window.update(samples=[], completed=[])
+    samples: list[int] = window["samples"]  # type: ignore[assignment]
+    completed: list[int] = window["completed"]  # type: ignore[assignment]
+    if phase == start:
+        completed.append(sum(samples))
+        samples.clear()
+    samples.append(v)
+    recent = completed[-chunks:] if chunks else []
+    return [sum(samples), sum(samples) + sum(recent), len(completed) % chunks if chunks else 0]
+
+
+# ------------------------------------------------------------------------------ inputs
+
+
+def table_records() -> list[list[int]]:
+    return [[K_TABLE, k, int(ACT_VALUE[k]), int(ACT_SLOPE[k])] for k in range(ACT_SEGMENTS)]
+
+
+def random_records(seed: int, n: int = 400) -> list[list[int]]:
+    """n random records per kernel, each within its documented precondition, plus the edges."""
+    rng = np.random.default_rng(seed)
+    out: list[list[int]] = []
+
+    def ints(lo: int, hi: int) -> int:
+        return int(rng.integers(lo, hi, endpoint=True))
+
+    edge32 = [I32[0], I32[0] + 1, -1, 0, 1, I32[1]]
+    for k in range(n):
+        shift = ints(ACT_POS_BITS, 29)
+        acc = edge32[k % 6] if k < 12 else ints(*I32) >> ints(0, 30)
+        out.append([K_ACT, acc, shift])
+        s = ints(1, 62)
+        out.append([K_RS64, ints(-(2**62) + 1, 2**62 - 1) >> ints(0, 60), s])
+        s32 = ints(1, 31)
+        out.append([K_RS32, ints(I32[0], I32[1] - 2 ** (s32 - 1)) >> ints(0, 30), s32])
+        out.append([K_RR64, ints(-(2**62), 2**62) >> ints(0, 60), ints(0, 62)])
+        out.append([K_RDIV, ints(-(2**62), 2**62) >> ints(0, 60), ints(1, 2**32 - 1)])
+        v0, v1 = ints(-32767, 32767), ints(-32767, 32767)
+        words = [ints(-32767, 32767) * 65536 + ints(0, 65535) for _ in range(4)]
+        pairs = ints(1, 2)
+        room = 2**31 - 1 - pairs * 2 * 32767 * 16384  # |bias| + sum |w v| < 2**31
+        out.append([K_DOT4, *words, v0 // 2, v1 // 2, ints(-room, room), ints(-room, room), pairs])
+        cell = edge32[k % 6] if k < 12 else ints(*I32) >> ints(0, 16)
+        out.append([K_CELL, ints(1, 65535), ints(1, 65535), ints(-32767, 32767), ints(1, 65535), cell])
+        pre, shift_in = ints(0, 20), ints(0, 30)
+        inv = ints(1, 2**31 - 1)
+        d_max = (2**62 - 1) // inv
+        out.append([K_INPUT, ints(-(2**61), 2**61) >> ints(0, 60), pre, ints(0, d_max), inv, shift_in])
+        out.append([K_HOLD, ints(-(2**47), 2**47)])
+        out.append([K_SAT, ints(-(2**62), 2**62) >> ints(0, 32)])
+        lo = ints(*I32)
+        out.append([K_CLAMP, ints(*I32), lo, ints(lo, I32[1])])
+        out.append([K_SHAPE, ints(0, 65535), ints(0, 65535)])
+    D = ints(1, 9)
+    chunks, start = ints(0, 4), ints(0, D - 1)
+    for k in range(3 * n):
+        out.append([K_WINDOW, chunks, start, k % D, ints(-(2**28), 2**28), int(k == 0 or k == 2 * n)])
+    return out
+
+
+def write_inputs(path: Path, records: list[list[int]]) -> None:
+    rows = np.zeros((len(records), N_IN), dtype="<i8")
+    for row, record in zip(rows, records, strict=True):
+        row[: len(record)] = record
+    path.write_bytes(rows.tobytes())
+
+
+def check_outputs(records: list[list[int]], raw: bytes) -> None:
+    got = np.frombuffer(raw, dtype="<i8").reshape(-1, N_OUT)
+    assert got.shape[0] == len(records)
+    window: dict[str, object] = {"samples": [], "completed": []}
+    for index, (record, row) in enumerate(zip(records, got, strict=True)):
+        want = expected(record, window)
+        assert [int(v) for v in row[: len(want)]] == want, f"record {index}: {record}"
+
+
+# ------------------------------------------------------------------------------ host
+
+
+@pytest.fixture(scope="module")
+def sanitized_app(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed (scripts/install_c_tools.sh)")
+    binary = tmp_path_factory.mktemp("kernels") / "kernel_app"
+    compile_c([HARNESS], binary, include_dirs=[KERNELS], cc="gcc", flags=("-O1", *SANITIZER_FLAGS))
+    return binary
+
+
+def run_host(binary: Path, records: list[list[int]], work: Path) -> bytes:
+    work.mkdir(parents=True, exist_ok=True)
+    write_inputs(work / "in.bin", records)
+    env = dict(os.environ, UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1", ASAN_OPTIONS="detect_leaks=1")
+    result = subprocess.run(
+        [str(binary), str(work / "in.bin"), str(work / "out.bin")], capture_output=True, env=env, check=False
+    )
+    assert result.returncode == 0 and b"runtime error" not in result.stderr, result.stderr.decode()[-3000:]
+    return (work / "out.bin").read_bytes()
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_kernels_equal_the_references_under_sanitizers(
+    sanitized_app: Path, seed: int, tmp_path: Path
+) -> None:
+    records = table_records() + random_records(seed)
+    check_outputs(records, run_host(sanitized_app, records, tmp_path / str(seed)))
+
+
+def test_activation_over_every_segment_and_position(sanitized_app: Path, tmp_path: Path) -> None:
+    """tdck_act at each segment's first, last and middle positions and across its boundary, for
+    the gate shifts of A = 17 .. 30 and the cell's: every table entry is reached."""
+    records = table_records()
+    for shift in (ACT_POS_BITS, 16, 22, C_FRAC - ACT_STEP_BITS, 25):
+        for k in range(ACT_SEGMENTS):
+            base = (k - ACT_SEGMENTS // 2) << shift
+            for offset in (0, 1, 1 << (shift - 1), (1 << shift) - 1, -1):
+                acc = base + offset
+                if I32[0] <= acc <= I32[1]:
+                    records.append([K_ACT, acc, shift])
+    check_outputs(records, run_host(sanitized_app, records, tmp_path))
+
+
+@pytest.mark.parametrize("compiler", ["gcc", "clang"])
+def test_header_is_warning_free(compiler: str, tmp_path: Path) -> None:
+    if shutil.which(compiler) is None:
+        pytest.skip(f"{compiler} is not installed (run scripts/install_c_tools.sh)")
+    extra = (
+        "-Wstrict-prototypes",
+        "-Wmissing-prototypes",
+        "-Wundef",
+        "-Wcast-qual",
+        "-Wvla",
+        "-Wdouble-promotion",
+    )
+    unit = tmp_path / "unit.c"
+    unit.write_text(
+        '#include "tdc_kernels.h"\nint tdck_unit_marker(void);\nint tdck_unit_marker(void) { return 0; }\n'
+    )
+    for opt in ("-O0", "-O2"):
+        for source in (unit, HARNESS):
+            cmd = [
+                compiler,
+                *STRICT_FLAGS,
+                *extra,
+                opt,
+                f"-I{KERNELS}",
+                "-c",
+                str(source),
+                "-o",
+                str(tmp_path / "x.o"),
+            ]
+            result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            assert result.returncode == 0 and not result.stderr, f"{source.name} {opt}: {result.stderr}"
+
+
+def test_q_format_block_is_generated_from_qformats() -> None:
+    text = qformats.HEADER.read_text()
+    assert qformats.header_with_block(text) == text
+    for f in qformats.FORMATS:
+        assert f"#define TDCK_{f.name} " in text and f"/* {f.doc} */" in text
+    assert subprocess.run([sys.executable, "-m", "codegen.qformats"], cwd=ROOT, check=False).returncode == 0
+
+
+# ------------------------------------------------------------------------------ Cortex-M4
+
+
+def _driver() -> ModuleType:
+    """firmware_c/cortex_m.py (firmware_c/ is no package: imported by path)."""
+    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("cortex_m", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
+def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
+    """The SMLAD path (the default on a Cortex-M4) and the portable path on the target."""
+    cm = _driver()
+    reason = cm.ensure_toolchain()
+    if reason is not None:
+        pytest.skip(f"Cortex-M toolchain unavailable: {reason}")
+    out = tmp_path / "build"
+    subprocess.run(
+        [
+            "make",
+            "--no-print-directory",
+            "-C",
+            str(cm.FIRMWARE_DIR),
+            f"OUT={out}",
+            f"EXTRA_CFLAGS={flags}",
+            "kernel-app",
+        ],
+        capture_output=True,
+        check=True,
+    )
+    records = table_records() + random_records(20240611, n=150)
+    write_inputs(tmp_path / "in.bin", records)
+    stdout = cm.run_qemu(out / "kernel_app.elf", ["in.bin", "out.bin"], cwd=tmp_path)
+    assert f"dsp {0 if flags else 1}" in stdout
+    check_outputs(records, (tmp_path / "out.bin").read_bytes())
