@@ -7,15 +7,27 @@ import json
 import sys
 
 from codegen import __version__
-from trainer.errors import OneLineArgumentParser, run_cli
+from codegen.flightparams import EXTENSIONS
+from trainer.errors import OneLineArgumentParser, UserError, run_cli
 
 EXIT_MISMATCH = 1
 
 
 def _export(args: argparse.Namespace) -> int:
+    if args.format != "c":
+        return _export_params(args)
+    for option, given in (
+        ("--channel", args.channel),
+        ("--device-id", args.device_id),
+        ("--keep-constant", args.keep_constant),
+    ):
+        if given not in (None, False):
+            raise UserError(f"{option} applies to --format px4-params/ardupilot-parm, not to the C module")
+    if len(args.model) != 1:
+        raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
 
-    model, files = export(args.model, args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
+    model, files = export(args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
     name = next(f for f in files if f.endswith(".h"))[:-2]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
@@ -23,6 +35,31 @@ def _export(args: argparse.Namespace) -> int:
         f"flash tables {sizes['flash_table_bytes']} B, state RAM {sizes['ram_state_bytes']} B, "
         f"model sha256:{model.sha256[:16]}..."
     )
+    for note in model.notes:
+        print(f"{model.checkpoint.method}: {note}")
+    return 0
+
+
+def _export_params(args: argparse.Namespace) -> int:
+    """Flight-stack parameter files: one per command, all models' channels in it."""
+    from codegen.export import write_files_atomically
+    from codegen.flightparams import load_channel_cubic, render
+    from codegen.render import validate_name
+
+    if len(args.model) > 1 and (args.channel is not None or args.device_id is not None):
+        raise UserError("--channel and --device-id name the channel of a single model; give one model")
+    name = (
+        validate_name(args.name)
+        if args.name
+        else ("px4_thermal" if args.format == "px4-params" else "ardupilot_tcal")
+    )
+    channels = [
+        load_channel_cubic(path, channel=args.channel, device_id=args.device_id) for path in args.model
+    ]
+    text = render(args.format, channels, keep_constant=args.keep_constant)
+    file_name = name + EXTENSIONS[args.format]
+    write_files_atomically({file_name: text}, args.out_dir)
+    print(f"wrote {args.out_dir}/{file_name}: {', '.join(c.name for c in channels)} ({args.format})")
     return 0
 
 
@@ -50,8 +87,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"mems-tdc codegen {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser)
 
-    exp = sub.add_parser("export", help="quantise a model.pt and render NAME.h, NAME.c and a manifest")
-    exp.add_argument("model", help="checkpoint written by 'trainer fit' (model.pt)")
+    exp = sub.add_parser(
+        "export",
+        help="quantise a model.pt and render NAME.h, NAME.c and a manifest, or write flight-stack parameters",
+    )
+    exp.add_argument(
+        "model",
+        nargs="+",
+        help="checkpoint written by 'trainer fit' (model.pt); parameter files take several",
+    )
     exp.add_argument(
         "-o", "--out-dir", required=True, help="output directory (created; its parent must exist)"
     )
@@ -61,6 +105,24 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=16.0,
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
+    )
+    exp.add_argument(
+        "--format",
+        choices=("c", *EXTENSIONS),
+        default="c",
+        help="c: the fixed-point C module (default); px4-params: a QGroundControl .params file of TC_*; "
+        "ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only)",
+    )
+    exp.add_argument(
+        "--channel", help="parameter files: the sensor axis of the model (default: as fitted), e.g. accel0_z"
+    )
+    exp.add_argument(
+        "--device-id", type=int, help="px4-params: the sensor's device id (default: as imported)"
+    )
+    exp.add_argument(
+        "--keep-constant",
+        action="store_true",
+        help="px4-params: write the model's constant term as X0 (default 0: the ordinary calibration owns it)",
     )
     exp.set_defaults(func=_export)
 

@@ -12,13 +12,17 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from codegen.manifest import build_manifest
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, QuantModel, quantise_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
-from trainer.checkpoint import load_checkpoint
+from trainer import methods as registry
+from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
+from trainer.fitting import removes_sustained_input
+from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, RECURSIVE_NOTE, OffsetRecord, check_constant
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,7 @@ class LoadedModel:
     sha256: str
     checkpoint: Checkpoint
     quantised: QuantModel
+    notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
 
 
 def load_for_codegen(
@@ -43,7 +48,45 @@ def load_for_codegen(
         quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
-    return LoadedModel(p, sha256, ckpt, quantised)
+    return LoadedModel(p, sha256, ckpt, quantised, offset_notes(p, raw))
+
+
+def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
+    """The constant the module removes (trainer/reference.py), or the recursive-method warning.
+
+    ``trainer fit`` refuses a constant above the limit; a file without an offset record (written
+    before the policy existed, or by hand) removes its fitted constant: it is measured at the
+    mid-point of the valid range and reported, with a warning above the limit.
+    """
+    method = registry.REGISTRY[raw["method"]]
+    if removes_sustained_input(method):
+        return (RECURSIVE_NOTE,)
+    if "offset" in raw:
+        try:
+            record = OffsetRecord.from_dict(raw["offset"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
+        check_constant(record, str(path))
+        return (record.describe(),)
+    try:
+        model, _ = load_model(path)
+    except UserError:  # a layout the generator reads but the trainer does not (hand-made files)
+        return (f"offset: not recorded in {path.name} and not measurable by the trainer; check it",)
+    lo, hi = (float(v) for v in raw["valid_temp_range_c"])
+    frontend = raw["payload"].get("frontend", {}) if isinstance(raw["payload"], dict) else {}
+    rate_hz = float(frontend.get("rate_hz", raw["train_stats"].get("sample_rate_hz", 1.0)))
+    t_ref = 0.5 * (lo + hi)
+    constant = model.drift_at_reference(t_ref, rate_hz)
+    note = (
+        f"offset: not recorded in {path.name} (fitted before the offset policy): it removes its fitted "
+        f"constant, {constant:.4g} mg at T_ref {t_ref:.2f} degC"
+    )
+    if abs(constant) > OFFSET_LIMIT_MG:
+        note += (
+            f"; WARNING: above {OFFSET_LIMIT_MG:g} mg, gravity or a static offset: refit with "
+            f"'trainer fit' ({OFFSET_OPTION} relative, the default)"
+        )
+    return (note,)
 
 
 def manifest_name(name: str) -> str:
@@ -53,7 +96,7 @@ def manifest_name(name: str) -> str:
 def generate(model: LoadedModel, name: str) -> dict[str, str]:
     """File name -> content of the three output files (pure; nothing touches the disk)."""
     name = validate_name(name)
-    files = render_sources(model.quantised, name, model.sha256)
+    files = render_sources(model.quantised, name, model.sha256, notes=model.notes)
     manifest = build_manifest(
         model.quantised,
         name=name,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import textwrap
 from dataclasses import dataclass
 
 import jinja2
@@ -343,10 +344,11 @@ def _environment() -> jinja2.Environment:
     )
 
 
-def render_sources(model: QuantModel, name: str, sha256: str) -> dict[str, str]:
-    """``{NAME.h: text, NAME.c: text}``."""
+def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = ()) -> dict[str, str]:
+    """``{NAME.h: text, NAME.c: text}``; ``notes`` are lines for the header's comment."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
+    ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
     return {
         f"{name}.h": env.get_template("module.h.j2").render(ctx),
         f"{name}.c": env.get_template("module.c.j2").render(ctx),

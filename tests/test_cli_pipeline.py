@@ -75,11 +75,18 @@ def test_fit_then_evaluate_removes_most_of_the_true_drift(
     for name in ("report.md", "fig12_compensated.png", "fig13_allan.png"):
         assert (out_dir / name).stat().st_size > 0
     # Independent check of the headline metric: compensation must remove most of the true drift.
+    # The model is relative to T_ref (the default offset policy): so is the truth it is scored on.
     validation = read_recording(valid)
-    residual = validation.truth("drift_mg") - model.predict_drift(validation.without_truth())
-    raw_rms = np.sqrt(np.mean(validation.truth("drift_mg") ** 2))
+    true_drift = validation.truth("drift_mg")
+    assert model.offset is not None and model.offset.relative
+    t_ref = 0.5 * (rec.temp_c.min() + rec.temp_c.max())
+    assert model.offset.t_ref_c == pytest.approx(t_ref)
+    near = np.abs(validation.temp_c - t_ref) < 0.5
+    true_relative = true_drift - np.mean(true_drift[near])
+    residual = true_relative - model.predict_drift(validation.without_truth())
+    raw_rms = np.sqrt(np.mean(true_relative**2))
     assert np.sqrt(np.mean(residual**2)) < 0.1 * raw_rms
-    assert "residual drift vs true_drift_mg" in printed
+    assert f"residual drift vs true_drift_mg relative to T_ref {t_ref:.2f} degC" in printed
 
 
 def test_fit_never_reads_ground_truth(recordings: tuple[Path, Path], tmp_path: Path) -> None:

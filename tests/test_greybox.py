@@ -12,6 +12,7 @@ import pytest
 from trainer.checkpoint import load_model, save_model
 from trainer.cli import main
 from trainer.errors import run_cli
+from trainer.fitting import fit_compensator
 from trainer.greybox.compensator import PhysicsCompensator
 from trainer.greybox.stream import PhysicsModel, PhysicsStream
 from trainer.physics.config import parse_config_text
@@ -79,7 +80,9 @@ tau_s = 60.0
 amp_mg = 0.8
 width_c = 6.0
 """
-EVERY_TERM = LAG_RATE_OFFSET.replace("hysteresis_offset", "hysteresis") + """
+EVERY_TERM = (
+    LAG_RATE_OFFSET.replace("hysteresis_offset", "hysteresis")
+    + """
 [effects.stress_relaxation]
 gain_mg_per_c = 0.02
 tau_s = 3000.0
@@ -87,6 +90,7 @@ tau_s = 3000.0
 amp_mg = 0.5
 tau_s = 300.0
 """
+)
 
 
 @pytest.mark.parametrize("effects", [LAG_RATE_OFFSET, EVERY_TERM], ids=["lag-rate-offset", "every-term"])
@@ -131,7 +135,7 @@ def test_forced_structure_gives_back_the_parameters(noisy: bool) -> None:
     rec = simulate(cfg, 5)
     if not noisy:
         rec.columns["accel_mg"] = rec.columns["true_drift_mg"].copy()
-    model = PhysicsCompensator(effects="thermal_lag,temp_rate,hysteresis_offset", absolute=True)
+    model = PhysicsCompensator(effects="thermal_lag,temp_rate,hysteresis_offset")
     model.fit(rec.without_truth())
     found = {e.identifier: e.params for e in model.effects}
     tolerance = 0.25 if noisy else 0.05
@@ -139,9 +143,14 @@ def test_forced_structure_gives_back_the_parameters(noisy: bool) -> None:
         if effect.identifier == "bias_poly":
             continue
         for name, value in effect.params.items():
-            assert found[effect.identifier][name] == pytest.approx(value, rel=tolerance), (effect.identifier, name)
+            assert found[effect.identifier][name] == pytest.approx(value, rel=tolerance), (
+                effect.identifier,
+                name,
+            )
     drift_left = rec.columns["true_drift_mg"] - model.predict_drift(rec)
-    assert np.sqrt(np.mean(drift_left**2)) < (0.01 if not noisy else 0.05) * np.ptp(rec.columns["true_drift_mg"])
+    assert np.sqrt(np.mean(drift_left**2)) < (0.01 if not noisy else 0.05) * np.ptp(
+        rec.columns["true_drift_mg"]
+    )
 
 
 def test_relative_drift_leaves_the_offset_and_the_checkpoint_round_trips(tmp_path: Path) -> None:
@@ -149,7 +158,8 @@ def test_relative_drift_leaves_the_offset_and_the_checkpoint_round_trips(tmp_pat
     rec = simulate(cfg, 6)
     offset = 980.0  # gravity on the vertical axis
     rec.columns["accel_mg"] = rec.columns["accel_mg"] + offset
-    model = PhysicsCompensator(effects="thermal_lag").fit(rec.without_truth())
+    model = fit_compensator("physics", rec, {"effects": "thermal_lag"})
+    assert isinstance(model, PhysicsCompensator)
     compensated = model.compensate(rec)
     assert abs(np.mean(compensated) - offset) < 5.0  # the offset stays in the output
     path = tmp_path / "model.pt"
@@ -183,7 +193,7 @@ def test_bad_structure_options_give_one_line(
 
 
 def test_auto_adds_nothing_on_a_monotone_ramp() -> None:
-    ramp = CYCLE.split("[[protocol.segments]]\nlabel = \"hold\"")[0]  # soak and one ramp up
+    ramp = CYCLE.split('[[protocol.segments]]\nlabel = "hold"')[0]  # soak and one ramp up
     cfg = parse_config_text(ramp + LAG_RATE_OFFSET.split("[effects.temp_rate]")[0] + NOISE)
     rec = simulate(cfg, 7)
     model = PhysicsCompensator().fit(rec.without_truth())
@@ -191,11 +201,17 @@ def test_auto_adds_nothing_on_a_monotone_ramp() -> None:
 
 
 def test_auto_names_a_branch_offset_on_a_cycle() -> None:
-    cfg = parse_config_text(config(LAG_RATE_OFFSET.split("[effects.thermal_lag]")[0] + """
+    cfg = parse_config_text(
+        config(
+            LAG_RATE_OFFSET.split("[effects.thermal_lag]")[0]
+            + """
 [effects.hysteresis_offset]
 amp_mg = 0.8
 width_c = 6.0
-""", noise=True))
+""",
+            noise=True,
+        )
+    )
     rec = simulate(replace(cfg, effects=tuple(e for e in cfg.effects if e.identifier != "temp_rate")), 8)
     model = PhysicsCompensator().fit(rec.without_truth())
     assert {e.identifier for e in model.effects} == {"bias_poly", "hysteresis_offset"}

@@ -45,6 +45,9 @@ class LinearInTemperature(TemperatureCompensator):
     def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
         return self.coefficients[0] * np.asarray(temp_c) + self.coefficients[1]
 
+    def shift_drift(self, delta_mg: float) -> None:
+        self.coefficients = (self.coefficients[0], self.coefficients[1] + delta_mg)
+
     def to_payload(self) -> dict[str, Any]:
         return {"coefficients": list(self.coefficients), "temp_range_c": list(self.temp_range_c)}
 
@@ -102,7 +105,18 @@ def test_fit_compare_and_export_see_a_method_registered_once(
 ) -> None:
     train, valid = recordings
     model_path = tmp_path / "lin.pt"
-    assert trainer_main(["fit", "--method", NAME, str(train), "-o", str(model_path), "--through-zero"]) == 0
+    argv = [
+        "fit",
+        "--method",
+        NAME,
+        str(train),
+        "-o",
+        str(model_path),
+        "--through-zero",
+        "--offset",
+        "absolute",
+    ]
+    assert trainer_main(argv) == 0
     model, checkpoint = load_model(model_path)
     assert isinstance(model, LinearInTemperature) and checkpoint["method"] == NAME
     assert model.coefficients[1] == 0.0  # its own option reached its constructor

@@ -3,7 +3,11 @@
 The file is a ``torch.save`` of a plain dict::
 
     {"format": "mems-tdc-model", "format_version": 1, "method": "pla", "payload": {...},
-     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0"}
+     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0",
+     "offset": {"mode": "relative", "t_ref_c": ..., "drift_at_t_ref_mg": ...}}
+
+``offset`` (optional; absent for recursive methods and older files) is the
+:class:`trainer.reference.OffsetRecord` of a temperature-driven model.
 
 and is always read with ``torch.load(weights_only=True)``, which refuses pickled code.
 """
@@ -13,6 +17,7 @@ from __future__ import annotations
 import io
 import os
 import pickle
+import re
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +26,10 @@ import torch
 from trainer import __version__, methods
 from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
+from trainer.reference import OffsetRecord
 
 FORMAT_NAME = "mems-tdc-model"
+_UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
 FORMAT_VERSION = 1
 
 
@@ -43,6 +50,8 @@ def save_model(
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
         "created_by": f"mems-tdc {__version__}",
     }
+    if model.offset is not None:
+        checkpoint["offset"] = model.offset.to_dict()
     # torch.save names the archive's root folder after the file it writes; serialising to memory
     # first keeps that name fixed ("archive"), so the same model gives byte-identical files
     # (and the same model_id in the generated C) whatever the output path.
@@ -60,8 +69,16 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         checkpoint = torch.load(p, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "unsafe content"
-        raise UserError(f"{p}: refused to load (not a plain mems-tdc checkpoint: {first})") from None
+        # torch's message advises loading with weights_only=False: never forward that advice.
+        found = _UNSUPPORTED_GLOBAL.search(str(exc))
+        what = (
+            f"a Python object of type {found.group(1)}"
+            if found
+            else "content beyond tensors and plain values"
+        )
+        raise UserError(
+            f"{p}: refused to load: it holds {what} (not a plain mems-tdc checkpoint; such files are never unpickled)"
+        ) from None
     except Exception as exc:  # torch's loader raises many types on damaged files; all mean the same
         raise UserError(
             f"{p}: not a readable model file (truncated or corrupted: {type(exc).__name__})"
@@ -93,4 +110,9 @@ def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None
+    if "offset" in checkpoint:
+        try:
+            model.offset = OffsetRecord.from_dict(checkpoint["offset"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
     return model, checkpoint

@@ -17,6 +17,7 @@ COMMANDS: dict[str, str] = {
     "evaluate": "evaluate_cmd",
     "compare": "compare_cmd",
     "diagnose": "diagnose_cmd",
+    "fleet": "fleet_cmd",
 }
 
 

@@ -8,18 +8,30 @@ in :mod:`trainer.methods`; a class does not name or register itself.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
 from trainer.data.recording import Recording
 
+if TYPE_CHECKING:
+    from trainer.reference import OffsetRecord
+
+# How long a constant-temperature stream runs before the drift at T_ref is read: long enough for
+# any smoothing, network state or lag of a temperature-driven model to settle.
+REFERENCE_SETTLE_S = 600.0
+
 
 class Compensator(ABC):
     """Fit on a training recording, then estimate the drift of any recording.
 
+    ``offset`` records what :func:`trainer.fitting.apply_offset_policy` did with the constant
+    (None: recursive, or not applied). Temperature-driven methods implement :meth:`shift_drift`.
+
     Subclasses implement the four abstract methods. ``to_payload`` must return only tensors and plain Python values (str, int, float, bool, None, lists, dicts) so that the checkpoint loads with ``torch.load(weights_only=True)``.
     """
+
+    offset: OffsetRecord | None = None
 
     @abstractmethod
     def fit(self, rec: Recording) -> Self:
@@ -45,3 +57,25 @@ class Compensator(ABC):
     def compensate(self, rec: Recording) -> np.ndarray:
         """The compensated output ``accel_mg - drift`` in mg."""
         return rec.accel_mg - self.predict_drift(rec)
+
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float) -> float:
+        """The settled drift estimate at the constant temperature ``t_ref_c`` (mg).
+
+        Any temperature-driven model gets it from its own stream: :data:`REFERENCE_SETTLE_S` of
+        constant temperature at ``rate_hz`` and zero acceleration; the last estimate is read.
+        """
+        n = max(2, round(REFERENCE_SETTLE_S * rate_hz))
+        columns = {
+            "time_s": np.arange(n, dtype=np.float64) / rate_hz,
+            "temp_c": np.full(n, float(t_ref_c)),
+            "accel_mg": np.zeros(n),
+        }
+        rec = Recording(columns, {"sample_rate_hz": repr(float(rate_hz))}, f"<constant {t_ref_c:g} degC>")
+        return float(self.predict_drift(rec)[-1])
+
+    def shift_drift(self, delta_mg: float) -> None:
+        """Add ``delta_mg`` to every drift estimate, in the fitted parameters (so the export carries it).
+
+        Temperature-driven methods implement it; the offset policy calls it after fitting.
+        """
+        raise NotImplementedError(f"{type(self).__name__} cannot shift its drift estimate")

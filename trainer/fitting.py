@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from typing import Any
 
 import numpy as np
@@ -10,6 +11,13 @@ from trainer import methods
 from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.errors import UserError
+from trainer.reference import (
+    OFFSET_OPTION,
+    OffsetPolicy,
+    OffsetRecord,
+    check_constant,
+    reference_temperature,
+)
 
 
 def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:
@@ -32,10 +40,94 @@ def training_stats(rec: Recording) -> dict[str, Any]:
         "temp_max_c": float(np.max(rec.temp_c)),
         "accel_mean_mg": float(np.mean(rec.accel_mg)),
         "accel_std_mg": float(np.std(rec.accel_mg)),
+        "time_range_s": [float(rec.time_s[0]), float(rec.time_s[-1])],
+        "data_sha256": data_fingerprint(rec),
+        **_channel_stats(rec),
     }
 
 
-def fit_compensator(method: str, train: Recording, options: dict[str, Any] | None = None) -> Compensator:
-    """Fit ``method`` on ``train`` with every ground-truth column hidden from it."""
+def _channel_stats(rec: Recording) -> dict[str, Any]:
+    """The sensor channel ``accel_mg`` came from and its device id, when the recording says so.
+
+    Flight-stack parameters (``codegen export --format px4-params``) are keyed by them.
+    """
+    from trainer.data.flightlog import parse_channel
+
+    name = rec.meta.get("channel", "")
+    channel = parse_channel(name)
+    if channel is None:
+        return {}
+    stats: dict[str, Any] = {"channel": name}
+    device_id = rec.meta.get(f"device_id_{channel.sensor}{channel.instance}", "")
+    if device_id.isdigit():
+        stats["device_id"] = int(device_id)
+    return stats
+
+
+def data_fingerprint(rec: Recording) -> str:
+    """sha256 of the time, temperature and acceleration columns: the same data, whatever the file."""
+    digest = hashlib.sha256()
+    for name in ("time_s", "temp_c", "accel_mg"):
+        digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
+    return digest.hexdigest()
+
+
+def fit_compensator(
+    method: str,
+    train: Recording,
+    options: dict[str, Any] | None = None,
+    policy: OffsetPolicy | None = None,
+) -> Compensator:
+    """Fit ``method`` on ``train`` with every ground-truth column hidden from it, then apply the
+    offset policy (relative to ``T_ref`` by default; :mod:`trainer.reference`)."""
     model = make_compensator(method, options)
-    return model.fit(train.without_truth())
+    blind = train.without_truth()
+    model.fit(blind)
+    apply_offset_policy(model, methods.get(method), blind, policy or OffsetPolicy())
+    return model
+
+
+def removes_sustained_input(method: methods.Method) -> bool:
+    """A recursive method removes any sustained acceleration (no reference temperature)."""
+    return method.family == methods.RECURSIVE
+
+
+def apply_offset_policy(
+    model: Compensator, method: methods.Method, train: Recording, policy: OffsetPolicy
+) -> OffsetRecord | None:
+    """Shift a fitted temperature-driven ``model`` as ``policy`` says; None for a recursive method.
+
+    The model is fitted with its constant (least squares needs one); the policy then moves the
+    constant out through :meth:`Compensator.shift_drift`, which every temperature-driven method
+    implements so that the exported C carries the same shift.
+    """
+    if removes_sustained_input(method):
+        return None
+    t_ref = reference_temperature(train.temp_c, policy.t_ref_c)
+    constant = model.drift_at_reference(t_ref, train.sample_rate_hz)
+    record = OffsetRecord(policy.mode, t_ref, constant)
+    check_constant(record, f"{method.name} fitted on {train.source}")
+    if record.relative:
+        try:
+            model.shift_drift(-constant)
+        except NotImplementedError:
+            raise UserError(
+                f"method {method.name!r} cannot model the drift relative to T_ref (its class does not "
+                f"implement Compensator.shift_drift); use {OFFSET_OPTION} absolute"
+            ) from None
+    model.offset = record
+    return record
+
+
+def fit_with_stats(
+    method: str,
+    train: Recording,
+    options: dict[str, Any] | None = None,
+    policy: OffsetPolicy | None = None,
+) -> tuple[Compensator, dict[str, Any]]:
+    """Fit ``method`` and return it with its checkpoint's ``train_stats`` (incl. the fit residual RMS)."""
+    model = fit_compensator(method, train, options, policy)
+    stats = training_stats(train)
+    residual = train.accel_mg - model.predict_drift(train.without_truth())
+    stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
+    return model, stats

@@ -66,6 +66,8 @@ class Method:
     ``reference``: a trivial predictor kept for honest scoring; not offered by ``trainer fit`` and
     not drawn in the fit figures. ``renderer``: codegen's renderer, None = no code generator.
     ``paper_table1``: the method's row of the paper's Table 1; set exactly for the paper's methods.
+    ``min_temp_span_c``: the temperature span a training recording needs to determine the method's
+    shape in temperature (``trainer fit`` refuses less); 0 = no requirement.
     """
 
     name: str
@@ -76,6 +78,7 @@ class Method:
     shares_population: bool = False
     reference: bool = False
     paper_table1: PaperRow | None = field(default=None, repr=False)
+    min_temp_span_c: float = 0.0
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
@@ -206,10 +209,18 @@ register(
         PLA_OPTIONS,
         renderer="piecewise-linear",
         paper_table1=PaperRow(B=(5.25e-4, 3.29), K=(3.45e-5, 20.23), R=(8.24e-7, 30.31), Aver=17.94),
+        min_temp_span_c=10.0,  # 10 intervals of at least 1 degC each at the paper's setting
     )
 )
 register(
-    Method("poly3", "trainer.baselines.poly3:CubicPolynomial", MEMORYLESS, POLY3_OPTIONS, renderer="cubic")
+    Method(
+        "poly3",
+        "trainer.baselines.poly3:CubicPolynomial",
+        MEMORYLESS,
+        POLY3_OPTIONS,
+        renderer="cubic",
+        min_temp_span_c=10.0,  # ArduPilot's TEMP_RANGE_MIN for the same cubic (AP_InertialSensor_tempcal.cpp)
+    )
 )
 register(
     Method(

@@ -66,6 +66,9 @@ class PiecewiseLinear(TemperatureCompensator):
         index = self.interval_index(temp_c)
         return self.slopes_mg_per_c[index] * temp_c + self.intercepts_mg[index]
 
+    def shift_drift(self, delta_mg: float) -> None:
+        self.intercepts_mg = self.intercepts_mg + delta_mg
+
     def to_payload(self) -> dict[str, Any]:
         return {
             "n_intervals": self.n_intervals,

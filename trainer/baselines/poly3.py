@@ -13,6 +13,8 @@ One deliberate difference, controlled by ``remove_median``: PX4 subtracts the ax
 fitting because its separate six-position calibration owns the constant offset. The paper's
 static test defines the drift with a zero reference, so by default the constant term is fitted
 too (``remove_median=False``) and the cubic is compared like-for-like with PLA and the DLSTM.
+The tool's offset policy (:mod:`trainer.reference`, relative to ``T_ref`` by default) then moves
+the fitted constant out of the model, which is what PX4's median removal is for.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from scipy.ndimage import median_filter
 
 from trainer.baselines.base import TemperatureCompensator
 from trainer.errors import UserError
+from trainer.reference import reference_temperature
 
 PX4_MEDIAN_KERNEL = 31
 PX4_TEMPERATURE_BINS = 2000
@@ -70,7 +73,7 @@ class CubicPolynomial(TemperatureCompensator):
         )
         if self.remove_median:
             drift = drift - np.median(drift)
-        self.t_ref_c = 0.5 * (t_min + t_max)
+        self.t_ref_c = reference_temperature(temp_c)
         temp_rel = temp_c - self.t_ref_c
         if self.n_bins > 0:
             temp_rel, drift = bin_by_temperature(temp_rel, drift, self.n_bins)
@@ -83,6 +86,9 @@ class CubicPolynomial(TemperatureCompensator):
     def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
         clipped = np.clip(temp_c, *self.temp_range_c)
         return np.polynomial.polynomial.polyval(clipped - self.t_ref_c, self.coefficients)
+
+    def shift_drift(self, delta_mg: float) -> None:
+        self.coefficients = self.coefficients + np.array([delta_mg, 0.0, 0.0, 0.0])
 
     def to_payload(self) -> dict[str, Any]:
         return {

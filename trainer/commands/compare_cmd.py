@@ -11,8 +11,10 @@ from typing import Any
 
 from trainer import methods
 from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+from trainer.commands.offset_options import add_offset_options, policy_from_args
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
+from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -21,8 +23,22 @@ def add_parser(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "compare", help="train every method, score them like the paper's Table 1 and write a report"
     )
-    parser.add_argument("train", help="training recording (.csv or .npz)")
-    parser.add_argument("valid", help="validation recording (.csv or .npz)")
+    parser.add_argument("train", help="training recording (.csv or .npz); with --holdout, the one recording")
+    parser.add_argument(
+        "valid", nargs="?", help="validation recording (.csv or .npz); omitted with --holdout"
+    )
+    parser.add_argument(
+        "--holdout",
+        metavar="SPEC",
+        help="score on a held-out part of TRAIN and train on the rest: F or last:F (the last fraction F), "
+        "first:F, or T0: / :T1 in seconds (docs/real-data.md)",
+    )
+    parser.add_argument(
+        "--inject",
+        choices=INPUT_PRESETS,
+        help="add this known input (steps: tilts of up to 50 mg) to the validation data and report how "
+        "much of it each method keeps",
+    )
     parser.add_argument(
         "--out-dir", default="comparison", help="report, figures and models go here (comparison/)"
     )
@@ -46,6 +62,7 @@ def add_parser(subparsers: Any) -> None:
         help="validation smoothing in s (paper: 0.5)",
     )
     add_dlstm_options(parser)
+    add_offset_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -76,18 +93,35 @@ def run(args: argparse.Namespace) -> int:
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     settings, frontend = settings_from_args(args)
+    policy = policy_from_args(args)
+    if (args.valid is None) == (args.holdout is None):
+        raise UserError("compare: give a validation recording VALID or --holdout SPEC (exactly one)")
 
     from trainer.checkpoint import save_model
+    from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.recording_io import read_recording
-    from trainer.fitting import training_stats
+    from trainer.fitting import data_fingerprint, training_stats
     from trainer.scoring.compare import compare
     from trainer.scoring.report import headline_table, render_report, write_figures, write_survival_figure
 
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
-    train = read_recording(args.train)
-    valid = read_recording(args.valid)
+    notes = []
+    if args.holdout is not None:
+        holdout = parse_holdout(args.holdout)
+        train, valid = split(read_recording(args.train), holdout)
+        notes.append(
+            f"one recording, {holdout.describe()}: training t = {train.time_s[0]:g} .. {train.time_s[-1]:g} s, "
+            f"validation t = {valid.time_s[0]:g} .. {valid.time_s[-1]:g} s"
+        )
+    else:
+        train = read_recording(args.train)
+        valid = read_recording(args.valid)
+    warning = overlap_warning(training_stats(train), valid, data_fingerprint(valid))
+    if warning:
+        print(warning, file=sys.stderr, flush=True)
+        notes.append(f"**{warning}**")
     input_tests = tuple(read_recording(path) for path in args.input_test)
     for rec in input_tests:
         if rec.truth("accel_mg") is None:
@@ -105,7 +139,10 @@ def run(args: argparse.Namespace) -> int:
         methods=requested,
         progress=not args.quiet,
         log=log,
+        policy=policy,
+        inject=args.inject,
     )
+    comparison.notes += notes
     # Everything is written into a fresh directory first and moved into place at the end, so a
     # failure never leaves a half-written report.
     out_dir.parent.mkdir(parents=True, exist_ok=True)

@@ -8,6 +8,7 @@ from typing import Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, atomic_output
+from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -23,16 +24,41 @@ def add_parser(subparsers: Any) -> None:
         default=PAPER_RUN_SMOOTHING_S,
         help="trailing moving average in s applied before the Allan analysis (paper: 0.5)",
     )
+    parser.add_argument(
+        "--holdout",
+        metavar="SPEC",
+        help="score only the held-out part of the recording (as 'trainer compare --holdout'): F or last:F, "
+        "first:F, T0: or :T1",
+    )
+    parser.add_argument(
+        "--inject",
+        choices=INPUT_PRESETS,
+        help="add this known input to the recording and report how much of it the model keeps",
+    )
     parser.set_defaults(func=run)
 
 
+def _mg(value: float) -> str:
+    return f"{value:.4g} mg"
+
+
 def drift_lines(result: Any) -> list[str]:
+    """The headline (drift left, always), ground-truth details and warnings, one line each."""
     lines = []
     for name, score in result.drift.items():
+        reference = "" if score.t_ref_c is None else f" relative to T_ref {score.t_ref_c:.2f} degC"
         lines.append(
-            f"residual drift vs true_drift_mg [{name}]: RMS {score.residual_rms_mg:.4g} mg, "
+            f"residual drift vs true_drift_mg{reference} [{name}]: RMS {score.residual_rms_mg:.4g} mg, "
             f"max |.| {score.residual_max_abs_mg:.4g} mg (uncompensated drift RMS "
             f"{score.raw_drift_rms_mg:.4g} mg)"
+        )
+    for name in [n for n in result.static if n != "raw"]:
+        left, raw = result.static[name], result.static["raw"]
+        lines.append(
+            f"drift left, deviation from a constant [{name}]: RMS {_mg(left.rms_mg)} (uncompensated "
+            f"{_mg(raw.rms_mg)}), max |.| {_mg(left.max_abs_mg)}, heating RMS {_mg(left.heating_rms_mg)}, "
+            f"cooling RMS {_mg(left.cooling_rms_mg)}; noise floor {_mg(result.noise_floor_mg)}"
+            + ("" if result.drift else " (no true_drift_mg: scored as a static recording)")
         )
     for name, fraction in result.out_of_range_fraction.items():
         if fraction > 0:
@@ -45,25 +71,46 @@ def drift_lines(result: Any) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import load_model
+    from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.recording_io import read_recording
+    from trainer.fitting import data_fingerprint
     from trainer.scoring.allan import plot_allan
     from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.inject import injected_input, input_kept
     from trainer.scoring.plots import plot_series
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)
     rec = read_recording(args.recording)
+    if args.holdout is not None:
+        _, rec = split(rec, parse_holdout(args.holdout))
     name = checkpoint["method"]
     compensated = model.compensate(rec.without_truth())
     lo, hi = checkpoint["valid_temp_range_c"]
     outside = (rec.temp_c < lo) | (rec.temp_c > hi)
-    result = evaluate(rec, {name: compensated}, out_of_range={name: outside}, smoothing_s=args.smoothing)
+    references = {name: model.offset.t_ref_c} if model.offset is not None and model.offset.relative else {}
+    result = evaluate(
+        rec,
+        {name: compensated},
+        out_of_range={name: outside},
+        smoothing_s=args.smoothing,
+        references=references,
+    )
 
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     text = result.table.to_text()
     extra = drift_lines(result)
+    if args.inject is not None:
+        kept = input_kept(model, rec, injected_input(rec, args.inject))
+        extra.append(
+            f"input kept [{name}]: {100 * kept.gain:.1f} % of the injected '{args.inject}' input "
+            f"(RMS {kept.input_rms_mg:.4g} mg; removed or distorted RMS {kept.error_rms_mg:.4g} mg)"
+        )
+    warning = overlap_warning(checkpoint["train_stats"], rec, data_fingerprint(rec))
+    if warning:
+        extra.append(warning)
     print(text)
     for line in extra:
         print(line)

@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from trainer import methods
+from trainer.commands.offset_options import add_offset_options, policy_from_args
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -17,29 +18,35 @@ def add_parser(subparsers: Any) -> None:
         "--method", required=True, choices=methods.fit_cli_names(), help="compensation method"
     )
     parser.add_argument("-o", "--output", required=True, help="checkpoint to write (model.pt)")
+    parser.add_argument(
+        "--accept-implausible",
+        action="store_true",
+        help="warn instead of refusing implausible rates, units or a too small temperature span",
+    )
     groups = []  # each method's options once, however many methods share them
     for method in methods.entries():
         if method.in_fit_cli and method.options not in groups:
             groups.append(method.options)
             method.options.add_arguments(parser)
+    add_offset_options(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from trainer.checkpoint import save_model
+    from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
-    from trainer.fitting import fit_compensator, training_stats
+    from trainer.fitting import fit_with_stats
+    from trainer.reference import RECURSIVE_NOTE
 
     check_output_path(args.output)  # fail before a long training run, not after it
     options = methods.get(args.method).options.fit_kwargs(args)
+    policy = policy_from_args(args)
     train = read_recording(args.train)
-    model = fit_compensator(args.method, train, options)
-    stats = training_stats(train)
-    residual = train.accel_mg - model.predict_drift(train.without_truth())
-    stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
+    checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
+    model, stats = fit_with_stats(args.method, train, options, policy)
+    checks.print_warnings()
     save_model(
         model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
     )
@@ -50,4 +57,5 @@ def run(args: argparse.Namespace) -> int:
     )
     for line in model.describe():
         print(line)
+    print(f"{args.method}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
     return 0

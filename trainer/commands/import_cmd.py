@@ -1,20 +1,50 @@
-"""``trainer import FOREIGN -o OUT.csv|.npz``: convert a foreign logger's file into a recording."""
+"""``trainer import FOREIGN -o OUT.csv|.npz``: convert a foreign logger's file or a flight log into a recording.
+
+A PX4 ULog or ArduPilot DataFlash log (recognised by its magic bytes) takes ``--channel``; any
+other file is delimited text mapped by the column options.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
 
+from trainer.data.flightlog import KIND_NAMES, log_kind
+from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
+    DEFAULT_CHANNEL,
     DELIMITER_NAMES,
+    FILL_TEMP_MODES,
     GRAVITY_MODES,
     PRESETS,
+    TEMP_UNIT_OFFSET_C,
     TIME_UNIT_SECONDS,
+    ImportOptions,
+    LogImportOptions,
+    import_flight_log,
     import_foreign,
     options_with_preset,
 )
+from trainer.data.plausibility import ACCEPT_OPTION, Plausibility
+from trainer.data.recording import Recording
 from trainer.data.recording_io import recording_format, write_recording
+from trainer.errors import UserError
+
+# Options that map the columns of a delimited file; a flight log names its channels itself.
+TEXT_ONLY_OPTIONS = (
+    "preset",
+    "delimiter",
+    "time",
+    "time_unit",
+    "rate",
+    "temp",
+    "accel",
+    "accel_unit",
+    "extra_axes",
+    "temp_unit",
+    "decimal_comma",
+)
 
 _DELIMITER_ALIASES = {"tab": "\t", "\\t": "\t", "comma": ",", "semicolon": ";"}
 
@@ -51,21 +81,40 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Register ``trainer import``; options left out fall back to the preset, then to defaults."""
     parser = subparsers.add_parser(
         "import",
-        help="convert a foreign logger's delimited file into a recording",
+        help="convert a foreign logger's delimited file or a PX4/ArduPilot flight log into a recording",
         description=(
-            "Convert a tab/comma/semicolon-delimited file into a recording (.csv or .npz). Time starts "
-            "at 0; a time axis whose jitter breaks the 1 percent rule is an error unless --resample or "
-            "--retime is given."
+            "Convert a tab/comma/semicolon-delimited file, a PX4 ULog (.ulg) or an ArduPilot DataFlash log "
+            "(.bin) into a recording (.csv or .npz). Time starts at 0; a time axis whose jitter breaks the "
+            "1 percent rule is an error unless --resample or --retime is given."
         ),
     )
-    parser.add_argument("foreign", metavar="FOREIGN", help="the foreign delimited file (with a header line)")
-    parser.add_argument("-o", "--output", required=True, metavar="OUT", help="output recording, .csv or .npz")
+    parser.add_argument(
+        "foreign", metavar="FOREIGN", help="delimited file (with a header line) or flight log"
+    )
+    parser.add_argument("-o", "--output", metavar="OUT", help="output recording, .csv or .npz")
+    parser.add_argument(
+        "--channel",
+        metavar="NAME",
+        help=f"flight logs: the accelerometer axis that becomes the recording (default {DEFAULT_CHANNEL})",
+    )
+    parser.add_argument(
+        "--list-channels", action="store_true", help="flight logs: print every channel of the log and stop"
+    )
     parser.add_argument("--preset", choices=sorted(PRESETS), help="column mapping of a known logger")
     parser.add_argument("--delimiter", type=_delimiter, help="tab, comma or semicolon (default: sniffed)")
     parser.add_argument("--time", metavar="COL", help="time column")
     parser.add_argument("--time-unit", choices=list(TIME_UNIT_SECONDS), help="unit of --time (default s)")
     parser.add_argument("--rate", type=_positive_hz, metavar="HZ", help="sample rate for --time-unit index")
-    parser.add_argument("--temp", metavar="COL", help="sensor temperature column, degC")
+    parser.add_argument("--temp", metavar="COL", help="sensor temperature column")
+    parser.add_argument("--temp-unit", choices=list(TEMP_UNIT_OFFSET_C), help="unit of --temp (default degC)")
+    parser.add_argument(
+        "--fill-temp",
+        choices=FILL_TEMP_MODES,
+        help="an empty temperature field (a slower channel) repeats the previous reading",
+    )
+    parser.add_argument(
+        "--decimal-comma", action="store_true", help="numbers are written 1,5 (tab or semicolon delimiter)"
+    )
     parser.add_argument("--accel", metavar="COL", help="the axis to compensate (becomes accel_mg)")
     parser.add_argument("--accel-unit", choices=list(ACCEL_UNIT_TO_MG), help="unit of the axes (default mg)")
     parser.add_argument(
@@ -86,12 +135,69 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="keep every sample and space the timestamps evenly over the same span (jitter up to 5 percent)",
     )
+    parser.add_argument(
+        ACCEPT_OPTION,
+        action="store_true",
+        help="warn instead of refusing implausible units, rates or temperatures",
+    )
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    kind = log_kind(args.foreign)
+    if args.list_channels:
+        if kind is None:
+            raise UserError(f"{args.foreign}: --list-channels applies to flight logs (ULog, DataFlash) only")
+        log = read_flight_log(args.foreign)
+        print(f"{args.foreign}: {KIND_NAMES[log.kind]} log, {len(log.channels)} channels")
+        for channel in log.channels.values():
+            print(f"  {channel.summary()}")
+        return 0
+    if args.output is None:
+        raise UserError("trainer import: -o/--output OUT is required")
     recording_format(args.output)  # reject a bad extension before any work
-    options = options_with_preset(
+    checks = Plausibility(accept=args.accept_implausible)
+    rec = _import_log(args, kind, checks) if kind is not None else _import_text(args, checks)
+    write_recording(rec, args.output)
+    checks.print_warnings()
+    how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
+    rate_hz = float(rec.meta["sample_rate_hz"])
+    picked = f" ({rec.meta['channel']})" if kind is not None else ""
+    print(f"{args.output}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}{picked}")
+    return 0
+
+
+def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Recording:
+    for name in TEXT_ONLY_OPTIONS:
+        if getattr(args, name) not in (None, False):
+            option = "--" + name.replace("_", "-")
+            raise UserError(
+                f"{args.foreign}: {option} does not apply to a {KIND_NAMES[kind]} log (its channels carry "
+                f"their units and temperatures); choose the axis with --channel"
+            )
+    resample = None if args.resample == "none" else args.resample
+    options = LogImportOptions(
+        channel=args.channel or DEFAULT_CHANNEL,
+        remove_gravity=args.remove_gravity or "none",
+        sensor=args.sensor,
+        resample=resample,
+        retime=args.retime,
+        fill_temp=args.fill_temp,
+    )
+    return import_flight_log(args.foreign, options, checks)
+
+
+def _import_text(args: argparse.Namespace, checks: Plausibility) -> Recording:
+    if args.channel is not None:
+        raise UserError(
+            f"{args.foreign}: --channel applies to flight logs; map a delimited file's columns with --accel"
+        )
+    return import_foreign(args.foreign, import_options(args), checks)
+
+
+def import_options(args: argparse.Namespace) -> ImportOptions:
+    """The parsed ``trainer import`` options of a delimited file (``trainer fleet`` reuses it)."""
+    return options_with_preset(
         args.preset,
         time=args.time,
         time_unit=args.time_unit,
@@ -105,10 +211,7 @@ def run(args: argparse.Namespace) -> int:
         resample=args.resample,
         retime=args.retime or None,
         delimiter=args.delimiter,
+        temp_unit=args.temp_unit,
+        decimal_comma=args.decimal_comma or None,
+        fill_temp=args.fill_temp,
     )
-    rec = import_foreign(args.foreign, options)
-    write_recording(rec, args.output)
-    how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
-    rate_hz = float(rec.meta["sample_rate_hz"])
-    print(f"{args.output}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}")
-    return 0

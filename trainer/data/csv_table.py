@@ -36,6 +36,7 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _META_COMMENT = re.compile(r"#\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*=(.*)")
 _NUMERIC_BYTES = b"0123456789.eE+- \t\r\n"  # all a chunk of plain numbers can contain
 _NON_FINITE_WORDS = {"nan", "inf", "infinity"}
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
 
 
 def quote(text: str, limit: int = 40) -> str:
@@ -154,6 +155,10 @@ def _parse_cell(cell: str, source: str, line: int, column: str) -> float:
         return value
     if text.lower().lstrip("+-") in _NON_FINITE_WORDS:
         raise UserError(f"{where}: {quote(text)} is not allowed (nan and inf are errors)")
+    if _DECIMAL_COMMA.fullmatch(text):
+        raise UserError(
+            f"{where}: {quote(text)} is not a number (a decimal comma? trainer import takes --decimal-comma)"
+        )
     raise UserError(f"{where}: {quote(text)} is not a number")
 
 
@@ -188,8 +193,12 @@ def _scan_chunk(
     source: str,
     meta: dict[str, str],
     meta_lines: dict[str, int],
+    allow_empty: frozenset[int] = frozenset(),
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Row-by-row parse of a chunk: skips comments and blank lines, raises on the first bad cell."""
+    """Row-by-row parse of a chunk: skips comments and blank lines, raises on the first bad cell.
+
+    An empty field of a column in ``allow_empty`` (indices) becomes NaN instead of an error.
+    """
     rows: list[list[float]] = []
     lines: list[int] = []
     pieces = chunk.split(b"\n")
@@ -215,12 +224,26 @@ def _scan_chunk(
                 f"{source}: line {line}, column {len(names) + 1}: unexpected extra field "
                 f"(found {len(fields)} fields, the header has {len(names)})"
             )
-        rows.append([_parse_cell(fields[j], source, line, names[j]) for j in used])
+        rows.append(
+            [
+                math.nan
+                if j in allow_empty and not fields[j].strip()
+                else _parse_cell(fields[j], source, line, names[j])
+                for j in used
+            ]
+        )
         lines.append(line)
     return np.array(rows, dtype=np.float64).reshape(len(rows), len(used)), np.array(lines, dtype=np.int64)
 
 
-def read_table(path: str | Path, *, delimiter: str = ",", columns: Sequence[str] | None = None) -> Table:
+def read_table(
+    path: str | Path,
+    *,
+    delimiter: str = ",",
+    columns: Sequence[str] | None = None,
+    decimal_comma: bool = False,
+    allow_empty: Sequence[str] = (),
+) -> Table:
     """Parse a delimited text file with a header into float64 columns.
 
     ``columns=None`` parses every column (and requires every header name to be present and
@@ -228,6 +251,9 @@ def read_table(path: str | Path, *, delimiter: str = ",", columns: Sequence[str]
     have a field on every row. Lines starting with ``#`` are comments (``# key=value`` ones land
     in ``meta``), blank lines are skipped. Values are not checked for being finite here beyond
     the text (``nan``/``inf`` words are rejected; an overflow such as ``1e999`` is not).
+
+    ``decimal_comma``: numbers are written ``1,5`` (the delimiter is then not a comma). Empty
+    fields of the ``allow_empty`` columns read as NaN (a channel logged more slowly than the rest).
     """
     source = str(path)
     data = _read_bytes(Path(path))
@@ -236,6 +262,9 @@ def read_table(path: str | Path, *, delimiter: str = ",", columns: Sequence[str]
     preamble = _read_preamble(data, source, delimiter, meta, meta_lines)
     used = _select_columns(source, preamble, columns)
     names = preamble.names
+    if decimal_comma:
+        data = data[: preamble.body_start] + data[preamble.body_start :].replace(b",", b".")
+    empty_ok = frozenset(j for j in used if names[j] in allow_empty)
     allowed = _NUMERIC_BYTES + delimiter.encode()
 
     blocks: list[np.ndarray] = []
@@ -251,7 +280,9 @@ def read_table(path: str | Path, *, delimiter: str = ",", columns: Sequence[str]
             blocks.append(block[:, used])
             line_blocks.append(np.arange(line, line + n_lines, dtype=np.int64))
         else:
-            values, lines = _scan_chunk(chunk, line, names, used, delimiter, source, meta, meta_lines)
+            values, lines = _scan_chunk(
+                chunk, line, names, used, delimiter, source, meta, meta_lines, empty_ok
+            )
             blocks.append(values)
             line_blocks.append(lines)
         pos, line = end, line + n_lines

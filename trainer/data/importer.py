@@ -15,6 +15,7 @@ it counts samples and never reads a clock.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,13 +24,19 @@ from typing import Literal
 import numpy as np
 
 from trainer.data.csv_table import Table, read_table
+from trainer.data.flightlog import KIND_NAMES, MG_PER_MPS2, log_kind
+from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
+from trainer.data.flightlog_io import read_flight_log
+from trainer.data.plausibility import Plausibility
 from trainer.data.recording import Recording
 from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
 from trainer.errors import UserError
 
-STANDARD_GRAVITY = 9.80665  # m/s^2 per g (CGPM 1901)
 TIME_UNIT_SECONDS: dict[str, float | None] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "index": None}
-ACCEL_UNIT_TO_MG: dict[str, float] = {"m/s^2": 1000.0 / STANDARD_GRAVITY, "g": 1000.0, "mg": 1.0}
+ACCEL_UNIT_TO_MG: dict[str, float] = {"m/s^2": MG_PER_MPS2, "g": 1000.0, "mg": 1.0}
+TEMP_UNIT_OFFSET_C: dict[str, float] = {"degC": 0.0, "K": -273.15}  # added to the column
+FILL_TEMP_MODES = ("previous",)
+DEFAULT_CHANNEL = "accel0_z"  # a level board's vertical axis: the one PX4's thermal run sees gravity on
 GRAVITY_MODES = ("none", "nominal", "mean")
 DELIMITER_NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
 EXTRA_AXIS_COLUMNS = ("accel_x_mg", "accel_y_mg", "accel_z_mg")
@@ -63,6 +70,21 @@ class ImportOptions:
     retime: bool = False
     delimiter: str | None = None
     meta: dict[str, str] = field(default_factory=dict)
+    temp_unit: str = "degC"
+    decimal_comma: bool = False
+    fill_temp: str | None = None  # "previous": an empty temperature field repeats the last reading
+
+
+@dataclass(frozen=True)
+class LogImportOptions:
+    """How to turn a flight log into a one-axis recording; mirrors ``trainer import LOG``."""
+
+    channel: str = DEFAULT_CHANNEL
+    remove_gravity: str = "none"
+    sensor: str | None = None
+    resample: Resample = None
+    retime: bool = False
+    fill_temp: str | None = None
 
 
 # Known loggers: the option values that make their files import with no other flag.
@@ -78,7 +100,7 @@ PRESETS: dict[str, dict[str, object]] = {
         "extra_axes": ("imu.acc.x", "imu.acc.y", "imu.acc.z"),
         "sensor": "tofupilot-imu-acc-z",
         "retime": True,
-        "meta": {"license": "MIT (c) 2024 tofupilot, see LICENSE.tofupilot"},
+        "meta": {"channel": "accel0_z", "license": "MIT (c) 2024 tofupilot, see LICENSE.tofupilot"},
     },
 }
 
@@ -111,8 +133,12 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
     return ImportOptions(**values)  # type: ignore[arg-type]
 
 
-def sniff_delimiter(path: str | Path) -> str:
-    """Tab, comma or semicolon: the one that splits the header and first data lines alike."""
+def sniff_delimiter(path: str | Path, *, decimal_comma: bool = False) -> str:
+    """Tab, comma or semicolon: the one that splits the header and first data lines alike.
+
+    A known binary log or any file with NUL bytes is refused before it is read as text.
+    """
+    _refuse_binary(path)
     try:
         with open(path, encoding="utf-8", errors="replace") as handle:
             lines: list[str] = []
@@ -130,6 +156,8 @@ def sniff_delimiter(path: str | Path) -> str:
         raise UserError(f"{path}: no header line (the file is empty or holds only comments)")
     best, best_fields = None, 1
     for candidate in DELIMITER_NAMES:
+        if decimal_comma and candidate == ",":
+            continue
         counts = {line.count(candidate) for line in lines}
         if len(counts) == 1 and (fields := counts.pop() + 1) > best_fields:
             best, best_fields = candidate, fields
@@ -141,29 +169,176 @@ def sniff_delimiter(path: str | Path) -> str:
     return best
 
 
-def import_foreign(path: str | Path, options: ImportOptions) -> Recording:
-    """Read ``path`` and return a recording following ``options``; problems are UserErrors."""
+def _refuse_binary(path: str | Path) -> None:
+    kind = log_kind(path)
+    if kind is not None:
+        raise UserError(
+            f"{path}: a {KIND_NAMES[kind]} log, not a delimited text file; import it with --channel NAME "
+            f"(the column options do not apply)"
+        )
+    with open(path, "rb") as handle:
+        if b"\0" in handle.read(4096):
+            raise UserError(f"{path}: a binary file, not delimited text (NUL bytes in the first 4 kB)")
+
+
+def import_foreign(path: str | Path, options: ImportOptions, checks: Plausibility | None = None) -> Recording:
+    """Read ``path`` and return a recording following ``options``; problems are UserErrors.
+
+    ``checks`` collects plausibility findings (default: the first one is an error).
+    """
     _check_options(options)
+    checks = checks or Plausibility()
     source = str(path)
-    delimiter = options.delimiter or sniff_delimiter(path)
+    _refuse_binary(path)
+    delimiter = options.delimiter or sniff_delimiter(path, decimal_comma=options.decimal_comma)
     extra = list(options.extra_axes or ())
     wanted = [name for name in (options.time, options.temp, options.accel, *extra) if name is not None]
-    table = read_table(path, delimiter=delimiter, columns=wanted)
-    n = len(table)
-    if n == 0:
+    table = read_table(
+        path,
+        delimiter=delimiter,
+        columns=wanted,
+        decimal_comma=options.decimal_comma,
+        allow_empty=(options.temp,),
+    )
+    if len(table) == 0:
         raise UserError(f"{source}: no data rows after the header on line {table.header_line}")
+    table, fill_note = _fill_temperature(table, [options.temp], options.fill_temp)
     for name in dict.fromkeys(wanted):
         bad = np.flatnonzero(~np.isfinite(table.columns[name]))
         if bad.size:
             raise UserError(f"{source}: {table.row_label(int(bad[0]))}, column {name!r}: value is not finite")
 
-    time = _time_seconds(table, options)
+    checks.accel_declared_g(
+        table.columns[options.accel], options.accel_unit, f"{source}: column {options.accel!r}"
+    )
     to_mg = ACCEL_UNIT_TO_MG[options.accel_unit]
-    columns = {"time_s": time, "temp_c": table.columns[options.temp].copy()}
+    columns = {"temp_c": table.columns[options.temp] + TEMP_UNIT_OFFSET_C[options.temp_unit]}
     columns["accel_mg"] = table.columns[options.accel] * to_mg
     for target, name in zip(EXTRA_AXIS_COLUMNS[: len(extra)], extra, strict=True):
         columns[target] = table.columns[name] * to_mg
+    meta = {"temp_filled": fill_note} if fill_note else {}
+    if options.decimal_comma:
+        meta["decimal_comma"] = "yes"
+    return _finish(table, options, columns, _mapping_note(options, delimiter), meta, checks)
 
+
+class _LogTable(Table):
+    """A flight log channel and its siblings as a table whose rows are named "sample N"."""
+
+    def row_label(self, row: int) -> str:
+        return f"sample {row + 1}"
+
+
+def import_flight_log(
+    path: str | Path, options: LogImportOptions, checks: Plausibility | None = None
+) -> Recording:
+    """One accelerometer channel of a ULog or DataFlash log as a recording.
+
+    The chosen channel becomes ``accel_mg`` with its own temperature as ``temp_c``; every channel
+    logged at exactly its timestamps (the other axes, and with DataFlash the gyroscope of the same
+    IMU) is kept under its recording-format name (``accel0_x_mg``, ``gyro0_x_dps``, ...).
+    """
+    checks = checks or Plausibility()
+    log = read_flight_log(path)
+    chosen = log.channel(options.channel)
+    if chosen.sensor != "accel":
+        accels = ", ".join(name for name, c in log.channels.items() if c.sensor == "accel") or "(none)"
+        raise UserError(
+            f"{log.source}: --channel {chosen.name!r}: a one-axis recording compensates an accelerometer "
+            f"axis (column accel_mg); choose one of {accels}"
+        )
+    siblings = list(log.siblings(chosen))
+    raw: dict[str, np.ndarray] = {"timestamp": chosen.time_us.astype(np.float64)}
+    for channel in siblings:
+        raw[channel.column] = channel.values
+        raw[channel.temp_column] = channel.temp_c
+    temp_columns = [name for name in raw if name.endswith("_temp_c")]
+    n = len(chosen.time_us)
+    table: Table = _LogTable(log.source, list(raw), 0, raw, np.arange(1, n + 1), {}, {})
+    table, fill_note = _fill_temperature(table, temp_columns, options.fill_temp)
+    for name, values in table.columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise UserError(
+                f"{log.source}: {table.row_label(int(bad[0]))}, channel column {name!r}: value is not finite"
+            )
+    imported = ImportOptions(
+        temp=chosen.temp_column,
+        accel=chosen.column,
+        time="timestamp",
+        time_unit="us",
+        remove_gravity=options.remove_gravity,
+        sensor=options.sensor or f"{log.kind}-{chosen.name}",
+        resample=options.resample,
+        retime=options.retime,
+    )
+    _check_options(imported)
+    columns = {"temp_c": table.columns[chosen.temp_column], "accel_mg": table.columns[chosen.column]}
+    columns.update((name, values) for name, values in table.columns.items() if name != "timestamp")
+    meta = {"channel": chosen.name}
+    for channel in siblings:
+        if channel.device_id is not None:
+            meta[f"device_id_{channel.sensor}{channel.instance}"] = str(channel.device_id)
+    meta.update(log.notes)
+    if fill_note:
+        meta["temp_filled"] = fill_note
+    mapping = (
+        f"{KIND_NAMES[log.kind]} log; time_s<-sample time[us] temp_c<-{chosen.temp_column} "
+        f"accel_mg<-{chosen.column}; {len(siblings)} channels logged with it kept"
+    )
+    return _finish(table, imported, columns, mapping, meta, checks)
+
+
+def _fill_temperature(table: Table, names: list[str], mode: str | None) -> tuple[Table, str | None]:
+    """Empty (NaN) temperature cells: an error naming the first, or ``previous`` repeats the last reading.
+
+    Rows before a column's first reading are dropped (there is nothing to repeat).
+    """
+    missing = {name: np.flatnonzero(np.isnan(table.columns[name])) for name in names}
+    missing = {name: rows for name, rows in missing.items() if rows.size}
+    if not missing:
+        return table, None
+    if mode is None:
+        name, rows = min(missing.items(), key=lambda item: int(item[1][0]))
+        raise UserError(
+            f"{table.source}: {table.row_label(int(rows[0]))}, column {name!r}: empty field (a temperature logged "
+            f"more slowly than the data? --fill-temp previous repeats the last reading)"
+        )
+    first = 0
+    for name in missing:
+        valid = ~np.isnan(table.columns[name])
+        if not valid.any():
+            raise UserError(f"{table.source}: column {name!r}: no temperature reading at all")
+        first = max(first, int(np.argmax(valid)))
+    columns = {name: values[first:].copy() for name, values in table.columns.items()}
+    filled = 0
+    for name in missing:
+        values = columns[name]
+        index = np.where(np.isnan(values), 0, np.arange(len(values)))
+        np.maximum.accumulate(index, out=index)
+        filled += int(np.count_nonzero(np.isnan(values)))
+        columns[name] = values[index]
+    kept = dataclasses.replace(table, columns=columns, lines=table.lines[first:])
+    note = f"previous: {filled} empty temperature cells repeat the last reading"
+    if first:
+        note += f", {first} rows before the first reading dropped"
+    return kept, note
+
+
+def _finish(
+    table: Table,
+    options: ImportOptions,
+    columns: dict[str, np.ndarray],
+    mapping: str,
+    extra_meta: dict[str, str],
+    checks: Plausibility,
+) -> Recording:
+    """Time base (jitter rule, retime or resample), gravity, plausibility and metadata."""
+    source = table.source
+    n = len(table)
+    time = _time_seconds(table, options)
+    columns = {"time_s": time, **columns}
+    checks.temperature(columns["temp_c"], f"{source}: column {options.temp!r}", at_import=True)
     meta: dict[str, str] = {}
     time_column = repr(options.time) if options.time else "(row number)"
     if options.retime:
@@ -177,6 +352,12 @@ def import_foreign(path: str | Path, options: ImportOptions) -> Recording:
         meta["resampled_from"] = f"{_jitter_summary(time)}; linear interpolation"
         columns = _resample(columns, rate)
     else:
+        if options.time_unit == "index":
+            assert options.rate_hz is not None, "index time needs --rate (checked by _check_options)"
+            rate = options.rate_hz
+        else:
+            rate = _median_rate(time)
+        checks.rate(rate, f"{source}: column {time_column}", at_import=True)
         problem = find_time_problem(np.round(time, csv_time_decimals(time)))
         if problem is not None:
             raise UserError(
@@ -184,20 +365,18 @@ def import_foreign(path: str | Path, options: ImportOptions) -> Recording:
                 f"use --resample HZ (linear interpolation onto a uniform grid) or, when no sample is "
                 f"missing, --retime"
             )
-        if options.time_unit == "index":
-            assert options.rate_hz is not None, "index time needs --rate (checked by _check_options)"
-            rate = options.rate_hz
-        else:
-            rate = _median_rate(time)
+    if options.retime or options.resample is not None:
+        checks.rate(_median_rate(time), f"{source}: column {time_column}", at_import=True)
 
     gravity_note = _remove_gravity(columns, options, source)
     meta["sample_rate_hz"] = f"{rate:.10g}"
     if options.sensor:
         meta["sensor"] = options.sensor
-    meta["source"] = Path(path).name
-    meta["mapping"] = _mapping_note(options, delimiter)
+    meta["source"] = Path(source).name
+    meta["mapping"] = mapping
     if gravity_note:
         meta["gravity_removed"] = gravity_note
+    meta.update(extra_meta)
     meta.update(options.meta)
     return Recording(columns, meta, source)
 
@@ -228,6 +407,12 @@ def _check_options(options: ImportOptions) -> None:
         raise UserError(f"--extra-axes needs exactly 3 column names (x,y,z), got {len(options.extra_axes)}")
     if options.delimiter is not None and options.delimiter not in DELIMITER_NAMES:
         raise UserError(f"--delimiter {options.delimiter!r}: use tab, comma or semicolon")
+    if options.decimal_comma and options.delimiter == ",":
+        raise UserError("--decimal-comma needs a tab or semicolon delimiter (a comma cannot be both)")
+    if options.temp_unit not in TEMP_UNIT_OFFSET_C:
+        raise UserError(f"--temp-unit {options.temp_unit!r}: use one of {', '.join(TEMP_UNIT_OFFSET_C)}")
+    if options.fill_temp is not None and options.fill_temp not in FILL_TEMP_MODES:
+        raise UserError(f"--fill-temp {options.fill_temp!r}: use one of {', '.join(FILL_TEMP_MODES)}")
 
 
 def _time_seconds(table: Table, options: ImportOptions) -> np.ndarray:
@@ -324,7 +509,7 @@ def _mapping_note(options: ImportOptions, delimiter: str) -> str:
         time += f" at {options.rate_hz:g} Hz"
     parts = [
         f"time_s<-{time}",
-        f"temp_c<-{options.temp}[degC]",
+        f"temp_c<-{options.temp}[{options.temp_unit}]",
         f"accel_mg<-{options.accel}[{options.accel_unit}]",
     ]
     for target, name in zip(EXTRA_AXIS_COLUMNS, options.extra_axes or (), strict=False):

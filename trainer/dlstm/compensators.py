@@ -219,6 +219,11 @@ class TemperatureDLSTM(_StreamingDLSTM):
     def run_inputs(self, rec: Recording) -> np.ndarray:
         return self._features(rec)
 
+    def shift_drift(self, delta_mg: float) -> None:
+        """The network's output is de-standardised with ``output_mean``: the shift goes there."""
+        assert self.output_norm is not None, "fit the model first"
+        self.output_norm = Standardiser((self.output_norm.mean[0] + delta_mg,), self.output_norm.std)
+
 
 class Persistence(Compensator):
     """``F`` = identity: the held estimate is the last smoothed output (no learning at all)."""

@@ -6,10 +6,10 @@ own formula (:func:`trainer.physics.effects.drift`) on the thermometer reading, 
 training range (outside it the compensator holds the range's edge, as a flight stack's cubic does).
 :mod:`.stream` runs the same model sample by sample.
 
-Offset safety: by default the drift is taken relative to its settled value at the reference
-temperature (the middle of the training range): the constant (which on a chamber run includes
-gravity on the vertical axis) is left to the accelerometer's own offset calibration, as flight
-stacks do. ``absolute=True`` keeps it.
+Offset safety: the offset policy (:mod:`trainer.reference`, ``--offset``) shifts the fitted
+bias polynomial's constant so that the drift is relative to its settled value at the reference
+temperature; the constant (which on a chamber run includes gravity on the vertical axis) is left to
+the accelerometer's own offset calibration, as flight stacks do.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.stream import PhysicsModel
 from trainer.greybox.terms import parse_effects
+from trainer.physics.catalogue import BACKBONE
 from trainer.physics.effects import EffectConfig, drift
 
 
@@ -38,7 +39,6 @@ class PhysicsCompensator(Compensator):
         effects: str = "auto",
         from_sim: str | None = None,
         warmup: bool = False,
-        absolute: bool = False,
         progress: bool = False,
     ) -> None:
         structures.check_source(effects, from_sim)
@@ -46,11 +46,9 @@ class PhysicsCompensator(Compensator):
         self.forced = None if effects == "auto" else parse_effects(effects)
         self.from_sim = from_sim
         self.warmup = warmup
-        self.absolute = absolute
         self.progress = progress
         self.effects: tuple[EffectConfig, ...] = ()
         self.temp_range_c = (np.nan, np.nan)
-        self.t_ref_c = np.nan
         self.report: dict[str, Any] = {}
 
     # -- fitting ---------------------------------------------------------------------------------
@@ -75,37 +73,35 @@ class PhysicsCompensator(Compensator):
         fitted = fit_physics(rec, chosen)
         self.effects = fitted.effects
         self.temp_range_c = (lo, hi)
-        self.t_ref_c = 0.5 * (lo + hi)
         self.report = _report(chosen, fitted)
         return self
 
     def describe(self) -> list[str]:
-        lines = summary_lines(self.report) if self.report else []
-        if not self.absolute and self.effects:
-            lines.append(
-                f"  relative to the drift at {self.t_ref_c:.2f} degC: removes {self.constant_mg:+.4g} mg less "
-                "than the absolute drift (the offset is left to the accelerometer's own calibration)"
-            )
-        return lines
+        return summary_lines(self.report) if self.report else []
 
     # -- running ---------------------------------------------------------------------------------
     @property
     def model(self) -> PhysicsModel:
         return PhysicsModel.from_effects(self.effects, self.temp_range_c)
 
-    @property
-    def constant_mg(self) -> float:
-        """What the relative form removes from the absolute drift: its settled value at ``t_ref_c``."""
-        return self.model.static_drift_mg(self.t_ref_c)
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float) -> float:
+        """Exactly the settled drift (filters settled, mid-branch, warm-up over), no simulation."""
+        del rate_hz
+        return self.model.static_drift_mg(t_ref_c)
 
-    def absolute_drift(self, rec: Recording) -> np.ndarray:
+    def shift_drift(self, delta_mg: float) -> None:
+        """Moves the bias polynomial's constant ``c0_mg`` (so the export carries the shift)."""
+        self.effects = tuple(
+            EffectConfig(e.identifier, {**e.params, "c0_mg": e.params["c0_mg"] + delta_mg})
+            if e.identifier == BACKBONE
+            else e
+            for e in self.effects
+        )
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
         t = np.asarray(rec.time_s, dtype=np.float64)
         temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *self.temp_range_c)
         return drift(self.effects, t - t[0], temp).total
-
-    def predict_drift(self, rec: Recording) -> np.ndarray:
-        out = self.absolute_drift(rec)
-        return out if self.absolute else out - self.constant_mg
 
     def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
         return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
@@ -115,8 +111,6 @@ class PhysicsCompensator(Compensator):
         return {
             "effects": [[e.identifier, {k: float(v) for k, v in e.params.items()}] for e in self.effects],
             "temp_range_c": [float(v) for v in self.temp_range_c],
-            "t_ref_c": float(self.t_ref_c),
-            "absolute": bool(self.absolute),
             "warmup": bool(self.warmup),
             "effects_option": self.effects_option,
             "report": self.report,
@@ -124,28 +118,30 @@ class PhysicsCompensator(Compensator):
 
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
-        model = cls(warmup=bool(payload["warmup"]), absolute=bool(payload["absolute"]))
+        model = cls(warmup=bool(payload["warmup"]))
         model.effects_option = str(payload["effects_option"])
         model.effects = tuple(
             EffectConfig(str(i), {k: float(v) for k, v in p.items()}) for i, p in payload["effects"]
         )
         model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
-        model.t_ref_c = float(payload["t_ref_c"])
         model.report = dict(payload["report"])
         return model
 
 
 def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, Any]:
     """Plain values for the checkpoint and the fit summary: structure, parameters, flags, notes."""
+    final = fitted.structure
+    added = [e.identifier for e in final.compensated if e not in chosen.compensated]
+    how = chosen.how + (f"; cross-validation added {', '.join(added)}" if added else "")
     return {
-        "structure": chosen.how,
+        "structure": how,
         "effects": [e.identifier for e in fitted.effects],
         "params": {e.identifier: dict(e.params) for e in fitted.effects},
         "std": {e.identifier: dict(fitted.std.get(e.identifier, {})) for e in fitted.effects},
         "nuisance": [e.identifier for e in fitted.nuisance],
         "at_bound": list(fitted.at_bound),
         "implausible": list(fitted.implausible),
-        "notes": list(chosen.notes),
+        "notes": [*chosen.notes, *fitted.notes],
     }
 
 

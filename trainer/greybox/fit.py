@@ -26,6 +26,7 @@ from trainer.diagnose.candidates import propose
 from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
 from trainer.diagnose.threads import single_blas_thread
 from trainer.errors import UserError
+from trainer.greybox.select import extend
 from trainer.greybox.structure import Structure
 from trainer.greybox.terms import RATE
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, PLAUSIBLE
@@ -50,6 +51,8 @@ class FittedPhysics:
     implausible: tuple[str, ...]  # "effect.param" outside the catalogue's plausible range
     blocks: int
     block_s: float
+    structure: Structure  # as finally chosen (auto: after the cross-validated stage)
+    notes: tuple[str, ...] = ()
 
 
 def _start_term(effect: EffectConfig) -> Term | None:
@@ -127,6 +130,9 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     current = fit_model(baseline.terms, noise_terms, data)
     for effect in (*structure.compensated, *structure.nuisance):
         current = _add(current, data, effect)
+    notes: list[str] = []
+    if structure.candidates:
+        current, structure, notes = extend(current, data, structure, _add)
     terms = _rate_filter(current.terms)
     fit = _clamp_rate(fit_model(terms, noise_terms, data, start=current.noise), data, noise_terms)
 
@@ -179,5 +185,13 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     order = list(EFFECTS)
     effects.sort(key=lambda e: order.index(e.identifier))
     return FittedPhysics(
-        tuple(effects), tuple(nuisance), std, tuple(at_bound), tuple(implausible), data.n, data.block_s
+        tuple(effects),
+        tuple(nuisance),
+        std,
+        tuple(at_bound),
+        tuple(implausible),
+        data.n,
+        data.block_s,
+        structure,
+        tuple(notes),
     )

@@ -34,6 +34,9 @@ class Structure:
     nuisance: tuple[EffectConfig, ...] = ()
     how: str = ""
     notes: tuple[str, ...] = field(default_factory=tuple)
+    # compensable effects the profile identifies but the finder did not name (auto only): the
+    # cross-validated stage (:mod:`trainer.greybox.select`) may still add them
+    candidates: tuple[str, ...] = ()
 
 
 def forced(names: tuple[str, ...]) -> Structure:
@@ -73,7 +76,15 @@ def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Str
         if compensated(n.effect, warmup_allowed=True)
     ]
     named = ", ".join(e.identifier for e in comp) or "nothing beyond the bias polynomial"
-    return Structure(comp, nuisance, how=f"auto: the finder named {named}", notes=tuple(notes))
+    present = {e.identifier for e in found}
+    candidates = tuple(
+        name
+        for name, info in diagnosis.profile.identifiability.items()
+        if info.identifiable and name not in present and compensated(name, warmup_allowed=warmup_allowed)
+    )
+    return Structure(
+        comp, nuisance, how=f"auto: the finder named {named}", notes=tuple(notes), candidates=candidates
+    )
 
 
 def check_source(effects: str | None, from_sim_path: str | None) -> None:

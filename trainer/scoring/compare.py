@@ -20,7 +20,10 @@ from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.dlstm.fusion import FusionSettings, train_stage
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.fitting import apply_offset_policy
+from trainer.reference import RECURSIVE_NOTE, OffsetPolicy
 from trainer.scoring.evaluate import Evaluation, InputSurvival, evaluate, input_survival
+from trainer.scoring.inject import injected_input, input_kept
 
 ORACLE = "oracle"  # evaluation only: accel - true_drift_mg, what perfect compensation would score
 
@@ -33,6 +36,7 @@ class Comparison:
     fit_seconds: dict[str, float]
     evaluation: Evaluation
     survival: dict[str, dict[str, InputSurvival]] = field(default_factory=dict)  # input rec -> method
+    notes: list[str] = field(default_factory=list)  # set-up and warnings for the report
 
 
 def fit_all(
@@ -42,11 +46,13 @@ def fit_all(
     methods: tuple[str, ...] | None = None,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    policy: OffsetPolicy | None = None,
 ) -> tuple[dict[str, Compensator], dict[str, float]]:
     """Fit every requested method (default: all) on ``train`` (ground truth hidden), in registry order.
 
     The methods that share the gradient-trained population are fitted first, from one population
-    trained once (prepared by the first registered sharing method), then every other method.
+    trained once (prepared by the first registered sharing method), then every other method. Every
+    temperature-driven model then gets the offset ``policy`` (:mod:`trainer.reference`).
     """
     train = train.without_truth()
     requested = registry.names() if methods is None else methods
@@ -76,6 +82,9 @@ def fit_all(
             start = time.perf_counter()
             models[method.name] = build(method).fit(train)
             seconds[method.name] = time.perf_counter() - start
+    for method in chosen:
+        record = apply_offset_policy(models[method.name], method, train, policy or OffsetPolicy())
+        log(f"{method.name}: {record.describe() if record else RECURSIVE_NOTE}")
     return {m.name: models[m.name] for m in chosen}, seconds
 
 
@@ -89,10 +98,19 @@ def compare(
     methods: tuple[str, ...] | None = None,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    policy: OffsetPolicy | None = None,
+    inject: str | None = None,
 ) -> Comparison:
-    models, seconds = fit_all(train, settings, methods=methods, progress=progress, log=log)
+    """Fit on ``train``, score on ``valid``; ``inject`` (an input preset) is added to ``valid`` to
+    measure how much of a known input each method keeps (:mod:`trainer.scoring.inject`)."""
+    models, seconds = fit_all(train, settings, methods=methods, progress=progress, log=log, policy=policy)
     blind = valid.without_truth()
     compensated = {name: model.compensate(blind) for name, model in models.items()}
+    references = {
+        name: model.offset.t_ref_c
+        for name, model in models.items()
+        if model.offset is not None and model.offset.relative
+    }
     true_drift = valid.truth("drift_mg")
     if true_drift is not None:
         compensated[ORACLE] = valid.accel_mg - true_drift
@@ -103,8 +121,14 @@ def compare(
         compensated,
         out_of_range={name: outside for name in models if registry.REGISTRY[name].range_checked},
         smoothing_s=smoothing_s,
+        references=references,
     )
     comparison = Comparison(models, seconds, evaluation)
+    if inject is not None:
+        signal = injected_input(valid, inject)
+        comparison.survival[f"injected-{inject}"] = {
+            name: input_kept(model, valid, signal) for name, model in models.items()
+        }
     for rec in input_tests:
         outputs = {name: model.compensate(rec.without_truth()) for name, model in models.items()}
         if rec.truth("drift_mg") is not None:

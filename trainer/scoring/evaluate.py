@@ -4,7 +4,11 @@ The paper smooths the validation data over 0.5 s before its Allan analysis; the 
 moving average is applied here to the raw output and to every compensated output alike, so the
 columns stay comparable. The Allan improvement rewards any high-pass operation, so when the
 recording carries ground truth the residual drift RMS against ``true_drift_mg`` is reported too:
-``drift_estimate = accel - compensated`` and ``residual = true_drift - drift_estimate``.
+``drift_estimate = accel - compensated`` and ``residual = true_drift - drift_estimate``. A method
+that models the drift relative to a reference temperature (:mod:`trainer.reference`) is scored
+against ``true_drift - true_drift(T_ref)``. Without ground truth (a real recording) the drift left
+is the compensated output's deviation from a constant (:mod:`trainer.scoring.static`), so there
+is always a headline figure.
 """
 
 from __future__ import annotations
@@ -17,7 +21,17 @@ import numpy as np
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.reference import value_at_temperature
 from trainer.scoring.allan import AllanCurve, AllanTable, allan_table, default_taus
+from trainer.scoring.static import (
+    COOLING,
+    HEATING,
+    DriftLeft,
+    noise_floor_mg,
+    static_drift_left,
+    summarise,
+    thermal_branch,
+)
 
 PAPER_VALIDATION_SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the paper's 0.5 s validation smoothing
 # A moving average of width w distorts the Allan deviation for tau up to a few w (the hump in
@@ -27,11 +41,16 @@ MIN_TAU_IN_SMOOTHING_WINDOWS = 4.0
 
 @dataclass(frozen=True)
 class DriftScore:
-    """How much real drift a method left behind (needs ``true_drift_mg``)."""
+    """How much real drift a method left behind (needs ``true_drift_mg``).
+
+    ``t_ref_c``: the true drift was taken relative to its value there (None: absolute).
+    """
 
     residual_rms_mg: float
     residual_max_abs_mg: float
     raw_drift_rms_mg: float
+    t_ref_c: float | None = None
+    left: DriftLeft | None = None  # the same residual per heating/cooling branch
 
 
 @dataclass(frozen=True)
@@ -44,6 +63,22 @@ class Evaluation:
     drift: dict[str, DriftScore]
     out_of_range_fraction: dict[str, float]
     smoothing_s: float
+    static: dict[str, DriftLeft]  # deviation from a constant, "raw" included
+    noise_floor_mg: float  # white-noise RMS of the raw output after the smoothing
+    branch_fractions: tuple[float, float]  # share of heating and of cooling samples
+    raw_drift: DriftScore | None = None  # the uncompensated output against the truth (common T_ref)
+
+    def drift_left(self, name: str) -> DriftLeft | None:
+        """The headline drift left of ``name``: against ground truth when there is one, else static."""
+        if self.drift:
+            score = self.raw_drift if name == "raw" else self.drift.get(name)
+            return score.left if score is not None else None
+        return self.static.get(name)
+
+    @property
+    def basis(self) -> str:
+        """What the headline drift left is measured against."""
+        return "true drift" if self.drift else "deviation from a constant (static recording)"
 
 
 def smooth_for_scoring(x: np.ndarray, rate_hz: float, smoothing_s: float) -> np.ndarray:
@@ -53,16 +88,27 @@ def smooth_for_scoring(x: np.ndarray, rate_hz: float, smoothing_s: float) -> np.
     return moving_average(x, window_samples(smoothing_s, rate_hz), mode="trailing")
 
 
-def drift_score(rec: Recording, compensated: np.ndarray) -> DriftScore | None:
-    """Residual drift against ground truth, or None when the recording has none."""
+def drift_score(
+    rec: Recording,
+    compensated: np.ndarray,
+    t_ref_c: float | None = None,
+    branch: np.ndarray | None = None,
+) -> DriftScore | None:
+    """Residual drift against ground truth (relative to ``t_ref_c`` when given), or None without it."""
     true_drift = rec.truth("drift_mg")
     if true_drift is None:
         return None
+    if t_ref_c is not None:
+        true_drift = true_drift - value_at_temperature(rec.temp_c, true_drift, t_ref_c)
     residual = true_drift - (rec.accel_mg - compensated)
+    if branch is None:
+        branch = thermal_branch(rec.temp_c, rec.sample_rate_hz)
     return DriftScore(
         residual_rms_mg=float(np.sqrt(np.mean(residual**2))),
         residual_max_abs_mg=float(np.max(np.abs(residual))),
         raw_drift_rms_mg=float(np.sqrt(np.mean(true_drift**2))),
+        t_ref_c=t_ref_c,
+        left=summarise(residual, branch),
     )
 
 
@@ -72,17 +118,35 @@ def evaluate(
     *,
     out_of_range: dict[str, np.ndarray] | None = None,
     smoothing_s: float = PAPER_VALIDATION_SMOOTHING_S,
+    references: dict[str, float] | None = None,
 ) -> Evaluation:
-    """Score each compensated output of ``rec`` (name -> 200 Hz compensated signal in mg)."""
+    """Score each compensated output of ``rec`` (name -> 200 Hz compensated signal in mg).
+
+    ``references``: name -> ``T_ref`` of the methods that model the drift relative to it.
+    """
     rate = rec.sample_rate_hz
     smoothed = {"raw": smooth_for_scoring(rec.accel_mg, rate, smoothing_s)}
     smoothed.update({name: smooth_for_scoring(x, rate, smoothing_s) for name, x in compensated.items()})
     taus = default_taus(len(rec), rate)
     taus = taus[taus >= MIN_TAU_IN_SMOOTHING_WINDOWS * smoothing_s]
     table = allan_table(smoothed["raw"], {k: v for k, v in smoothed.items() if k != "raw"}, rate, taus=taus)
-    drift = {name: s for name, x in compensated.items() if (s := drift_score(rec, x)) is not None}
+    branch = thermal_branch(rec.temp_c, rate)
+    refs = references or {}
+    drift = {
+        name: s
+        for name, x in compensated.items()
+        if (s := drift_score(rec, x, refs.get(name), branch)) is not None
+    }
     fractions = {name: float(np.mean(mask)) for name, mask in (out_of_range or {}).items()}
-    return Evaluation(table, table.curves, smoothed, drift, fractions, smoothing_s)
+    static = {name: static_drift_left(x, branch) for name, x in smoothed.items()}
+    window = window_samples(smoothing_s, rate) if smoothing_s > 0 else 1
+    floor = noise_floor_mg(rec.accel_mg, window)
+    shares = (float(np.mean(branch == HEATING)), float(np.mean(branch == COOLING)))
+    common = set(refs.values())
+    raw_drift = drift_score(rec, rec.accel_mg, common.pop() if len(common) == 1 else None, branch)
+    return Evaluation(
+        table, table.curves, smoothed, drift, fractions, smoothing_s, static, floor, shares, raw_drift
+    )
 
 
 @dataclass(frozen=True)

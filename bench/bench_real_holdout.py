@@ -1,0 +1,118 @@
+"""Every cheap method on the bundled real chamber run, held out both ways, on x, y and z.
+
+The recording (``shared/data/real/``, one 71 min cycle 51.6 -> -17.6 -> 74.0 -> 36.3 degC at
+1.98 Hz, static) is imported per axis exactly as ``trainer import --preset tofupilot --accel
+imu.acc.X`` does, then ``trainer compare``'s own functions score every method on a held-out part:
+
+- ``last:0.5`` / ``first:0.5``: train on the first half, score the second, and the other way round
+  (the issue's "both ways round"; part of each held-out half lies outside the training range);
+- ``3131:`` / ``:1361``: split at the temperature maximum (t = 3131 s) and minimum (t = 1361 s),
+  so that the scored part lies inside the training range (train on cycle + heating, score the last
+  cooling; train on heating + cooling, score the first cooling).
+
+Scores (docs/real-data.md): drift left = deviation of the compensated output from a constant
+(RMS, max, heating and cooling RMS), the share of injected tilt steps kept, the noise floor.
+
+    python bench/bench_real_holdout.py            # the methods without DLSTM options
+    python bench/bench_real_holdout.py --dlstm    # + the recursive and the temperature-input DLSTM
+                                                  #   (population 4, 500 iterations, no sparrow cycles)
+    python bench/bench_real_holdout.py --markdown table.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from trainer import methods as registry
+from trainer.commands.method_options import DLSTM_OPTIONS
+from trainer.data.holdout import parse_holdout, split
+from trainer.data.importer import import_foreign, options_with_preset
+from trainer.dlstm.fusion import FusionSettings
+from trainer.scoring.compare import compare
+from trainer.scoring.markdown import markdown_table
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
+SPLITS = ("last:0.5", "first:0.5", "3131:", ":1361")
+DLSTM_SETTINGS = FusionSettings(population=4, iterations=500, cycles=0)
+
+
+def _cell(value: float) -> str:
+    return f"{value:.2f}" if value == value else "n/a"
+
+
+def chosen_methods(with_dlstm: bool) -> tuple[str, ...]:
+    """Every method without DLSTM options (the cheap ones, ``physics`` included once registered);
+    with ``with_dlstm`` also the first population-sharing DLSTM and the non-sharing DLSTMs (with no
+    sparrow cycles the SSA/ISSA variants equal the first)."""
+    chosen: list[str] = []
+    shared = False
+    for method in registry.entries():
+        if method.options is not DLSTM_OPTIONS:
+            chosen.append(method.name)
+        elif with_dlstm and not (method.shares_population and shared):
+            chosen.append(method.name)
+            shared = shared or method.shares_population
+    return tuple(chosen)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--recording", default=str(REAL), help="the tofupilot .tsv file")
+    parser.add_argument("--dlstm", action="store_true", help="add dlstm and dlstm-temp (reduced settings)")
+    parser.add_argument("--markdown", help="also write the table to this file")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)  # the fastest for these sizes (docs/trainer.md), and fair to other jobs
+    methods = chosen_methods(args.dlstm)
+    header = ["axis", "held out", "method", "drift left RMS (mg)", "max (mg)", "heating RMS (mg)"]
+    header += ["cooling RMS (mg)", "steps kept (%)", "outside training range (%)", "noise floor (mg)"]
+    rows = []
+    for axis in "xyz":
+        rec = import_foreign(args.recording, options_with_preset("tofupilot", accel=f"imu.acc.{axis}"))
+        for holdout in SPLITS:
+            train, valid = split(rec, parse_holdout(holdout))
+            start = time.perf_counter()
+            result = compare(
+                train,
+                valid,
+                DLSTM_SETTINGS,
+                methods=methods,
+                progress=False,
+                log=lambda _: None,
+                inject="steps",
+            )
+            evaluation = result.evaluation
+            print(f"  fit seconds: {result.fit_seconds}", file=sys.stderr, flush=True)
+            kept = result.survival["injected-steps"]
+            print(f"{axis} {holdout}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+            for name in ("raw", *methods):
+                left = evaluation.drift_left(name)
+                assert left is not None
+                outside = evaluation.out_of_range_fraction.get(name)
+                rows.append(
+                    [
+                        axis,
+                        holdout,
+                        "uncompensated" if name == "raw" else name,
+                        _cell(left.rms_mg),
+                        _cell(left.max_abs_mg),
+                        _cell(left.heating_rms_mg),
+                        _cell(left.cooling_rms_mg),
+                        "100" if name == "raw" else f"{100 * kept[name].gain:.1f}",
+                        "" if outside is None else f"{100 * outside:.0f}",
+                        _cell(evaluation.noise_floor_mg),
+                    ]
+                )
+    table = markdown_table(header, rows)
+    print(table)
+    if args.markdown:
+        Path(args.markdown).write_text(table + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

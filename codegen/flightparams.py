@@ -1,0 +1,315 @@
+"""Per-unit calibration as flight-stack parameters: PX4 ``.params`` and ArduPilot ``.parm`` files.
+
+Both stacks apply a cubic of the temperature as an offset, so only a model that *is* a cubic of
+the temperature qualifies (``poly3``; ``pla`` with one interval, a line). What each stack does
+with the parameters (checked in their sources; docs/flight-stacks.md quotes them):
+
+PX4 (``src/modules/temperature_compensation/TemperatureCompensation.cpp``,
+``calc_thermal_offsets_3D`` / ``_1D``, applied in ``src/lib/sensor_calibration/Accelerometer.hpp``
+as ``data - _thermal_offset - _offset``)::
+
+    dT = clamp(T, TMIN, TMAX) - TREF
+    offset = X0 + X1 dT + X2 dT^2 + X3 dT^3        (baro: up to X5 dT^5)
+    corrected = raw - offset                      (m/s^2, rad/s, Pa)
+
+ArduPilot (``libraries/AP_InertialSensor/AP_InertialSensor_tempcal.cpp``, ``correct_sensor``;
+``Tools/scripts/tempcal_IMU.py`` writes the same set)::
+
+    P(d) = (ACC1 + (ACC2 + ACC3 d) d) d * 1e-6      (no constant term; 1e-6 = SCALE_FACTOR)
+    corrected = raw - P(clamp(T) - 35) + P(clamp(CALTEMP) - 35)
+
+The sign is the same as ours (``compensated = raw - drift``), so the offset is the model's drift
+converted to the stack's unit. The constant term belongs to the stack's ordinary calibration
+(PX4 asks for an accelerometer calibration after the thermal one; ArduPilot keeps it in
+``INS_ACCn_OFFS`` at ``INS_ACCn_CALTEMP``), and a chamber recording's constant includes gravity,
+so by default PX4's ``X0`` is 0: the offset is ``drift(T) - drift(TREF)``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from codegen.spec import Checkpoint, PlaSpec, Poly3Spec, parse_checkpoint
+from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
+from trainer.errors import UserError
+
+EXTENSIONS = {"px4-params": ".params", "ardupilot-parm": ".parm"}  # the --format choices besides c
+# model unit -> the stacks' unit (PX4 and ArduPilot alike: m/s^2, rad/s, Pa)
+TO_STACK_UNIT = {"mg": STANDARD_GRAVITY / 1000.0, "dps": math.pi / 180.0, "pa": 1.0}
+STACK_UNIT = {"mg": "m/s^2", "dps": "rad/s", "pa": "Pa"}
+PX4_PREFIX = {"accel": "TC_A", "gyro": "TC_G", "baro": "TC_B"}
+PX4_BARO_ORDER = 5  # TC_Bn_X0..X5
+PX4_INSTANCES = 4  # ACCEL_COUNT_MAX etc. in TemperatureCompensation.h
+MAV_PARAM_TYPE_INT32, MAV_PARAM_TYPE_REAL32 = 6, 9
+ARDUPILOT_TEMP_REF_C = 35.0  # TEMP_REFERENCE in AP_InertialSensor_tempcal.cpp
+ARDUPILOT_SCALE = 1.0e6  # SCALE_FACTOR
+ARDUPILOT_PREFIX = {"accel": "ACC", "gyro": "GYR"}
+ARDUPILOT_INSTANCES = 3  # INS_TCAL1..3
+GRAVITY_IN_CONSTANT_MG = 500.0  # a constant term this large holds gravity, not a bias
+AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+@dataclass(frozen=True)
+class ChannelCubic:
+    """One channel's drift as a cubic about ``t_ref_c`` in the stacks' unit, clamped to the range."""
+
+    channel: ChannelName
+    name: str
+    device_id: int | None
+    coefficients: np.ndarray  # c0..c3 of (T - t_ref)^k, stack unit / degC^k
+    t_ref_c: float
+    t_min_c: float
+    t_max_c: float
+    model_sha256: str
+
+
+def shift_polynomial(coefficients: np.ndarray, from_ref: float, to_ref: float) -> np.ndarray:
+    """Coefficients of the same polynomial in ``T - to_ref`` (exact algebra: a binomial re-expansion)."""
+    poly = np.polynomial.Polynomial(coefficients)
+    shifted = poly(np.polynomial.Polynomial([to_ref - from_ref, 1.0])).coef
+    return np.pad(shifted, (0, len(coefficients) - len(shifted)))
+
+
+def _model_cubic(ckpt: Checkpoint, source: str) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """(c0..c3 in the model's unit, t_ref, clamp range) of a model that is a cubic of the temperature."""
+    model = ckpt.model
+    if isinstance(model, Poly3Spec):
+        return model.coefficients_mg.copy(), model.t_ref_c, model.temp_range_c
+    if isinstance(model, PlaSpec) and len(model.slopes_mg_per_c) == 1:
+        lo, hi = ckpt.valid_temp_range_c
+        t_ref = 0.5 * (lo + hi)
+        slope, intercept = float(model.slopes_mg_per_c[0]), float(model.intercepts_mg[0])
+        return np.array([intercept + slope * t_ref, slope, 0.0, 0.0]), t_ref, (lo, hi)
+    raise UserError(
+        f"{source}: method {ckpt.method!r} is not a cubic of the temperature; flight-stack parameters hold one "
+        f"(use poly3, or pla with --intervals 1)"
+    )
+
+
+def load_channel_cubic(
+    path: str | os.PathLike[str], *, channel: str | None = None, device_id: int | None = None
+) -> ChannelCubic:
+    """A checkpoint as a channel's cubic; ``channel``/``device_id`` override what the training recorded."""
+    import hashlib
+
+    from trainer.checkpoint import load_checkpoint  # torch: imported on use, so --help stays fast
+
+    source = str(path)
+    raw = load_checkpoint(path)
+    ckpt = parse_checkpoint(raw, source)
+    coefficients, t_ref, (lo, hi) = _model_cubic(ckpt, source)
+    stats = raw["train_stats"] if isinstance(raw["train_stats"], dict) else {}
+    name = channel or stats.get("channel")
+    if not isinstance(name, str):
+        raise UserError(
+            f"{source}: the model does not record which sensor axis it was fitted on (its recording has no "
+            f"'channel' metadata); pass --channel, e.g. accel0_z"
+        )
+    parsed = parse_channel(name)
+    if parsed is None:
+        raise UserError(
+            f"{source}: channel {name!r} is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
+        )
+    if device_id is None and channel is None and isinstance(stats.get("device_id"), int):
+        device_id = int(stats["device_id"])
+    if not lo < hi:
+        raise UserError(f"{source}: the valid temperature range {lo:g} .. {hi:g} degC is empty")
+    scale = TO_STACK_UNIT[parsed.unit]
+    sha = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return ChannelCubic(parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha)
+
+
+@dataclass(frozen=True)
+class SensorSet:
+    """The channels of one sensor instance on a common reference and range (one stack parameter set)."""
+
+    sensor: str
+    instance: int
+    device_id: int | None
+    t_ref_c: float
+    t_min_c: float
+    t_max_c: float
+    axes: dict[str | None, ChannelCubic]  # axis (None for a barometer) -> channel
+
+
+def group_by_instance(channels: Sequence[ChannelCubic]) -> list[SensorSet]:
+    """Group channels per sensor instance; the instance's range is the intersection of its channels'."""
+    groups: dict[tuple[str, int], list[ChannelCubic]] = defaultdict(list)
+    for cubic in channels:
+        groups[cubic.channel.sensor, cubic.channel.instance].append(cubic)
+    sets = []
+    for (sensor, instance), members in sorted(
+        groups.items(), key=lambda item: (_sensor_rank(item[0][0]), item[0][1])
+    ):
+        axes: dict[str | None, ChannelCubic] = {}
+        for cubic in members:
+            if cubic.channel.axis in axes:
+                raise UserError(
+                    f"two models for channel {cubic.name} ({axes[cubic.channel.axis].name} given twice)"
+                )
+            axes[cubic.channel.axis] = cubic
+        ids = {c.device_id for c in members if c.device_id is not None}
+        if len(ids) > 1:
+            raise UserError(f"{sensor}{instance}: the models name different device ids ({sorted(ids)})")
+        lo = max(c.t_min_c for c in members)
+        hi = min(c.t_max_c for c in members)
+        if not lo < hi:
+            raise UserError(f"{sensor}{instance}: the models' temperature ranges do not overlap")
+        sets.append(SensorSet(sensor, instance, next(iter(ids), None), 0.5 * (lo + hi), lo, hi, axes))
+    return sets
+
+
+def _sensor_rank(sensor: str) -> int:
+    return list(PX4_PREFIX).index(sensor)
+
+
+def _number(value: float) -> str:
+    """9 significant digits: a float32 parameter reads back to the same float32."""
+    text = f"{value:.9g}"
+    return "0" if text in ("0", "-0") else text
+
+
+# --------------------------------------------------------------------------- PX4
+
+
+def px4_values(group: SensorSet, *, keep_constant: bool) -> list[tuple[str, float | int, int]]:
+    """(name, value, MAV_PARAM_TYPE) of one TC_A/TC_G/TC_B instance, in PX4's parameter names."""
+    prefix = f"{PX4_PREFIX[group.sensor]}{group.instance}"
+    if group.device_id is None:
+        raise UserError(
+            f"{group.sensor}{group.instance}: PX4 applies {prefix}_* to the sensor whose device id is {prefix}_ID, "
+            f"and the model does not record it; pass --device-id (trainer import of a ULog records it)"
+        )
+    rows: list[tuple[str, float | int, int]] = [(f"{prefix}_ID", group.device_id, MAV_PARAM_TYPE_INT32)]
+    rows += [
+        (f"{prefix}_TREF", group.t_ref_c, MAV_PARAM_TYPE_REAL32),
+        (f"{prefix}_TMIN", group.t_min_c, MAV_PARAM_TYPE_REAL32),
+        (f"{prefix}_TMAX", group.t_max_c, MAV_PARAM_TYPE_REAL32),
+    ]
+    if group.sensor == "baro":
+        coefficients = _px4_coefficients(group.axes[None], group.t_ref_c, keep_constant)
+        padded = np.pad(coefficients, (0, PX4_BARO_ORDER + 1 - len(coefficients)))
+        return rows + [
+            (f"{prefix}_X{k}", float(padded[k]), MAV_PARAM_TYPE_REAL32) for k in range(PX4_BARO_ORDER + 1)
+        ]
+    per_axis = {
+        axis: _px4_coefficients(group.axes[axis], group.t_ref_c, keep_constant)
+        if axis in group.axes
+        else np.zeros(4)
+        for axis in AXIS_INDEX
+    }
+    for k in range(4):
+        for axis, index in AXIS_INDEX.items():
+            rows.append((f"{prefix}_X{k}_{index}", float(per_axis[axis][k]), MAV_PARAM_TYPE_REAL32))
+    return rows
+
+
+def _px4_coefficients(cubic: ChannelCubic, t_ref_c: float, keep_constant: bool) -> np.ndarray:
+    coefficients = shift_polynomial(cubic.coefficients, cubic.t_ref_c, t_ref_c)
+    if not keep_constant:
+        coefficients[0] = 0.0
+    else:
+        constant_model_unit = coefficients[0] / TO_STACK_UNIT[cubic.channel.unit]
+        if cubic.channel.sensor == "accel" and abs(constant_model_unit) > GRAVITY_IN_CONSTANT_MG:
+            raise UserError(
+                f"{cubic.name}: the constant term {constant_model_unit:.1f} mg holds gravity, not a bias; export "
+                f"without --keep-constant, or fit on a recording imported with --remove-gravity"
+            )
+    return coefficients
+
+
+def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False) -> str:
+    """A QGroundControl parameter file (``Vehicle-Id Component-Id Name Value Type``, tab-separated)."""
+    groups = group_by_instance(channels)
+    for group in groups:
+        if group.instance >= PX4_INSTANCES:
+            raise UserError(
+                f"{group.sensor}{group.instance}: PX4 has thermal parameters for instances 0..3 only"
+            )
+    lines = [
+        "# Sensor thermal compensation parameters (mems-tdc codegen export --format px4-params)",
+        "# Applied by PX4's TemperatureCompensation: offset = X0 + X1 dT + X2 dT^2 + X3 dT^3,",
+        "# dT = clamp(T, TMIN, TMAX) - TREF; corrected = raw - offset (m/s^2, rad/s, Pa).",
+        f"# X0: {'the model constant' if keep_constant else '0, the constant belongs to the ordinary calibration'}.",
+    ]
+    lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
+    for group in groups:
+        missing = [axis for axis in AXIS_INDEX if axis not in group.axes] if group.sensor != "baro" else []
+        if missing:
+            lines.append(
+                f"# {group.sensor}{group.instance} axes {', '.join(missing)}: no model given, coefficients 0"
+            )
+    lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
+    rows: list[tuple[str, float | int, int]] = [
+        (f"{PX4_PREFIX[sensor]}_ENABLE", 1, MAV_PARAM_TYPE_INT32)
+        for sensor in PX4_PREFIX
+        if any(group.sensor == sensor for group in groups)
+    ]
+    for group in groups:
+        rows += px4_values(group, keep_constant=keep_constant)
+    for name, value, kind in rows:
+        text = str(int(value)) if kind == MAV_PARAM_TYPE_INT32 else _number(float(value))
+        lines.append(f"1\t1\t{name}\t{text}\t{kind}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- ArduPilot
+
+
+def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
+    """An ArduPilot parameter file (``NAME VALUE`` lines) of INS_TCALn_* sets, as tempcal_IMU.py writes."""
+    groups = group_by_instance(channels)
+    imus: dict[int, dict[str, SensorSet]] = defaultdict(dict)
+    for group in groups:
+        if group.sensor not in ARDUPILOT_PREFIX:
+            raise UserError(
+                f"{group.sensor}{group.instance}: ArduPilot's INS_TCAL holds accelerometers and gyroscopes only"
+            )
+        if group.instance >= ARDUPILOT_INSTANCES:
+            raise UserError(
+                f"{group.sensor}{group.instance}: ArduPilot has INS_TCAL1..3 (IMU instances 0..2) only"
+            )
+        imus[group.instance][group.sensor] = group
+    lines = [
+        "# IMU temperature calibration (mems-tdc codegen export --format ardupilot-parm)",
+        "# Applied by AP_InertialSensor_tempcal.cpp: P(d) = (C1 + (C2 + C3 d) d) d * 1e-6, d = clamp(T) - 35,",
+        "# corrected = raw - P(T - 35) + P(CALTEMP - 35) (m/s^2, rad/s); the constant belongs to INS_ACCn_OFFS.",
+    ]
+    lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
+    for instance, sensors in sorted(imus.items()):
+        prefix = f"INS_TCAL{instance + 1}"
+        lo = max(found.t_min_c for found in sensors.values())
+        hi = min(found.t_max_c for found in sensors.values())
+        if not lo < hi:
+            raise UserError(
+                f"IMU {instance}: the accelerometer and gyroscope models' temperature ranges do not overlap"
+            )
+        lines += [f"{prefix}_ENABLE 1", f"{prefix}_TMIN {_number(lo)}", f"{prefix}_TMAX {_number(hi)}"]
+        for sensor, short in ARDUPILOT_PREFIX.items():
+            axes = sensors[sensor].axes if sensor in sensors else {}
+            if not axes:
+                lines.append(f"# {sensor}{instance}: no model given, coefficients 0")
+            for order in (1, 2, 3):
+                for axis in AXIS_INDEX:
+                    cubic = axes.get(axis)
+                    value = 0.0
+                    if cubic is not None:
+                        shifted = shift_polynomial(cubic.coefficients, cubic.t_ref_c, ARDUPILOT_TEMP_REF_C)
+                        value = float(shifted[order]) * ARDUPILOT_SCALE
+                    lines.append(f"{prefix}_{short}{order}_{axis.upper()} {_number(value)}")
+    return "\n".join(lines) + "\n"
+
+
+def render(fmt: str, channels: Sequence[ChannelCubic], *, keep_constant: bool = False) -> str:
+    if fmt == "px4-params":
+        return render_px4(channels, keep_constant=keep_constant)
+    if keep_constant:
+        raise UserError("--keep-constant applies to px4-params only (ArduPilot has no constant term)")
+    return render_ardupilot(channels)

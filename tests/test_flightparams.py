@@ -1,0 +1,265 @@
+"""``codegen export --format px4-params|ardupilot-parm``: the written parameters, applied by independent
+re-implementations of PX4's and ArduPilot's published formulas (float32, as the autopilots compute),
+match the model's drift within 1e-6 of its range.
+
+PX4, src/modules/temperature_compensation/TemperatureCompensation.cpp (calc_thermal_offsets_3D):
+    dT = clamp(T, TMIN, TMAX) - TREF; offset = X0 + X1 dT + X2 dT^2 + X3 dT^3; corrected = raw - offset.
+ArduPilot, libraries/AP_InertialSensor/AP_InertialSensor_tempcal.cpp (correct_sensor):
+    P(d) = (C1 + (C2 + C3 d) d) d * 1e-6; corrected = raw - P(clamp(T) - 35) + P(clamp(CALTEMP) - 35).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.cli import main as codegen_main
+from trainer.checkpoint import load_model
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import UserError
+
+G = 9.80665  # m/s^2 per g
+F32 = np.float32
+REAL = Path(__file__).resolve().parents[2] / "shared/data/real/tofupilot_imu_chamber_cycle.tsv"
+DEVICE_ID = 2490378
+
+
+def read_px4_params(path: Path) -> dict[str, float]:
+    """QGroundControl's format: '#' comments, then 'vehicle component name value type' tab-separated."""
+    values = {}
+    for line in path.read_text().splitlines():
+        if line.startswith("#"):
+            continue
+        vehicle, component, name, value, kind = line.split("\t")
+        assert (vehicle, component) == ("1", "1") and kind in ("6", "9")
+        values[name] = float(value) if kind == "9" else int(value)
+    return values
+
+
+def read_ardupilot_parm(path: Path) -> dict[str, float]:
+    values = {}
+    for line in path.read_text().splitlines():
+        if not line.startswith("#"):
+            name, value = line.split(" ")
+            values[name] = float(value)
+    return values
+
+
+def px4_offset(params: dict[str, float], prefix: str, axis: int, temp_c: np.ndarray) -> np.ndarray:
+    """calc_thermal_offsets_3D in float32."""
+    tmin, tmax, tref = (
+        F32(params[f"{prefix}_TMIN"]),
+        F32(params[f"{prefix}_TMAX"]),
+        F32(params[f"{prefix}_TREF"]),
+    )
+    t = temp_c.astype(F32)
+    dt = np.where(t > tmax, tmax - tref, np.where(t < tmin, tmin - tref, t - tref)).astype(F32)
+    x0, x1, x2, x3 = (F32(params[f"{prefix}_X{k}_{axis}"]) for k in range(4))
+    dt2 = dt * dt
+    dt3 = dt2 * dt
+    return (x0 + x1 * dt + x2 * dt2 + x3 * dt3).astype(F32)
+
+
+def ardupilot_correction(
+    params: dict[str, float], imu: int, sensor: str, axis: str, temp_c: np.ndarray, cal_temp_c: float
+) -> np.ndarray:
+    """What correct_sensor subtracts from the raw value, in float32."""
+    prefix = f"INS_TCAL{imu + 1}"
+    tmin, tmax = F32(params[f"{prefix}_TMIN"]), F32(params[f"{prefix}_TMAX"])
+    c1, c2, c3 = (F32(params[f"{prefix}_{sensor}{k}_{axis}"]) for k in (1, 2, 3))
+
+    def poly(d: np.ndarray) -> np.ndarray:
+        return ((c1 + (c2 + c3 * d) * d) * d * F32(1.0e-6)).astype(F32)
+
+    t = np.clip(temp_c.astype(F32), tmin, tmax)
+    cal = np.clip(F32(cal_temp_c), tmin, tmax)
+    return poly(t - F32(35.0)) - poly(np.array([cal - F32(35.0)], dtype=F32))
+
+
+def chamber_recording(path: Path, *, axis_offset_mg: float, meta: dict[str, str], seed: int) -> Path:
+    """A 1 Hz chamber run, -20 -> 60 -> -10 degC, with a cubic drift and noise."""
+    rng = np.random.default_rng(seed)
+    temp = np.concatenate([np.linspace(-20, 60, 900), np.linspace(60, -10, 700)])
+    d = temp - 20.0
+    drift = 5.0 + 0.3 * d - 0.004 * d**2 + 2e-5 * d**3 + rng.normal(0, 0.05, temp.size)
+    rec = Recording(
+        {"time_s": np.arange(temp.size, dtype=float), "temp_c": temp, "accel_mg": axis_offset_mg + drift},
+        {"sample_rate_hz": "1", **meta},
+    )
+    write_recording(rec, path)
+    return path
+
+
+def fit(path: Path, out: Path, method: str = "poly3", *extra: str) -> Path:
+    assert trainer_main(["fit", "--method", method, str(path), "-o", str(out), *extra]) == 0
+    return out
+
+
+def export(out_dir: Path, fmt: str, *args: str | Path) -> Path:
+    assert codegen_main(["export", *map(str, args), "-o", str(out_dir), "--format", fmt]) == 0
+    (written,) = out_dir.iterdir()
+    return written
+
+
+def model_drift(model_path: Path, temp_c: np.ndarray) -> tuple[np.ndarray, float]:
+    """The model's drift at ``temp_c`` and its range over the training range (mg)."""
+    model, _ = load_model(model_path)
+    lo, hi = model.temp_range_c
+    span = model.drift_at(np.linspace(lo, hi, 4001))
+    return model.drift_at(temp_c), float(span.max() - span.min())
+
+
+@pytest.fixture(scope="module")
+def xyz_models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """poly3 fitted on accel0_x, _y, _z of one device (z carries gravity)."""
+    root = tmp_path_factory.mktemp("xyz")
+    models = {}
+    for seed, (axis, offset) in enumerate({"x": 12.0, "y": -7.0, "z": -1000.0}.items()):
+        meta = {"channel": f"accel0_{axis}", "device_id_accel0": str(DEVICE_ID)}
+        rec = chamber_recording(root / f"{axis}.csv", axis_offset_mg=offset, meta=meta, seed=seed)
+        models[axis] = fit(rec, root / f"{axis}.pt")
+    return models
+
+
+def grid(model_path: Path) -> np.ndarray:
+    model, _ = load_model(model_path)
+    lo, hi = model.temp_range_c
+    return np.concatenate([np.linspace(lo - 15, hi + 15, 3001), [lo, hi]])
+
+
+def test_px4_params_match_the_model_drift(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    written = export(tmp_path / "px4", "px4-params", *xyz_models.values())
+    assert written.name == "px4_thermal.params"
+    params = read_px4_params(written)
+    assert params["TC_A_ENABLE"] == 1 and params["TC_A0_ID"] == DEVICE_ID
+    for index, axis in enumerate("xyz"):
+        temp = grid(xyz_models[axis])
+        drift, drift_range = model_drift(xyz_models[axis], temp)
+        at_ref, _ = model_drift(xyz_models[axis], np.array([params["TC_A0_TREF"]]))
+        offset_mg = px4_offset(params, "TC_A0", index, temp).astype(float) * 1000.0 / G
+        # X0 = 0: the stack subtracts drift(T) - drift(TREF); its ordinary calibration owns the constant
+        np.testing.assert_allclose(offset_mg, drift - at_ref[0], rtol=0, atol=1e-6 * drift_range)
+        assert params[f"TC_A0_X0_{index}"] == 0.0
+
+
+def test_px4_keep_constant_writes_x0_and_refuses_gravity(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    written = export(tmp_path / "x", "px4-params", xyz_models["x"], "--keep-constant")
+    params = read_px4_params(written)
+    temp = grid(xyz_models["x"])
+    drift, drift_range = model_drift(xyz_models["x"], temp)
+    offset_mg = px4_offset(params, "TC_A0", 0, temp).astype(float) * 1000.0 / G
+    np.testing.assert_allclose(offset_mg, drift, rtol=0, atol=1e-6 * drift_range)
+    assert params["TC_A0_X1_1"] == 0.0 and params["TC_A0_X3_2"] == 0.0  # y, z: no model given
+    assert "axes y, z: no model given" in written.read_text()
+    with pytest.raises(UserError, match="holds gravity"):
+        codegen_main(
+            [
+                "export",
+                str(xyz_models["z"]),
+                "-o",
+                str(tmp_path / "z"),
+                "--format",
+                "px4-params",
+                "--keep-constant",
+            ]
+        )
+    assert not (tmp_path / "z").exists()
+
+
+def test_ardupilot_parm_matches_the_model_drift(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    written = export(tmp_path / "ap", "ardupilot-parm", *xyz_models.values())
+    assert written.name == "ardupilot_tcal.parm"
+    params = read_ardupilot_parm(written)
+    assert params["INS_TCAL1_ENABLE"] == 1
+    assert params["INS_TCAL1_GYR2_Y"] == 0.0  # no gyroscope model given
+    for axis in "xyz":
+        temp = grid(xyz_models[axis])
+        for cal_temp in (20.0, 35.0, 55.5):  # INS_ACC1_CALTEMP: the temperature of the ordinary calibration
+            drift, drift_range = model_drift(xyz_models[axis], temp)
+            at_cal, _ = model_drift(xyz_models[axis], np.array([cal_temp]))
+            subtracted = ardupilot_correction(params, 0, "ACC", axis.upper(), temp, cal_temp).astype(float)
+            np.testing.assert_allclose(
+                subtracted * 1000.0 / G, drift - at_cal[0], rtol=0, atol=1e-6 * drift_range
+            )
+
+
+def test_gyro_channel_is_converted_to_rad_per_s(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    # the same model declared as a gyroscope axis: its unit is deg/s, the stacks' rad/s
+    written = export(
+        tmp_path / "g", "px4-params", xyz_models["y"], "--channel", "gyro1_y", "--device-id", "77"
+    )
+    params = read_px4_params(written)
+    assert params["TC_G_ENABLE"] == 1 and params["TC_G1_ID"] == 77 and "TC_A_ENABLE" not in params
+    temp = grid(xyz_models["y"])
+    drift, drift_range = model_drift(xyz_models["y"], temp)
+    at_ref, _ = model_drift(xyz_models["y"], np.array([params["TC_G1_TREF"]]))
+    offset_dps = np.degrees(px4_offset(params, "TC_G1", 1, temp).astype(float))
+    np.testing.assert_allclose(offset_dps, drift - at_ref[0], rtol=0, atol=1e-6 * drift_range)
+
+
+def test_export_is_deterministic_and_refuses_what_a_stack_cannot_hold(
+    tmp_path: Path, xyz_models: dict[str, Path]
+) -> None:
+    first = export(tmp_path / "a", "px4-params", *xyz_models.values()).read_bytes()
+    assert export(tmp_path / "b", "px4-params", *xyz_models.values()).read_bytes() == first
+    rec = chamber_recording(tmp_path / "r.csv", axis_offset_mg=0.0, meta={}, seed=9)
+    pla = fit(rec, tmp_path / "pla.pt", "pla")
+    messages = []
+    for args in (
+        [pla],  # ten lines are not one cubic
+        [fit(rec, tmp_path / "nochan.pt")],  # no channel recorded
+        [tmp_path / "nochan.pt", "--channel", "accel0_x"],  # PX4 needs the device id
+        [xyz_models["x"], "--channel", "baro0", "--format", "ardupilot-parm"],  # INS_TCAL: IMUs only
+        [xyz_models["x"], "--channel", "accel3_x", "--format", "ardupilot-parm"],  # INS_TCAL1..3
+    ):
+        argv = ["export", *map(str, args), "-o", str(tmp_path / "out")]
+        if "--format" not in argv:
+            argv += ["--format", "px4-params"]
+        with pytest.raises(UserError) as caught:
+            codegen_main(argv)
+        messages.append(str(caught.value))
+        assert "\n" not in messages[-1] and not (tmp_path / "out").exists()
+    assert "method 'pla' is not a cubic of the temperature" in messages[0]
+    assert "pass --channel" in messages[1]
+    assert "pass --device-id" in messages[2]
+    assert "accelerometers and gyroscopes only" in messages[3]
+    assert "INS_TCAL1..3" in messages[4]
+
+
+def test_a_one_interval_pla_is_a_line(tmp_path: Path) -> None:
+    rec = chamber_recording(tmp_path / "r.csv", axis_offset_mg=3.0, meta={"channel": "accel2_x"}, seed=4)
+    model_path = fit(rec, tmp_path / "pla1.pt", "pla", "--intervals", "1")
+    params = read_ardupilot_parm(export(tmp_path / "ap", "ardupilot-parm", model_path))
+    model, _ = load_model(model_path)
+    lo, hi = model.temp_range_c
+    temp = np.linspace(lo, hi, 1001)  # inside the range (PLA extrapolates, the stacks clamp)
+    drift = model.drift_at(temp)
+    expected = drift - model.drift_at(np.array([25.0]))[0]
+    subtracted = ardupilot_correction(params, 2, "ACC", "X", temp, 25.0).astype(float) * 1000.0 / G
+    np.testing.assert_allclose(subtracted, expected, rtol=0, atol=1e-6 * float(np.ptp(drift)))
+    assert params["INS_TCAL3_ACC2_X"] == 0.0 and params["INS_TCAL3_ACC3_X"] == 0.0
+
+
+def test_real_run_parameters_match_the_model(tmp_path: Path) -> None:
+    if not REAL.is_file():
+        pytest.skip(f"real recording not found at {REAL}")
+    rec = tmp_path / "real.npz"
+    assert trainer_main(["import", str(REAL), "--preset", "tofupilot", "-o", str(rec)]) == 0
+    model_path = fit(rec, tmp_path / "poly3.pt")
+    px4 = read_px4_params(export(tmp_path / "px4", "px4-params", model_path, "--device-id", str(DEVICE_ID)))
+    ap = read_ardupilot_parm(export(tmp_path / "ap", "ardupilot-parm", model_path))
+    temp = grid(model_path)
+    drift, drift_range = model_drift(model_path, temp)
+    at_ref, _ = model_drift(model_path, np.array([px4["TC_A0_TREF"]]))
+    np.testing.assert_allclose(
+        px4_offset(px4, "TC_A0", 2, temp).astype(float) * 1000.0 / G,
+        drift - at_ref[0],
+        atol=1e-6 * drift_range,
+    )
+    at_cal, _ = model_drift(model_path, np.array([25.0]))
+    subtracted = ardupilot_correction(ap, 0, "ACC", "Z", temp, 25.0).astype(float) * 1000.0 / G
+    np.testing.assert_allclose(subtracted, drift - at_cal[0], atol=1e-6 * drift_range)

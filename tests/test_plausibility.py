@@ -1,0 +1,188 @@
+"""Plausibility checks with hints in ``trainer import`` and ``trainer fit``, and clean error text."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from trainer.cli import main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
+from trainer.errors import UserError, run_cli
+
+G = 9.80665
+
+
+def write_text(path: Path, header: str, rows: list[str]) -> Path:
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def logger_file(path: Path, *, step: float = 0.01, accel: float = -1000.0, temp0: float = 20.0) -> Path:
+    """t, T, a: 40 rows, temperature rising 0.5 degC per row."""
+    rows = [f"{k * step:.6f},{temp0 + 0.5 * k:.3f},{accel + 0.001 * k:.4f}" for k in range(40)]
+    return write_text(path, "t,T,a", rows)
+
+
+def cli_error(*args: str | Path) -> str:
+    argv = [str(a) for a in args]
+    with pytest.raises(UserError) as caught:
+        main(argv)
+    message = str(caught.value)
+    assert "\n" not in message and "\x1b" not in message
+    if "-o" in argv:
+        assert not Path(argv[argv.index("-o") + 1]).exists()
+    return message
+
+
+IMPORT = ("--time", "t", "--temp", "T", "--accel", "a")
+
+
+# --------------------------------------------------------------------------- import
+
+
+def test_mps2_declared_as_g_is_refused_with_a_hint(tmp_path: Path) -> None:
+    src = logger_file(tmp_path / "log.csv", accel=-9.81)
+    message = cli_error("import", src, *IMPORT, "--accel-unit", "g", "-o", tmp_path / "o.csv")
+    assert "column 'a'" in message and "m/s^2?" in message and "--accel-unit m/s^2" in message
+    # the right unit imports; --accept-implausible keeps the user's word with a warning
+    assert main(["import", str(src), *IMPORT, "--accel-unit", "m/s^2", "-o", str(tmp_path / "ok.csv")]) == 0
+    assert read_recording(tmp_path / "ok.csv").accel_mg[0] == pytest.approx(-9.81 / G * 1000)
+    out = tmp_path / "g.csv"
+    assert (
+        main(["import", str(src), *IMPORT, "--accel-unit", "g", "--accept-implausible", "-o", str(out)]) == 0
+    )
+    assert read_recording(out).accel_mg[0] == pytest.approx(-9810.0)
+
+
+def test_milliseconds_read_as_seconds_is_refused(tmp_path: Path) -> None:
+    src = logger_file(tmp_path / "log.csv", step=20.0)  # a 50 Hz logger's ms column, declared as s
+    message = cli_error("import", src, *IMPORT, "-o", tmp_path / "o.csv")
+    assert "0.05 Hz is below 0.1 Hz" in message and "milliseconds read as seconds?" in message
+    rec_path = tmp_path / "ok.csv"
+    assert main(["import", str(src), *IMPORT, "--time-unit", "ms", "-o", str(rec_path)]) == 0
+    assert float(read_recording(rec_path).meta["sample_rate_hz"]) == pytest.approx(50.0)
+
+
+def test_a_rate_above_100_khz_is_refused(tmp_path: Path) -> None:
+    src = logger_file(tmp_path / "log.csv", step=5.0)  # 5 ms steps...
+    message = cli_error(
+        "import", src, *IMPORT, "--time-unit", "us", "-o", tmp_path / "o.csv"
+    )  # ...read as us
+    assert "200 kHz" not in message and "above 100 kHz" in message and "--time-unit" in message
+
+
+def test_kelvin_is_refused_and_temp_unit_k_converts(tmp_path: Path) -> None:
+    src = logger_file(tmp_path / "log.csv", temp0=293.15)
+    message = cli_error("import", src, *IMPORT, "-o", tmp_path / "o.csv")
+    assert "above 150 degC" in message and "kelvin?" in message and "--temp-unit K" in message
+    assert main(["import", str(src), *IMPORT, "--temp-unit", "K", "-o", str(tmp_path / "ok.csv")]) == 0
+    np.testing.assert_allclose(read_recording(tmp_path / "ok.csv").temp_c[:3], [20.0, 20.5, 21.0], atol=1e-9)
+
+
+def test_decimal_comma_hint_and_option(tmp_path: Path) -> None:
+    rows = [f"{k * 0.01:.2f};{20 + 0.5 * k:.2f};{-1000 + 0.25 * k:.2f}".replace(".", ",") for k in range(10)]
+    src = write_text(tmp_path / "de.csv", "t;T;a", rows)
+    message = cli_error("import", src, *IMPORT, "-o", tmp_path / "o.csv")
+    assert (
+        "line 2, column 't'" in message
+        and "'0,00' is not a number" in message
+        and "--decimal-comma" in message
+    )
+    out = tmp_path / "ok.csv"
+    assert main(["import", str(src), *IMPORT, "--decimal-comma", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    np.testing.assert_allclose(rec.accel_mg, -1000 + 0.25 * np.arange(10))
+    np.testing.assert_allclose(rec.temp_c, 20 + 0.5 * np.arange(10))
+    message = cli_error(
+        "import", src, *IMPORT, "--decimal-comma", "--delimiter", "comma", "-o", tmp_path / "x.csv"
+    )
+    assert "--decimal-comma needs a tab or semicolon delimiter" in message
+
+
+def test_slow_temperature_channel_hint_and_fill_previous(tmp_path: Path) -> None:
+    # the temperature is logged on every third row only, starting on the second
+    rows = [
+        f"{k * 0.01:.2f},{20 + k / 10:.1f},{-1000 + k}" if k % 3 == 1 else f"{k * 0.01:.2f},,{-1000 + k}"
+        for k in range(12)
+    ]
+    src = write_text(tmp_path / "slow.csv", "t,T,a", rows)
+    message = cli_error("import", src, *IMPORT, "-o", tmp_path / "o.csv")
+    assert "line 2, column 'T': empty field" in message and "--fill-temp previous" in message
+    out = tmp_path / "ok.csv"
+    assert main(["import", str(src), *IMPORT, "--fill-temp", "previous", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    expected_temp = [
+        20 + (1 + 3 * ((k - 1) // 3)) / 10 for k in range(1, 12)
+    ]  # the last reading at or before k
+    np.testing.assert_allclose(rec.temp_c, expected_temp)
+    np.testing.assert_allclose(
+        rec.accel_mg, -1000 + np.arange(1, 12)
+    )  # the leading row without a reading is dropped
+    assert "1 rows before the first reading dropped" in rec.meta["temp_filled"]
+
+
+# --------------------------------------------------------------------------- fit
+
+
+def recording(path: Path, *, temp: np.ndarray, accel: np.ndarray, rate_hz: float = 10.0) -> Path:
+    n = len(temp)
+    rec = Recording(
+        {"time_s": np.arange(n) / rate_hz, "temp_c": temp, "accel_mg": accel},
+        {"sample_rate_hz": f"{rate_hz:g}"},
+    )
+    write_recording(rec, path)
+    return path
+
+
+def test_fit_refuses_a_span_too_small_for_the_cubic(tmp_path: Path) -> None:
+    n = 400
+    path = recording(tmp_path / "flat.csv", temp=25.0 + np.linspace(0, 0.12, n), accel=np.linspace(0, 1, n))
+    message = cli_error("fit", "--method", "poly3", path, "-o", tmp_path / "m.pt")
+    assert "spans 0.12 degC" in message and "too small for poly3 (needs 10 degC)" in message
+    assert (
+        main(["fit", "--method", "poly3", str(path), "-o", str(tmp_path / "m.pt"), "--accept-implausible"])
+        == 0
+    )
+
+
+def test_fit_refuses_gravity_in_g_and_kelvin_and_slow_rates(tmp_path: Path) -> None:
+    n = 400
+    temp = np.linspace(-20, 60, n)
+    as_g = recording(tmp_path / "g.csv", temp=temp, accel=np.full(n, -9806.65) + temp)
+    assert "m/s^2 declared as g at import?" in cli_error(
+        "fit", "--method", "poly3", as_g, "-o", tmp_path / "m.pt"
+    )
+    kelvin = recording(tmp_path / "k.csv", temp=temp + 273.15, accel=temp)
+    assert "kelvin?" in cli_error("fit", "--method", "poly3", kelvin, "-o", tmp_path / "m.pt")
+    slow = recording(tmp_path / "s.csv", temp=temp, accel=temp, rate_hz=0.02)
+    assert "milliseconds read as seconds?" in cli_error(
+        "fit", "--method", "poly3", slow, "-o", tmp_path / "m.pt"
+    )
+
+
+# --------------------------------------------------------------------------- error text
+
+
+def test_unsafe_model_error_gives_no_unsafe_advice_and_no_colour(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    path = tmp_path / "model.pt"
+    torch.save({"format": "mems-tdc-model", "payload": Path("x")}, path)  # a pickled Python object
+    rec = recording(tmp_path / "r.csv", temp=np.linspace(0, 40, 50), accel=np.zeros(50))
+    assert run_cli(main, ["evaluate", str(path), str(rec)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1
+    assert "refused to load" in err and "Path" in err
+    assert "weights_only=False" not in err and "trust" not in err and "\x1b" not in err
+
+
+def test_run_cli_strips_terminal_codes(capsys: pytest.CaptureFixture) -> None:
+    def failing(argv: list[str] | None) -> int:
+        raise UserError("x.csv: \x1b[1mbold\x1b[0m and \x1b[31mred\x1b[0m\nsecond line")
+
+    assert run_cli(failing, []) == 2
+    assert capsys.readouterr().err == "error: x.csv: bold and red second line\n"

@@ -1,0 +1,173 @@
+"""Flight-stack logs (PX4 ULog, ArduPilot DataFlash) as named sensor channels.
+
+A flight log holds every sensor instance at its own rate and time base: ``sensor_accel`` and
+``sensor_gyro`` are separate ULog topics, a barometer runs slower. So a reader returns *all*
+channels, each with its own timestamps, values in the recording format's units (mg, deg/s, Pa)
+and its own temperature as logged; picking the channel(s) that become a recording is a separate
+step (:func:`trainer.data.importer.import_flight_log`). Channel names follow the "Several
+channels" section of ``shared/specs/recording-format.md``: ``accel0_z``, ``gyro1_x``, ``baro0``.
+
+The kind of a file is decided by its magic bytes, never by its extension, so a binary log never
+reaches the delimiter sniffer of the CSV importer. The readers live in ``ulog_reader`` and
+``dataflash_reader``; :func:`trainer.data.flightlog_io.read_flight_log` picks one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypeVar
+
+import numpy as np
+
+from trainer.errors import UserError
+
+T = TypeVar("T")
+
+STANDARD_GRAVITY = 9.80665  # m/s^2 per g (CGPM 1901)
+MG_PER_MPS2 = 1000.0 / STANDARD_GRAVITY
+DPS_PER_RADPS = 180.0 / np.pi
+
+# File kind -> its first bytes. ULog: "ULog" 0x01 0x12 0x35 (ULog file format, PX4 docs).
+# DataFlash: every message starts 0xA3 0x95 <type>, and a log starts with the FMT message (128).
+MAGIC: dict[str, bytes] = {"ulog": b"ULog\x01\x12\x35", "dataflash": b"\xa3\x95\x80"}
+KIND_NAMES = {"ulog": "PX4 ULog", "dataflash": "ArduPilot DataFlash"}
+
+SENSOR_UNITS = {"accel": "mg", "gyro": "dps", "baro": "pa"}  # column unit suffix per sensor
+AXES = ("x", "y", "z")
+CHANNEL_NAME = re.compile(r"(accel|gyro)([0-9])_([xyz])|(baro)([0-9])")
+
+
+@dataclass(frozen=True)
+class ChannelName:
+    """A parsed channel name: ``accel0_z`` -> (accel, 0, z); ``baro1`` -> (baro, 1, None)."""
+
+    sensor: str
+    instance: int
+    axis: str | None
+
+    @property
+    def unit(self) -> str:
+        return SENSOR_UNITS[self.sensor]
+
+
+def parse_channel(name: str) -> ChannelName | None:
+    """The parts of a channel name of the recording format, or None when it is not one."""
+    match = CHANNEL_NAME.fullmatch(name)
+    if match is None:
+        return None
+    if match.group(4):
+        return ChannelName("baro", int(match.group(5)), None)
+    return ChannelName(match.group(1), int(match.group(2)), match.group(3))
+
+
+@dataclass(frozen=True)
+class LogChannel:
+    """One sensor axis of one instance: its own time base, values and temperature."""
+
+    sensor: str  # accel | gyro | baro
+    instance: int
+    axis: str | None  # x | y | z, None for a barometer
+    time_us: np.ndarray  # int64 microseconds, the log's own clock
+    values: np.ndarray  # float64, in SENSOR_UNITS[sensor]
+    temp_c: np.ndarray  # float64, the sensor's own reading as logged (may be NaN)
+    device_id: int | None = None
+
+    @property
+    def name(self) -> str:
+        """``accel0_z``: the data column name of the recording format without its unit."""
+        base = f"{self.sensor}{self.instance}"
+        return f"{base}_{self.axis}" if self.axis else base
+
+    @property
+    def unit(self) -> str:
+        return SENSOR_UNITS[self.sensor]
+
+    @property
+    def column(self) -> str:
+        """The recording-format data column, e.g. ``accel0_z_mg``."""
+        return f"{self.name}_{self.unit}"
+
+    @property
+    def temp_column(self) -> str:
+        return f"{self.sensor}{self.instance}_temp_c"
+
+    def summary(self) -> str:
+        """One line for ``trainer import --list-channels``."""
+        n = len(self.time_us)
+        span_s = (int(self.time_us[-1]) - int(self.time_us[0])) * 1e-6 if n > 1 else 0.0
+        rate = f"{(n - 1) / span_s:.4g} Hz" if span_s > 0 else "-"
+        finite = self.temp_c[np.isfinite(self.temp_c)]
+        temp = f"{finite.min():.2f} .. {finite.max():.2f} degC" if finite.size else "no temperature"
+        device = f", device id {self.device_id}" if self.device_id is not None else ""
+        return f"{self.name} [{self.unit}]: {n} samples at {rate}, {temp}{device}"
+
+
+@dataclass
+class FlightLog:
+    """Every sensor channel of a log, in a stable order (sensor, instance, axis)."""
+
+    source: str
+    kind: str  # a key of MAGIC
+    channels: dict[str, LogChannel]
+    notes: dict[str, str] = field(default_factory=dict)  # metadata worth keeping (``key=value``)
+
+    def channel(self, name: str) -> LogChannel:
+        """The channel ``name``; a one-line error listing the available ones otherwise."""
+        if name not in self.channels:
+            if not CHANNEL_NAME.fullmatch(name):
+                problem = "is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
+            else:
+                problem = "is not in this log"
+            raise UserError(f"{self.source}: --channel {name!r} {problem}; available: {self.names()}")
+        return self.channels[name]
+
+    def names(self) -> str:
+        return ", ".join(self.channels) if self.channels else "(none)"
+
+    def siblings(self, chosen: LogChannel) -> Iterator[LogChannel]:
+        """Channels logged at exactly the chosen channel's timestamps (same message or topic)."""
+        for other in self.channels.values():
+            if len(other.time_us) == len(chosen.time_us) and np.array_equal(other.time_us, chosen.time_us):
+                yield other
+
+
+def sorted_channels(channels: list[LogChannel]) -> dict[str, LogChannel]:
+    order = list(SENSOR_UNITS)
+    ranked = sorted(channels, key=lambda c: (order.index(c.sensor), c.instance, c.axis or ""))
+    return {c.name: c for c in ranked}
+
+
+def log_kind(path: str | Path) -> str | None:
+    """'ulog', 'dataflash' or None (not a known binary log) from the file's first bytes."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(16)
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise UserError(f"{path}: is a directory, not a file") from None
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read ({exc.strerror})") from None
+    return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
+
+
+def quiet_library_call(source: str, kind: str, call: Callable[[], T]) -> T:
+    """Run a parser that prints to stdout and raises its own exception types.
+
+    Its console chatter is swallowed and any exception becomes one line naming the file; the
+    library's own message is not forwarded (it may be long, coloured or give unsafe advice).
+    """
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            return call()
+        except (MemoryError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # the parsers raise many types on damaged files; all mean the same
+            raise UserError(
+                f"{source}: not a readable {KIND_NAMES[kind]} log (truncated or corrupted: {type(exc).__name__})"
+            ) from None

@@ -1,0 +1,23 @@
+"""Read a flight log of either kind: the magic bytes pick the reader."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from trainer.data.dataflash_reader import read_dataflash
+from trainer.data.flightlog import KIND_NAMES, FlightLog, log_kind
+from trainer.data.ulog_reader import read_ulog
+from trainer.errors import UserError
+
+
+def read_flight_log(path: str | Path) -> FlightLog:
+    """Read a ULog or DataFlash log (decided by magic bytes) into channels."""
+    kind = log_kind(path)
+    if kind is None:
+        raise UserError(f"{path}: not a PX4 ULog or ArduPilot DataFlash log (magic bytes do not match)")
+    log = read_ulog(path) if kind == "ulog" else read_dataflash(path)
+    if not log.channels:
+        raise UserError(
+            f"{path}: a {KIND_NAMES[kind]} log without accelerometer, gyroscope or barometer data"
+        )
+    return log

@@ -1,0 +1,126 @@
+"""``--holdout``: train on one part of a single recording and score on the rest.
+
+For users with one chamber run. The held-out part touches one end of the recording so that the
+training part stays one contiguous run (stateful methods see no jump):
+
+- ``F`` or ``last:F``: the last fraction ``F`` (0 < F < 1) is held out, training on the first part;
+- ``first:F``: the first fraction ``F`` is held out, training on the last part;
+- ``T0:`` / ``:T1``: by time in seconds from the recording's start: from ``T0`` to the end, or
+  from the start to ``T1``.
+
+:func:`overlap_warning` says when validation data is (part of) the training data.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+
+MIN_ROWS = 16  # each part must hold at least this many samples
+Side = Literal["first", "last"]
+
+
+@dataclass(frozen=True)
+class Holdout:
+    """Which end is held out, by fraction of the rows or by a time boundary (seconds from start)."""
+
+    side: Side
+    fraction: float | None = None
+    boundary_s: float | None = None
+
+    def describe(self) -> str:
+        amount = f"{100 * self.fraction:g} %" if self.fraction is not None else f"{self.boundary_s:g} s"
+        if self.boundary_s is not None:
+            where = "before" if self.side == "first" else "after"
+            return f"held out: the part {where} t = {amount}, training on the rest"
+        return f"held out: the {self.side} {amount} of the rows, training on the rest"
+
+
+def parse_holdout(spec: str) -> Holdout:
+    """``F``, ``first:F``, ``last:F``, ``T0:`` or ``:T1``; a one-line UserError otherwise."""
+    text = spec.strip()
+
+    def number(value: str, what: str) -> float:
+        try:
+            x = float(value)
+        except ValueError:
+            x = math.nan
+        if not math.isfinite(x):
+            raise UserError(f"--holdout {spec!r}: {what} {value!r} is not a number")
+        return x
+
+    def fraction(value: str) -> float:
+        f = number(value, "fraction")
+        if not 0 < f < 1:
+            raise UserError(f"--holdout {spec!r}: the fraction must lie strictly between 0 and 1")
+        return f
+
+    side, colon, rest = text.partition(":")
+    if not colon:
+        return Holdout("last", fraction=fraction(text))
+    if side in ("first", "last"):
+        return Holdout(side, fraction=fraction(rest))  # type: ignore[arg-type]
+    if side and not rest:
+        return Holdout("last", boundary_s=number(side, "time"))
+    if rest and not side:
+        return Holdout("first", boundary_s=number(rest, "time"))
+    raise UserError(
+        f"--holdout {spec!r}: use F, first:F, last:F (fractions) or T0: / :T1 (seconds); the held-out "
+        "part must touch the start or the end so that the training part stays one run"
+    )
+
+
+def split(rec: Recording, holdout: Holdout) -> tuple[Recording, Recording]:
+    """(training part, held-out part) of ``rec``."""
+    n = len(rec)
+    if holdout.fraction is not None:
+        held = round(holdout.fraction * n)
+        cut = n - held if holdout.side == "last" else held
+    else:
+        assert holdout.boundary_s is not None
+        cut = int(np.searchsorted(rec.time_s - rec.time_s[0], holdout.boundary_s, side="left"))
+    first, last = rec.slice(0, cut), rec.slice(cut, n)
+    if min(len(first), len(last)) < MIN_ROWS:
+        raise UserError(
+            f"{rec.source}: --holdout leaves {len(first)} and {len(last)} rows; each part needs at least "
+            f"{MIN_ROWS}"
+        )
+    return (first, last) if holdout.side == "last" else (last, first)
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return a == b
+
+
+def overlap_warning(train_stats: dict[str, Any], valid: Recording, fingerprint: str) -> str | None:
+    """A warning when ``valid`` is the training data or overlaps it (same file, overlapping times).
+
+    ``train_stats`` is :func:`trainer.fitting.training_stats` of the training data (also stored in
+    ``model.pt``); ``fingerprint`` is :func:`trainer.fitting.data_fingerprint` of ``valid``.
+    """
+    if train_stats.get("data_sha256") == fingerprint:
+        return (
+            "warning: the validation data is the training data: every score is in-sample and says "
+            "nothing about a new run (use another recording or --holdout)"
+        )
+    time_range = train_stats.get("time_range_s")
+    source = str(train_stats.get("source", ""))
+    if time_range and source and _same_file(source, valid.source):
+        lo, hi = float(time_range[0]), float(time_range[1])
+        inside = (valid.time_s >= lo) & (valid.time_s <= hi)
+        if np.any(inside):
+            return (
+                f"warning: {100 * float(np.mean(inside)):.1f} % of the validation rows are training rows "
+                f"({source}, t = {lo:g} .. {hi:g} s): those scores are in-sample"
+            )
+    return None

@@ -1,0 +1,112 @@
+"""Plausibility checks with hints: the unit and time-base mistakes that import silently.
+
+Each check names what it saw and the likely cause in one line. They run in ``trainer import``
+(where the declared units are known) and ``trainer fit`` (on the recording as written). By default
+a finding is an error; ``--accept-implausible`` turns it into a one-line warning for the rare
+genuine case (a centrifuge run, a sensor in an oven above 150 degC).
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from trainer.errors import UserError
+
+if TYPE_CHECKING:
+    from trainer.data.recording import Recording
+    from trainer.methods import Method
+
+RATE_MIN_HZ = 0.1  # slower than one sample per 10 s: a time column in ms read as s
+RATE_MAX_HZ = 100e3  # faster than any MEMS output data rate: s read as ms/us, or an index
+TEMP_MAX_C = 150.0  # above any MEMS operating range (-40..125 degC typical)
+KELVIN_RANGE = (200.0, 400.0)  # -73..127 degC written in kelvin
+G_AS_MPS2 = (8.5, 11.0)  # |a| of a static axis carrying gravity when m/s^2 is read as g
+ACCEPT_OPTION = "--accept-implausible"
+
+
+class Plausibility:
+    """Collects findings; raises on the first one unless ``accept`` (then keeps them as warnings)."""
+
+    def __init__(self, accept: bool = False) -> None:
+        self.accept = accept
+        self.warnings: list[str] = []
+
+    def problem(self, message: str) -> None:
+        if not self.accept:
+            raise UserError(f"{message} ({ACCEPT_OPTION} to go on anyway)")
+        self.warnings.append(message)
+
+    def print_warnings(self) -> None:
+        for message in self.warnings:
+            print(f"warning: {message}", file=sys.stderr)
+
+    # ---- the checks
+    def rate(self, rate_hz: float, where: str, *, at_import: bool) -> None:
+        """A sample rate outside 0.1 Hz .. 100 kHz is a time unit read wrongly."""
+        fix = "check --time-unit" if at_import else "check the time unit at import"
+        if rate_hz < RATE_MIN_HZ:
+            self.problem(
+                f"{where}: {rate_hz:.4g} Hz is below {RATE_MIN_HZ:g} Hz: milliseconds read as seconds? {fix}"
+            )
+        elif rate_hz > RATE_MAX_HZ:
+            self.problem(
+                f"{where}: {rate_hz:.4g} Hz is above {RATE_MAX_HZ / 1e3:g} kHz: microseconds or milliseconds read "
+                f"as seconds, or a sample counter as time? {fix}"
+            )
+
+    def temperature(self, temp_c: np.ndarray, where: str, *, at_import: bool) -> None:
+        """Temperatures above 150 degC; all of them within 200..400 suggests kelvin."""
+        hottest = float(np.max(temp_c))
+        if hottest <= TEMP_MAX_C:
+            return
+        coldest = float(np.min(temp_c))
+        fix = "--temp-unit K" if at_import else "re-import with --temp-unit K"
+        if KELVIN_RANGE[0] <= coldest and hottest <= KELVIN_RANGE[1]:
+            cause = f"kelvin? ({coldest:.2f} .. {hottest:.2f} K is {coldest - 273.15:.2f} .. {hottest - 273.15:.2f} degC; {fix})"
+        else:
+            cause = "not a temperature in degC? (kelvin, a raw sensor count or the wrong column)"
+        self.problem(f"{where}: temperature up to {hottest:.4g} degC is above {TEMP_MAX_C:g} degC: {cause}")
+
+    def accel_declared_g(self, raw: np.ndarray, unit: str, where: str) -> None:
+        """A static axis near 9.8 declared in g is m/s^2."""
+        if unit != "g":
+            return
+        level = float(np.abs(np.median(raw)))
+        if G_AS_MPS2[0] <= level <= G_AS_MPS2[1]:
+            self.problem(
+                f"{where}: median |a| {level:.4g} declared as g (9.8 g at rest?): m/s^2? pass --accel-unit m/s^2"
+            )
+
+    def gravity_in_mg(self, accel_mg: np.ndarray, where: str) -> None:
+        """A recording whose axis rests near 9.8 g had m/s^2 declared as g at import."""
+        level = float(np.abs(np.median(accel_mg))) / 1000.0
+        if G_AS_MPS2[0] <= level <= G_AS_MPS2[1]:
+            self.problem(
+                f"{where}: median |accel_mg| is {level:.4g} g at rest: m/s^2 declared as g at import? "
+                f"re-import with --accel-unit m/s^2"
+            )
+
+    def temperature_span(self, temp_c: np.ndarray, method: str, min_span_c: float, where: str) -> None:
+        """A temperature-driven method needs the temperature to move enough to determine its shape."""
+        if min_span_c <= 0:
+            return
+        lo, hi = float(np.min(temp_c)), float(np.max(temp_c))
+        if hi - lo < min_span_c:
+            self.problem(
+                f"{where}: temperature spans {hi - lo:.3g} degC ({lo:.2f} .. {hi:.2f}), too small for {method} "
+                f"(needs {min_span_c:g} degC): a run without heating or cooling, or the wrong temperature column?"
+            )
+
+
+def check_training(rec: Recording, method: Method, *, accept: bool = False) -> Plausibility:
+    """The checks ``trainer fit`` runs on a training recording before fitting ``method``."""
+    checks = Plausibility(accept)
+    where = rec.source
+    checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
+    checks.temperature(rec.temp_c, f"{where}: column 'temp_c'", at_import=False)
+    checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
+    checks.temperature_span(rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column 'temp_c'")
+    return checks

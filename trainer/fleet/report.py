@@ -1,0 +1,266 @@
+"""``OUTDIR/report.md``, its figures and ``OUTDIR/fleet.json``: the fleet as a production engineer reads it.
+
+Sections: the sign-off table (one row per unit: PASS, REVIEW when out of family, FAIL when a stage
+failed or an export did not verify), the failed units with their one-line errors, the exports that
+failed to verify, the out-of-family units with the reason, the effects the finder named and how
+often, and the distributions of each method's drift left and of every fitted physical parameter.
+The report holds no wall times, so identical runs write identical reports.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trainer.errors import atomic_output
+from trainer.fleet.cache import json_bytes
+from trainer.fleet.manifest import Manifest
+from trainer.fleet.outliers import (
+    COMMON_SHARE,
+    MIN_UNITS,
+    RARE_SHARE,
+    Z_LIMIT,
+    Finding,
+    drift_feature,
+    find_out_of_family,
+    named_effects,
+    unit_features,
+)
+from trainer.scoring.markdown import markdown_table
+from trainer.scoring.plots import new_figure, save_figure
+
+FIGURES_DIR = "figures"
+PASS, REVIEW, FAIL = "PASS", "REVIEW", "FAIL"
+
+
+def verify_state(summary: dict[str, Any]) -> str:
+    """``yes`` (0 mismatches), ``NO`` (mismatches or export error), ``n/a`` (no code generator), ``-`` (no fit)."""
+    verify = summary.get("verify")
+    if not isinstance(verify, dict):
+        return "-"
+    passed = verify.get("passed")
+    return "n/a" if passed is None else ("yes" if passed else "NO")
+
+
+def sign_off(result: dict[str, Any] | None, findings: list[Finding]) -> str:
+    if result is None or result.get("status") != "ok":
+        return FAIL
+    if any(verify_state(m) == "NO" for m in result["methods"].values()):
+        return FAIL
+    return REVIEW if findings else PASS
+
+
+def _mg(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, int | float) else "-"
+
+
+def _strip_plot(
+    path: Path, columns: list[tuple[str, dict[str, float]]], flagged: set[str], title: str
+) -> Path:
+    """One panel per column (a feature): every unit a dot, out-of-family units in red, median line."""
+    count = max(1, len(columns))
+    per_row = min(4, count)
+    rows = (count + per_row - 1) // per_row
+    figure = new_figure((3.2 * per_row, 2.6 * rows), dpi=100)
+    axes = figure.subplots(rows, per_row, squeeze=False)
+    jitter = np.random.default_rng(0)  # fixed: identical runs draw identical figures
+    for index, ax in enumerate(axes.flat):
+        if index >= len(columns):
+            ax.set_visible(False)
+            continue
+        name, values = columns[index]
+        units = sorted(values)
+        x = jitter.uniform(-0.15, 0.15, len(units))
+        y = np.array([values[u] for u in units])
+        colours = ["tab:red" if u in flagged else "tab:blue" for u in units]
+        ax.scatter(x, y, c=colours, s=14)
+        ax.axhline(float(np.median(y)), color="grey", lw=0.8)
+        for xi, yi, u in zip(x, y, units, strict=True):
+            if u in flagged:
+                ax.annotate(u, (xi, yi), fontsize=7, xytext=(4, 0), textcoords="offset points")
+        ax.set_xlim(-0.6, 0.6)
+        ax.set_xticks([])
+        ax.set_title(name, fontsize=8)
+        ax.tick_params(labelsize=7)
+    figure.suptitle(title, fontsize=10)
+    figure.tight_layout()
+    return save_figure(figure, path)
+
+
+def _effects_plot(path: Path, counts: Counter[str], n: int) -> Path:
+    figure = new_figure((6.0, 0.5 + 0.35 * max(1, len(counts))), dpi=100)
+    ax = figure.add_subplot()
+    names = sorted(counts, key=lambda e: (-counts[e], e))
+    ax.barh(names[::-1], [counts[e] for e in names[::-1]], color="tab:blue")
+    ax.set_xlim(0, max(1, n))
+    ax.set_xlabel(f"units where the finder names the effect (of {n})")
+    figure.tight_layout()
+    return save_figure(figure, path)
+
+
+def _distribution_rows(columns: list[tuple[str, dict[str, float]]]) -> list[list[str]]:
+    rows = []
+    for name, values in columns:
+        y = np.array(list(values.values()))
+        p10, p50, p90 = np.percentile(y, [10, 50, 90])
+        rows.append(
+            [name, str(y.size), f"{p50:.4g}", f"{p10:.4g}", f"{p90:.4g}", f"{y.min():.4g}", f"{y.max():.4g}"]
+        )
+    return rows
+
+
+def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str, Any]]) -> Path:
+    """Write ``report.md``, ``figures/*.png`` and ``fleet.json``; returns the report's path."""
+    units = [u.id for u in manifest.units]
+    methods = list(dict.fromkeys(m for u in manifest.units for m in u.methods))
+    findings = find_out_of_family({u: results[u] for u in units if u in results})
+    by_unit: dict[str, list[Finding]] = {u: [f for f in findings if f.unit == u] for u in units}
+    verdicts = {u: sign_off(results.get(u), by_unit[u]) for u in units}
+    ok = [u for u in units if results.get(u, {}).get("status") == "ok"]
+    flagged = {f.unit for f in findings}
+
+    features = {u: unit_features(results[u]) for u in ok}
+    drift_columns = [
+        (drift_feature(m), {u: features[u][drift_feature(m)] for u in ok if drift_feature(m) in features[u]})
+        for m in methods
+    ]
+    drift_columns = [(n, v) for n, v in drift_columns if v]
+    parameter_names = sorted({n for f in features.values() for n in f if not n.startswith("drift left ")})
+    parameter_columns = [(n, {u: features[u][n] for u in ok if n in features[u]}) for n in parameter_names]
+    counts: Counter[str] = Counter(e for u in ok for e in named_effects(results[u]))
+
+    figures_dir = out_dir / FIGURES_DIR
+    figures_dir.mkdir(exist_ok=True)
+    figures = []
+    if drift_columns:
+        figures.append(
+            _strip_plot(figures_dir / "drift_left.png", drift_columns, flagged, "Drift left per method")
+        )
+    if parameter_columns:
+        figures.append(
+            _strip_plot(
+                figures_dir / "parameters.png", parameter_columns, flagged, "Fitted physical parameters"
+            )
+        )
+    if counts:
+        figures.append(_effects_plot(figures_dir / "effects.png", counts, len(ok)))
+
+    tally = Counter(verdicts.values())
+    lines = [
+        f"# Fleet report: {manifest.source.name}",
+        "",
+        f"{len(units)} units; {len(ok)} processed without error; sign-off: {tally[PASS]} PASS, "
+        f"{tally[REVIEW]} REVIEW (out of family), {tally[FAIL]} FAIL (a stage failed or an export did not verify).",
+        f"Methods: {', '.join(methods)}. Drift left: RMS of the residual against `true_drift_mg` on "
+        "simulated data, else the spread of the compensated output's 60 s means; scored on each unit's "
+        "second run or held-out tail.",
+        "",
+        "## Sign-off",
+        "",
+    ]
+    header = ["unit", "sign-off", "effects named"]
+    header += [f"drift left {m} (mg)" for m in methods] + [f"C verified {m}" for m in methods]
+    header.append("out of family")
+    rows = []
+    for u in units:
+        result = results.get(u)
+        summaries = result["methods"] if result else {}
+        row = [u, verdicts[u], ", ".join(named_effects(result)) if result else "-"]
+        row += [_mg(summaries.get(m, {}).get("drift_left_mg")) for m in methods]
+        row += [verify_state(summaries.get(m, {})) for m in methods]
+        row.append("; ".join(f.reason for f in by_unit[u]) or ("-" if u in ok else "n/a (failed)"))
+        rows.append(row)
+    lines += [markdown_table(header, rows), ""]
+
+    failed = [u for u in units if results.get(u, {}).get("status") != "ok"]
+    lines += ["## Failed units", ""]
+    if failed:
+        for u in failed:
+            errors = results[u]["errors"] if u in results else [{"stage": "-", "error": "no result"}]
+            lines += [f"- **{u}** ({e['stage']}): {e['error']}" for e in errors]
+    else:
+        lines.append("None.")
+    lines += ["", "## Exports that failed to verify", ""]
+    unverified = [
+        (u, m, results[u]["methods"][m]["verify"])
+        for u in units
+        if u in results
+        for m in results[u]["methods"]
+        if verify_state(results[u]["methods"][m]) == "NO"
+    ]
+    if unverified:
+        for u, m, v in unverified:
+            detail = (
+                v.get("error")
+                or f"{v.get('mismatches')} mismatches, final state identical: {v.get('state_equal')}"
+            )
+            lines.append(f"- **{u}** {m}: {detail}")
+    else:
+        lines.append("None: every exported C module equals its golden model bit for bit (0 mismatches).")
+    lines += [
+        "",
+        "## Out-of-family units",
+        "",
+        f"Robust z-score (median and 1.4826 MAD over the {len(ok)} processed units) beyond {Z_LIMIT:g} on a "
+        f"fitted parameter or a drift left, or an effect that at most {100 * RARE_SHARE:g} % of the units show "
+        f"(or a missing one that at least {100 * COMMON_SHARE:g} % show).",
+        "",
+    ]
+    if len(ok) < MIN_UNITS:
+        lines.append(f"Not assessed: {len(ok)} processed units are too few ({MIN_UNITS} needed).")
+    elif findings:
+        lines.append(markdown_table(["unit", "reason"], [[f.unit, f.reason] for f in findings]))
+    else:
+        lines.append("None.")
+    lines += ["", "## Effects the finder names", ""]
+    if counts:
+        lines.append(
+            markdown_table(
+                ["effect", "units", "share (%)"],
+                [
+                    [e, str(c), f"{100 * c / len(ok):.0f}"]
+                    for e, c in sorted(counts.items(), key=lambda x: (-x[1], x[0]))
+                ],
+                align="lrr",
+            )
+        )
+        lines += ["", f"![effects]({FIGURES_DIR}/effects.png)"]
+    else:
+        lines.append("None beyond the simulation the finder started from.")
+    distribution_header = ["quantity", "units", "median", "p10", "p90", "min", "max"]
+    for title, columns, figure in (
+        ("Drift left per method", drift_columns, "drift_left.png"),
+        ("Fitted physical parameters", parameter_columns, "parameters.png"),
+    ):
+        lines += ["", f"## {title}", ""]
+        if columns:
+            lines += [
+                markdown_table(distribution_header, _distribution_rows(columns), align="lrrrrrr"),
+                "",
+                f"![{title}]({FIGURES_DIR}/{figure})",
+            ]
+        else:
+            lines.append("No processed unit.")
+    lines.append("")
+
+    with atomic_output(out_dir / "report.md") as tmp:
+        tmp.write_text("\n".join(lines), encoding="utf-8")
+    summary = {
+        "manifest": str(manifest.source),
+        "units": [
+            {
+                "id": u,
+                "sign_off": verdicts[u],
+                "status": results.get(u, {}).get("status", "missing"),
+                "out_of_family": [f.reason for f in by_unit[u]],
+                "errors": [e["error"] for e in results.get(u, {}).get("errors", [])],
+            }
+            for u in units
+        ],
+    }
+    with atomic_output(out_dir / "fleet.json") as tmp:
+        tmp.write_bytes(json_bytes(summary))
+    return out_dir / "report.md"

@@ -1,0 +1,131 @@
+"""``trainer fleet`` end to end: key every unit, skip the finished ones, run the rest, report.
+
+Units are submitted as Dask graphs (:mod:`.stages`) and written as each one finishes, so an
+interrupted run keeps every unit it finished; the report is rebuilt at the end from the results on
+disk of every unit in the manifest (computed now or by an earlier run).
+"""
+
+from __future__ import annotations
+
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from trainer.errors import UserError
+from trainer.fleet import stages
+from trainer.fleet.cache import clean_staging, is_done, json_bytes, publish_unit, read_result, unit_key
+from trainer.fleet.manifest import FleetSettings, Manifest, UnitSpec, load_manifest
+
+
+@dataclass
+class FleetRun:
+    """What one invocation did: units computed now, units skipped (already done), the report."""
+
+    manifest: Manifest
+    out_dir: Path
+    computed: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+    report: Path | None = None
+
+
+def _submit(client: Any, unit: UnitSpec, key: str, settings: FleetSettings, sim_text: str | None) -> Any:
+    """The unit's graph; only the ``assemble`` future is kept (Dask keeps what it needs)."""
+    tag = f"{unit.id}-{key[:12]}"
+    data = client.submit(stages.load, unit, settings, key=f"load-{tag}")
+    diagnosis = client.submit(stages.diagnose, data, settings, sim_text, key=f"diagnose-{tag}")
+    outputs = [client.submit(stages.method, data, unit, m, key=f"method-{m}-{tag}") for m in unit.methods]
+    return client.submit(stages.assemble, unit, key, data, diagnosis, *outputs, key=f"assemble-{tag}")
+
+
+def _failed(unit: UnitSpec, key: str | None, stage: str, exc: BaseException) -> stages.UnitOutcome:
+    """A unit that never reached ``assemble`` (unreadable input, lost worker): its result only."""
+    message, internal = stages.one_line(exc)
+    result = {
+        "id": unit.id,
+        "key": key,
+        "status": "failed",
+        "retry": internal or key is None,
+        "errors": [{"stage": stage, "error": message}],
+        "recordings": [str(p) for p in unit.recordings],
+        "evaluated_on": None,
+        "export_name": unit.export_name,
+        "methods": {m: {"error": message} for m in unit.methods},
+        "diagnosis": None,
+    }
+    return stages.UnitOutcome(unit.id, {"result.json": json_bytes(result)}, result)
+
+
+def run_fleet(
+    manifest_path: str | Path,
+    out_dir: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    client: Any | None = None,
+) -> FleetRun:
+    """Run every unit of the manifest not already done in ``out_dir``, then write the report.
+
+    ``client``: a ``distributed.Client`` to use instead of opening one (``scheduler`` and
+    ``workers`` are then ignored); a caller running several fleets keeps one cluster up.
+    """
+    from tqdm import tqdm
+
+    from trainer.fleet.report import write_report
+    from trainer.physics.config import parse_config_text
+
+    manifest = load_manifest(manifest_path)
+    settings = manifest.settings
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"-o {out}: exists and is not a directory")
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise UserError(f"-o {out}: parent directory {out.parent} does not exist")
+    sim_text = None
+    if settings.sim is not None:
+        sim_text = settings.sim.read_text(encoding="utf-8")
+        parse_config_text(sim_text, str(settings.sim))  # a bad simulation fails the run before any work
+    clean_staging(out)  # OUTDIR itself is created by the first result: a run that cannot start leaves none
+    run = FleetRun(manifest, out)
+
+    todo: list[tuple[UnitSpec, str]] = []
+    for unit in manifest.units:
+        try:
+            key = unit_key(unit, settings)
+        except UserError as exc:  # a missing or unreadable recording: this unit fails, the fleet goes on
+            publish_unit(out, unit.id, _failed(unit, None, "load", exc).files)
+            run.computed.append(unit.id)
+            continue
+        if is_done(out, unit.id, key):
+            run.skipped.append(unit.id)
+        else:
+            todo.append((unit, key))
+
+    if todo:
+        from distributed import as_completed
+
+        from trainer.fleet.cluster import open_client
+
+        with nullcontext(client) if client is not None else open_client(scheduler, workers) as active:
+            futures = {_submit(active, unit, key, settings, sim_text): (unit, key) for unit, key in todo}
+            bar = tqdm(total=len(futures), unit="unit", desc="fleet", disable=None if progress else True)
+            for future in as_completed(futures):
+                unit, key = futures[future]
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # the task itself was lost (e.g. its worker died)
+                    outcome = _failed(unit, key, "cluster", exc)
+                publish_unit(out, unit.id, outcome.files)
+                run.computed.append(unit.id)
+                bar.update()
+            bar.close()
+
+    for unit in manifest.units:
+        result = read_result(out, unit.id)
+        if result is not None:
+            run.results[unit.id] = result
+    out.mkdir(exist_ok=True)
+    run.report = write_report(manifest, out, run.results)
+    return run

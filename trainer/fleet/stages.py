@@ -1,0 +1,368 @@
+"""One unit's work as Dask tasks: load, diagnose, one task per method, assemble.
+
+``load`` (import and validate) feeds ``diagnose`` and every ``method`` task (fit, evaluate, export
+the C module, verify it bit for bit); ``assemble`` gathers them into the unit's files and its
+``result.json``. The tasks return plain data and write nothing under OUTDIR: the client writes a
+finished unit atomically (:mod:`.cache`), so workers only need to see the recordings.
+
+No task raises for a unit's own problem: a bad file, a failed fit or a failed export becomes a
+:class:`Failure` carrying the one-line error, the unit's result records it, and the fleet goes on.
+Anything that is not a :class:`~trainer.errors.UserError` (a bug, a lost worker) is recorded the
+same way but marked ``internal``, and a restarted run computes that unit again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+from trainer.fleet.cache import RESULT_FILE, json_bytes
+from trainer.fleet.cluster import pinned
+from trainer.fleet.manifest import FleetSettings, UnitSpec
+
+T = TypeVar("T")
+DRIFT_BLOCK_S = 60.0  # without ground truth, drift left = spread of the compensated output's 60 s means
+TIMING_FILE = "timing.json"  # wall times: the one file of a unit that differs between identical runs
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A stage that failed: the one-line error, and whether it is the unit's fault (not ``internal``)."""
+
+    stage: str
+    error: str
+    internal: bool = False
+
+
+@dataclass(frozen=True)
+class UnitData:
+    """A unit's recordings, validated: fit and diagnose on ``train``, score on ``valid``."""
+
+    train: Recording
+    valid: Recording
+    evaluated_on: str
+    seconds: float
+
+
+@dataclass(frozen=True)
+class StageOutput:
+    """Files (path relative to the unit's directory -> bytes) and the summary for ``result.json``."""
+
+    files: dict[str, bytes]
+    summary: dict[str, Any]
+    seconds: float
+
+
+@dataclass(frozen=True)
+class UnitOutcome:
+    """Everything the client writes for one unit."""
+
+    unit_id: str
+    files: dict[str, bytes] = field(repr=False)
+    result: dict[str, Any]
+
+
+def one_line(exc: BaseException) -> tuple[str, bool]:
+    """``(message, internal)``: a UserError's own line, anything else prefixed with its type."""
+    if isinstance(exc, UserError):
+        return " ".join(str(exc).split()), False
+    return " ".join(f"internal error: {type(exc).__name__}: {exc}".split()), True
+
+
+def _guarded(stage: str, work: Callable[[], T]) -> T | Failure:
+    try:
+        return work()
+    except Exception as exc:  # one unit's failure must not stop the fleet
+        message, internal = one_line(exc)
+        return Failure(stage, message, internal)
+
+
+# ------------------------------------------------------------------------------------- load
+
+
+def _read(path: Path, unit: UnitSpec) -> Recording:
+    from trainer.data.importer import import_foreign
+    from trainer.data.recording_io import read_recording
+
+    if unit.import_options is not None:
+        return import_foreign(path, unit.import_options)
+    if path.suffix.lower() not in (".csv", ".npz"):
+        raise UserError(
+            f"{path}: not a recording (.csv/.npz); give the unit 'import' options for a foreign file"
+        )
+    return read_recording(path)
+
+
+def _tail(rec: Recording, fraction: float) -> tuple[Recording, Recording]:
+    """The first ``1 - fraction`` for fitting, the rest (time restarting at 0) for scoring."""
+    n = len(rec)
+    cut = round(n * (1.0 - fraction))
+    if cut < 2 or n - cut < 2:
+        raise UserError(f"{rec.source}: {n} rows are too few to hold out the last {fraction:g} of them")
+    tail = rec.slice(cut, n)
+    tail.columns["time_s"] = tail.time_s - tail.time_s[0]
+    return rec.slice(0, cut), tail
+
+
+@pinned
+def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
+    """Import (or read) and validate the unit's recordings; split off the scoring part."""
+
+    def work() -> UnitData:
+        started = time.perf_counter()
+        recordings = [_read(path, unit) for path in unit.recordings]
+        if len(recordings) == 2:
+            train, valid = recordings
+            where = f"second run {unit.recordings[1].name}"
+        else:
+            train, valid = _tail(recordings[0], settings.eval_fraction)
+            where = f"held-out last {100 * settings.eval_fraction:g} % of {unit.recordings[0].name}"
+        return UnitData(train, valid, where, time.perf_counter() - started)
+
+    return _guarded("load", work)
+
+
+# --------------------------------------------------------------------------------- diagnose
+
+
+def _diagnosis_summary(doc: dict[str, Any]) -> dict[str, Any]:
+    """What the fleet report reads: the calibrated baseline, the effects named, the fit."""
+    return {
+        "baseline_calibrated": doc["baseline_calibrated"],
+        "left_out": [
+            {"effect": e["effect"], "params": e["params"], "flags": e.get("flags", [])}
+            for e in doc["left_out"]
+        ],
+        "ambiguous": [a["effects"] for a in doc["ambiguous"]],
+        "rms_block_mg": {
+            "before": doc["fit"]["before"]["rms_block_mg"],
+            "after": doc["fit"]["after"]["rms_block_mg"],
+        },
+    }
+
+
+@pinned
+def diagnose(
+    data: UnitData | Failure, settings: FleetSettings, sim_text: str | None
+) -> StageOutput | Failure:
+    """``trainer diagnose`` on the fitted recording; ``diagnosis.json`` without its wall time."""
+    if isinstance(data, Failure):
+        return data
+
+    def work() -> StageOutput:
+        from trainer.diagnose import diagnose as find
+        from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS
+        from trainer.diagnose.document import json_text
+        from trainer.physics.config import parse_config_text
+
+        started = time.perf_counter()
+        sim = None if sim_text is None else parse_config_text(sim_text, str(settings.sim))
+        result = find(
+            data.train,
+            sim,
+            holdout_fraction=settings.diagnose_holdout,
+            max_blocks=settings.diagnose_blocks or DEFAULT_MAX_BLOCKS,
+        )
+        doc = json.loads(json_text(result))
+        doc.pop("seconds", None)  # the one non-deterministic field; timing.json has it
+        return StageOutput(
+            {"diagnosis.json": json_bytes(doc)}, _diagnosis_summary(doc), time.perf_counter() - started
+        )
+
+    return _guarded("diagnose", work)
+
+
+# ----------------------------------------------------------------------------------- method
+
+
+def drift_left_mg(valid: Recording, compensated: np.ndarray) -> tuple[float, str]:
+    """RMS drift left and its basis: against ``true_drift_mg`` when present, else the spread of
+    the compensated output's :data:`DRIFT_BLOCK_S` means (a static run's output should be flat)."""
+    from trainer.scoring.evaluate import drift_score
+
+    score = drift_score(valid, compensated)
+    if score is not None:
+        return score.residual_rms_mg, "true_drift_mg"
+    per_block = max(1, round(DRIFT_BLOCK_S * valid.sample_rate_hz))
+    blocks = len(compensated) // per_block
+    if blocks < 2:
+        raise UserError(
+            f"{valid.source}: shorter than two {DRIFT_BLOCK_S:g} s blocks; cannot score drift left"
+        )
+    means = compensated[: blocks * per_block].reshape(blocks, per_block).mean(axis=1)
+    return float(np.sqrt(np.mean((means - means.mean()) ** 2))), f"{DRIFT_BLOCK_S:g} s means"
+
+
+def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> dict[str, Any]:
+    from trainer.scoring.evaluate import evaluate
+
+    valid = data.valid
+    compensated = model.compensate(valid.without_truth())
+    outside = (valid.temp_c < stats["temp_min_c"]) | (valid.temp_c > stats["temp_max_c"])
+    table = evaluate(valid, {method: compensated}, out_of_range={method: outside}).table
+    drift, basis = drift_left_mg(valid, compensated)
+    coefficients = table.compensated[method]
+    return {
+        "method": method,
+        "evaluated_on": data.evaluated_on,
+        "samples": len(valid),
+        "drift_left_mg": drift,
+        "drift_left_basis": basis,
+        "fit_residual_rms_mg": stats["fit_residual_rms_mg"],
+        "out_of_range_fraction": float(np.mean(outside)),
+        "allan": {
+            "B_mg": coefficients.b_mg,
+            "K_mg_per_rt_s": coefficients.k_mg_per_rt_s,
+            "R_mg_per_s": coefficients.r_mg_per_s,
+            "improvement_pct": dict(table.improvement_pct[method]),
+            "average_improvement_pct": table.average_improvement_pct[method],
+        },
+    }
+
+
+def _export_and_verify(
+    model_path: Path, valid: Recording, name: str, tmp: Path
+) -> tuple[dict[str, bytes], dict[str, Any]]:
+    """``codegen export`` + ``codegen verify`` on the scoring recording (0 mismatches to pass)."""
+    from codegen.export import export
+    from codegen.verify import verify
+    from trainer.data.recording_io import write_recording
+
+    c_dir = tmp / "c"
+    _, files = export(model_path, c_dir, name=name)
+    write_recording(valid, tmp / "verify.npz")
+    result = verify(model_path, c_dir, tmp / "verify.npz", name=name, table1=False)
+    passed = result.mismatches == 0 and result.state_equal
+    report = {
+        "passed": passed,
+        "samples": result.samples,
+        "mismatches": result.mismatches,
+        "first_mismatch": result.first_mismatch,
+        "state_equal": result.state_equal,
+        "error_budget_rms_mg": result.budget.rms_mg,
+        "error_budget_max_abs_mg": result.budget.max_abs_mg,
+    }
+    return {f"c/{file_name}": (c_dir / file_name).read_bytes() for file_name in sorted(files)}, report
+
+
+@pinned
+def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput | Failure:
+    """Fit ``name``, score it on the scoring recording, export and verify its C module."""
+    if isinstance(data, Failure):
+        return data
+
+    def work() -> StageOutput:
+        from trainer import methods
+        from trainer.checkpoint import save_model
+        from trainer.fitting import fit_with_stats
+
+        started = time.perf_counter()
+        model, stats = fit_with_stats(name, data.train, unit.fit_kwargs.get(name, {}))
+        scores = _scores(name, data, model, stats)
+        files: dict[str, bytes] = {}
+        with tempfile.TemporaryDirectory(prefix="fleet-") as tmp_name:
+            tmp = Path(tmp_name)
+            save_model(
+                model,
+                tmp / "model.pt",
+                train_stats=stats,
+                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+            )
+            files["model.pt"] = (tmp / "model.pt").read_bytes()
+            if methods.get(name).renderer is None:
+                verified: dict[str, Any] = {"passed": None, "error": f"{name} has no code generator"}
+            else:
+                outcome = _guarded(
+                    "export", lambda: _export_and_verify(tmp / "model.pt", data.valid, unit.export_name, tmp)
+                )
+                if isinstance(outcome, Failure):
+                    verified = {"passed": False, "error": outcome.error}
+                else:
+                    c_files, verified = outcome
+                    files.update(c_files)
+        files["scores.json"] = json_bytes(_finite(scores))
+        files["verify.json"] = json_bytes(_finite(verified))
+        summary = {
+            "drift_left_mg": scores["drift_left_mg"],
+            "drift_left_basis": scores["drift_left_basis"],
+            "verify": verified,
+        }
+        return StageOutput(
+            {f"{name}/{k}": v for k, v in files.items()}, summary, time.perf_counter() - started
+        )
+
+    return _guarded(f"method {name}", work)
+
+
+# --------------------------------------------------------------------------------- assemble
+
+
+def _finite(value: Any) -> Any:
+    """NaN/inf (an unobserved score) as None, so that ``result.json`` is strict JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
+
+
+@pinned
+def assemble(
+    unit: UnitSpec,
+    key: str,
+    data: UnitData | Failure,
+    diagnosis: StageOutput | Failure,
+    *outputs: StageOutput | Failure,
+) -> UnitOutcome:
+    """The unit's files and ``result.json`` (status, errors, per-method summary, diagnosis summary)."""
+    files: dict[str, bytes] = {}
+    errors: list[Failure] = []
+    timing: dict[str, float] = {}
+    if isinstance(data, Failure):
+        errors.append(data)
+    else:
+        timing["load"] = data.seconds
+    if isinstance(diagnosis, StageOutput):
+        files.update(diagnosis.files)
+        timing["diagnose"] = diagnosis.seconds
+    elif diagnosis is not data:
+        errors.append(diagnosis)
+    method_results: dict[str, Any] = {}
+    for name, output in zip(unit.methods, outputs, strict=True):
+        if isinstance(output, StageOutput):
+            files.update(output.files)
+            method_results[name] = output.summary
+            timing[name] = output.seconds
+        else:
+            method_results[name] = {"error": output.error}
+            if output is not data:
+                errors.append(output)
+    result = _finite(
+        {
+            "id": unit.id,
+            "key": key,
+            "status": "failed" if errors else "ok",
+            "retry": any(e.internal for e in errors),
+            "errors": [{"stage": e.stage, "error": e.error} for e in errors],
+            "recordings": [str(p) for p in unit.recordings],
+            "evaluated_on": None if isinstance(data, Failure) else data.evaluated_on,
+            "export_name": unit.export_name,
+            "methods": method_results,
+            "diagnosis": diagnosis.summary if isinstance(diagnosis, StageOutput) else None,
+        }
+    )
+    files[TIMING_FILE] = json_bytes({k: round(v, 3) for k, v in timing.items()})
+    files[RESULT_FILE] = json_bytes(result)
+    return UnitOutcome(unit.id, files, result)
