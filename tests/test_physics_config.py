@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trainer.errors import UserError
+from trainer.physics.catalogue import excluded
 from trainer.physics.config import (
     InputConfig,
     NoiseConfig,
@@ -32,8 +33,9 @@ from trainer.physics.profiles import SegmentSpec
 CATALOGUE_EFFECTS = {
     "bias_poly": {"c0_mg", "c1_mg_per_c", "c2_mg_per_c2", "c3_mg_per_c3"},
     "thermal_lag": {"tau_s"},
-    "temp_rate": {"k_mg_per_c_per_min"},
+    "temp_rate": {"k_mg_per_c_per_min", "tau_s"},
     "hysteresis": {"amp_mg", "width_c"},
+    "hysteresis_offset": {"amp_mg", "width_c"},
     "stress_relaxation": {"gain_mg_per_c", "tau_s"},
     "warmup": {"amp_mg", "tau_s"},
     "periodic": {"amp_mg", "period_s", "phase_rad"},
@@ -267,6 +269,8 @@ def effect_strategy(draw: st.DrawFn, identifier: str) -> EffectConfig:
 def config_strategy(draw: st.DrawFn) -> PhysicsConfig:
     effects: list[EffectConfig] = []
     for identifier in EFFECT_PARAMETERS:
+        if any(excluded(identifier, e.identifier) for e in effects):
+            continue  # the same physics twice is refused (tested on its own)
         count = draw(st.integers(0, 2 if identifier in MULTI_INSTANCE else 1))
         effects += [draw(effect_strategy(identifier)) for _ in range(count)]
     noise = []
@@ -450,3 +454,13 @@ def test_rounding_free_float_text() -> None:
     cfg = parse_config_text("[effects.bias_poly]\nc3_mg_per_c3 = 4.000000000000001e-6")
     assert cfg.effects[0].params["c3_mg_per_c3"] == 4.000000000000001e-6
     assert math.isfinite(cfg.effects[0].params["c3_mg_per_c3"])
+
+
+def test_effects_describing_the_same_physics_twice_are_refused(tmp_path: Path) -> None:
+    path = write(
+        tmp_path,
+        "[effects.hysteresis]\namp_mg = 0.1\nwidth_c = 4.0\n"
+        "[effects.hysteresis_offset]\namp_mg = 0.1\nwidth_c = 4.0\n",
+    )
+    with pytest.raises(UserError, match=r"hysteresis.*hysteresis_offset.*same physics"):
+        load_config(path)

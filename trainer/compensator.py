@@ -50,6 +50,10 @@ class Compensator(ABC):
     def from_payload(cls, payload: dict[str, Any]) -> Self:
         """Rebuild a fitted compensator from :meth:`to_payload`'s output."""
 
+    def describe(self) -> list[str]:
+        """Lines a user reads after fitting (structure, parameters, warnings); none by default."""
+        return []
+
     def compensate(self, rec: Recording) -> np.ndarray:
         """The compensated output ``accel_mg - drift`` in mg."""
         return rec.accel_mg - self.predict_drift(rec)

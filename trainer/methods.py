@@ -17,7 +17,14 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
-from trainer.commands.method_options import DLSTM_OPTIONS, NO_OPTIONS, PLA_OPTIONS, POLY3_OPTIONS, OptionGroup
+from trainer.commands.method_options import (
+    DLSTM_OPTIONS,
+    NO_OPTIONS,
+    PHYSICS_OPTIONS,
+    PLA_OPTIONS,
+    POLY3_OPTIONS,
+    OptionGroup,
+)
 from trainer.errors import UserError
 
 if TYPE_CHECKING:
@@ -223,6 +230,9 @@ register(
         DLSTM_OPTIONS,
         renderer="lstm-stream",
     )
+)
+register(
+    Method("physics", "trainer.greybox.compensator:PhysicsCompensator", TEMPERATURE_DRIVEN, PHYSICS_OPTIONS)
 )
 register(
     Method(

@@ -55,5 +55,7 @@ def run(args: argparse.Namespace) -> int:
         f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
         f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}"
     )
+    for line in model.describe():
+        print(line)
     print(f"{args.method}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
     return 0

@@ -66,3 +66,34 @@ DLSTM_OPTIONS = OptionGroup(
     _dlstm_fit_kwargs,
     lambda settings, progress: {"settings": settings, "progress": progress},
 )
+
+
+def _add_physics(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--effects",
+        default="auto",
+        help="physics: 'auto' (default: the effects the mismatch finder identifies on the training run) or a "
+        "comma list of thermal_lag, temp_rate, hysteresis, hysteresis_offset, stress_relaxation, warmup",
+    )
+    parser.add_argument(
+        "--from-sim",
+        metavar="AUGMENTED_TOML",
+        help="physics: take the structure and starting values from the augmented.toml of trainer diagnose --report",
+    )
+    parser.add_argument(
+        "--warmup",
+        action="store_true",
+        help="physics: compensate the warm-up after power-on too (the firmware must count time since power-on)",
+    )
+
+
+def _physics_fit_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    return {
+        "effects": args.effects,
+        "from_sim": args.from_sim,
+        "warmup": args.warmup,
+        "progress": not getattr(args, "quiet", False),
+    }
+
+
+PHYSICS_OPTIONS = OptionGroup(_add_physics, _physics_fit_kwargs)

@@ -26,7 +26,7 @@ from trainer.diagnose.model import (
     polish,
     search_bounds,
 )
-from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS
+from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, nonlinear_defaults
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
@@ -171,7 +171,12 @@ def _propose_profile(current: ModelFit, data: BlockData, effect: str) -> list[Pr
 
 
 def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
-    fit = polish((*current.terms, Term(effect)), data, current.gls)
+    """Linear columns only; optional nonlinear parameters held at their catalogue defaults."""
+    fit = polish(
+        (*current.terms, Term(effect, nonlinear_defaults(effect), fixed=bool(nonlinear_defaults(effect)))),
+        data,
+        current.gls,
+    )
     return [Proposal(effect, fit.terms, current.noise.terms, fit)]
 
 
@@ -219,5 +224,7 @@ def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     if definition is None or search is None:
         raise ValueError(f"no search for {effect!r}")
     if sum(1 for i in current.identifiers if i == effect) >= definition.finder.max_terms:
+        return []
+    if any(excluded(effect, present) for present in current.identifiers):
         return []
     return SEARCHES[search](current, data, effect)

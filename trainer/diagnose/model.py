@@ -189,7 +189,8 @@ def _free_slots(terms: Sequence[Term], data: BlockData) -> list[tuple[int, int, 
         names = DEFINITIONS[term.identifier].finder.nonlinear
         bounds = search_bounds(term.identifier, data)
         for j, ((_, logged), (lo, hi)) in enumerate(zip(names, bounds, strict=True)):
-            slots.append((i, j, lo, hi, logged))
+            if j < len(term.nl):  # an optional nonlinear parameter left out is held at its default
+                slots.append((i, j, lo, hi, logged))
     return slots
 
 

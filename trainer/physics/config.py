@@ -20,7 +20,7 @@ import tomli_w
 
 from trainer.errors import UserError, atomic_output
 from trainer.fields import TableFields, show
-from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS
+from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS, excluded
 from trainer.physics.catalogue.base import Param
 from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import BUILTIN_PROTOCOLS, PROTOCOL_NAMES, SEGMENT_LABELS, SegmentSpec
@@ -328,6 +328,14 @@ def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
         NoiseConfig(i, p)
         for i, p in _read_terms(source, "noise", data.get("noise", {}), NOISE_PARAMETERS, frozenset())
     )
+    names = [e.identifier for e in effects]
+    for i, first in enumerate(names):
+        for second in names[i + 1 :]:
+            if excluded(first, second):
+                raise UserError(
+                    f"{source}: [effects.{first}] and [effects.{second}] describe the same physics twice; "
+                    "keep one"
+                )
     sf_with_input = input_setters(effects)
     if sf_with_input and "input" in data:
         effect, name = sf_with_input[0]

@@ -15,6 +15,7 @@ from trainer.physics.catalogue import (
     bias_poly,
     bias_step,
     hysteresis,
+    hysteresis_offset,
     periodic,
     quantization_noise,
     rate_ramp,
@@ -39,6 +40,7 @@ EFFECTS: dict[str, Effect] = {
         thermal_lag,
         temp_rate,
         hysteresis,
+        hysteresis_offset,
         stress_relaxation,
         warmup,
         periodic,
@@ -89,12 +91,25 @@ SEPARATING_SIGNATURE: dict[frozenset[str], str] = {
 }
 
 
+def excluded(first: str, second: str) -> bool:
+    """Whether two identifiers describe the same physics twice (either definition's ``excludes``)."""
+    a, b = EFFECTS.get(first), EFFECTS.get(second)
+    return (a is not None and second in a.excludes) or (b is not None and first in b.excludes)
+
+
+def nonlinear_defaults(identifier: str) -> tuple[float, ...]:
+    """The catalogue defaults of an identifier's nonlinear parameters (a linear search holds them)."""
+    definition = DEFINITIONS[identifier]
+    params = {p.name: p for p in definition.params}
+    return tuple(float(params[name].default or 0.0) for name, _ in definition.finder.nonlinear)
+
+
 def _check() -> None:
     """Cross-references between definitions name real identifiers; each separation is written once."""
     pairs = [frozenset({k, o}) for k, d in DEFINITIONS.items() for o in d.finder.separations]
     assert len(pairs) == len(set(pairs)), "a separating signature is defined twice"
     for k, d in DEFINITIONS.items():
-        for other in (*d.finder.confounders, *d.finder.separations):
+        for other in (*d.finder.confounders, *d.finder.separations, *getattr(d, "excludes", ())):
             assert other in DEFINITIONS, f"{k}: unknown identifier {other!r}"
 
 
@@ -118,4 +133,6 @@ __all__ = [
     "TEMPERATURE_CHAIN",
     "T_REF_C",
     "WHITE_NOISE",
+    "excluded",
+    "nonlinear_defaults",
 ]

@@ -215,7 +215,8 @@ class Effect:
     reads. ``input_param`` names a parameter that sets the constant true input. ``compensable``:
     a property of the sensor that a temperature-drift compensator models (lag, rate, hysteresis,
     creep, warm-up), as opposed to an event or a property of the test set-up (a step, a chamber
-    oscillation, the thermometer's resolution).
+    oscillation, the thermometer's resolution). ``excludes``: identifiers that describe the same
+    physics another way; a configuration or a model never holds both.
     """
 
     identifier: str
@@ -228,6 +229,7 @@ class Effect:
     multi_instance: bool = False
     input_param: str | None = None
     compensable: bool = False
+    excludes: tuple[str, ...] = ()  # identifiers it must not be combined with (the same physics twice)
     sampling_check: Callable[[Mapping[str, float], float], str | None] | None = None
     finder: Finder = Finder()
     scenario: Scenario | None = None

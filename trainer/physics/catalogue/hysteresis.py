@@ -35,7 +35,8 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("amp_mg", (d.T_pm - play) / (width / 2.0))]
 
 
-def _identifiability(p: Any) -> Identifiability:
+def reversal_identifiability(p: Any) -> Identifiability:
+    """A branch offset needs both branches over a common range (shared with ``hysteresis_offset``)."""
     overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
     if p.reversals >= 1 and overlap_span >= 3.0:
         return Identifiability(
@@ -53,6 +54,7 @@ def _identifiability(p: Any) -> Identifiability:
 DEFINITION = Effect(
     identifier="hysteresis",
     compensable=True,
+    excludes=("hysteresis_offset",),
     params=(
         Param("amp_mg", unit="mg", plausible=(0.02, 2.0)),
         Param("width_c", "positive", unit="degC", plausible=(2.0, 30.0)),
@@ -66,12 +68,12 @@ DEFINITION = Effect(
         bounds=lambda data: ((0.5, 40.0),),
         grid_points=16,
         columns=_columns,
-        identifiability=_identifiability,
+        identifiability=reversal_identifiability,
         advice=(
             "heating and cooling branches differ: a single polynomial splits the difference; calibrate on both "
             "branches and track the branch (the offset persists in holds)"
         ),
-        confounders=("thermal_lag", "temp_rate"),
+        confounders=("thermal_lag", "temp_rate", "hysteresis_offset"),
     ),
     scenario=Scenario(
         draw=lambda rng, duration, sign: {

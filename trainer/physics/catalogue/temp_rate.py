@@ -1,4 +1,9 @@
-"""``temp_rate``: thermal-gradient stress, ``k * dT_die/dt`` (degC/min)."""
+"""``temp_rate``: thermal-gradient stress, ``k * LP(dT_die/dt, tau_s)`` (degC/min).
+
+With ``tau_s > 0`` the low-passed rate is computed as ``(T_die - LP(T_die, tau_s)) / tau_s``, which
+is the same thing for a first-order filter (``LP(dx/dt) = d LP(x)/dt``) and needs no numerical
+derivative: a compensator computes it from a noisy, quantised thermometer exactly this way.
+"""
 
 from __future__ import annotations
 
@@ -15,32 +20,71 @@ from trainer.physics.catalogue.base import (
     Param,
     Scenario,
     Signals,
+    StartContext,
+    StartingTerm,
     rate_c_per_min,
+    sample_period,
 )
+from trainer.physics.thermal import lowpass
 
 
 def rate_term(rate_c_per_min: np.ndarray, k_mg_per_c_per_min: float) -> np.ndarray:
     return k_mg_per_c_per_min * np.asarray(rate_c_per_min, dtype=np.float64)
 
 
+def filtered_rate(T: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
+    """``LP(dT/dt, tau_s)`` in degC/min as ``60 (T - LP(T, tau_s)) / tau_s`` (no derivative taken)."""
+    T = np.asarray(T, dtype=np.float64)
+    return 60.0 * (T - lowpass(T, tau_s, dt_s)) / tau_s
+
+
 def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
+    tau = p.get("tau_s", 0.0)
+    if tau > 0:
+        return rate_term(filtered_rate(s.T_die, tau, sample_period(s.t)), p["k_mg_per_c_per_min"])
     rate = rate_c_per_min(s.t, s.T_die) if s.rate_c_per_min is None else s.rate_c_per_min
     return rate_term(rate, p["k_mg_per_c_per_min"])
 
 
 def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+    tau = term.nl[0] if term.nl else 0.0
+    if tau > 0:
+        return [("k_mg_per_c_per_min", filtered_rate(d.T, tau, d.data.block_s))]
     return [("k_mg_per_c_per_min", d.rate)]
+
+
+def _to_params(term: Any, linear: Mapping[str, float]) -> dict[str, float]:
+    """The instantaneous form (``tau_s = 0``, the default) is written without ``tau_s``."""
+    params = {"k_mg_per_c_per_min": linear["k_mg_per_c_per_min"]}
+    if term.nl and term.nl[0] > 0:
+        params["tau_s"] = float(term.nl[0])
+    return params
+
+
+def _from_config(params: Mapping[str, float], context: StartContext) -> StartingTerm:
+    """A configured ``tau_s`` is refined; the instantaneous form stays instantaneous."""
+    tau = float(params.get("tau_s", 0.0))
+    return StartingTerm((tau,), fixed=tau == 0.0)
 
 
 DEFINITION = Effect(
     identifier="temp_rate",
     compensable=True,
-    params=(Param("k_mg_per_c_per_min", unit="mg per degC/min", plausible=(0.01, 2.0)),),
-    summary="k * dT_die/dt (thermal-gradient stress, dT/dt in degC/min)",
+    params=(
+        Param("k_mg_per_c_per_min", unit="mg per degC/min", plausible=(0.01, 2.0)),
+        Param("tau_s", "nonnegative", default=0.0, unit="s", plausible=(0.0, 600.0)),
+    ),
+    summary="k * LP(dT_die/dt, tau_s) (thermal-gradient stress, dT/dt in degC/min; tau_s = 0: instantaneous)",
     contribution=_contribution,
     finder=Finder(
+        # Proposed instantaneous (tau_s held at 0, linear); a configured or compensator-refined
+        # tau_s is searched on a linear scale, so that 0 stays reachable.
         search="linear",
+        nonlinear=(("tau_s", False),),
+        bounds=lambda data: ((0.0, 600.0),),
         columns=_columns,
+        to_params=_to_params,
+        from_config=_from_config,
         identifiability=rules.rate_changes,
         advice=(
             "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "

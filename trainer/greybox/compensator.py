@@ -1,0 +1,166 @@
+"""``physics``: the grey-box compensator (registered in :mod:`trainer.methods`).
+
+Drift model: the catalogue's bias polynomial in the proof-mass temperature plus the effects the
+structure names (:mod:`.structure`), fitted jointly (:mod:`.fit`) and evaluated by the simulator's
+own formula (:func:`trainer.physics.effects.drift`) on the thermometer reading, clipped to the
+training range (outside it the compensator holds the range's edge, as a flight stack's cubic does).
+:mod:`.stream` runs the same model sample by sample.
+
+Offset safety: the offset policy (:mod:`trainer.reference`, ``--offset``) shifts the fitted
+bias polynomial's constant so that the drift is relative to its settled value at the reference
+temperature; the constant (which on a chamber run includes gravity on the vertical axis) is left to
+the accelerometer's own offset calibration, as flight stacks do.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Self
+
+import numpy as np
+
+from trainer.compensator import Compensator
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+from trainer.greybox import structure as structures
+from trainer.greybox.fit import FittedPhysics, fit_physics
+from trainer.greybox.stream import PhysicsModel
+from trainer.greybox.terms import parse_effects
+from trainer.physics.catalogue import BACKBONE
+from trainer.physics.effects import EffectConfig, drift
+
+
+class PhysicsCompensator(Compensator):
+    """Catalogue physics fitted to the training run; a stateful function of the temperature history."""
+
+    def __init__(
+        self,
+        *,
+        effects: str = "auto",
+        from_sim: str | None = None,
+        warmup: bool = False,
+        progress: bool = False,
+    ) -> None:
+        structures.check_source(effects, from_sim)
+        self.effects_option = effects
+        self.forced = None if effects == "auto" else parse_effects(effects)
+        self.from_sim = from_sim
+        self.warmup = warmup
+        self.progress = progress
+        self.effects: tuple[EffectConfig, ...] = ()
+        self.temp_range_c = (np.nan, np.nan)
+        self.report: dict[str, Any] = {}
+
+    # -- fitting ---------------------------------------------------------------------------------
+    def _structure(self, rec: Recording) -> structures.Structure:
+        if self.from_sim is not None:
+            path = Path(self.from_sim)
+            if not path.is_file():
+                raise UserError(
+                    f"--from-sim: {path}: no such file (trainer diagnose --report writes augmented.toml)"
+                )
+            return structures.from_sim(path, warmup_allowed=self.warmup)
+        if self.forced is not None:
+            return structures.forced(self.forced)
+        return structures.auto(rec, warmup_allowed=self.warmup, progress=self.progress)
+
+    def fit(self, rec: Recording) -> Self:
+        temp = np.asarray(rec.temp_c, dtype=np.float64)
+        lo, hi = float(np.min(temp)), float(np.max(temp))
+        if not hi > lo:
+            raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")
+        chosen = self._structure(rec)
+        fitted = fit_physics(rec, chosen)
+        self.effects = fitted.effects
+        self.temp_range_c = (lo, hi)
+        self.report = _report(chosen, fitted)
+        return self
+
+    def describe(self) -> list[str]:
+        return summary_lines(self.report) if self.report else []
+
+    # -- running ---------------------------------------------------------------------------------
+    @property
+    def model(self) -> PhysicsModel:
+        return PhysicsModel.from_effects(self.effects, self.temp_range_c)
+
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float) -> float:
+        """Exactly the settled drift (filters settled, mid-branch, warm-up over), no simulation."""
+        del rate_hz
+        return self.model.static_drift_mg(t_ref_c)
+
+    def shift_drift(self, delta_mg: float) -> None:
+        """Moves the bias polynomial's constant ``c0_mg`` (so the export carries the shift)."""
+        self.effects = tuple(
+            EffectConfig(e.identifier, {**e.params, "c0_mg": e.params["c0_mg"] + delta_mg})
+            if e.identifier == BACKBONE
+            else e
+            for e in self.effects
+        )
+
+    def predict_drift(self, rec: Recording) -> np.ndarray:
+        t = np.asarray(rec.time_s, dtype=np.float64)
+        temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *self.temp_range_c)
+        return drift(self.effects, t - t[0], temp).total
+
+    def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
+        return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
+
+    # -- checkpoint ------------------------------------------------------------------------------
+    def to_payload(self) -> dict[str, Any]:
+        return {
+            "effects": [[e.identifier, {k: float(v) for k, v in e.params.items()}] for e in self.effects],
+            "temp_range_c": [float(v) for v in self.temp_range_c],
+            "warmup": bool(self.warmup),
+            "effects_option": self.effects_option,
+            "report": self.report,
+        }
+
+    @classmethod
+    def from_payload(cls, payload: dict[str, Any]) -> Self:
+        model = cls(warmup=bool(payload["warmup"]))
+        model.effects_option = str(payload["effects_option"])
+        model.effects = tuple(
+            EffectConfig(str(i), {k: float(v) for k, v in p.items()}) for i, p in payload["effects"]
+        )
+        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        model.report = dict(payload["report"])
+        return model
+
+
+def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, Any]:
+    """Plain values for the checkpoint and the fit summary: structure, parameters, flags, notes."""
+    final = fitted.structure
+    added = [e.identifier for e in final.compensated if e not in chosen.compensated]
+    how = chosen.how + (f"; cross-validation added {', '.join(added)}" if added else "")
+    return {
+        "structure": how,
+        "effects": [e.identifier for e in fitted.effects],
+        "params": {e.identifier: dict(e.params) for e in fitted.effects},
+        "std": {e.identifier: dict(fitted.std.get(e.identifier, {})) for e in fitted.effects},
+        "nuisance": [e.identifier for e in fitted.nuisance],
+        "at_bound": list(fitted.at_bound),
+        "implausible": list(fitted.implausible),
+        "notes": [*chosen.notes, *fitted.notes],
+    }
+
+
+def summary_lines(report: dict[str, Any]) -> list[str]:
+    """The fit summary a user reads: structure, parameters with one standard deviation, warnings."""
+    lines = [f"physics structure: {report['structure']}"]
+    for effect in report["effects"]:
+        params = report["params"][effect]
+        std = report["std"].get(effect, {})
+        text = ", ".join(
+            f"{k} = {v:.6g}" + (f" +- {std[k]:.2g}" if k in std and np.isfinite(std[k]) else "")
+            for k, v in params.items()
+        )
+        lines.append(f"  {effect}: {text}")
+    if report["nuisance"]:
+        lines.append(f"  fitted but not compensated (not sensor drift): {', '.join(report['nuisance'])}")
+    for name in report["at_bound"]:
+        lines.append(f"  warning: {name} sits at the end of its search range: not determined by this run")
+    for name in report["implausible"]:
+        lines.append(f"  warning: {name} is outside the catalogue's plausible range")
+    lines += [f"  note: {n}" for n in report["notes"]]
+    return lines

@@ -1,0 +1,197 @@
+"""Joint fit of a structure with the mismatch finder's model (block means, GLS, noise by ML).
+
+The finder's machinery does the work: the same design columns, the same profile search for a
+term without starting values, the same joint polish of every nonlinear parameter with the bias
+polynomial refitted at each step (:func:`trainer.diagnose.model.fit_model`). Two things are
+specific to a compensator:
+
+* the linear coefficients are refitted by least squares at the fitted nonlinear values: the
+  compensator runs with no noise model in the field, which is what the finder's held-out figure
+  scores too (``trainer.diagnose.holdout.HEADLINE``);
+* a ``temp_rate`` term gets a rate filter of at least :data:`RATE_TAU_MIN_S`: firmware cannot
+  differentiate a noisy, quantised thermometer reading without one (see :mod:`.stream`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from trainer.data.recording import Recording
+from trainer.diagnose.baseline import build_baseline
+from trainer.diagnose.blocks import BlockData, build_blocks
+from trainer.diagnose.candidates import propose
+from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
+from trainer.diagnose.threads import single_blas_thread
+from trainer.errors import UserError
+from trainer.greybox.select import extend
+from trainer.greybox.structure import Structure
+from trainer.greybox.terms import RATE
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, PLAUSIBLE
+from trainer.physics.catalogue.base import catalogue_params
+from trainer.physics.effects import EffectConfig
+
+# The shortest rate filter (s): the derivative of a thermometer with 0.01-0.04 degC noise and a
+# 0.0625 degC LSB, low-passed over 30 s, is good to about 0.05 degC/min; it lags the true rate by
+# this much (a first-order filter's group delay at low frequency is its time constant).
+RATE_TAU_MIN_S = 30.0
+BOUND_MARGIN = 0.01  # a nonlinear value within 1 % of its search range's end sits at the bound
+
+
+@dataclass(frozen=True)
+class FittedPhysics:
+    """Catalogue parameters of the compensated effects (bias polynomial first) and what to trust."""
+
+    effects: tuple[EffectConfig, ...]
+    nuisance: tuple[EffectConfig, ...]
+    std: dict[str, dict[str, float]]  # one standard deviation per parameter (same units)
+    at_bound: tuple[str, ...]  # "effect.param" at an end of the finder's search range
+    implausible: tuple[str, ...]  # "effect.param" outside the catalogue's plausible range
+    blocks: int
+    block_s: float
+    structure: Structure  # as finally chosen (auto: after the cross-validated stage)
+    notes: tuple[str, ...] = ()
+
+
+def _start_term(effect: EffectConfig) -> Term | None:
+    """A term from catalogue starting values; ``None`` when they are missing (profile it)."""
+    names = [name for name, _ in DEFINITIONS[effect.identifier].finder.nonlinear]
+    if not all(name in effect.params for name in names):
+        if effect.identifier == RATE and "k_mg_per_c_per_min" in effect.params:
+            return Term(RATE, (RATE_TAU_MIN_S,))
+        return None
+    return Term(effect.identifier, tuple(float(effect.params[name]) for name in names))
+
+
+def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
+    """Add one effect: from its starting values, else by the finder's own search for it."""
+    term = _start_term(effect)
+    if term is not None:
+        return evaluate((*current.terms, term), data, current.gls)
+    fits = [
+        p.fit_fixed_noise for p in propose(current, data, effect.identifier) if p.fit_fixed_noise is not None
+    ]
+    if not fits:
+        raise UserError(f"--effects: the finder cannot place {effect.identifier} on this recording")
+    return max(fits, key=lambda f: f.loglik)
+
+
+def _rate_filter(terms: tuple[Term, ...]) -> tuple[Term, ...]:
+    """Every ``temp_rate`` term searched from at least the shortest rate filter."""
+    return tuple(
+        replace(t, nl=(max(t.nl[0] if t.nl else 0.0, RATE_TAU_MIN_S),), fixed=False)
+        if t.identifier == RATE
+        else t
+        for t in terms
+    )
+
+
+def _clamp_rate(fit: ModelFit, data: BlockData, noise_terms: tuple[str, ...]) -> ModelFit:
+    """A rate filter polished below the minimum is held at the minimum and the rest refitted."""
+    if all(t.identifier != RATE or t.nl[0] >= RATE_TAU_MIN_S for t in fit.terms):
+        return fit
+    terms = tuple(
+        replace(t, nl=(RATE_TAU_MIN_S,), fixed=True) if t.identifier == RATE else t for t in fit.terms
+    )
+    return fit_model(terms, noise_terms, data, start=fit.noise)
+
+
+def _nonlinear_std(fit: ModelFit, data: BlockData, index: int, j: int) -> float:
+    """One standard deviation of a nonlinear parameter from the log-likelihood's curvature."""
+    term = fit.terms[index]
+    value = term.nl[j]
+    h = max(0.02 * abs(value), 0.5 * data.block_s)
+
+    def loglik(x: float) -> float:
+        nl = list(term.nl)
+        nl[j] = x
+        terms = list(fit.terms)
+        terms[index] = replace(term, nl=tuple(nl))
+        return evaluate(terms, data, fit.gls).loglik
+
+    lo = max(value - h, 1e-9)
+    curvature = (2.0 * fit.loglik - loglik(lo) - loglik(value + h)) / (0.5 * (value + h - lo)) ** 2
+    return 1.0 / math.sqrt(curvature) if curvature > 0 else math.inf
+
+
+def fit_physics(rec: Recording, structure: Structure) -> FittedPhysics:
+    """Fit ``structure`` (bias polynomial plus its effects) to ``rec`` jointly."""
+    with single_blas_thread():
+        return _fit(rec, structure)
+
+
+def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
+    rec = rec.without_truth()
+    data = build_blocks(rec)
+    baseline = build_baseline(None, np.asarray(rec.time_s) - float(rec.time_s[0]), data.lattice_lsb_c)
+    noise_terms = baseline.noise_terms
+    current = fit_model(baseline.terms, noise_terms, data)
+    for effect in (*structure.compensated, *structure.nuisance):
+        current = _add(current, data, effect)
+    notes: list[str] = []
+    if structure.candidates:
+        current, structure, notes = extend(current, data, structure, _add)
+    terms = _rate_filter(current.terms)
+    fit = _clamp_rate(fit_model(terms, noise_terms, data, start=current.noise), data, noise_terms)
+
+    design = build_design(fit.terms, data)
+    y = data.accel - design.offset
+    beta_ols, *_ = np.linalg.lstsq(design.X, y, rcond=None)
+    Xw = fit.gls.whiten(design.X)
+    dof = max(data.n - design.X.shape[1], 1)
+    cov = (fit.rss / dof) * np.linalg.pinv(Xw.T @ Xw)
+    sd_linear = np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+    keep = {e.identifier for e in structure.compensated} | {BACKBONE}
+    effects: list[EffectConfig] = []
+    nuisance: list[EffectConfig] = []
+    std: dict[str, dict[str, float]] = {}
+    at_bound: list[str] = []
+    implausible: list[str] = []
+    for index, term in enumerate(fit.terms):
+        definition = DEFINITIONS[term.identifier]
+        if term.identifier not in EFFECTS:
+            continue  # a noise trend column (rate_ramp) is part of the fit, not of the drift
+        linear = {
+            role: float(b) for (owner, role), b in zip(design.roles, beta_ols, strict=True) if owner == index
+        }
+        params = catalogue_params(definition, term, linear)
+        sd_lin = {
+            role: float(s) for (owner, role), s in zip(design.roles, sd_linear, strict=True) if owner == index
+        }
+        nonlinear = [name for name, _ in definition.finder.nonlinear]
+        sd = {k: abs(v) for k, v in catalogue_params(definition, term, sd_lin).items() if k not in nonlinear}
+        bounds = search_bounds(term.identifier, data) if nonlinear else ()
+        for j, name in enumerate(nonlinear[: len(term.nl)]):
+            if name not in params:
+                continue
+            if not term.fixed:
+                sd[name] = _nonlinear_std(fit, data, index, j)
+            lo, hi = bounds[j]
+            span = hi - lo
+            if not term.fixed and (
+                term.nl[j] - lo < BOUND_MARGIN * span or hi - term.nl[j] < BOUND_MARGIN * span
+            ):
+                at_bound.append(f"{term.identifier}.{name}")
+        for name, value in params.items():
+            rng = PLAUSIBLE.get((term.identifier, name))
+            if rng is not None and not (rng[0] <= abs(value) <= rng[1]):
+                implausible.append(f"{term.identifier}.{name}")
+        config = EffectConfig(term.identifier, params)
+        (effects if term.identifier in keep else nuisance).append(config)
+        std[term.identifier] = sd
+    order = list(EFFECTS)
+    effects.sort(key=lambda e: order.index(e.identifier))
+    return FittedPhysics(
+        tuple(effects),
+        tuple(nuisance),
+        std,
+        tuple(at_bound),
+        tuple(implausible),
+        data.n,
+        data.block_s,
+        structure,
+        tuple(notes),
+    )

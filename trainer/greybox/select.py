@@ -1,0 +1,81 @@
+"""The compensator's own test for a term: does it predict blocks it was not fitted on?
+
+The finder judges effects by BIC under its noise model, where a random walk may explain a slow
+heating / cooling split as noise. A compensator cannot remove noise, and what matters to it is the
+drift it leaves on data it has not seen. So, after the finder, every compensable effect that the
+temperature profile identifies (the finder's identifiability rules: a monotone ramp identifies no
+lag, rate or hysteresis, and then nothing is tried) is tested by contiguous K-fold cross-validation
+on the block means: fitted on the other folds at the profiled nonlinear values (least squares, as
+the compensator runs), it must lower the pooled held-out RMS by :data:`MIN_GAIN`. The best such
+term is added and the search repeats.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.model import ModelFit, Term, build_design
+from trainer.greybox.structure import Structure
+from trainer.physics.catalogue import excluded
+from trainer.physics.effects import EffectConfig
+
+FOLDS = 5
+MIN_GAIN = 0.05  # a term must lower the cross-validated RMS by 5 %
+
+
+def cv_rms(terms: tuple[Term, ...], data: BlockData, folds: int = FOLDS) -> float:
+    """Pooled RMS (mean removed) of each contiguous fold predicted by least squares on the others."""
+    design = build_design(terms, data)
+    y = data.accel - design.offset
+    X = design.X
+    edges = np.linspace(0, data.n, folds + 1).astype(int)
+    residual = np.empty(data.n)
+    for k in range(folds):
+        test = np.zeros(data.n, dtype=bool)
+        test[edges[k] : edges[k + 1]] = True
+        beta, *_ = np.linalg.lstsq(X[~test], y[~test], rcond=None)
+        residual[test] = y[test] - X[test] @ beta
+    residual -= residual.mean()
+    return float(np.sqrt(np.mean(residual**2)))
+
+
+def extend(
+    fit: ModelFit, data: BlockData, structure: Structure, add: object
+) -> tuple[ModelFit, Structure, list[str]]:
+    """Add candidates while one lowers the cross-validated RMS by ``MIN_GAIN``.
+
+    ``add(fit, data, effect)`` places one effect (the finder's profile search); returns the
+    extended fit, the structure with the accepted effects, and one note per decision.
+    """
+    notes: list[str] = []
+    current = cv_rms(fit.terms, data)
+    remaining = list(structure.candidates)
+    accepted: list[EffectConfig] = []
+    while remaining:
+        trials = []
+        for name in remaining:
+            if any(excluded(name, t.identifier) for t in fit.terms):
+                continue
+            trial = add(fit, data, EffectConfig(name, {}))  # type: ignore[operator]
+            trials.append((cv_rms(trial.terms, data), name, trial))
+        if not trials:
+            break
+        score, name, trial = min(trials, key=lambda item: item[0])
+        if score > (1.0 - MIN_GAIN) * current:
+            notes.append(
+                f"cross-validation: no further term lowers the held-out block RMS by {MIN_GAIN:.0%} "
+                f"(best: {name}, {current:.4g} -> {score:.4g} mg)"
+            )
+            break
+        notes.append(
+            f"cross-validation: {name} lowers the held-out block RMS {current:.4g} -> {score:.4g} mg"
+        )
+        fit, current = trial, score
+        accepted.append(EffectConfig(name, {}))
+        remaining.remove(name)
+    if accepted:
+        structure = replace(structure, compensated=(*structure.compensated, *accepted))
+    return fit, structure, notes
