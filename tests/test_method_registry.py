@@ -182,6 +182,7 @@ def test_the_registry_order_is_the_comparison_order() -> None:
         "pla",
         "poly3",
         "dlstm-temp",
+        "physics",
         "persistence",
     )
     assert methods.paper_names() == ("dlstm", "dlstm-ssa", "dlstm-issa", "pla")

@@ -91,7 +91,7 @@ def _physics_fit_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return {
         "effects": args.effects,
         "from_sim": args.from_sim,
-        "warmup": args.warmup,
+        "with_warmup": args.warmup,
         "progress": not getattr(args, "quiet", False),
     }
 

@@ -18,7 +18,7 @@ import numpy as np
 import tomli_w
 
 from trainer.data.recording_io import write_recording
-from trainer.physics.catalogue import EFFECTS
+from trainer.physics.catalogue import EFFECTS, WHITE_NOISE, bias_step, thermal_lag
 from trainer.physics.config import NoiseConfig, PhysicsConfig, parse_config_text
 from trainer.physics.effects import EffectConfig
 from trainer.physics.simulate import simulate
@@ -68,8 +68,11 @@ RELATIVE_SPREAD = {"c1_mg_per_c": 0.10, "c2_mg_per_c2": 0.10, "c3_mg_per_c3": 0.
 WHITE_SPREAD = 0.05
 BIAS_STEP_MG = 0.3
 BIAS_STEP_AT = 0.55  # share of the run
-DEFECTS = ("bias_step", "lag_x3")
-DEFAULT_DEFECTS = {"U07": "bias_step", "U18": "lag_x3"}
+STEP = bias_step.DEFINITION.identifier
+LAG = thermal_lag.DEFINITION.identifier
+LAG_X3 = "lag_x3"  # a defect name (the lag tripled), not a catalogue identifier
+DEFECTS = (STEP, LAG_X3)
+DEFAULT_DEFECTS = {"U07": STEP, "U18": LAG_X3}
 
 
 def sensor() -> PhysicsConfig:
@@ -95,22 +98,20 @@ def unit_config(base: PhysicsConfig, rng: np.random.Generator, defect: str | Non
         NoiseConfig(
             n.identifier, {k: v * (1.0 + float(rng.normal(0.0, WHITE_SPREAD))) for k, v in n.params.items()}
         )
-        if n.identifier == "white_noise"
+        if n.identifier == WHITE_NOISE
         else n
         for n in base.noise
     ]
-    if defect == "lag_x3":
+    if defect == LAG_X3:
         effects = [
-            EffectConfig(e.identifier, {"tau_s": 3.0 * e.params["tau_s"]})
-            if e.identifier == "thermal_lag"
-            else e
+            EffectConfig(e.identifier, {"tau_s": 3.0 * e.params["tau_s"]}) if e.identifier == LAG else e
             for e in effects
         ]
-    if defect == "bias_step":
+    if defect == STEP:
         _start, segments = base.protocol.resolved()
         duration = sum(s.duration_s for s in segments)
         effects.append(
-            EffectConfig("bias_step", {"t_s": round(BIAS_STEP_AT * duration, 1), "step_mg": BIAS_STEP_MG})
+            EffectConfig(STEP, {"t_s": round(BIAS_STEP_AT * duration, 1), "step_mg": BIAS_STEP_MG})
         )
     order = list(EFFECTS)
     effects.sort(key=lambda e: order.index(e.identifier))

@@ -38,14 +38,14 @@ class PhysicsCompensator(Compensator):
         *,
         effects: str = "auto",
         from_sim: str | None = None,
-        warmup: bool = False,
+        with_warmup: bool = False,
         progress: bool = False,
     ) -> None:
         structures.check_source(effects, from_sim)
         self.effects_option = effects
         self.forced = None if effects == "auto" else parse_effects(effects)
         self.from_sim = from_sim
-        self.warmup = warmup
+        self.warmup = with_warmup
         self.progress = progress
         self.effects: tuple[EffectConfig, ...] = ()
         self.temp_range_c = (np.nan, np.nan)
@@ -111,14 +111,14 @@ class PhysicsCompensator(Compensator):
         return {
             "effects": [[e.identifier, {k: float(v) for k, v in e.params.items()}] for e in self.effects],
             "temp_range_c": [float(v) for v in self.temp_range_c],
-            "warmup": bool(self.warmup),
+            "with_warmup": bool(self.warmup),
             "effects_option": self.effects_option,
             "report": self.report,
         }
 
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
-        model = cls(warmup=bool(payload["warmup"]))
+        model = cls(with_warmup=bool(payload["with_warmup"]))
         model.effects_option = str(payload["effects_option"])
         model.effects = tuple(
             EffectConfig(str(i), {k: float(v) for k, v in p.items()}) for i, p in payload["effects"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SEGMENT_LABELS: tuple[str, ...] = ("soak", "ramp_up", "hold", "ramp_down")
-PROTOCOL_NAMES: tuple[str, ...] = ("paper-oven", "extended", "custom")
+PROTOCOL_NAMES: tuple[str, ...] = ("paper-oven", "extended", "realistic-train", "realistic-valid", "custom")
 
 
 @dataclass(frozen=True)
@@ -45,9 +45,40 @@ EXTENDED: tuple[float, tuple[SegmentSpec, ...]] = (
     ),
 )
 
+# The realistic experiment (trainer/physics/realistic.toml, docs/simulator.md): two chamber cycles
+# that differ in ramp rates and in the order of the range, so that a compensator trained on one
+# is validated on temperature histories it has not seen. Training: up at 1.0, down at 1.5, up
+# at 0.5 degC/min, starting cold; validation: starting hot, down at 2.0, up at 0.7, down at 1.0.
+REALISTIC_TRAIN: tuple[float, tuple[SegmentSpec, ...]] = (
+    -20.0,
+    (
+        SegmentSpec("soak", 1200.0, -20.0),
+        SegmentSpec("ramp_up", 5400.0, 70.0),
+        SegmentSpec("hold", 1800.0, 70.0),
+        SegmentSpec("ramp_down", 2800.0, 0.0),
+        SegmentSpec("hold", 1200.0, 0.0),
+        SegmentSpec("ramp_up", 4800.0, 40.0),
+        SegmentSpec("hold", 1200.0, 40.0),
+    ),
+)
+REALISTIC_VALID: tuple[float, tuple[SegmentSpec, ...]] = (
+    60.0,
+    (
+        SegmentSpec("soak", 1200.0, 60.0),
+        SegmentSpec("ramp_down", 2400.0, -20.0),
+        SegmentSpec("hold", 1800.0, -20.0),
+        SegmentSpec("ramp_up", 7700.0, 70.0),
+        SegmentSpec("hold", 1200.0, 70.0),
+        SegmentSpec("ramp_down", 3000.0, 20.0),
+        SegmentSpec("hold", 1200.0, 20.0),
+    ),
+)
+
 BUILTIN_PROTOCOLS: dict[str, tuple[float, tuple[SegmentSpec, ...]]] = {
     "paper-oven": PAPER_OVEN,
     "extended": EXTENDED,
+    "realistic-train": REALISTIC_TRAIN,
+    "realistic-valid": REALISTIC_VALID,
 }
 
 
