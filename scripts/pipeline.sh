@@ -5,7 +5,7 @@
 # 2. trains every method with the paper's settings (DLSTM, DLSTM+SSA, DLSTM+ISSA, PLA, the PX4-style
 #    cubic, the temperature-input DLSTM, the persistence predictor) and scores them like the paper's
 #    Table 1 plus the honest metrics (drift left, true input kept): report, figures and models in
-#    $OUT/comparison/ (default OUT=out).
+#    $OUT/comparison/ (default OUT=out);
 # Extra arguments go to 'trainer compare', e.g. scripts/pipeline.sh --iterations 100 --cycles 50
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -21,4 +21,18 @@ trainer simulate --protocol paper-oven --seed 4 --input motion -o "$OUT/input-mo
 trainer compare "$OUT/train.npz" "$OUT/valid.npz" \
   --input-test "$OUT/input-steps.npz" --input-test "$OUT/input-motion.npz" \
   --out-dir "$OUT/comparison" "$@"
-echo "pipeline done: open $OUT/comparison/report.md"
+# 3. the realistic experiment (trainer/physics/realistic.toml): a sensor with the lag, rate and
+#    branch-offset terms measured on the bundled real run, trained on one chamber cycle and
+#    validated on another with other ramp rates and the range in another order; every method,
+#    including the physics compensator. Report in $OUT/realistic/.
+REALISTIC=trainer/physics/realistic.toml
+trainer simulate --config "$REALISTIC" --seed 11 -o "$OUT/realistic-train.npz"
+trainer simulate --config "$REALISTIC" --protocol realistic-valid --seed 12 -o "$OUT/realistic-valid.npz"
+trainer simulate --config "$REALISTIC" --protocol realistic-valid --seed 13 --input steps \
+  -o "$OUT/realistic-input-steps.npz"
+trainer simulate --config "$REALISTIC" --protocol realistic-valid --seed 14 --input motion \
+  -o "$OUT/realistic-input-motion.npz"
+trainer compare "$OUT/realistic-train.npz" "$OUT/realistic-valid.npz" \
+  --input-test "$OUT/realistic-input-steps.npz" --input-test "$OUT/realistic-input-motion.npz" \
+  --out-dir "$OUT/realistic" "$@"
+echo "pipeline done: open $OUT/comparison/report.md and $OUT/realistic/report.md"

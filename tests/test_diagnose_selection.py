@@ -52,3 +52,12 @@ def test_user_sim_without_random_walk_names_only_the_hidden_effect(effect: str, 
         t for t in doc["tested"] if t["effect"] == RANDOM_WALK and t.get("how", "").startswith("dropped")
     ]
     assert dropped and all(t["delta_bic"] < 12.0 for t in dropped), doc["tested"]
+
+
+def test_a_trend_that_only_replaces_the_random_walk_is_not_named() -> None:
+    """Clean draw 3085 (bench_diagnose, offset 2000): its random walk's realisation looks like a
+    ramp. Refitting the noise let a rate_ramp replace the walk (walk level to ~0, delta BIC 12.8);
+    judged at the walk's own level the ramp gains ~1 and nothing is named."""
+    scenario = make_scenario([], 3085, rates=(5.0, 10.0, 20.0, 50.0))
+    doc = document(diagnose(scenario.recording(), scenario.sim, holdout_fraction=0.0))
+    assert doc["left_out"] == []

@@ -131,6 +131,17 @@ def _refit(current: ModelFit, proposal: Proposal, data: BlockData) -> tuple[floa
         return delta, fit, f"BIC improvement {delta:.1f} ({proposal.note})"
     fit = fit_model(proposal.terms, proposal.noise_terms, data, start=current.noise)
     delta = current.bic - fit.bic
+    if catalogue.DEFINITIONS[proposal.effect].finder.noise_role == "trend":
+        # A trend and a random walk are two readings of one slow wander: a trend that gains only
+        # by replacing the walk (the refit drives the walk's level to zero) is no finding. It must
+        # also beat the walk at the walk's current level.
+        fixed = _fixed_score(current, proposal)
+        if fixed < delta:
+            return (
+                fixed,
+                fit,
+                f"BIC improvement {fixed:.1f} (GLS at the current noise; a trend must beat the random walk)",
+            )
     return delta, fit, f"BIC improvement {delta:.1f} (GLS, noise re-estimated by ML)"
 
 
