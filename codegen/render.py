@@ -39,6 +39,7 @@ from codegen.quantize import (
     QStream,
     QuantModel,
 )
+from trainer import methods as registry
 from trainer.errors import UserError
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
@@ -386,7 +387,7 @@ def _physics_context(model: QPhysics) -> dict[str, object]:
         return {"q": _c_int(g.q, 64), "shift": g.shift}
 
     return {
-        "family": "physics",
+        "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
         "rate_hz": f"{model.rate_hz:g}",
         "state_frac": PHYS_STATE_FRAC,
         "diff_shift": PHYS_DIFF_SHIFT,

@@ -246,7 +246,7 @@ PARSERS: dict[str, Callable[[_Fields, _Fields, str], ModelSpec]] = {
     "mean-stream": _persistence,
     "piecewise-linear": _pla,
     "cubic": _poly3,
-    "physics": _physics,
+    registry.PHYSICS_RENDERER: _physics,
 }
 
 

@@ -39,6 +39,7 @@ FAMILIES: tuple[Family, ...] = (MEMORYLESS, TEMPERATURE_DRIVEN, RECURSIVE)
 # Code generator renderers (codegen/spec.py parses, codegen/render.py renders each one).
 Renderer = Literal["lstm-stream", "mean-stream", "piecewise-linear", "cubic", "physics"]
 RENDERERS: tuple[Renderer, ...] = ("lstm-stream", "mean-stream", "piecewise-linear", "cubic", "physics")
+PHYSICS_RENDERER: Renderer = "physics"  # the grey-box compensator's C (codegen/templates/_physics.c.j2)
 
 
 @dataclass(frozen=True)
@@ -237,7 +238,7 @@ register(
         "trainer.greybox.compensator:PhysicsCompensator",
         TEMPERATURE_DRIVEN,
         PHYSICS_OPTIONS,
-        renderer="physics",
+        renderer=PHYSICS_RENDERER,
     )
 )
 register(
