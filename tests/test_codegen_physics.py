@@ -5,6 +5,7 @@ save/restore across a power cycle, the out-of-range flag and the export's refusa
 
 from __future__ import annotations
 
+import itertools
 import shutil
 import subprocess
 from pathlib import Path
@@ -131,7 +132,7 @@ def test_c_equals_golden_under_sanitizers_with_extremes_resets_and_inits(
     c_out = np.frombuffer(outputs.read_bytes(), dtype="<i4").astype(np.int64)
     golden, expected = golden_for(loaded.quantised), []
     cuts = [0, 2_001, 4_500, 6_100, accel.size]
-    for a, b in zip(cuts, cuts[1:], strict=False):
+    for a, b in itertools.pairwise(cuts):
         if commands[a] == CMD_RESET:
             golden.reset()
         elif commands[a] == CMD_INIT:
