@@ -27,13 +27,25 @@ import numpy as np
 
 from codegen.activations import sigmoid_q16, tanh_q15
 from codegen.fixedpoint import INT32_MAX, INT32_MIN, rdiv_round, rshift_round, sat32
-from codegen.qformats import ACT_STEP_BITS, C_FRAC, EST_FRAC, GATE_FRAC, TANH_FRAC, X_MAX
+from codegen.qformats import (
+    ACT_STEP_BITS,
+    C_FRAC,
+    EST_FRAC,
+    GATE_FRAC,
+    PHYS_DIFF_SHIFT,
+    PHYS_STATE_FRAC,
+    PHYS_U_FRAC,
+    TANH_FRAC,
+    X_MAX,
+)
 from codegen.quantize import (
     EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
     X_SLOTS,
+    QLowpass,
+    QPhysics,
     QPla,
     QPoly3,
     QStream,
@@ -294,6 +306,110 @@ class GoldenStream(_Golden):
         return estimate
 
 
+def _rr(x: int, shift: int) -> int:
+    """x / 2**shift rounded half away from zero, on Python integers (exact at any size)."""
+    if shift == 0:
+        return x
+    q, r = divmod(abs(x), 1 << shift)
+    q += r >= 1 << (shift - 1)
+    return -q if x < 0 else q
+
+
+class GoldenPhysics(_Golden):
+    """The grey-box model sample by sample on Python integers, with the C struct's fields.
+
+    Python integers never wrap, so an int64 overflow the generator failed to rule out would show
+    here as a value beyond int64 (checked at every update) instead of agreeing with the C."""
+
+    model: QPhysics
+    FILTERS = ("proof_mass", "play", "rate_lp", "creep_lp")
+
+    def reset(self) -> None:
+        self.started = 0
+        self.temp_prev = 0
+        self.values = dict.fromkeys(self.FILTERS, 0)
+
+    def init(self) -> None:
+        super().init()
+        self.tag = self.model.tag
+
+    def present(self) -> tuple[str, ...]:
+        m = self.model
+        flags = (m.lag is not None, m.half_width_q is not None, m.rate is not None, m.creep is not None)
+        return tuple(name for name, on in zip(self.FILTERS, flags, strict=True) if on)
+
+    def state(self) -> dict[str, np.ndarray | int]:
+        out: dict[str, np.ndarray | int] = {name: self.values[name] for name in self.present()}
+        return {
+            **out,
+            "temp_prev": self.temp_prev,
+            "started": self.started,
+            "model_tag": self.tag,
+            **super().state(),
+        }
+
+    def restore(self, saved: dict[str, int]) -> bool:
+        """The C ``NAME_restore``: continue from a saved state of this model, else start afresh."""
+        if saved["model_tag"] != self.model.tag:
+            self.init()
+            return False
+        self.values.update({name: int(saved[name]) for name in self.present()})
+        self.temp_prev, self.started = int(saved["temp_prev"]), int(saved["started"])
+        self.flags, self.samples, self.tag = (
+            int(saved["flags"]),
+            int(saved["samples"]),
+            int(saved["model_tag"]),
+        )
+        return True
+
+    @staticmethod
+    def _lowpass(f: QLowpass, y: int, prev: int, t: int) -> int:
+        d = prev * (1 << PHYS_STATE_FRAC) - y
+        return y + _rr(_rr(d, PHYS_DIFF_SHIFT) * f.c.q, f.c.shift) + _rr((t - prev) * f.b0.q, f.b0.shift)
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        one = 1 << PHYS_STATE_FRAC
+        v = self.values
+        drift = np.empty(temp.size, dtype=np.int64)
+        d0, d1, d2, d3 = m.coefficients_q
+        for n, raw in enumerate(temp.tolist()):
+            t = min(max(raw, m.clip_lo_mdegc), m.clip_hi_mdegc)
+            t_q = t * one
+            if not self.started:
+                self.started, self.temp_prev = 1, t
+                for name in self.present():
+                    v[name] = t_q
+            prev = self.temp_prev
+            t_pm = t_q
+            if m.lag is not None:
+                t_pm = v["proof_mass"] = self._lowpass(m.lag, v["proof_mass"], prev, t)
+            t_b, acc = t_pm, 0
+            if m.half_width_q is not None:
+                h = m.half_width_q
+                v["play"] = min(max(v["play"], t_pm - h), t_pm + h)
+                if m.poly_reads_play:
+                    t_b = v["play"]
+                assert m.branch is not None
+                acc += _rr(_rr(t_pm - v["play"], PHYS_DIFF_SHIFT) * m.branch.q, m.branch.shift)
+            u = _rr(t_b - m.t_ref_mdegc * one, m.u_round)
+            assert abs(u) <= 1 << PHYS_U_FRAC
+            poly = d3
+            for coefficient in (d2, d1, d0):
+                poly = _rr(poly * u, PHYS_U_FRAC) + coefficient
+            acc += poly
+            if m.rate is not None and m.rate_gain is not None:
+                v["rate_lp"] = self._lowpass(m.rate, v["rate_lp"], prev, t)
+                acc += _rr(_rr(t_q - v["rate_lp"], PHYS_DIFF_SHIFT) * m.rate_gain.q, m.rate_gain.shift)
+            if m.creep is not None and m.creep_gain is not None:
+                v["creep_lp"] = self._lowpass(m.creep, v["creep_lp"], prev, t)
+                acc += _rr(_rr(t_q - v["creep_lp"], PHYS_DIFF_SHIFT) * m.creep_gain.q, m.creep_gain.shift)
+            assert abs(acc) <= m.bound and all(abs(x) < 1 << 62 for x in v.values())
+            self.temp_prev = t
+            drift[n] = _rr(acc, m.frac)
+        return self._output(accel, self._sat(drift))
+
+
 def golden_for(model: QuantModel) -> _Golden:
     """A fresh golden model, initialised like ``NAME_init``."""
     golden: _Golden
@@ -301,6 +417,8 @@ def golden_for(model: QuantModel) -> _Golden:
         golden = GoldenPla(model)
     elif isinstance(model, QPoly3):
         golden = GoldenPoly3(model)
+    elif isinstance(model, QPhysics):
+        golden = GoldenPhysics(model)
     else:
         golden = GoldenStream(model)
     golden.init()

@@ -11,17 +11,37 @@ import math
 from codegen import __version__
 from codegen.activations import ACT_ERROR_LSB
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
-from codegen.qformats import C_FRAC, GATE_FRAC, H_FRAC, TANH_FRAC, X_FRAC, X_MIN_FRAC
+from codegen.qformats import (
+    C_FRAC,
+    GATE_FRAC,
+    H_FRAC,
+    PHYS_COEF_BITS,
+    PHYS_DIFF_SHIFT,
+    PHYS_STATE_FRAC,
+    PHYS_U_FRAC,
+    TANH_FRAC,
+    X_FRAC,
+    X_MIN_FRAC,
+)
 from codegen.quantize import (
     ACCEL_PER_MG,
     QLayer,
     QMatrix,
+    QPhysics,
     QPla,
     QPoly3,
     QStream,
     QuantModel,
 )
-from codegen.render import FLAGS, KERNEL_FILE, activation_summary, state_bytes, state_fields, table_bytes
+from codegen.render import (
+    FLAGS,
+    KERNEL_FILE,
+    activation_summary,
+    rate_millihz,
+    state_bytes,
+    state_fields,
+    table_bytes,
+)
 from trainer.dlstm.realtime import PERSISTENCE_KIND
 
 FORMAT = "mems-tdc-codegen-manifest"
@@ -181,6 +201,46 @@ def _poly3(model: QPoly3) -> dict[str, object]:
     }
 
 
+def _physics(model: QPhysics) -> dict[str, object]:
+    return {
+        "rates": {
+            "sample_rate_hz": model.rate_hz,
+            "sample_rate_millihz": rate_millihz(model.rate_hz),
+            "note": "the filters are discretised for this rate: call NAME_step at exactly this rate",
+        },
+        "quantisation": {
+            "rounding": "half away from zero",
+            "states": f"int64 Q{PHYS_STATE_FRAC} mdegC (filters, play operator)",
+            "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],
+            "coefficients": f"{PHYS_COEF_BITS} significant bits; state differences pre-shifted by {PHYS_DIFF_SHIFT}",
+            "polynomial_u": f"(T_b - {model.t_ref_mdegc} mdegC) / 2^{model.u_shift} in Q{PHYS_U_FRAC}",
+            "coefficients_q": list(model.coefficients_q),
+            "drift_frac_bits": model.frac,
+            "drift_bound": model.bound,
+            "drift_headroom_bits": _num(headroom_bits(model.bound, INT64_MAX)),
+            "poly_bound": model.poly_bound,
+            "filters": [
+                {
+                    "name": f.name,
+                    "tau_s": f.tau_s,
+                    "c_q": f.c.q,
+                    "c_frac_bits": f.c.frac,
+                    "b0_q": f.b0.q,
+                    "b0_frac_bits": f.b0.frac,
+                    "deadband_mdegc": _num(f.deadband_mdegc),
+                    "deadband_drift_mg": _num(f.deadband_mdegc * f.sensitivity_mg_per_c / 1000.0),
+                }
+                for f in model.filters
+            ],
+            "gains": [{"name": g.name, "q": g.q, "shift": g.shift, "bound": g.bound} for g in model.gains],
+        },
+        "model_tag": model.tag,
+        "power_on": "filters start in equilibrium at the first sample; the play operator at T_pm (mid-branch)",
+        "save_restore": "copy NAME_state_t; NAME_restore checks model_tag and keeps the hysteresis branch",
+        "macs_per_sample": 3 + 2 * len(model.filters) + len(model.gains),
+    }
+
+
 def build_manifest(
     model: QuantModel, *, name: str, sha256: str, valid_temp_range_c: tuple[float, float]
 ) -> dict[str, object]:
@@ -189,6 +249,8 @@ def build_manifest(
     body = (
         _stream(model)
         if isinstance(model, QStream)
+        else _physics(model)
+        if isinstance(model, QPhysics)
         else _pla(model)
         if isinstance(model, QPla)
         else (_poly3(model))
@@ -208,6 +270,11 @@ def build_manifest(
             "run": f"void {name}_run({name}_state_t *state, const int32_t *accel_q4ug, "
             "const int32_t *temp_mdegc, int32_t *out_q4ug, size_t n)",
             "model_id": f"const char *{name}_model_id(void)",
+            **(
+                {"restore": f"int {name}_restore({name}_state_t *state, const {name}_state_t *saved)"}
+                if isinstance(model, QPhysics)
+                else {}
+            ),
         },
         "units": {
             "accel_in": "int32, 1/16 micro-g (16000 LSB = 1 mg)",

@@ -24,6 +24,8 @@ head                   int32/int64  weights in accel LSB per unit of h, Q(f); bi
 held estimate          int64        Q16 accel LSB, saturated at +-(2**31 - 1) LSB (flagged)
 PLA slopes/intercepts  int32/int64  accel LSB per mdegC and accel LSB, Q(f_pla)
 cubic coefficients     int32        accel LSB, of u^k with u = (T - T_ref) / 2**p, Q(f_poly)
+physics states         int64        Q32 mdegC (filters, play operator), see :func:`_physics`
+physics coefficients   int64        24 significant bits each; drift accumulator Q(f_phys) accel LSB
 =====================  ===========  ======================================================
 
 A layer's accumulator format Q(A) is the largest A (16 .. 30) such that every weight fits int16
@@ -45,6 +47,7 @@ before the normalisation multiply so that the multiplier keeps 31 significant bi
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -73,7 +76,19 @@ from codegen.qformats import (
     X_MAX,
     X_MIN_FRAC,
 )
-from codegen.spec import Checkpoint, DlstmModelSpec, FrontEndSpec, PersistenceSpec, PlaSpec, Poly3Spec
+from codegen.qformats import PHYS_COEF_BITS as COEF_BITS
+from codegen.qformats import PHYS_DIFF_SHIFT as DIFF_SHIFT
+from codegen.qformats import PHYS_STATE_FRAC as STATE_FRAC
+from codegen.qformats import PHYS_U_FRAC as U_FRAC
+from codegen.spec import (
+    Checkpoint,
+    DlstmModelSpec,
+    FrontEndSpec,
+    PersistenceSpec,
+    PhysicsSpec,
+    PlaSpec,
+    Poly3Spec,
+)
 from trainer.errors import UserError
 
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
@@ -280,7 +295,73 @@ class QPoly3:
     bound: int  # worst-case |Horner accumulator|
 
 
-QuantModel = QStream | QPla | QPoly3
+@dataclass(frozen=True)
+class QCoef:
+    """``q / 2**frac`` of a positive real coefficient, applied as ``rshift_round(v * q, shift)``."""
+
+    q: int
+    frac: int
+    shift: int
+
+
+@dataclass(frozen=True)
+class QLowpass:
+    """``y += rr(rr(x_prev 2^F - y, DIFF_SHIFT) c, c.shift) + rr((x - x_prev) b0, b0.shift)``:
+    the exact first-order-hold low-pass ``y' = a y + b0 x + b1 x_prev`` with ``c = 1 - a``."""
+
+    name: str
+    tau_s: float
+    c: QCoef
+    b0: QCoef
+    deadband_mdegc: float  # |x_prev - y| below which an update rounds to zero
+    sensitivity_mg_per_c: float  # how much the drift moves per degC of this state
+
+
+@dataclass(frozen=True)
+class QGain:
+    """A drift term ``gain (state difference)``: ``rr(rr(diff, DIFF_SHIFT) q, shift)`` in Q(frac) LSB."""
+
+    name: str
+    q: int
+    shift: int
+    diff_bound: int  # |diff| in Q32 mdegC
+    bound: int  # |term| in Q(frac) accel LSB
+
+
+@dataclass(frozen=True)
+class QPhysics:
+    method: str
+    limits: Limits
+    rate_hz: float
+    clip_lo_mdegc: int
+    clip_hi_mdegc: int
+    lag: QLowpass | None
+    rate: QLowpass | None
+    creep: QLowpass | None
+    half_width_q: int | None  # play operator: w / 2 in Q32 mdegC (None: no hysteresis)
+    poly_reads_play: bool
+    t_ref_mdegc: int
+    u_shift: int  # u = (T_b - T_ref) / 2**u_shift mdegC, in Q(U_FRAC), |u| <= 1
+    u_round: int  # T_b (Q32 mdegC) -> u: rshift_round by STATE_FRAC + u_shift - U_FRAC
+    coefficients_q: tuple[int, ...]  # d0..d3 of u^k, Q(frac) accel LSB
+    branch: QGain | None
+    rate_gain: QGain | None
+    creep_gain: QGain | None
+    frac: int
+    poly_bound: int  # |Horner accumulator|, Q(frac)
+    bound: int  # |drift accumulator|, Q(frac)
+    tag: int  # uint32 identifying these constants (a saved state is restored only by its own model)
+
+    @property
+    def filters(self) -> tuple[QLowpass, ...]:
+        return tuple(f for f in (self.lag, self.rate, self.creep) if f is not None)
+
+    @property
+    def gains(self) -> tuple[QGain, ...]:
+        return tuple(g for g in (self.branch, self.rate_gain, self.creep_gain) if g is not None)
+
+
+QuantModel = QStream | QPla | QPoly3 | QPhysics
 
 
 def _fits_int32(q: np.ndarray) -> bool:
@@ -539,6 +620,141 @@ def _poly3(spec: Poly3Spec, limits: Limits) -> QPoly3:
     raise UserError("poly3: coefficients too large for the fixed-point format")
 
 
+STATE_ONE = 1 << STATE_FRAC
+PHYS_DEADBAND_BUDGET_MG = 1e-4  # a stalled filter may cost at most this much drift (proved below)
+
+
+def _coef(value: float, min_frac: int) -> QCoef:
+    """``value`` (>= 0) with COEF_BITS significant bits and at least ``min_frac`` fractional bits."""
+    if value == 0.0:
+        return QCoef(0, min_frac, 0)
+    frac = max(COEF_BITS - 1 - math.floor(math.log2(value)), min_frac)
+    return QCoef(round_half_away(Fraction(value) * Fraction(2) ** frac), frac, 0)
+
+
+def _lowpass(name: str, tau_s: float, rate_hz: float, span: int, sensitivity: float) -> QLowpass:
+    from trainer.physics.thermal import lowpass_coefficients
+
+    (b0, _), (_, minus_a) = lowpass_coefficients(tau_s, 1.0 / rate_hz)
+    c_real = 1.0 + float(minus_a)  # 1 - a
+    c = _coef(c_real, DIFF_SHIFT)
+    c = QCoef(c.q, c.frac, c.frac - DIFF_SHIFT)
+    b = _coef(float(b0), STATE_FRAC)
+    b = QCoef(b.q, b.frac, b.frac - STATE_FRAC)
+    diff_bound = (span + 1) * STATE_ONE
+    if ((diff_bound >> DIFF_SHIFT) + 1) * c.q >= INT64_SAFE or span * b.q >= INT64_SAFE:
+        raise UserError(f"physics: {name} filter (tau {tau_s:g} s) cannot be represented in int64")
+    deadband = max(2.0 ** (DIFF_SHIFT - 1), 0.5 / c_real) / STATE_ONE if c_real > 0 else math.inf
+    if deadband * sensitivity / 1000.0 > PHYS_DEADBAND_BUDGET_MG:
+        raise UserError(
+            f"physics: {name} filter (tau {tau_s:g} s at {rate_hz:g} Hz) would stall within "
+            f"{deadband:.3g} mdegC of its input, {deadband * sensitivity / 1000:.3g} mg of drift "
+            f"(budget {PHYS_DEADBAND_BUDGET_MG:g} mg)"
+        )
+    return QLowpass(name, tau_s, c, b, deadband, sensitivity)
+
+
+def _gain(name: str, mg_per_c: float, diff_bound: int, frac: int) -> QGain:
+    """``mg_per_c`` times a Q32 mdegC difference, in Q(frac) accel LSB."""
+    per_lsb = Fraction(mg_per_c) * ACCEL_PER_MG / 1000  # accel LSB per mdegC
+    magnitude = abs(float(per_lsb))
+    k = frac + DIFF_SHIFT - STATE_FRAC  # the smallest k with a shift >= 0
+    if magnitude:
+        k = max(COEF_BITS - 1 - math.floor(math.log2(magnitude)), k)
+    q = round_half_away(per_lsb * Fraction(2) ** k)
+    shift = STATE_FRAC - DIFF_SHIFT + k - frac
+    pre = (diff_bound >> DIFF_SHIFT) + 1
+    if pre * abs(q) >= INT64_SAFE:
+        raise UserError(f"physics: the {name} gain {mg_per_c:g} mg/degC cannot be represented in int64")
+    return QGain(name, q, shift, diff_bound, _ceil_shift(pre * abs(q), shift) + 1)
+
+
+def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
+    """Every state is Q32 mdegC (int64); the drift is accumulated in Q(frac) accel LSB, the largest
+    frac (<= 40) for which the Horner products and the sum stay below 2**62."""
+    m = spec.model
+    lo = round_half_away(Fraction(m.temp_range_c[0]) * 1000)
+    hi = round_half_away(Fraction(m.temp_range_c[1]) * 1000)
+    if not (-INT32_MAX <= lo < hi <= INT32_MAX) or hi - lo >= 1 << 20:
+        raise UserError(
+            f"physics: temperature range {m.temp_range_c} degC is outside the supported -524..524 degC"
+        )
+    span = hi - lo
+    half = None
+    if m.play_width_c is not None:
+        if not m.play_width_c > 0:
+            raise UserError(f"physics: play width {m.play_width_c!r} degC must be positive")
+        half = round_half_away(Fraction(m.play_width_c) * 500 * STATE_ONE)
+    from trainer.physics.catalogue.base import T_REF_C
+
+    t_ref = round_half_away(Fraction(T_REF_C) * 1000)
+    margin = 1 + (0 if half is None or not m.poly_reads_play else -(-half // STATE_ONE))
+    reach = max(abs(lo - margin - t_ref), abs(hi + margin - t_ref))
+    u_shift = max(1, math.ceil(math.log2(reach)))
+    delta = Fraction(t_ref) - Fraction(T_REF_C) * 1000  # 0 today: the catalogue's T_ref is whole mdegC
+    e = [Fraction(c) * ACCEL_PER_MG / Fraction(1000) ** k for k, c in enumerate(m.c_mg)]
+    shifted = [sum(e[k] * math.comb(k, j) * delta ** (k - j) for k in range(j, 4)) for j in range(4)]
+    d = [v * Fraction(2) ** (u_shift * j) for j, v in enumerate(shifted)]
+    # drift sensitivity to each state (mg per degC), for the filters' dead-band proof
+    grid = np.linspace(lo / 1000 - margin / 1000, hi / 1000 + margin / 1000, 1001) - T_REF_C
+    c1, c2, c3 = m.c_mg[1:]
+    slope = float(np.max(np.abs(c1 + 2 * c2 * grid + 3 * c3 * grid**2)))
+    branch_gain = 0.0 if half is None else m.branch_amp_mg / (m.play_width_c / 2.0)  # type: ignore[operator]
+    rate_gain = 0.0 if m.rate_tau_s is None else m.rate_k_mg_per_c_per_min * 60.0 / m.rate_tau_s
+    lag = None
+    if m.lag_tau_s is not None:
+        lag = _lowpass("thermal_lag", m.lag_tau_s, spec.rate_hz, span, slope + 2 * abs(branch_gain))
+    rate = (
+        None
+        if m.rate_tau_s is None
+        else _lowpass("temp_rate", m.rate_tau_s, spec.rate_hz, span, abs(rate_gain))
+    )
+    creep = None
+    if m.creep_tau_s is not None:
+        creep = _lowpass("stress_relaxation", m.creep_tau_s, spec.rate_hz, span, abs(m.creep_gain_mg_per_c))
+    diff = (span + 1) * STATE_ONE
+    for frac in range(40, -1, -1):
+        coeffs = [round_half_away(v * Fraction(2) ** frac) for v in d]
+        poly_bound = sum(abs(c) for c in coeffs) + 3
+        if poly_bound << U_FRAC >= INT64_SAFE:
+            continue
+        try:
+            branch = None if half is None else _gain("branch", branch_gain, 2 * half, frac)
+            gr = None if rate is None else _gain("temp_rate", rate_gain, diff, frac)
+            gc = None if creep is None else _gain("stress_relaxation", m.creep_gain_mg_per_c, diff, frac)
+        except UserError:
+            continue
+        bound = poly_bound + sum(g.bound for g in (branch, gr, gc) if g is not None)
+        if bound >= INT64_SAFE:
+            continue
+        constants = (lo, hi, half, m.poly_reads_play, u_shift, coeffs, frac, lag, rate, creep, branch, gr, gc)
+        tag = int(hashlib.sha256(repr(constants).encode()).hexdigest()[:8], 16)
+        return QPhysics(
+            spec.method,
+            limits,
+            spec.rate_hz,
+            lo,
+            hi,
+            lag,
+            rate,
+            creep,
+            half,
+            m.poly_reads_play,
+            t_ref,
+            u_shift,
+            STATE_FRAC + u_shift - U_FRAC,
+            tuple(coeffs),
+            branch,
+            gr,
+            gc,
+            frac,
+            poly_bound,
+            bound,
+            tag,
+        )
+    raise UserError("physics: coefficients too large for the fixed-point format")
+
+
 def quantise_checkpoint(ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> QuantModel:
     """The fixed-point model of a parsed checkpoint (deterministic: same input, same integers)."""
     limits = _limits(ckpt, accel_limit_g)
@@ -547,4 +763,6 @@ def quantise_checkpoint(ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCE
         return _stream(model, limits)
     if isinstance(model, PlaSpec):
         return _pla(model, limits)
+    if isinstance(model, PhysicsSpec):
+        return _physics(model, limits)
     return _poly3(model, limits)

@@ -17,17 +17,29 @@ import numpy as np
 
 from codegen import __version__
 from codegen.activations import ACT_SLOPE, ACT_VALUE, activation_errors
-from codegen.qformats import ACT_SEGMENTS, C_FRAC, EST_FRAC, header_with_block
+from codegen.qformats import (
+    ACT_SEGMENTS,
+    C_FRAC,
+    EST_FRAC,
+    PHYS_DIFF_SHIFT,
+    PHYS_STATE_FRAC,
+    PHYS_U_FRAC,
+    header_with_block,
+)
 from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.quantize import (
     EST_LIMIT,
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
+    QGain,
+    QLowpass,
+    QPhysics,
     QPla,
     QStream,
     QuantModel,
 )
+from trainer import methods as registry
 from trainer.errors import UserError
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
@@ -115,6 +127,21 @@ def state_fields(model: QuantModel) -> list[Field]:
         Field("uint32_t", "flags", (), "sticky FLAG_* bits"),
         Field("uint32_t", "samples", (), "samples since init (saturating)"),
     ]
+    if isinstance(model, QPhysics):
+        unit = f"Q{PHYS_STATE_FRAC} mdegC"
+        docs = {
+            "proof_mass": f"thermal_lag: proof-mass temperature T_pm, {unit}",
+            "play": f"play operator output P (the hysteresis branch), {unit}",
+            "rate_lp": f"temp_rate: the rate filter R, {unit}",
+            "creep_lp": f"stress_relaxation: the creep filter C, {unit}",
+        }
+        return [
+            *(Field("int64_t", name, (), docs[name]) for name in physics_filter_fields(model)),
+            Field("int32_t", "temp_prev", (), "previous clipped temperature, mdegC"),
+            Field("uint32_t", "started", (), "0 until the first sample after init/reset"),
+            Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
+            *common,
+        ]
     if not isinstance(model, QStream):
         return common
     unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
@@ -154,6 +181,17 @@ def state_fields(model: QuantModel) -> list[Field]:
     return fields
 
 
+def physics_filter_fields(model: QPhysics) -> list[str]:
+    """The int64 state words a physics model keeps (one per filter, one for the play operator)."""
+    present = (model.lag, model.half_width_q, model.rate, model.creep)
+    names = ("proof_mass", "play", "rate_lp", "creep_lp")
+    return [name for name, part in zip(names, present, strict=True) if part is not None]
+
+
+def rate_millihz(rate_hz: float) -> int:
+    return round(rate_hz * 1000)
+
+
 def state_bytes(fields: list[Field]) -> int:
     """sizeof the struct with natural alignment (what gcc/clang give on x86-64 and ARM EABI)."""
     offset, align = 0, 1
@@ -172,6 +210,8 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
             sizes["activation_table"] = 2 * (ACT_VALUE.size + ACT_SLOPE.size)
             sizes["weights"] = sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size
             sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
+    elif isinstance(model, QPhysics):
+        sizes["physics_coefficients"] = 32
     elif isinstance(model, QPla):
         sizes["pla_tables"] = (
             4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
@@ -295,6 +335,13 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             ("DECIMATION", f"{fe.decimation}u"),
             ("WINDOW", f"{model.window}u"),
         ]
+    elif isinstance(model, QPhysics):
+        ctx.update(_physics_context(model))
+        macros += [
+            ("SAMPLE_RATE_HZ", f"{model.rate_hz:g}"),
+            ("SAMPLE_RATE_MILLIHZ", f"{rate_millihz(model.rate_hz)}u"),
+            ("MODEL_TAG", f"{model.tag}u"),
+        ]
     elif isinstance(model, QPla):
         ctx.update(
             family="piecewise_linear",
@@ -317,6 +364,54 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         )
     ctx["macros"] = macros
     return ctx
+
+
+def _physics_context(model: QPhysics) -> dict[str, object]:
+    def lowpass(f: QLowpass | None) -> dict[str, object] | None:
+        if f is None:
+            return None
+        return {
+            "name": f.name,
+            "tau": f"{f.tau_s:g}",
+            "c": _c_int(f.c.q, 64),
+            "c_shift": f.c.shift,
+            "b0": _c_int(f.b0.q, 64),
+            "b0_shift": f.b0.shift,
+            "c_real": f"{f.c.q / 2.0**f.c.frac:.9g}",
+            "b0_real": f"{f.b0.q / 2.0**f.b0.frac:.9g}",
+        }
+
+    def gain(g: QGain | None) -> dict[str, object] | None:
+        if g is None:
+            return None
+        return {"q": _c_int(g.q, 64), "shift": g.shift}
+
+    return {
+        "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
+        "rate_hz": f"{model.rate_hz:g}",
+        "state_frac": PHYS_STATE_FRAC,
+        "diff_shift": PHYS_DIFF_SHIFT,
+        "u_frac": PHYS_U_FRAC,
+        "frac": model.frac,
+        "bound_text": _bound_text(model.bound),
+        "clip_lo": model.clip_lo_mdegc,
+        "clip_hi": model.clip_hi_mdegc,
+        "filters": [lowpass(f) for f in model.filters],
+        "filter_fields": physics_filter_fields(model),
+        "gains": bool(model.gains),
+        "lag": lowpass(model.lag),
+        "rate": lowpass(model.rate),
+        "creep": lowpass(model.creep),
+        "branch": gain(model.branch),
+        "rate_gain": gain(model.rate_gain),
+        "creep_gain": gain(model.creep_gain),
+        "half_width": _c_int(model.half_width_q, 64) if model.half_width_q is not None else None,
+        "poly_reads_play": model.poly_reads_play,
+        "t_ref": model.t_ref_mdegc,
+        "u_shift": model.u_shift,
+        "u_round": model.u_round,
+        "coefficients": _rows(model.coefficients_q, width=64, per_line=2),
+    }
 
 
 def _environment() -> jinja2.Environment:

@@ -21,7 +21,9 @@ import numpy as np
 
 from trainer import methods as registry
 from trainer.dlstm.realtime import PERSISTENCE_KIND, RECURSIVE_KIND, TEMPERATURE_KIND
+from trainer.errors import UserError
 from trainer.fields import DottedFields as _Fields
+from trainer.greybox.stream import PhysicsModel
 
 MAX_WINDOW = 1 << 20  # keeps window sums times 2**8 inside int64
 
@@ -87,7 +89,16 @@ class Poly3Spec:
     temp_range_c: tuple[float, float]
 
 
-ModelSpec = DlstmModelSpec | PersistenceSpec | PlaSpec | Poly3Spec
+@dataclass(frozen=True)
+class PhysicsSpec:
+    """The grey-box model's plain parameters and the sample rate its filters are discretised for."""
+
+    method: str
+    model: PhysicsModel
+    rate_hz: float  # the training recording's (train_stats.sample_rate_hz)
+
+
+ModelSpec = DlstmModelSpec | PersistenceSpec | PlaSpec | Poly3Spec | PhysicsSpec
 
 
 @dataclass(frozen=True)
@@ -209,12 +220,33 @@ def _poly3(root: _Fields, payload: _Fields, method: str) -> Poly3Spec:
     return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
 
 
+def _physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
+    """Parameters through the trainer's own payload reader (one definition of the layout)."""
+    from trainer.greybox.compensator import PhysicsCompensator
+
+    rate_hz = root.sub("train_stats").number("sample_rate_hz", positive=True)
+    try:
+        model = PhysicsCompensator.from_payload(payload.data).model
+    except (KeyError, TypeError, ValueError, IndexError, UserError) as exc:
+        root.fail(f"field 'payload' is not a physics model ({exc})")
+    if model.warmup_tau_s is not None and model.warmup_amp_mg != 0.0:
+        root.fail(
+            "the physics model includes the warm-up term, which needs the time since power-on; the C "
+            "export leaves it out: refit without --warmup (the warm-up is then left to the output)"
+        )
+    lo, hi = model.temp_range_c
+    if not lo < hi:
+        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
+    return PhysicsSpec(method, model, rate_hz)
+
+
 # One parser per renderer of trainer/methods.py (tests/test_method_registry.py checks the keys).
 PARSERS: dict[str, Callable[[_Fields, _Fields, str], ModelSpec]] = {
     "lstm-stream": _dlstm,
     "mean-stream": _persistence,
     "piecewise-linear": _pla,
     "cubic": _poly3,
+    registry.PHYSICS_RENDERER: _physics,
 }
 
 

@@ -23,7 +23,7 @@ from codegen.export import LoadedModel, load_for_codegen, manifest_name
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden import GoldenStream, golden_for
 from codegen.hostbuild import load_module
-from codegen.quantize import ACCEL_PER_MG, QStream
+from codegen.quantize import ACCEL_PER_MG, QPhysics, QStream
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 
@@ -269,6 +269,10 @@ def verify(
     if isinstance(q, QStream) and abs(rec.sample_rate_hz - q.frontend.rate_hz) > 0.01 * q.frontend.rate_hz:
         raise UserError(
             f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model runs at {q.frontend.rate_hz:g} Hz"
+        )
+    if isinstance(q, QPhysics) and abs(rec.sample_rate_hz - q.rate_hz) > 0.01 * q.rate_hz:
+        raise UserError(
+            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model's filters are for {q.rate_hz:g} Hz"
         )
     accel, temp = to_step_units(rec)
 

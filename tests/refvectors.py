@@ -7,6 +7,7 @@ code that is itself tested against the float models (docs/codegen.md, "Error bud
 only regenerated on purpose, when the arithmetic is meant to change:
 
     PYTHONPATH=. python -m tests.refvectors    # rewrites tests/data/ref/, then review the diff
+    PYTHONPATH=. python -m tests.refvectors physics    # only one method's files (a new method)
 
 Streams: 3,000 samples of a simulated oven run with a reset at sample 1,777, then bursts at the
 input limits; streaming models step every 10 samples (front end of 50 ms windows), so 300 network
@@ -55,7 +56,7 @@ def _checkpoint(method: str) -> dict[str, object]:
     rec = read_recording(work)
     work.unlink()
     renderer = registry.get(method).renderer
-    if renderer in ("piecewise-linear", "cubic", "mean-stream"):
+    if renderer in ("piecewise-linear", "cubic", "mean-stream", "physics"):
         return tm.checkpoint_for(method, rec)
     fe = tm.frontend_fields(200.0, run_s=0.05, temp_s=0.1, step_s=0.05)
     hidden = 4 if tm.frontend_kind(registry.REGISTRY[method]) == "temperature" else 10
@@ -84,11 +85,13 @@ def load_outputs(method: str) -> np.ndarray:
         return data["out"].astype(np.int64)
 
 
-def write_all() -> None:
+def write_all(only: tuple[str, ...] = ()) -> None:
+    """Every method's files (and the stream), or only those of the methods named (a new method)."""
     REF_DIR.mkdir(parents=True, exist_ok=True)
-    accel, temp = stream()
-    np.savez_compressed(REF_DIR / "stream.npz", accel=accel.astype(np.int32), temp=temp.astype(np.int32))
-    for method in methods():
+    if not only:
+        accel, temp = stream()
+        np.savez_compressed(REF_DIR / "stream.npz", accel=accel.astype(np.int32), temp=temp.astype(np.int32))
+    for method in only or methods():
         path = REF_DIR / f"{method}.pt"
         tm.save_checkpoint(_checkpoint(method), path)
         out = expected_outputs(path).astype(np.int32)
@@ -97,5 +100,5 @@ def write_all() -> None:
 
 
 if __name__ == "__main__":
-    write_all()
+    write_all(tuple(sys.argv[1:]))  # python -m tests.refvectors [METHOD ...]
     sys.exit(0)

@@ -178,6 +178,32 @@ def test_cortex_m4_equals_golden_on_a_recording(
     assert_state_equal(module_dir, name, result.states[0], states[0])
 
 
+def test_cortex_m4_physics_equals_golden_on_a_recording(recordings: dict[str, Path], tmp_path: Path) -> None:
+    """The grey-box physics module (every exported term; parameters of tests/testmodels.py, no fit)
+    on the same stream, burst and commands: int64 filters and the play operator on the target."""
+    from tests import testmodels as tm
+
+    folder = tmp_path / "model"
+    folder.mkdir()
+    tm.save_checkpoint(tm.physics_checkpoint(read_recording(recordings["train"])), folder / "model.pt")
+    model, _ = export(folder / "model.pt", folder / "out", name="tdc_physics_train")
+    accel, temp = (v.astype(np.int64) for v in to_step_units(read_recording(recordings["stream"])))
+    burst_accel, burst_temp = extreme_burst(4_000, seed=12)
+    accel, temp = np.concatenate([accel, burst_accel]), np.concatenate([temp, burst_temp])
+    commands = np.zeros(accel.size, dtype=np.int64)
+    commands[20_011] = CMD_RESET
+    commands[41_234] = CMD_INIT
+    commands[STREAM_SAMPLES + 1_500] = CMD_RESET
+    build = cm.Build(folder / "out", "tdc_physics_train", tmp_path / "build")
+    log = build.make("module", "test-app")
+    assert "warning" not in log.lower(), log
+    result = cm.stream(build, accel, temp, commands, tmp_path / "run")
+    assert result.model_id == f"sha256:{model.sha256}"
+    expected, states = golden_replay(model.quantised, accel, temp, commands)
+    assert_bit_exact(result.outputs, expected, f"physics, {accel.size} samples")
+    assert_state_equal(folder / "out", "tdc_physics_train", result.states[0], states[0])
+
+
 def test_two_instances_side_by_side_equal_two_separate_runs(
     recordings: dict[str, Path], exported: Callable[..., Any], tmp_path: Path
 ) -> None:

@@ -138,6 +138,32 @@ def persistence_checkpoint(rec: Recording) -> dict[str, Any]:
     return checkpoint_dict(method, payload, (float(rec.temp_c.min()), float(rec.temp_c.max())))
 
 
+# A grey-box model with every term the C export carries (catalogue units; sizes like the real run's).
+PHYSICS_EFFECTS: dict[str, dict[str, float]] = {
+    "bias_poly": {"c0_mg": 0.4, "c1_mg_per_c": 0.15, "c2_mg_per_c2": 1e-3, "c3_mg_per_c3": -5e-6},
+    "thermal_lag": {"tau_s": 120.0},
+    "temp_rate": {"k_mg_per_c_per_min": 0.3, "tau_s": 60.0},
+    "hysteresis_offset": {"amp_mg": 0.8, "width_c": 6.0},
+    "stress_relaxation": {"gain_mg_per_c": 0.02, "tau_s": 3000.0},
+}
+
+
+def physics_checkpoint(
+    rec: Recording, effects: dict[str, dict[str, float]] | None = None, **_: Any
+) -> dict[str, Any]:
+    """A physics checkpoint with given parameters (no fit), the training range and rate of ``rec``."""
+    from trainer.greybox.compensator import PhysicsCompensator
+    from trainer.physics.effects import EffectConfig
+
+    model = PhysicsCompensator()
+    model.effects = tuple(EffectConfig(k, dict(v)) for k, v in (effects or PHYSICS_EFFECTS).items())
+    model.temp_range_c = (float(rec.temp_c.min()), float(rec.temp_c.max()))
+    model.report = {}
+    checkpoint = checkpoint_dict("physics", model.to_payload(), model.temp_range_c)
+    checkpoint["train_stats"] = {"sample_rate_hz": float(rec.sample_rate_hz)}
+    return checkpoint
+
+
 def checkpoint_for(method: str, rec: Recording, **kwargs: Any) -> dict[str, Any]:
     """A test checkpoint of any method with a renderer (``kwargs`` go to :func:`dlstm_checkpoint`)."""
     renderer = registry.get(method).renderer
@@ -145,6 +171,8 @@ def checkpoint_for(method: str, rec: Recording, **kwargs: Any) -> dict[str, Any]
         return baseline_checkpoint(method, rec)
     if renderer == "mean-stream":
         return persistence_checkpoint(rec)
+    if renderer == "physics":
+        return physics_checkpoint(rec)
     return dlstm_checkpoint(method, rec, **kwargs)
 
 

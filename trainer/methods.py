@@ -37,8 +37,9 @@ RECURSIVE: Family = "recursive"  # uses the past output
 FAMILIES: tuple[Family, ...] = (MEMORYLESS, TEMPERATURE_DRIVEN, RECURSIVE)
 
 # Code generator renderers (codegen/spec.py parses, codegen/render.py renders each one).
-Renderer = Literal["lstm-stream", "mean-stream", "piecewise-linear", "cubic"]
-RENDERERS: tuple[Renderer, ...] = ("lstm-stream", "mean-stream", "piecewise-linear", "cubic")
+Renderer = Literal["lstm-stream", "mean-stream", "piecewise-linear", "cubic", "physics"]
+RENDERERS: tuple[Renderer, ...] = ("lstm-stream", "mean-stream", "piecewise-linear", "cubic", "physics")
+PHYSICS_RENDERER: Renderer = "physics"  # the grey-box compensator's C (codegen/templates/_physics.c.j2)
 
 
 @dataclass(frozen=True)
@@ -232,7 +233,13 @@ register(
     )
 )
 register(
-    Method("physics", "trainer.greybox.compensator:PhysicsCompensator", TEMPERATURE_DRIVEN, PHYSICS_OPTIONS)
+    Method(
+        "physics",
+        "trainer.greybox.compensator:PhysicsCompensator",
+        TEMPERATURE_DRIVEN,
+        PHYSICS_OPTIONS,
+        renderer=PHYSICS_RENDERER,
+    )
 )
 register(
     Method(
