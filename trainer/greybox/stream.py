@@ -31,6 +31,8 @@ import math
 from dataclasses import dataclass, fields
 from typing import Self
 
+import numpy as np
+
 from trainer.greybox.terms import CREEP, HYSTERESIS, HYSTERESIS_OFFSET, LAG, RATE, WARMUP
 from trainer.physics.catalogue import BACKBONE
 from trainer.physics.catalogue.bias_poly import polynomial
@@ -83,7 +85,7 @@ class PhysicsModel:
     def static_drift_mg(self, temp_c: float) -> float:
         """The drift held long at ``temp_c`` (every filter settled, mid-branch, warm-up over)."""
         lo, hi = self.temp_range_c
-        return float(polynomial(min(max(temp_c, lo), hi), *self.c_mg))
+        return float(polynomial(np.asarray(min(max(temp_c, lo), hi)), *self.c_mg))
 
 
 @dataclass
@@ -142,7 +144,7 @@ class PhysicsStream:
             drift += m.branch_amp_mg * (s.proof_mass_c - s.play_c) / half
             if m.poly_reads_play:
                 T_b = s.play_c
-        drift += float(polynomial(T_b, *m.c_mg))
+        drift += float(polynomial(np.asarray(T_b), *m.c_mg))
         if m.rate_tau_s is not None:
             a, b0, b1 = self.rate
             s.rate_lp_c = a * s.rate_lp_c + b0 * T + b1 * s.temp_prev_c
