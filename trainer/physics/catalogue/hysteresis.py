@@ -24,7 +24,8 @@ def branch_offset(T_pm: np.ndarray, play: np.ndarray, amp_mg: float, width_c: fl
     return amp_mg * (T_pm - play) / (width_c / 2.0)
 
 
-def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
+def branch_contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
+    """The branch term on ``T_pm`` (shared with ``hysteresis_offset``)."""
     return branch_offset(s.T_pm, play_operator(s.T_pm, p["width_c"]), p["amp_mg"], p["width_c"])
 
 
@@ -60,7 +61,7 @@ DEFINITION = Effect(
         Param("width_c", "positive", unit="degC", plausible=(2.0, 30.0)),
     ),
     summary="amp * (T_pm - P) / (width_c / 2), P the play operator of T_pm; bias_poly reads P",
-    contribution=_contribution,
+    contribution=branch_contribution,
     bias_temperature=lambda T_pm, p: play_operator(T_pm, p["width_c"]),
     finder=Finder(
         search="profile",

@@ -7,18 +7,13 @@ branches are the polynomial shifted up and down, the form that fits real chamber
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from trainer.physics.catalogue.base import BlockDesign, Effect, Finder, Param, Scenario, Signals
-from trainer.physics.catalogue.hysteresis import branch_offset, reversal_identifiability
+from trainer.physics.catalogue.base import BlockDesign, Effect, Finder, Param, Scenario
+from trainer.physics.catalogue.hysteresis import branch_contribution, reversal_identifiability
 from trainer.physics.thermal import play_operator
-
-
-def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
-    return branch_offset(s.T_pm, play_operator(s.T_pm, p["width_c"]), p["amp_mg"], p["width_c"])
 
 
 def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
@@ -35,7 +30,7 @@ DEFINITION = Effect(
         Param("width_c", "positive", unit="degC", plausible=(2.0, 60.0)),
     ),
     summary="amp * (T_pm - P) / (width_c / 2), P the play operator of T_pm; bias_poly keeps reading T_pm",
-    contribution=_contribution,
+    contribution=branch_contribution,
     finder=Finder(
         search="profile",
         nonlinear=(("width_c", True),),
