@@ -372,7 +372,10 @@ BAD = [
     ("[recording]\nsensor = ''", "[recording] sensor must be a non-empty single line"),
     ("[temperature]\ncase_tau = 3", "cfg.toml: [temperature] unknown key 'case_tau'"),
     ("[temperature]\ncase_tau_s = 0", "[temperature] case_tau_s must be > 0, got 0"),
-    ("[protocol]\nname = 'oven'", "[protocol] name must be one of paper-oven, extended, realistic-train, realistic-valid, custom, got 'oven'"),
+    (
+        "[protocol]\nname = 'oven'",
+        "[protocol] name must be one of paper-oven, extended, realistic-train, realistic-valid, custom, got 'oven'",
+    ),
     (
         "[protocol]\nname = 'paper-oven'\nstart_c = 3",
         "[protocol] start_c is only allowed with name = 'custom'",
