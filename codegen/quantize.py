@@ -90,6 +90,7 @@ from codegen.spec import (
     Poly3Spec,
 )
 from trainer.errors import UserError
+from trainer.greybox.terms import CREEP, LAG, RATE
 
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
 MAX_MEAN_FRAC = 24  # window means: Q24 of the input unit when the window allows (the rate input needs it)
@@ -703,15 +704,11 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     rate_gain = 0.0 if m.rate_tau_s is None else m.rate_k_mg_per_c_per_min * 60.0 / m.rate_tau_s
     lag = None
     if m.lag_tau_s is not None:
-        lag = _lowpass("thermal_lag", m.lag_tau_s, spec.rate_hz, span, slope + 2 * abs(branch_gain))
-    rate = (
-        None
-        if m.rate_tau_s is None
-        else _lowpass("temp_rate", m.rate_tau_s, spec.rate_hz, span, abs(rate_gain))
-    )
+        lag = _lowpass(LAG, m.lag_tau_s, spec.rate_hz, span, slope + 2 * abs(branch_gain))
+    rate = None if m.rate_tau_s is None else _lowpass(RATE, m.rate_tau_s, spec.rate_hz, span, abs(rate_gain))
     creep = None
     if m.creep_tau_s is not None:
-        creep = _lowpass("stress_relaxation", m.creep_tau_s, spec.rate_hz, span, abs(m.creep_gain_mg_per_c))
+        creep = _lowpass(CREEP, m.creep_tau_s, spec.rate_hz, span, abs(m.creep_gain_mg_per_c))
     diff = (span + 1) * STATE_ONE
     for frac in range(40, -1, -1):
         coeffs = [round_half_away(v * Fraction(2) ** frac) for v in d]
@@ -720,8 +717,8 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
             continue
         try:
             branch = None if half is None else _gain("branch", branch_gain, 2 * half, frac)
-            gr = None if rate is None else _gain("temp_rate", rate_gain, diff, frac)
-            gc = None if creep is None else _gain("stress_relaxation", m.creep_gain_mg_per_c, diff, frac)
+            gr = None if rate is None else _gain(RATE, rate_gain, diff, frac)
+            gc = None if creep is None else _gain(CREEP, m.creep_gain_mg_per_c, diff, frac)
         except UserError:
             continue
         bound = poly_bound + sum(g.bound for g in (branch, gr, gc) if g is not None)

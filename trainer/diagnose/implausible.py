@@ -99,7 +99,10 @@ def resolve_implausible(
             for a in names
             if (key := frozenset({step.effect, a})) in SEPARATING_SIGNATURE
         ]
-        listed = "; ".join(f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in alternatives)
+        listed = "; ".join(
+            f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" + (" (implausible too)" if alt.flags else "")
+            for alt in alternatives
+        )
         reason = (
             f"the best-fitting shape, {step.effect}, is implausible ({'; '.join(entry.flags)}); "
             f"fitted in its place (BIC difference from it): {listed or 'nothing fits'}"

@@ -67,7 +67,7 @@ DEFINITION = Effect(
             "package creep after a temperature change: the bias keeps moving for tens of minutes at a constant "
             "temperature; hold long enough before calibrating or model the creep"
         ),
-        confounders=("thermal_lag", "temp_rate", "warmup"),
+        confounders=("thermal_lag", "temp_rate", "warmup", "hysteresis_offset"),
         separations={"warmup": "creep follows each temperature change; warm-up happens once after power-on"},
     ),
     scenario=Scenario(
