@@ -155,11 +155,16 @@ def test_px4_keep_constant_writes_x0_and_refuses_gravity(tmp_path: Path, xyz_mod
     np.testing.assert_allclose(offset_mg, drift, rtol=0, atol=1e-6 * drift_range)
     assert params["TC_A0_X1_1"] == 0.0 and params["TC_A0_X3_2"] == 0.0  # y, z: no model given
     assert "axes y, z: no model given" in written.read_text()
+    # The default fit leaves gravity to the accelerometer calibration (relative to T_ref); a model
+    # fitted with its absolute constant holds it, and --keep-constant refuses to write it.
+    meta = {"channel": "accel0_z", "device_id_accel0": str(DEVICE_ID)}
+    rec = chamber_recording(tmp_path / "z.csv", axis_offset_mg=-1000.0, meta=meta, seed=2)
+    absolute = fit(rec, tmp_path / "z_abs.pt", "poly3", "--offset", "absolute-unbounded")
     with pytest.raises(UserError, match="holds gravity"):
         codegen_main(
             [
                 "export",
-                str(xyz_models["z"]),
+                str(absolute),
                 "-o",
                 str(tmp_path / "z"),
                 "--format",

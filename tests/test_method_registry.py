@@ -187,7 +187,7 @@ def test_the_registry_order_is_the_comparison_order() -> None:
     )
     assert methods.paper_names() == ("dlstm", "dlstm-ssa", "dlstm-issa", "pla")
     assert [m.name for m in methods.entries() if m.shares_population] == ["dlstm", "dlstm-ssa", "dlstm-issa"]
-    assert [m.name for m in methods.entries() if m.range_checked] == ["pla", "poly3", "dlstm-temp"]
+    assert [m.name for m in methods.entries() if m.range_checked] == ["pla", "poly3", "dlstm-temp", "physics"]
     assert inspect.signature(fit_all).parameters["methods"].default is None  # None = every method
 
 

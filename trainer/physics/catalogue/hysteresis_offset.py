@@ -50,12 +50,7 @@ DEFINITION = Effect(
             ),
         },
     ),
-    scenario=Scenario(
-        draw=lambda rng, duration, sign: {
-            "amp_mg": sign * float(rng.uniform(0.05, 0.25)),
-            "width_c": float(rng.uniform(2.0, 8.0)),
-        },
-        checked=("amp_mg", "width_c"),
-        needs_reversal=True,
-    ),
+    # Not concealed by the finder's test bench: at bench sizes its branch offset is the catalogue
+    # hysteresis's on a near-linear bias curve (the two are declared confounders).
+    scenario=Scenario(checked=("amp_mg", "width_c"), needs_reversal=True),
 )
