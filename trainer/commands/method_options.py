@@ -73,7 +73,7 @@ def _add_physics(parser: argparse.ArgumentParser) -> None:
         "--effects",
         default="auto",
         help="physics: 'auto' (default: the effects the mismatch finder identifies on the training run) or a "
-        "comma list of thermal_lag, temp_rate, hysteresis, hysteresis_offset, stress_relaxation, warmup",
+        "comma list of compensable catalogue effects (a wrong name lists them)",
     )
     parser.add_argument(
         "--from-sim",

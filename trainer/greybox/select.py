@@ -12,6 +12,7 @@ term is added and the search repeats.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -43,7 +44,10 @@ def cv_rms(terms: tuple[Term, ...], data: BlockData, folds: int = FOLDS) -> floa
 
 
 def extend(
-    fit: ModelFit, data: BlockData, structure: Structure, add: object
+    fit: ModelFit,
+    data: BlockData,
+    structure: Structure,
+    add: Callable[[ModelFit, BlockData, EffectConfig], ModelFit],
 ) -> tuple[ModelFit, Structure, list[str]]:
     """Add candidates while one lowers the cross-validated RMS by ``MIN_GAIN``.
 
@@ -59,7 +63,7 @@ def extend(
         for name in remaining:
             if any(excluded(name, t.identifier) for t in fit.terms):
                 continue
-            trial = add(fit, data, EffectConfig(name, {}))  # type: ignore[operator]
+            trial = add(fit, data, EffectConfig(name, {}))
             trials.append((cv_rms(trial.terms, data), name, trial))
         if not trials:
             break

@@ -33,7 +33,7 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     width = term.nl[0]
     play = play_operator(d.T_pm, width)
     d.T_b = play  # the polynomial reads the play output (catalogue: T_b)
-    return [("amp_mg", (d.T_pm - play) / (width / 2.0))]
+    return [("amp_mg", branch_offset(d.T_pm, play, 1.0, width))]
 
 
 def reversal_identifiability(p: Any) -> Identifiability:

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from trainer.physics.catalogue.base import BlockDesign, Effect, Finder, Param, Scenario
-from trainer.physics.catalogue.hysteresis import branch_contribution, reversal_identifiability
+from trainer.physics.catalogue.hysteresis import branch_contribution, branch_offset, reversal_identifiability
 from trainer.physics.thermal import play_operator
 
 
 def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     width = term.nl[0]
-    return [("amp_mg", (d.T_pm - play_operator(d.T_pm, width)) / (width / 2.0))]
+    return [("amp_mg", branch_offset(d.T_pm, play_operator(d.T_pm, width), 1.0, width))]
 
 
 DEFINITION = Effect(
