@@ -11,7 +11,8 @@ imu.acc.X`` does, then ``trainer compare``'s own functions score every method on
   cooling; train on heating + cooling, score the first cooling).
 
 Scores (docs/real-data.md): drift left = deviation of the compensated output from a constant
-(RMS, max, heating and cooling RMS), the share of injected tilt steps kept, the noise floor.
+(RMS, max, heating and cooling RMS), the share of injected tilt steps kept, the noise floor, and
+each method's fit time on the training part (wall clock, this machine).
 
     python bench/bench_real_holdout.py            # the methods without DLSTM options
     python bench/bench_real_holdout.py --dlstm    # + the recursive and the temperature-input DLSTM
@@ -70,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     methods = chosen_methods(args.dlstm)
     header = ["axis", "held out", "method", "drift left RMS (mg)", "max (mg)", "heating RMS (mg)"]
     header += ["cooling RMS (mg)", "steps kept (%)", "outside training range (%)", "noise floor (mg)"]
+    header += ["fit time (s)"]
     rows = []
     for axis in "xyz":
         rec = import_foreign(args.recording, options_with_preset("tofupilot", accel=f"imu.acc.{axis}"))
@@ -86,7 +88,6 @@ def main(argv: list[str] | None = None) -> int:
                 inject="steps",
             )
             evaluation = result.evaluation
-            print(f"  fit seconds: {result.fit_seconds}", file=sys.stderr, flush=True)
             kept = result.survival["injected-steps"]
             print(f"{axis} {holdout}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
             for name in ("raw", *methods):
@@ -105,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
                         "100" if name == "raw" else f"{100 * kept[name].gain:.1f}",
                         "" if outside is None else f"{100 * outside:.0f}",
                         _cell(evaluation.noise_floor_mg),
+                        "" if name == "raw" else f"{result.fit_seconds[name]:.1f}",
                     ]
                 )
     table = markdown_table(header, rows)
