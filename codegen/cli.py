@@ -70,7 +70,7 @@ def _export_params(args: argparse.Namespace) -> int:
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from codegen.verify import report_lines, verify
+    from codegen.verify import report_lines, verify, write_json
 
     result = verify(
         args.model,
@@ -83,6 +83,8 @@ def _verify(args: argparse.Namespace) -> int:
     )
     for line in report_lines(result):
         print(line)
+    if args.json:
+        write_json(result, args.out_dir, args.json)
     if result.mismatches or not result.state_equal:
         print(
             f"error: the generated C differs from the golden model ({result.mismatches} samples)",
@@ -158,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="interpolate a recording of another rate onto the module's rate (a module exported with --rate)",
     )
+    ver.add_argument("--json", metavar="PATH", help="also write the result as JSON (for 'trainer report')")
     ver.add_argument("--no-table", action="store_true", help="skip the Table 1 comparison (saves a few s)")
     ver.set_defaults(func=_verify)
     return parser

@@ -375,3 +375,26 @@ def report_lines(result: VerifyResult) -> list[str]:
             + f" ({IMPROVEMENT_BUDGET_PP:g} pp, {100 * DRIFT_LEFT_BUDGET:g} %)"
         )
     return lines
+
+
+def write_json(result: VerifyResult, out_dir: str | os.PathLike[str], path: str | os.PathLike[str]) -> None:
+    """The result as JSON (``codegen verify --json``; ``trainer report --verify`` reads it), with the
+    module's sizes from its manifest; written atomically."""
+    from trainer.errors import atomic_output
+
+    _, manifest = find_manifest(Path(out_dir), result.name)
+    model = manifest.get("model")
+    data = {
+        "name": result.name,
+        "method": result.method,
+        "model_id": model.get("id") if isinstance(model, dict) else None,
+        "samples": result.samples,
+        "mismatches": result.mismatches,
+        "first_mismatch": result.first_mismatch,
+        "state_equal": result.state_equal,
+        "rate_millihz": result.rate_millihz,
+        "resampled_from_hz": result.resampled_from_hz,
+        "sizes": manifest.get("sizes"),
+    }
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
