@@ -198,7 +198,10 @@ def run(args: argparse.Namespace) -> int:
             channel = str(stats.get("channel") or model_path.stem)
             label = f"{channel} / {ckpt['method']}"
             if label in seen:
-                raise UserError(f"{model_path}: a second {ckpt['method']} model for channel {channel}")
+                raise UserError(
+                    f"{model_path}: a second {ckpt['method']} model for channel {channel} (the channel is the "
+                    "training recording's 'channel' metadata: check the import)"
+                )
             seen.add(label)
             lo, hi = (float(v) for v in ckpt["valid_temp_range_c"])
             model_id = f"sha256:{hashlib.sha256(model_path.read_bytes()).hexdigest()}"
