@@ -68,6 +68,16 @@ def test_export_at_twice_the_rate_is_bit_exact_at_that_rate(
         assert f"#define M_DECIMATION {2 * FRONTEND['decimation']}u" in header
 
 
+def test_the_training_rate_given_as_rate_exports_the_same_bytes(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    model = _checkpoint("dlstm-temp", runs, tmp_path)
+    assert _export(model, tmp_path / "plain") == 0
+    assert _export(model, tmp_path / "rated", "--rate", f"{TRAINED_HZ:g}") == 0
+    for name in ("m.h", "m.c", "m.manifest.json"):
+        assert (tmp_path / "plain" / name).read_bytes() == (tmp_path / "rated" / name).read_bytes()
+
+
 def test_a_recording_of_the_training_rate_is_resampled_on_request(
     runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

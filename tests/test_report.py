@@ -76,6 +76,12 @@ def test_a_threshold_without_its_measurement_fails_as_not_measured(
     assert _report(unit, tmp_path / "r", "[thresholds]\nmax_instructions_per_sample = 1000\n") == 1
     text = (tmp_path / "r" / "report.md").read_text()
     assert "| not measured |" in text and "## Verdict: FAIL" in text
+    other = tmp_path / "other.json"  # a clean verify result, but of another model: not this one's
+    other.write_text('{"mismatches": 0, "samples": 9, "state_equal": true, "model_id": "sha256:00"}')
+    config = "[thresholds]\nmax_verify_mismatches = 0\n"
+    assert _report(unit, tmp_path / "v", config, "--verify", str(other)) == 1
+    text = (tmp_path / "v" / "report.md").read_text()
+    assert "| not measured |" in text and "WARNING: the module is of model sha256:00" in text
 
 
 @pytest.mark.parametrize(

@@ -227,6 +227,8 @@ def run(args: argparse.Namespace) -> int:
                 notes.append(f"whole recording: {warning}")
             verify, sizes = (None, None) if target is None else _verify(model_path, target, rec_path)
             entry = _bench_entry(bench, model_id, bench_path) if bench_path else None
+            if bench_path is not None and entry is None:
+                notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
                 channel=channel,
                 model_path=str(model_path),

@@ -159,9 +159,7 @@ def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
         "holdout_rms_mg": [("held-out", score("held-out all", "rms"))],
         "holdout_max_mg": [("held-out", score("held-out all", "max"))],
         "min_coverage": [("trained range", report.coverage)],
-        "max_verify_mismatches": [
-            ("codegen verify", None if report.verify is None else _verify_count(report.verify))
-        ],
+        "max_verify_mismatches": [("codegen verify", _verify_count(report))],
         "max_flash_bytes": [("module", None if cost.flash_bytes is None else cost.flash_bytes[0])],
         "max_ram_bytes": [("module", None if cost.ram_bytes is None else cost.ram_bytes[0])],
         "max_instructions_per_sample": [
@@ -175,8 +173,12 @@ def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
     ]
 
 
-def _verify_count(v: VerifySummary) -> float:
-    """Mismatching samples; a differing final state counts as one more (it is a mismatch too)."""
+def _verify_count(report: ChannelReport) -> float | None:
+    """Mismatching samples, a differing final state counting as one more; None (not measured) without
+    a verify result or with one of another model."""
+    v = report.verify
+    if v is None or v.model_id != report.model_id:
+        return None
     return float(v.mismatches + (0 if v.state_equal else 1))
 
 
