@@ -84,6 +84,8 @@ class FrontEnd:
         that would work (multiples of ``trained rate / gcd(windows)``).
         """
         trained = round(self.rate_hz * 1000)
+        if trained <= 0:
+            raise UserError(f"the front end's rate {self.rate_hz:g} Hz is below 1 mHz: cannot re-derive it")
         windows = {
             "accel_window": self.accel_window,
             "temp_window": self.temp_window,
@@ -96,6 +98,7 @@ class FrontEnd:
                 self, rate_hz=rate_millihz / 1000, **{k: int(w * ratio) for k, w in windows.items()}
             )
         base = Fraction(trained, 1000 * math.gcd(*windows.values()))
+        base *= (base * 1000).denominator  # the smallest such multiple in whole millihertz
         examples = ", ".join(f"{float(base * k):g}" for k in _nearby_multiples(base, rate_millihz))
         raise UserError(
             f"--rate {rate_millihz / 1000:g}: the front end (windows "
@@ -114,14 +117,10 @@ class FrontEnd:
 
 
 def _nearby_multiples(base: Fraction, rate_millihz: int) -> list[int]:
-    """Up to three multiples k of ``base`` (Hz) around the requested rate, in whole millihertz."""
+    """The three multiples k of ``base`` (Hz) nearest the requested rate."""
     target = Fraction(rate_millihz, 1000) / base
-    found = [
-        k
-        for k in range(max(1, math.floor(target) - 3), math.floor(target) + 5)
-        if (base * k * 1000).denominator == 1
-    ]
-    return sorted(sorted(found, key=lambda k: (abs(k - target), k))[:3]) or [1]
+    found = range(max(1, math.floor(target) - 3), math.floor(target) + 5)
+    return sorted(sorted(found, key=lambda k: (abs(k - target), k))[:3])
 
 
 def smoothed_steps(x: np.ndarray, window: int, decimation: int) -> np.ndarray:
