@@ -27,10 +27,10 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument("models", nargs="+", help="one model.pt per channel of the unit")
     parser.add_argument(
         "--recording",
-        nargs="+",
+        action="append",
         required=True,
         metavar="REC",
-        help="the unit's recording(s): one for every model, or one per model in the same order",
+        help="the unit's recording: once for every model, or repeated once per model in the same order",
     )
     parser.add_argument("-o", "--out-dir", required=True, help="report.md and its PNGs go here")
     parser.add_argument("--unit", help="the unit's name in the title (default: the first recording's stem)")
@@ -45,10 +45,10 @@ def add_parser(subparsers: Any) -> None:
     )
     parser.add_argument(
         "--verify",
-        nargs="+",
+        action="append",
         metavar="DIR|JSON",
-        help="per model, in order: a directory written by 'codegen export' (verified now on the recording) "
-        "or the JSON of 'codegen verify --json'",
+        help="repeated once per model, in order: a directory written by 'codegen export' (verified now on "
+        "the recording) or the JSON of 'codegen verify --json'",
     )
     parser.add_argument(
         "--bench",
