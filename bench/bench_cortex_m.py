@@ -17,7 +17,11 @@ batch, and repeats every timed loop with an empty function of the same signature
 is the cost of the NAME_step calls (call and return included). QEMU counts instructions, not
 cycles (no wait states, no pipeline effects).
 
-    python bench/bench_cortex_m.py [--model model.pt ...]
+    python bench/bench_cortex_m.py [--model model.pt ...] [--json costs.json]
+
+Modules with a time base are exported for the stream's 200 Hz (codegen export --rate 200) and the
+bench app refuses, at compile time, a module built for another rate. --json writes each generated
+module's model_id, instructions_per_sample, flash_bytes and ram_bytes for 'trainer report --bench'.
 
 Anchors, in the same run, for every DLSTM: the generated module with its SMLAD path (the default on
 a Cortex-M4) and with the portable path (-DTDCK_PORTABLE), both checked bit-exact against the
@@ -29,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import platform
 import sys
 import tempfile
@@ -53,6 +58,7 @@ from trainer.data.recording_io import read_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 CLOCK_MHZ = 168.0  # a typical Cortex-M4F flight computer (STM32F4): time per sample at 1 instruction/cycle
+STREAM_RATE_HZ = 200  # the timed stream's rate: modules with a time base are exported for it (--rate)
 FIT_QUICK = ["--population", "2", "--iterations", "5", "--cycles", "2", "--quiet"]
 # physics: the structure forced to the terms the real run shows (a single simulated ramp identifies
 # none of them, so 'auto' would export a plain cubic); the cost does not depend on the values
@@ -170,7 +176,7 @@ def measure(
     else:
         zeros = np.zeros(stream[0].size, dtype=np.int64)
         state_bytes = cm.stream(build, stream[0], stream[1], zeros, work / "run").state_bytes
-    counts = cm.bench(build, work / "bench", vectors)
+    counts = cm.bench(build, work / "bench", vectors, rate_millihz=STREAM_RATE_HZ * 1000)
     (module,) = cm.sizes(Path(build.out) / f"{build.name}.o")
     return Row(
         label,
@@ -184,9 +190,32 @@ def measure(
     )
 
 
+def write_json(rows: list[Row], path: Path) -> None:
+    """The generated modules' costs, keyed by model id (docs/signoff.md: ``trainer report --bench``)."""
+    modules = [
+        {
+            "model_id": r.counts.model_id,
+            "label": r.label,
+            "variant": r.variant,
+            "rate_hz": STREAM_RATE_HZ,
+            "instructions_per_sample": r.counts.average,
+            "worst_instructions_per_sample": r.counts.worst,
+            "flash_bytes": r.module.flash,
+            "ram_bytes": r.module.ram + r.state_bytes,
+            "stack_bytes": r.stack_bytes,
+        }
+        for r in rows
+        if r.variant in ("generated", "generated, SMLAD")
+    ]
+    path.write_text(json.dumps({"modules": modules}, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", action="append", type=Path, help="model.pt to measure (repeatable)")
+    parser.add_argument(
+        "--json", type=Path, help="also write the generated modules' costs (for 'trainer report')"
+    )
     args = parser.parse_args()
     reason = cm.ensure_toolchain()
     if reason is not None:
@@ -204,7 +233,7 @@ def main() -> int:
         write_vectors(vectors, accel, temp, np.zeros(accel.size, dtype=np.int64))
         for k, (label, path) in enumerate(models):
             name = f"bench{k}"
-            model, _ = export(path, work / f"m{k}", name=name)
+            model, _ = export(path, work / f"m{k}", name=name, rate_millihz=STREAM_RATE_HZ * 1000)
             build = cm.Build(work / f"m{k}", name, work / f"build{k}")
             network = isinstance(model.quantised, QStream) and bool(model.quantised.layers)
             variant = "generated, SMLAD" if network else "generated"
@@ -235,6 +264,8 @@ def main() -> int:
                 rows.append(row)
         app_sizes = cm.sizes(*apps) if apps else []
     report(rows, app_sizes, accel.size)
+    if args.json:
+        write_json(rows, args.json)
     return 0 if all(r.mismatches in (0, None) for r in rows) else 1
 
 

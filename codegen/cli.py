@@ -15,6 +15,8 @@ EXIT_MISMATCH = 1
 
 def _export(args: argparse.Namespace) -> int:
     if args.format != "c":
+        if args.rate is not None:
+            raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
         return _export_params(args)
     for option, given in (
         ("--channel", args.channel),
@@ -26,8 +28,12 @@ def _export(args: argparse.Namespace) -> int:
     if len(args.model) != 1:
         raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
+    from codegen.rate import parse_rate_hz
 
-    model, files = export(args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
+    rate = None if args.rate is None else parse_rate_hz(args.rate)
+    model, files = export(
+        args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g, rate_millihz=rate
+    )
     name = next(f for f in files if f.endswith(".manifest.json"))[: -len(".manifest.json")]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
@@ -64,13 +70,21 @@ def _export_params(args: argparse.Namespace) -> int:
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from codegen.verify import report_lines, verify
+    from codegen.verify import report_lines, verify, write_json
 
     result = verify(
-        args.model, args.out_dir, args.recording, name=args.name, cc=args.cc, table1=not args.no_table
+        args.model,
+        args.out_dir,
+        args.recording,
+        name=args.name,
+        cc=args.cc,
+        table1=not args.no_table,
+        resample=args.resample,
     )
     for line in report_lines(result):
         print(line)
+    if args.json:
+        write_json(result, args.out_dir, args.json)
     if result.mismatches or not result.state_equal:
         print(
             f"error: the generated C differs from the golden model ({result.mismatches} samples)",
@@ -107,6 +121,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
     )
     exp.add_argument(
+        "--rate",
+        type=float,
+        metavar="HZ",
+        help="the firmware's sample rate: a model with a time base (DLSTM front end, physics filters) is "
+        "re-derived for it exactly or refused; memoryless models run at any rate (default: as trained)",
+    )
+    exp.add_argument(
         "--format",
         choices=("c", *EXTENSIONS),
         default="c",
@@ -134,6 +155,12 @@ def build_parser() -> argparse.ArgumentParser:
     ver.add_argument("recording", help="recording (.csv or .npz) to stream through both")
     ver.add_argument("--name", help="module name when OUTDIR holds several")
     ver.add_argument("--cc", help="C compiler (default $CC, cc, gcc or clang)")
+    ver.add_argument(
+        "--resample",
+        action="store_true",
+        help="interpolate a recording of another rate onto the module's rate (a module exported with --rate)",
+    )
+    ver.add_argument("--json", metavar="PATH", help="also write the result as JSON (for 'trainer report')")
     ver.add_argument("--no-table", action="store_true", help="skip the Table 1 comparison (saves a few s)")
     ver.set_defaults(func=_verify)
     return parser

@@ -16,6 +16,7 @@ from typing import Any
 
 from codegen.manifest import build_manifest
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, QuantModel, quantise_checkpoint
+from codegen.rate import retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods as registry
@@ -37,18 +38,24 @@ class LoadedModel:
 
 
 def load_for_codegen(
-    path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G
+    path: str | os.PathLike[str],
+    *,
+    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    rate_millihz: int | None = None,
 ) -> LoadedModel:
-    """Validate (``load_checkpoint``), parse and quantise; every failure is a one-line UserError."""
+    """Validate (``load_checkpoint``), re-derive for ``rate_millihz`` when given (codegen/rate.py),
+    parse and quantise; every failure is a one-line UserError."""
     p = Path(path)
     raw = load_checkpoint(p)
     sha256 = hashlib.sha256(p.read_bytes()).hexdigest()
-    ckpt = parse_checkpoint(raw, str(p))
+    retimed, rate_note = retime_checkpoint(raw, rate_millihz, str(p))
+    ckpt = parse_checkpoint(retimed, str(p))
     try:
         quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
-    return LoadedModel(p, sha256, ckpt, quantised, offset_notes(p, raw))
+    notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ())
+    return LoadedModel(p, sha256, ckpt, quantised, notes)
 
 
 def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
@@ -149,11 +156,12 @@ def export(
     *,
     name: str | None = None,
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    rate_millihz: int | None = None,
 ) -> tuple[LoadedModel, dict[str, str]]:
-    """Load, quantise, render and write; returns the model and the written files."""
+    """Load, quantise (for ``rate_millihz`` when given), render and write; returns the model and files."""
     if name is not None:
         validate_name(name)
-    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)
     return model, files

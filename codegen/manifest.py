@@ -33,11 +33,11 @@ from codegen.quantize import (
     QStream,
     QuantModel,
 )
+from codegen.rate import ANY_RATE_MILLIHZ, rate_millihz
 from codegen.render import (
     FLAGS,
     KERNEL_FILE,
     activation_summary,
-    rate_millihz,
     state_bytes,
     state_fields,
     table_bytes,
@@ -93,6 +93,7 @@ def _stream(model: QStream) -> dict[str, object]:
     out: dict[str, object] = {
         "rates": {
             "sample_rate_hz": fe.rate_hz,
+            "sample_rate_millihz": rate_millihz(fe.rate_hz),
             "decimation": fe.decimation,
             "network_step_hz": _num(fe.rate_hz / fe.decimation),
         },
@@ -169,7 +170,7 @@ def _stream(model: QStream) -> dict[str, object]:
 
 def _pla(model: QPla) -> dict[str, object]:
     return {
-        "rates": {"sample_rate_hz": None, "memoryless": True},
+        "rates": {"sample_rate_hz": None, "sample_rate_millihz": ANY_RATE_MILLIHZ, "memoryless": True},
         "quantisation": {
             "rounding": "half away from zero",
             "split_points_mdegc": list(model.splits_mdegc),
@@ -185,7 +186,7 @@ def _pla(model: QPla) -> dict[str, object]:
 
 def _poly3(model: QPoly3) -> dict[str, object]:
     return {
-        "rates": {"sample_rate_hz": None, "memoryless": True},
+        "rates": {"sample_rate_hz": None, "sample_rate_millihz": ANY_RATE_MILLIHZ, "memoryless": True},
         "quantisation": {
             "rounding": "half away from zero",
             "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],

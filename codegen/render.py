@@ -39,6 +39,7 @@ from codegen.quantize import (
     QStream,
     QuantModel,
 )
+from codegen.rate import declared_rate_millihz
 from trainer import methods as registry
 from trainer.errors import UserError
 
@@ -188,10 +189,6 @@ def physics_filter_fields(model: QPhysics) -> list[str]:
     return [name for name, part in zip(names, present, strict=True) if part is not None]
 
 
-def rate_millihz(rate_hz: float) -> int:
-    return round(rate_hz * 1000)
-
-
 def state_bytes(fields: list[Field]) -> int:
     """sizeof the struct with natural alignment (what gcc/clang give on x86-64 and ARM EABI)."""
     offset, align = 0, 1
@@ -266,10 +263,13 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         "temp_hi": lim.temp_hi_mdegc,
         "accel_limit": lim.accel,
     }
+    millihz = declared_rate_millihz(model)
     macros: list[tuple[str, object]] = [
         ("VALID_TEMP_MIN_MDEGC", lim.valid_lo_mdegc),
         ("VALID_TEMP_MAX_MDEGC", lim.valid_hi_mdegc),
+        ("SAMPLE_RATE_MILLIHZ", f"{millihz}u"),
     ]
+    ctx["rate_millihz"] = millihz  # 0: memoryless, any rate (codegen/rate.py)
     if isinstance(model, QStream):
         fe = model.frontend
         ctx.update(
@@ -331,17 +331,12 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 "h_start": model.vector_slots - model.hidden_slots,
             }
         macros += [
-            ("SAMPLE_RATE_HZ", f"{fe.rate_hz:g}"),
             ("DECIMATION", f"{fe.decimation}u"),
             ("WINDOW", f"{model.window}u"),
         ]
     elif isinstance(model, QPhysics):
         ctx.update(_physics_context(model))
-        macros += [
-            ("SAMPLE_RATE_HZ", f"{model.rate_hz:g}"),
-            ("SAMPLE_RATE_MILLIHZ", f"{rate_millihz(model.rate_hz)}u"),
-            ("MODEL_TAG", f"{model.tag}u"),
-        ]
+        macros += [("MODEL_TAG", f"{model.tag}u")]
     elif isinstance(model, QPla):
         ctx.update(
             family="piecewise_linear",

@@ -23,7 +23,9 @@ from codegen.export import LoadedModel, load_for_codegen, manifest_name
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden import GoldenStream, golden_for
 from codegen.hostbuild import load_module
-from codegen.quantize import ACCEL_PER_MG, QPhysics, QStream
+from codegen.quantize import ACCEL_PER_MG, QPhysics
+from codegen.rate import declared_rate_millihz, retime_compensator
+from codegen.rate import resample as resample_recording
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 
@@ -60,6 +62,8 @@ class VerifyResult:
     budget: ErrorBudget
     table1: Table1Check | None  # against the float model on the recording
     table1_integer_inputs: Table1Check | None  # against the float model on the C's integer inputs
+    rate_millihz: int = 0  # the module's NAME_SAMPLE_RATE_MILLIHZ (0: any rate)
+    resampled_from_hz: float | None = None  # the recording's own rate when --resample interpolated it
 
 
 def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
@@ -247,6 +251,7 @@ def verify(
     name: str | None = None,
     cc: str | None = None,
     table1: bool = True,
+    resample: bool = False,
 ) -> VerifyResult:
     from trainer.checkpoint import load_model
     from trainer.data.recording_io import read_recording
@@ -257,7 +262,10 @@ def verify(
         accel_limit_g = float(manifest["input_limits"]["accel_g"][1])
     except (KeyError, TypeError, IndexError, ValueError):
         raise UserError(f"{out / manifest_name(name)}: field 'input_limits.accel_g' is missing") from None
-    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    rates = manifest.get("rates")
+    declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
+    module_rate = declared if isinstance(declared, int) and declared > 0 else None
+    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g, rate_millihz=module_rate)
     model_entry = manifest.get("model")
     stamped = model_entry.get("sha256") if isinstance(model_entry, dict) else None
     if stamped != model.sha256:
@@ -266,14 +274,17 @@ def verify(
         )
     rec = read_recording(recording)
     q = model.quantised
-    if isinstance(q, QStream) and abs(rec.sample_rate_hz - q.frontend.rate_hz) > 0.01 * q.frontend.rate_hz:
-        raise UserError(
-            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model runs at {q.frontend.rate_hz:g} Hz"
-        )
-    if isinstance(q, QPhysics) and abs(rec.sample_rate_hz - q.rate_hz) > 0.01 * q.rate_hz:
-        raise UserError(
-            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the model's filters are for {q.rate_hz:g} Hz"
-        )
+    rate_hz = declared_rate_millihz(q) / 1000
+    resampled_from = None
+    if rate_hz and abs(rec.sample_rate_hz - rate_hz) > 0.01 * rate_hz:
+        if not resample:
+            what = "the model's filters are for" if isinstance(q, QPhysics) else "the model runs at"
+            raise UserError(
+                f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, {what} {rate_hz:g} Hz "
+                "(--resample interpolates the recording onto it)"
+            )
+        resampled_from = rec.sample_rate_hz
+        rec = resample_recording(rec, rate_hz)
     accel, temp = to_step_units(rec)
 
     host = load_module(out, name, cc=cc)
@@ -293,6 +304,7 @@ def verify(
     )
 
     float_model, _ = load_model(model_path)
+    retime_compensator(float_model, declared_rate_millihz(q))
     float_out = float_model.compensate(rec.without_truth())
     float_on_ints = float_model.compensate(integer_recording(rec, accel, temp))
     fine = None
@@ -312,13 +324,23 @@ def verify(
         int(differ[0]) if differ.size else None,
         state_equal,
         budget,
-        *tables,
+        tables[0],
+        tables[1],
+        rate_millihz=declared_rate_millihz(q),
+        resampled_from_hz=resampled_from,
     )
 
 
 def report_lines(result: VerifyResult) -> list[str]:
     b = result.budget
+    rate = f"{result.rate_millihz / 1000:g} Hz" if result.rate_millihz else "any rate (memoryless)"
     lines = [
+        f"module rate: {rate}"
+        + (
+            f" (recording resampled from {result.resampled_from_hz:g} Hz)"
+            if result.resampled_from_hz is not None
+            else ""
+        ),
         f"samples compared: {result.samples}",
         f"mismatches: {result.mismatches}"
         + (f" (first at sample {result.first_mismatch})" if result.first_mismatch is not None else ""),
@@ -353,3 +375,26 @@ def report_lines(result: VerifyResult) -> list[str]:
             + f" ({IMPROVEMENT_BUDGET_PP:g} pp, {100 * DRIFT_LEFT_BUDGET:g} %)"
         )
     return lines
+
+
+def write_json(result: VerifyResult, out_dir: str | os.PathLike[str], path: str | os.PathLike[str]) -> None:
+    """The result as JSON (``codegen verify --json``; ``trainer report --verify`` reads it), with the
+    module's sizes from its manifest; written atomically."""
+    from trainer.errors import atomic_output
+
+    _, manifest = find_manifest(Path(out_dir), result.name)
+    model = manifest.get("model")
+    data = {
+        "name": result.name,
+        "method": result.method,
+        "model_id": model.get("id") if isinstance(model, dict) else None,
+        "samples": result.samples,
+        "mismatches": result.mismatches,
+        "first_mismatch": result.first_mismatch,
+        "state_equal": result.state_equal,
+        "rate_millihz": result.rate_millihz,
+        "resampled_from_hz": result.resampled_from_hz,
+        "sizes": manifest.get("sizes"),
+    }
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")

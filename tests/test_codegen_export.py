@@ -189,7 +189,12 @@ def test_generated_c_has_no_libm_stdio_malloc_or_mutable_globals(
 
 def test_manifest_documents_rates_ranges_bounds_and_sizes(exported: dict[str, Path]) -> None:
     manifest = json.loads((exported["dlstm-issa"] / "tdc_dlstm_issa.manifest.json").read_text())
-    assert manifest["rates"] == {"sample_rate_hz": 200.0, "decimation": 200, "network_step_hz": 1.0}
+    assert manifest["rates"] == {
+        "sample_rate_hz": 200.0,
+        "sample_rate_millihz": 200_000,
+        "decimation": 200,
+        "network_step_hz": 1.0,
+    }
     assert manifest["architecture"] == {"input_size": 1, "hidden_size": 10, "num_layers": 2}
     assert manifest["macs_per_network_step"] == 4 * 10 * (1 + 10) + 4 * 10 * (10 + 10) + 10
     for index, layer in enumerate(manifest["quantisation"]["layers"]):

@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "compare": "compare_cmd",
     "diagnose": "diagnose_cmd",
     "fleet": "fleet_cmd",
+    "report": "report_cmd",
 }
 
 

@@ -8,6 +8,8 @@
  *    bumpless, with no warm-up. Cost: the sum of the models (see docs/firmware.md). A firmware
  *    short of CPU can step only the active model; after a switch it must then treat the first
  *    NAME_WINDOW samples and a few network steps of a streaming model as a warm-up.
+ *  - The modules' sample rate is checked at compile time (NAME_CHECK_SAMPLE_RATE_MILLIHZ): a streaming
+ *    model stepped at another rate than it was exported for would smooth, step and filter wrongly.
  *  - The module's flags are sticky; the task reads and clears them after every step, so they
  *    describe that one sample and the counters below count samples.
  *  - A streaming model's first seconds after init are a start-up transient (its LSTM state starts
@@ -32,6 +34,11 @@
 #define ALT_WARMUP_S 0u
 #endif
 #define GNC_RATE_HZ 200u
+
+/* The rate contract: both modules must be built for this task's rate (codegen export --rate 200);
+ * a module built for another rate stops the build here, naming NAME_built_for_another_sample_rate. */
+PRIMARY_CHECK_SAMPLE_RATE_MILLIHZ(GNC_RATE_HZ * 1000u);
+ALT_CHECK_SAMPLE_RATE_MILLIHZ(GNC_RATE_HZ * 1000u);
 
 enum { MODEL_NONE = -1, MODEL_PRIMARY = 0, MODEL_ALT = 1 };
 

@@ -31,6 +31,12 @@
 #ifndef TDC_DECIMATION
 #define TDC_DECIMATION 0
 #endif
+/* The rate the timed stream stands for (the Makefile's RATE_MILLIHZ, default 200 Hz): a module built
+ * for another rate does not compile (NAME_CHECK_SAMPLE_RATE_MILLIHZ, the generated rate contract). */
+#ifndef TDC_RATE_MILLIHZ
+#define TDC_RATE_MILLIHZ 200000u
+#endif
+TDC_CHECK_SAMPLE_RATE_MILLIHZ(TDC_RATE_MILLIHZ);
 #define MAX_SAMPLES 60000u
 #define BATCH 250u
 #define CALIBRATION_LOOPS 1000000u

@@ -9,7 +9,9 @@ the streaming computation, and is what this module does (vectorised).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, replace
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
@@ -74,6 +76,37 @@ class FrontEnd:
             train_accel_window=int(data["train_accel_window"]),
         )
 
+    def at_rate(self, rate_millihz: int) -> FrontEnd:
+        """The same windows and step in seconds at another rate, exactly, or a one-line refusal.
+
+        Every window (and the decimation) must be a whole number of samples at the new rate, so the
+        network sees the same smoothed inputs at the same step times; the refusal names the rates
+        that would work (multiples of ``trained rate / gcd(windows)``).
+        """
+        trained = round(self.rate_hz * 1000)
+        if trained <= 0:
+            raise UserError(f"the front end's rate {self.rate_hz:g} Hz is below 1 mHz: cannot re-derive it")
+        windows = {
+            "accel_window": self.accel_window,
+            "temp_window": self.temp_window,
+            "decimation": self.decimation,
+            "train_accel_window": self.train_accel_window,
+        }
+        ratio = Fraction(rate_millihz, trained)
+        if all((w * ratio).denominator == 1 for w in windows.values()):
+            return replace(
+                self, rate_hz=rate_millihz / 1000, **{k: int(w * ratio) for k, w in windows.items()}
+            )
+        base = Fraction(trained, 1000 * math.gcd(*windows.values()))
+        base *= (base * 1000).denominator  # the smallest such multiple in whole millihertz
+        examples = ", ".join(f"{float(base * k):g}" for k in _nearby_multiples(base, rate_millihz))
+        raise UserError(
+            f"--rate {rate_millihz / 1000:g}: the front end (windows "
+            f"{self.accel_window}/{self.temp_window} samples, a step every {self.decimation} at "
+            f"{trained / 1000:g} Hz) is not a whole number of samples at that rate; rates that work are "
+            f"multiples of {float(base):g} Hz, e.g. {examples}"
+        )
+
     def check_rate(self, rec: Recording) -> None:
         """Refuse a recording whose rate differs from the model's by more than 1 %."""
         rate = rec.sample_rate_hz
@@ -81,6 +114,13 @@ class FrontEnd:
             raise UserError(
                 f"{rec.source}: sample rate {rate:g} Hz, but the model was trained at {self.rate_hz:g} Hz"
             )
+
+
+def _nearby_multiples(base: Fraction, rate_millihz: int) -> list[int]:
+    """The three multiples k of ``base`` (Hz) nearest the requested rate."""
+    target = Fraction(rate_millihz, 1000) / base
+    found = range(max(1, math.floor(target) - 3), math.floor(target) + 5)
+    return sorted(sorted(found, key=lambda k: (abs(k - target), k))[:3])
 
 
 def smoothed_steps(x: np.ndarray, window: int, decimation: int) -> np.ndarray:

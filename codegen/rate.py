@@ -1,0 +1,137 @@
+"""The rate contract of a generated module: the sample rate it is built for, and re-deriving it.
+
+A memoryless model (cubic, PLA) is a function of the present temperature and runs at any rate
+(declared as 0). A model with a time base is built for one rate: the DLSTM front end (windows and
+decimation in samples, :meth:`trainer.dlstm.realtime.FrontEnd.at_rate`) and the physics filters
+(coefficients from time constants, :mod:`trainer.greybox.stream`). ``codegen export --rate HZ``
+re-derives them for the firmware's rate exactly, or refuses in one line; the header declares the
+rate as an integer in millihertz next to a compile-time check macro (``module.h.j2``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from codegen.quantize import QPhysics, QStream, QuantModel
+from trainer import methods as registry
+from trainer.compensator import Compensator
+from trainer.data.importer import _resample as resample_columns
+from trainer.data.recording import Recording
+from trainer.dlstm.realtime import FrontEnd
+from trainer.errors import UserError
+
+ANY_RATE_MILLIHZ = 0  # NAME_SAMPLE_RATE_MILLIHZ of a memoryless module
+MAX_RATE_HZ = 1_000_000.0
+
+
+def rate_millihz(rate_hz: float) -> int:
+    return round(rate_hz * 1000)
+
+
+def parse_rate_hz(rate_hz: float) -> int:
+    """``--rate HZ`` as whole millihertz (what the header declares), or a one-line refusal."""
+    if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+        raise UserError(
+            f"--rate {rate_hz:g}: must be a sample rate in Hz, above 0 and at most {MAX_RATE_HZ:g}"
+        )
+    millihz = rate_millihz(rate_hz)
+    if millihz == 0 or abs(rate_hz * 1000 - millihz) > 1e-6 * max(1.0, rate_hz):
+        raise UserError(f"--rate {rate_hz!r}: the header declares the rate in whole millihertz; round it")
+    return millihz
+
+
+def declared_rate_millihz(model: QuantModel) -> int:
+    """The rate a quantised model is built for, in millihertz; 0 for a memoryless one."""
+    if isinstance(model, QStream):
+        return rate_millihz(model.frontend.rate_hz)
+    if isinstance(model, QPhysics):
+        return rate_millihz(model.rate_hz)
+    return ANY_RATE_MILLIHZ
+
+
+def _retime_frontend(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
+    payload = raw["payload"]
+    frontend = payload["frontend"]
+    retimed = FrontEnd.from_dict(frontend).at_rate(millihz).to_dict()
+    return {**raw, "payload": {**payload, "frontend": {**frontend, **retimed}}}
+
+
+def _retime_physics(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
+    """The filters are discretised from their time constants at ``train_stats.sample_rate_hz``."""
+    return {**raw, "train_stats": {**raw["train_stats"], "sample_rate_hz": millihz / 1000}}
+
+
+def _trained_frontend(raw: dict[str, Any]) -> float:
+    return float(raw["payload"]["frontend"]["rate_hz"])
+
+
+def _trained_physics(raw: dict[str, Any]) -> float:
+    return float(raw["train_stats"]["sample_rate_hz"])
+
+
+# renderer -> (rate the checkpoint was built for, re-derivation at another rate); memoryless ones absent
+TIME_BASED: dict[
+    str, tuple[Callable[[dict[str, Any]], float], Callable[[dict[str, Any], int], dict[str, Any]]]
+] = {
+    "lstm-stream": (_trained_frontend, _retime_frontend),
+    "mean-stream": (_trained_frontend, _retime_frontend),
+    registry.PHYSICS_RENDERER: (_trained_physics, _retime_physics),
+}
+
+
+def retime_checkpoint(
+    raw: dict[str, Any], millihz: int | None, source: str
+) -> tuple[dict[str, Any], str | None]:
+    """``raw`` re-derived for ``millihz`` (None or the trained rate: unchanged) and a note saying so.
+
+    A memoryless method is unchanged at any rate. A malformed rate field is left for the parser
+    (``codegen.spec``) to report.
+    """
+    method = registry.REGISTRY[raw["method"]]
+    entry = TIME_BASED.get(method.renderer or "")
+    if millihz is None or entry is None:
+        return raw, None
+    trained_of, retime = entry
+    try:
+        trained = rate_millihz(trained_of(raw))
+    except (KeyError, TypeError, ValueError):
+        return raw, None
+    if trained == millihz:
+        return raw, None
+    try:
+        retimed = retime(raw, millihz)
+    except UserError as exc:
+        raise UserError(f"{source}: {exc}") from None
+    except (KeyError, TypeError, ValueError):
+        return raw, None
+    what = "windows and decimation" if method.renderer != registry.PHYSICS_RENDERER else "filter coefficients"
+    return (
+        retimed,
+        f"rate: exported for {millihz / 1000:g} Hz (trained at {trained / 1000:g} Hz; {what} re-derived)",
+    )
+
+
+def retime_compensator(model: Compensator, millihz: int) -> None:
+    """The float model at the module's rate (verify's reference): the DLSTM front end in samples.
+
+    The physics compensator's float form is a function of time (any rate); memoryless ones too.
+    """
+    frontend = getattr(model, "frontend", None)
+    if isinstance(frontend, FrontEnd) and millihz and rate_millihz(frontend.rate_hz) != millihz:
+        model.frontend = frontend.at_rate(millihz)  # type: ignore[attr-defined]
+
+
+def resample(rec: Recording, rate_hz: float) -> Recording:
+    """``rec`` linearly interpolated onto a uniform grid at ``rate_hz`` (the importer's resampler)."""
+    t0 = float(rec.time_s[0])
+    columns = {k: np.asarray(v, dtype=np.float64) for k, v in rec.columns.items()}
+    columns["time_s"] = columns["time_s"] - t0
+    out = resample_columns(columns, rate_hz)
+    out["time_s"] = out["time_s"] + t0
+    return Recording(
+        out, {**rec.meta, "sample_rate_hz": repr(float(rate_hz))}, f"{rec.source} at {rate_hz:g} Hz"
+    )

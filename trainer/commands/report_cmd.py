@@ -1,0 +1,267 @@
+"""``trainer report MODEL... --recording REC -o DIR``: the sign-off report of one unit (docs/signoff.md)."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.errors import UserError
+
+EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
+
+# Heavy modules (torch, matplotlib, cffi) are imported inside run() so that 'trainer --help' starts fast.
+
+
+def add_parser(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "report",
+        help="sign-off report of one unit: per channel drift and fit, drift left by branch and on held-out "
+        "data, coverage, model id, codegen verify, flash/RAM/instructions, pass/fail",
+    )
+    parser.add_argument("models", nargs="+", help="one model.pt per channel of the unit")
+    parser.add_argument(
+        "--recording",
+        action="append",
+        required=True,
+        metavar="REC",
+        help="the unit's recording: once for every model, or repeated once per model in the same order",
+    )
+    parser.add_argument("-o", "--out-dir", required=True, help="report.md and its PNGs go here")
+    parser.add_argument("--unit", help="the unit's name in the title (default: the first recording's stem)")
+    parser.add_argument(
+        "--config", metavar="TOML", help="pass/fail thresholds, table [thresholds] (keys: docs/signoff.md)"
+    )
+    parser.add_argument(
+        "--holdout",
+        metavar="SPEC",
+        help="also score the held-out part of each recording (as 'trainer compare --holdout': F, first:F, "
+        "T0:, :T1); the models should have been trained on the rest",
+    )
+    parser.add_argument(
+        "--verify",
+        action="append",
+        metavar="DIR|JSON",
+        help="repeated once per model, in order: a directory written by 'codegen export' (verified now on "
+        "the recording) or the JSON of 'codegen verify --json'",
+    )
+    parser.add_argument(
+        "--bench",
+        metavar="JSON",
+        help="Cortex-M4 measurements: model_id, instructions_per_sample, flash_bytes, ram_bytes (docs/signoff.md)",
+    )
+    parser.add_argument(
+        "--smoothing", type=float, default=PAPER_RUN_SMOOTHING_S, help="scoring smoothing in s (0.5)"
+    )
+    parser.set_defaults(func=run)
+
+
+def _per_model(values: list[str] | None, models: list[str], option: str) -> list[str | None]:
+    if values is None:
+        return [None] * len(models)
+    if len(values) == 1 and len(models) > 1 and option == "--recording":
+        return [values[0]] * len(models)
+    if len(values) != len(models):
+        raise UserError(f"{option}: {len(values)} given for {len(models)} models; give one per model")
+    return list(values)
+
+
+def _read_json(path: Path, what: str) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read the {what} ({exc.strerror})") from None
+    except ValueError as exc:
+        raise UserError(f"{path}: not valid JSON ({exc})") from None
+
+
+def _field(data: Any, key: str, kind: type | tuple[type, ...], path: Path) -> Any:
+    value = data.get(key) if isinstance(data, dict) else None
+    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
+        raise UserError(f"{path}: field {key!r} is missing or not a {getattr(kind, '__name__', 'number')}")
+    return value
+
+
+def _verify(model: Path, target: str, recording: str) -> tuple[Any, dict[str, Any] | None]:
+    """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON."""
+    from codegen.verify import find_manifest, verify
+    from trainer.scoring.signoff import VerifySummary
+
+    path = Path(target)
+    if path.is_dir():
+        result = verify(model, path, recording, table1=False, resample=True)
+        _, manifest = find_manifest(path, result.name)
+        summary = VerifySummary(
+            result.mismatches,
+            result.samples,
+            result.state_equal,
+            f"sha256:{hashlib.sha256(model.read_bytes()).hexdigest()}",
+            str(path),
+            result.rate_millihz,
+            result.resampled_from_hz,
+        )
+        return summary, manifest.get("sizes")
+    data = _read_json(path, "verify result")
+    summary = VerifySummary(
+        int(_field(data, "mismatches", int, path)),
+        int(_field(data, "samples", int, path)),
+        bool(_field(data, "state_equal", bool, path)),
+        str(_field(data, "model_id", str, path)),
+        str(path),
+        int(data.get("rate_millihz") or 0),
+        data.get("resampled_from_hz") if isinstance(data.get("resampled_from_hz"), int | float) else None,
+    )
+    sizes = data.get("sizes")
+    return summary, sizes if isinstance(sizes, dict) else None
+
+
+def _bench_entry(bench: Any, model_id: str, path: Path) -> dict[str, Any] | None:
+    entries = bench.get("modules", [bench]) if isinstance(bench, dict) else None
+    if not isinstance(entries, list):
+        raise UserError(f'{path}: expected an object or {{"modules": [...]}}')
+    for entry in entries:
+        if isinstance(entry, dict) and entry.get("model_id") == model_id:
+            return entry
+    return None
+
+
+def _cost(sizes: dict[str, Any] | None, bench: dict[str, Any] | None, bench_path: Path | None) -> Any:
+    from trainer.scoring.signoff import Cost
+
+    def number(entry: dict[str, Any] | None, key: str, source: str) -> tuple[float, str] | None:
+        if entry is None or key not in entry:
+            return None
+        value = entry[key]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise UserError(f"{source}: field {key!r} must be a number")
+        return float(value), source
+
+    bench_src = f"bench {bench_path}" if bench_path else ""
+    manifest_src = "manifest"
+    return Cost(
+        number(bench, "flash_bytes", bench_src)
+        or _labelled(number(sizes, "flash_table_bytes", manifest_src), "manifest: const tables only"),
+        number(bench, "ram_bytes", bench_src)
+        or _labelled(number(sizes, "ram_state_bytes", manifest_src), "manifest: one state struct"),
+        number(bench, "instructions_per_sample", bench_src),
+    )
+
+
+def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] | None:
+    return None if item is None else (item[0], label)
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer import __version__
+    from trainer.checkpoint import load_model
+    from trainer.commands.compare_cmd import publish
+    from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.recording_io import read_recording
+    from trainer.fitting import data_fingerprint
+    from trainer.scoring import signoff
+    from trainer.scoring.thresholds import load_thresholds
+
+    if args.smoothing < 0:
+        raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    thresholds = load_thresholds(args.config) if args.config else {}
+    holdout = parse_holdout(args.holdout) if args.holdout else None
+    recordings = _per_model(args.recording, args.models, "--recording")
+    verifies = _per_model(args.verify, args.models, "--verify")
+    bench_path = Path(args.bench) if args.bench else None
+    bench = _read_json(bench_path, "bench result") if bench_path else None
+    out_dir = Path(args.out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
+    if not (out_dir.parent if str(out_dir.parent) else Path(".")).is_dir():
+        raise UserError(f"--out-dir {out_dir}: parent directory {out_dir.parent} does not exist")
+    unit = args.unit or Path(str(recordings[0])).stem
+
+    loaded = {path: read_recording(path) for path in dict.fromkeys(r for r in recordings if r)}
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(
+        tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent if str(out_dir.parent) else ".")
+    )
+    try:
+        reports = []
+        seen: set[str] = set()
+        for model_arg, rec_path, target in zip(args.models, recordings, verifies, strict=True):
+            assert rec_path is not None
+            model_path = Path(model_arg)
+            model, ckpt = load_model(model_path)
+            rec = loaded[rec_path]
+            stats = ckpt.get("train_stats", {}) if isinstance(ckpt.get("train_stats"), dict) else {}
+            channel = str(stats.get("channel") or model_path.stem)
+            label = f"{channel} / {ckpt['method']}"
+            if label in seen:
+                raise UserError(
+                    f"{model_path}: a second {ckpt['method']} model for channel {channel} (the channel is the "
+                    "training recording's 'channel' metadata: check the import)"
+                )
+            seen.add(label)
+            lo, hi = (float(v) for v in ckpt["valid_temp_range_c"])
+            model_id = f"sha256:{hashlib.sha256(model_path.read_bytes()).hexdigest()}"
+            compensated = model.compensate(rec.without_truth())
+            scores = signoff.branch_scores(rec, compensated, args.smoothing)
+            notes = []
+            held_text = None
+            if holdout is not None:
+                _, held = split(rec, holdout)
+                scores.update(
+                    signoff.branch_scores(
+                        held, model.compensate(held.without_truth()), args.smoothing, "held-out "
+                    )
+                )
+                held_text = (
+                    f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
+                )
+                held_warning = overlap_warning(stats, held, data_fingerprint(held))
+                if held_warning:
+                    notes.append(f"held-out part: {held_warning}")
+            warning = overlap_warning(stats, rec, data_fingerprint(rec))
+            if warning:
+                notes.append(f"whole recording: {warning}")
+            verify, sizes = (None, None) if target is None else _verify(model_path, target, rec_path)
+            entry = _bench_entry(bench, model_id, bench_path) if bench_path else None
+            if bench_path is not None and entry is None:
+                notes.append(f"{bench_path} has no module of this model id: instructions not measured")
+            report = signoff.ChannelReport(
+                channel=channel,
+                model_path=str(model_path),
+                model_id=model_id,
+                method=str(ckpt["method"]),
+                trained_range_c=(lo, hi),
+                recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
+                scores=scores,
+                noise_floor_mg=signoff.noise_floor(rec, args.smoothing),
+                held_out=held_text,
+                verify=verify,
+                cost=_cost(sizes, entry, bench_path),
+                notes=notes,
+            )
+            report.figures = signoff.write_figures(
+                report, rec, model, compensated, args.smoothing, staging, thresholds
+            )
+            reports.append(report)
+        text = signoff.render(
+            unit,
+            reports,
+            thresholds,
+            recordings=list(dict.fromkeys(r for r in recordings if r)),
+            config=args.config,
+            smoothing_s=args.smoothing,
+            version=__version__,
+        )
+        (staging / "report.md").write_text(text, encoding="utf-8")
+        publish(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    line = signoff.summary_line(unit, reports, thresholds)
+    print(f"{line}; report written to {out_dir}/report.md")
+    failed = any(not c.ok for r in reports for c in signoff.checks(r, thresholds))
+    return EXIT_FAILED if failed else 0
