@@ -701,7 +701,10 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
             f"physics: temperature range {m.temp_range_c} degC is outside the supported -524..524 degC"
         )
     span = hi - lo
-    centre = (lo + hi) // 2
+    mid = (lo + hi) // 2
+    # the centre: an immediate operand of one Thumb-2 instruction (12 bits, or 8 significant bits)
+    grain = 1 if abs(mid) < 4096 else 1 << max(0, abs(mid).bit_length() - 8)
+    centre = round_half_away(Fraction(mid, grain)) * grain
     reach = max(hi - centre, centre - lo) + 2  # |state - centre|, mdegC: the range and the floors' margin
     half = None
     if m.play_width_c is not None:
