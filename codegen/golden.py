@@ -32,9 +32,6 @@ from codegen.qformats import (
     C_FRAC,
     EST_FRAC,
     GATE_FRAC,
-    PHYS_DIFF_SHIFT,
-    PHYS_STATE_FRAC,
-    PHYS_U_FRAC,
     TANH_FRAC,
     X_MAX,
 )
@@ -43,6 +40,7 @@ from codegen.quantize import (
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
+    HI_BITS,
     X_SLOTS,
     QLowpass,
     QPhysics,
@@ -306,15 +304,6 @@ class GoldenStream(_Golden):
         return estimate
 
 
-def _rr(x: int, shift: int) -> int:
-    """x / 2**shift rounded half away from zero, on Python integers (exact at any size)."""
-    if shift == 0:
-        return x
-    q, r = divmod(abs(x), 1 << shift)
-    q += r >= 1 << (shift - 1)
-    return -q if x < 0 else q
-
-
 class GoldenPhysics(_Golden):
     """The grey-box model sample by sample on Python integers, with the C struct's fields.
 
@@ -363,27 +352,29 @@ class GoldenPhysics(_Golden):
         return True
 
     @staticmethod
-    def _lowpass(f: QLowpass, y: int, prev: int, t: int) -> int:
-        d = prev * (1 << PHYS_STATE_FRAC) - y
-        return y + _rr(_rr(d, PHYS_DIFF_SHIFT) * f.c.q, f.c.shift) + _rr((t - prev) * f.b0.q, f.b0.shift)
+    def _lowpass(f: QLowpass, y: int, prev: int, step_mdegc: int, tf: int) -> int:
+        """``tdcp_lowpass``: floors written as Python's exact ``>>`` on integers."""
+        d = ((prev << HI_BITS) - y) >> (HI_BITS + f.shift)
+        return y + d * f.c_q + (step_mdegc << (tf - f.shift)) * f.b_q
 
     def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
         m = self.model
-        one = 1 << PHYS_STATE_FRAC
+        tf = m.temp_frac
         v = self.values
         drift = np.empty(temp.size, dtype=np.int64)
         d0, d1, d2, d3 = m.coefficients_q
         for n, raw in enumerate(temp.tolist()):
             t = min(max(raw, m.clip_lo_mdegc), m.clip_hi_mdegc)
-            t_q = t * one
+            x = (t - m.centre_mdegc) << tf
             if not self.started:
                 self.started, self.temp_prev = 1, t
                 for name in self.present():
-                    v[name] = t_q
-            prev = self.temp_prev
-            t_pm = t_q
+                    v[name] = x if name == "play" else x << HI_BITS
+            prev, step = (self.temp_prev - m.centre_mdegc) << tf, t - self.temp_prev
+            t_pm = x
             if m.lag is not None:
-                t_pm = v["proof_mass"] = self._lowpass(m.lag, v["proof_mass"], prev, t)
+                v["proof_mass"] = self._lowpass(m.lag, v["proof_mass"], prev, step, tf)
+                t_pm = v["proof_mass"] >> HI_BITS
             t_b, acc = t_pm, 0
             if m.half_width_q is not None:
                 h = m.half_width_q
@@ -391,23 +382,24 @@ class GoldenPhysics(_Golden):
                 if m.poly_reads_play:
                     t_b = v["play"]
                 assert m.branch is not None
-                acc += _rr(_rr(t_pm - v["play"], PHYS_DIFF_SHIFT) * m.branch.q, m.branch.shift)
-            u = _rr(t_b - m.t_ref_mdegc * one, m.u_round)
-            assert abs(u) <= 1 << PHYS_U_FRAC
+                acc += (t_pm - v["play"]) * m.branch.q
+            u = t_b << m.u_shift
             poly = d3
-            for coefficient in (d2, d1, d0):
-                poly = _rr(poly * u, PHYS_U_FRAC) + coefficient
-            acc += poly
+            for coefficient in (d2, d1, d0):  # each partial sum within m.horner_bounds (< 2**31)
+                poly = coefficient + ((poly * u + (1 << 31)) >> HI_BITS)
+                assert abs(poly) <= INT32_MAX
+            acc += poly << HI_BITS
             if m.rate is not None and m.rate_gain is not None:
-                v["rate_lp"] = self._lowpass(m.rate, v["rate_lp"], prev, t)
-                acc += _rr(_rr(t_q - v["rate_lp"], PHYS_DIFF_SHIFT) * m.rate_gain.q, m.rate_gain.shift)
+                v["rate_lp"] = self._lowpass(m.rate, v["rate_lp"], prev, step, tf)
+                acc += (x - (v["rate_lp"] >> HI_BITS)) * m.rate_gain.q
             if m.creep is not None and m.creep_gain is not None:
-                v["creep_lp"] = self._lowpass(m.creep, v["creep_lp"], prev, t)
-                acc += _rr(_rr(t_q - v["creep_lp"], PHYS_DIFF_SHIFT) * m.creep_gain.q, m.creep_gain.shift)
-            assert abs(acc) <= m.bound and all(abs(x) < 1 << 62 for x in v.values())
+                v["creep_lp"] = self._lowpass(m.creep, v["creep_lp"], prev, step, tf)
+                acc += (x - (v["creep_lp"] >> HI_BITS)) * m.creep_gain.q
+            assert abs(u) <= INT32_MAX and abs(acc) <= m.bound
+            assert all(abs(y) < 1 << 62 for y in v.values()) and abs(v["play"]) <= INT32_MAX
             self.temp_prev = t
-            drift[n] = _rr(acc, m.frac)
-        return self._output(accel, self._sat(drift))
+            drift[n] = (acc + (1 << (HI_BITS - 1 + m.frac))) >> (HI_BITS + m.frac)
+        return self._output(accel, drift)  # |drift| < 2**30: only the output saturates
 
 
 def golden_for(model: QuantModel) -> _Golden:

@@ -51,10 +51,6 @@ FORMATS: tuple[QFormat, ...] = (
         "ACT_SLOPE_BITS", 16, "slopes carry 16 bits below the Q15 output: out = v + (s pos + 2^15) >> 16"
     ),
     QFormat("ACT_VALUE_FRAC", 15, "table values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535"),
-    QFormat("PHYS_STATE_FRAC", 32, "physics: temperatures and filter states int64 Q32 mdegC (2^-42 degC)"),
-    QFormat("PHYS_DIFF_SHIFT", 16, "physics: a state difference loses 16 bits before a coefficient multiply"),
-    QFormat("PHYS_COEF_BITS", 24, "physics: filter and gain coefficients carry 24 significant bits"),
-    QFormat("PHYS_U_FRAC", 30, "physics: polynomial argument u = (T_b - 25 degC) / 2^p in Q30, |u| <= 1"),
 )
 
 _BY_NAME = {f.name: f.value for f in FORMATS}
@@ -73,10 +69,6 @@ ACT_SEGMENTS = _BY_NAME["ACT_SEGMENTS"]
 ACT_POS_BITS = _BY_NAME["ACT_POS_BITS"]
 ACT_SLOPE_BITS = _BY_NAME["ACT_SLOPE_BITS"]
 ACT_VALUE_FRAC = _BY_NAME["ACT_VALUE_FRAC"]
-PHYS_STATE_FRAC = _BY_NAME["PHYS_STATE_FRAC"]
-PHYS_DIFF_SHIFT = _BY_NAME["PHYS_DIFF_SHIFT"]
-PHYS_COEF_BITS = _BY_NAME["PHYS_COEF_BITS"]
-PHYS_U_FRAC = _BY_NAME["PHYS_U_FRAC"]
 
 X_MAX = (1 << 15) - 1  # |x_q|: 16 standard deviations
 H_MAX = (1 << 15) - 1

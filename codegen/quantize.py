@@ -24,8 +24,9 @@ head                   int32/int64  weights in accel LSB per unit of h, Q(f); bi
 held estimate          int64        Q16 accel LSB, saturated at +-(2**31 - 1) LSB (flagged)
 PLA slopes/intercepts  int32/int64  accel LSB per mdegC and accel LSB, Q(f_pla)
 cubic coefficients     int32        accel LSB, of u^k with u = (T - T_ref) / 2**p, Q(f_poly)
-physics states         int64        Q32 mdegC (filters, play operator), see :func:`_physics`
-physics coefficients   int64        24 significant bits each; drift accumulator Q(f_phys) accel LSB
+physics temperatures   int32        Q(tf) mdegC about the range's centre (play operator), see :func:`_physics`
+physics filter states  int64        Q(tf + 32) mdegC: the high word is the int32 temperature
+physics coefficients   int32        filters Q(32 + s); cubic d_k Q(f + k); drift accumulator int64 Q(f + 32)
 =====================  ===========  ======================================================
 
 A layer's accumulator format Q(A) is the largest A (16 .. 30) such that every weight fits int16
@@ -76,10 +77,6 @@ from codegen.qformats import (
     X_MAX,
     X_MIN_FRAC,
 )
-from codegen.qformats import PHYS_COEF_BITS as COEF_BITS
-from codegen.qformats import PHYS_DIFF_SHIFT as DIFF_SHIFT
-from codegen.qformats import PHYS_STATE_FRAC as STATE_FRAC
-from codegen.qformats import PHYS_U_FRAC as U_FRAC
 from codegen.spec import (
     Checkpoint,
     DlstmModelSpec,
@@ -297,60 +294,65 @@ class QPoly3:
 
 
 @dataclass(frozen=True)
-class QCoef:
-    """``q / 2**frac`` of a positive real coefficient, applied as ``rshift_round(v * q, shift)``."""
-
-    q: int
-    frac: int
-    shift: int
-
-
-@dataclass(frozen=True)
 class QLowpass:
-    """``y += rr(rr(x_prev 2^F - y, DIFF_SHIFT) c, c.shift) + rr((x - x_prev) b0, b0.shift)``:
-    the exact first-order-hold low-pass ``y' = a y + b0 x + b1 x_prev`` with ``c = 1 - a``."""
+    """The exact first-order-hold low-pass ``y' = a y + b0 x + b1 x_prev`` as ``tdcp_lowpass``::
+
+        y += floor((x_prev 2^32 - y) / 2^(32 + shift)) c_q + (T - T_prev) 2^(tf - shift) b_q
+
+    with ``c_q = round((1 - a) 2^(32 + shift))``, ``b_q = round(b0 2^(32 + shift))`` (int32) and the
+    state int64 Q(tf + 32) mdegC about the centre (its high word is the Q(tf) temperature)."""
 
     name: str
     tau_s: float
-    c: QCoef
-    b0: QCoef
-    deadband_mdegc: float  # |x_prev - y| below which an update rounds to zero
+    c_q: int
+    b_q: int
+    shift: int
+    c_real: float  # 1 - a, exactly the float model's
+    b0_real: float
+    error_mdegc: float  # bound of |state - the float model's state| (floors and coefficient rounding)
     sensitivity_mg_per_c: float  # how much the drift moves per degC of this state
+
+    @property
+    def error_mg(self) -> float:
+        return self.error_mdegc * self.sensitivity_mg_per_c / 1000.0
 
 
 @dataclass(frozen=True)
 class QGain:
-    """A drift term ``gain (state difference)``: ``rr(rr(diff, DIFF_SHIFT) q, shift)`` in Q(frac) LSB."""
+    """A drift term ``gain (difference)``: an int32 difference in Q(tf) mdegC times the int32 ``q``,
+    added to the int64 drift accumulator in Q(frac + 32) accel LSB (one SMLAL)."""
 
     name: str
     q: int
-    shift: int
-    diff_bound: int  # |diff| in Q32 mdegC
-    bound: int  # |term| in Q(frac) accel LSB
+    diff_bound: int  # |difference|, Q(tf) mdegC
+    bound: int  # |difference q|, Q(frac + 32) accel LSB
 
 
 @dataclass(frozen=True)
 class QPhysics:
+    """The grey-box model in int32 temperatures and products (see :func:`_physics`)."""
+
     method: str
     limits: Limits
     rate_hz: float
     clip_lo_mdegc: int
     clip_hi_mdegc: int
+    centre_mdegc: int  # temperatures are x = (T - centre) 2^temp_frac
+    temp_frac: int  # tf: int32 temperatures Q(tf) mdegC; filter states int64 Q(tf + 32)
     lag: QLowpass | None
     rate: QLowpass | None
     creep: QLowpass | None
-    half_width_q: int | None  # play operator: w / 2 in Q32 mdegC (None: no hysteresis)
+    half_width_q: int | None  # play operator: w / 2 in Q(tf) mdegC (None: no hysteresis)
     poly_reads_play: bool
-    t_ref_mdegc: int
-    u_shift: int  # u = (T_b - T_ref) / 2**u_shift mdegC, in Q(U_FRAC), |u| <= 1
-    u_round: int  # T_b (Q32 mdegC) -> u: rshift_round by STATE_FRAC + u_shift - U_FRAC
-    coefficients_q: tuple[int, ...]  # d0..d3 of u^k, Q(frac) accel LSB
+    t_ref_mdegc: int  # the catalogue's polynomial reference (re-expanded about the centre)
+    u_shift: int  # Horner argument u = T_b 2^u_shift, |u| < 2^31, read as U = u / 2^31
+    coefficients_q: tuple[int, ...]  # d0..d3: d_k of U^k in Q(frac + k) accel LSB, int32
+    horner_bounds: tuple[int, ...]  # |p_0| .. |p_3| of the Horner steps, each < 2^31
     branch: QGain | None
     rate_gain: QGain | None
     creep_gain: QGain | None
-    frac: int
-    poly_bound: int  # |Horner accumulator|, Q(frac)
-    bound: int  # |drift accumulator|, Q(frac)
+    frac: int  # the polynomial's value is Q(frac) accel LSB; the accumulator Q(frac + 32)
+    bound: int  # |drift accumulator|, Q(frac + 32), < 2^62
     tag: int  # uint32 identifying these constants (a saved state is restored only by its own model)
 
     @property
@@ -621,58 +623,76 @@ def _poly3(spec: Poly3Spec, limits: Limits) -> QPoly3:
     raise UserError("poly3: coefficients too large for the fixed-point format")
 
 
-STATE_ONE = 1 << STATE_FRAC
-PHYS_DEADBAND_BUDGET_MG = 1e-4  # a stalled filter may cost at most this much drift (proved below)
+HI_BITS = 32  # a filter state's high word is its int32 temperature (tdcp_hi)
+MAX_TEMP_FRAC = 24  # finer int32 temperatures buy nothing (the filters' floors are bounded below)
+MAX_DRIFT_FRAC = 30
+PHYS_FILTER_BUDGET_MG = 1e-4  # per filter: its state's error bound times the drift's sensitivity to it
 
 
-def _coef(value: float, min_frac: int) -> QCoef:
-    """``value`` (>= 0) with COEF_BITS significant bits and at least ``min_frac`` fractional bits."""
-    if value == 0.0:
-        return QCoef(0, min_frac, 0)
-    frac = max(COEF_BITS - 1 - math.floor(math.log2(value)), min_frac)
-    return QCoef(round_half_away(Fraction(value) * Fraction(2) ** frac), frac, 0)
+def _lowpass(
+    name: str, tau_s: float, rate_hz: float, tf: int, reach: int, span: int, sensitivity: float
+) -> QLowpass:
+    """The filter's coefficients at the shift that minimises the bound of its state's error.
 
-
-def _lowpass(name: str, tau_s: float, rate_hz: float, span: int, sensitivity: float) -> QLowpass:
+    Per step the floor of the difference costs less than 2^(shift - tf) mdegC times c, and the
+    rounded coefficients |dc| |x_prev - y| + |db| |x - x_prev|; through the filter (gain 1 / c) the
+    state stays within ``error_mdegc`` of the float model's, plus 2^-tf for reading its high word. A
+    larger shift gives c more bits and the difference fewer: the generator takes the best."""
     from trainer.physics.thermal import lowpass_coefficients
 
-    (b0, _), (_, minus_a) = lowpass_coefficients(tau_s, 1.0 / rate_hz)
-    c_real = 1.0 + float(minus_a)  # 1 - a
-    c = _coef(c_real, DIFF_SHIFT)
-    c = QCoef(c.q, c.frac, c.frac - DIFF_SHIFT)
-    b = _coef(float(b0), STATE_FRAC)
-    b = QCoef(b.q, b.frac, b.frac - STATE_FRAC)
-    diff_bound = (span + 1) * STATE_ONE
-    if ((diff_bound >> DIFF_SHIFT) + 1) * c.q >= INT64_SAFE or span * b.q >= INT64_SAFE:
-        raise UserError(f"physics: {name} filter (tau {tau_s:g} s) cannot be represented in int64")
-    deadband = max(2.0 ** (DIFF_SHIFT - 1), 0.5 / c_real) / STATE_ONE if c_real > 0 else math.inf
-    if deadband * sensitivity / 1000.0 > PHYS_DEADBAND_BUDGET_MG:
+    (b0_arr, _), (_, minus_a) = lowpass_coefficients(tau_s, 1.0 / rate_hz)
+    c, b0 = Fraction(1) + Fraction(float(minus_a)), Fraction(float(b0_arr))
+    if not (0 < b0 <= c < Fraction(1, 2)):
         raise UserError(
-            f"physics: {name} filter (tau {tau_s:g} s at {rate_hz:g} Hz) would stall within "
-            f"{deadband:.3g} mdegC of its input, {deadband * sensitivity / 1000:.3g} mg of drift "
-            f"(budget {PHYS_DEADBAND_BUDGET_MG:g} mg)"
+            f"physics: {name} filter (tau {tau_s:g} s) is too short for {rate_hz:g} Hz (or too long): "
+            f"1 - a = {float(c):.3g} must lie in (0, 1/2)"
         )
-    return QLowpass(name, tau_s, c, b, deadband, sensitivity)
+    best: tuple[Fraction, int, int, int] | None = None
+    for shift in range(0, min(tf, 30) + 1):
+        scale = Fraction(2) ** (HI_BITS + shift)
+        c_q, b_q = round_half_away(c * scale), round_half_away(b0 * scale)
+        if c_q + b_q > INT32_MAX:
+            break
+        if not 0 < b_q <= c_q:
+            continue
+        dc, db = abs(Fraction(c_q) / scale - c), abs(Fraction(b_q) / scale - b0)
+        error = Fraction(2) ** (shift - tf) + Fraction(1, 2**tf) + (2 * reach * dc + span * db) / c
+        if best is None or error < best[0]:
+            best = (error, shift, c_q, b_q)
+    if best is None:
+        raise UserError(f"physics: {name} filter (tau {tau_s:g} s at {rate_hz:g} Hz) cannot be represented")
+    error, shift, c_q, b_q = best
+    # tdcp_lowpass's preconditions: |x_prev 2^32| + |y| < 2^63 and |y| + |d c| + |step b0| < 2^63
+    y_max, d_max = reach << (tf + HI_BITS), ((2 * reach) << (tf - shift)) + 1
+    if 2 * y_max > INT64_MAX or y_max + d_max * c_q + (span << (tf - shift)) * b_q > INT64_MAX:
+        raise UserError(f"physics: {name} filter (tau {tau_s:g} s) cannot be represented in int64")
+    q = QLowpass(name, tau_s, c_q, b_q, shift, float(c), float(b0), float(error), sensitivity)
+    if error > 1 or q.error_mg > PHYS_FILTER_BUDGET_MG:
+        raise UserError(
+            f"physics: {name} filter (tau {tau_s:g} s at {rate_hz:g} Hz) would stray {float(error):.3g} mdegC "
+            f"from the float model, {q.error_mg:.3g} mg of drift (budget {PHYS_FILTER_BUDGET_MG:g} mg)"
+        )
+    return q
 
 
-def _gain(name: str, mg_per_c: float, diff_bound: int, frac: int) -> QGain:
-    """``mg_per_c`` times a Q32 mdegC difference, in Q(frac) accel LSB."""
-    per_lsb = Fraction(mg_per_c) * ACCEL_PER_MG / 1000  # accel LSB per mdegC
-    magnitude = abs(float(per_lsb))
-    k = frac + DIFF_SHIFT - STATE_FRAC  # the smallest k with a shift >= 0
-    if magnitude:
-        k = max(COEF_BITS - 1 - math.floor(math.log2(magnitude)), k)
-    q = round_half_away(per_lsb * Fraction(2) ** k)
-    shift = STATE_FRAC - DIFF_SHIFT + k - frac
-    pre = (diff_bound >> DIFF_SHIFT) + 1
-    if pre * abs(q) >= INT64_SAFE:
-        raise UserError(f"physics: the {name} gain {mg_per_c:g} mg/degC cannot be represented in int64")
-    return QGain(name, q, shift, diff_bound, _ceil_shift(pre * abs(q), shift) + 1)
+def _horner_bounds(d: list[int]) -> list[int]:
+    """|p_k| of ``p_3 = d_3, p_k = d_k + floor(p_(k+1) u / 2^32 + 1/2)`` for any |u| < 2^31."""
+    bounds = [abs(d[3])]
+    for k in (2, 1, 0):
+        bounds.insert(0, abs(d[k]) + (bounds[0] + 1) // 2)
+    return bounds
 
 
 def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
-    """Every state is Q32 mdegC (int64); the drift is accumulated in Q(frac) accel LSB, the largest
-    frac (<= 40) for which the Horner products and the sum stay below 2**62."""
+    """int32 temperatures, int64 filter states, int32 x int32 products (tdc_physics_kernels.h).
+
+    Temperatures are ``x = (T - centre) 2^tf`` mdegC about the training range's centre, ``tf`` the
+    largest for which every temperature, difference and ``x +- w/2`` fits int32. The filters stay
+    within the range (their updates are convex combinations; the floors move them down by less
+    than 1 mdegC), so the states are bounded by the range too. The cubic is re-expanded exactly
+    about the centre in ``U = T_b 2^u_shift / 2^31`` and evaluated by Horner in int32 with rounded
+    high-word products; the drift accumulator is int64 Q(frac + 32) accel LSB, ``frac`` the largest
+    (<= 30) for which every Horner step, every gain and the sum fit (all proved here)."""
     m = spec.model
     lo = round_half_away(Fraction(m.temp_range_c[0]) * 1000)
     hi = round_half_away(Fraction(m.temp_range_c[1]) * 1000)
@@ -681,50 +701,75 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
             f"physics: temperature range {m.temp_range_c} degC is outside the supported -524..524 degC"
         )
     span = hi - lo
+    mid = (lo + hi) // 2
+    # the centre: an immediate operand of one Thumb-2 instruction (12 bits, or 8 significant bits)
+    grain = 1 if abs(mid) < 4096 else 1 << max(0, abs(mid).bit_length() - 8)
+    centre = round_half_away(Fraction(mid, grain)) * grain
+    reach = max(hi - centre, centre - lo) + 2  # |state - centre|, mdegC: the range and the floors' margin
     half = None
     if m.play_width_c is not None:
         if not m.play_width_c > 0:
             raise UserError(f"physics: play width {m.play_width_c!r} degC must be positive")
-        half = round_half_away(Fraction(m.play_width_c) * 500 * STATE_ONE)
+        half = Fraction(m.play_width_c) * 500
+    tf = -1
+    for k in range(MAX_TEMP_FRAC, -1, -1):
+        h_q = 0 if half is None else round_half_away(half * 2**k)
+        if (2 * reach) << k <= INT32_MAX and (reach << k) + h_q <= INT32_MAX:
+            tf = k
+            break
+    if tf < 0:
+        raise UserError(f"physics: play width {m.play_width_c!r} degC is too wide for int32 temperatures")
+    half_q = None if half is None else round_half_away(half * 2**tf)
     from trainer.physics.catalogue.base import T_REF_C
 
     t_ref = round_half_away(Fraction(T_REF_C) * 1000)
-    margin = 1 + (0 if half is None or not m.poly_reads_play else -(-half // STATE_ONE))
-    reach = max(abs(lo - margin - t_ref), abs(hi + margin - t_ref))
-    u_shift = max(1, math.ceil(math.log2(reach)))
-    delta = Fraction(t_ref) - Fraction(T_REF_C) * 1000  # 0 today: the catalogue's T_ref is whole mdegC
-    e = [Fraction(c) * ACCEL_PER_MG / Fraction(1000) ** k for k, c in enumerate(m.c_mg)]
-    shifted = [sum(e[k] * math.comb(k, j) * delta ** (k - j) for k in range(j, 4)) for j in range(4)]
-    d = [v * Fraction(2) ** (u_shift * j) for j, v in enumerate(shifted)]
-    # drift sensitivity to each state (mg per degC), for the filters' dead-band proof
-    grid = np.linspace(lo / 1000 - margin / 1000, hi / 1000 + margin / 1000, 1001) - T_REF_C
+    # drift sensitivity to each state (mg per degC), for the filters' error budget
+    grid = np.linspace(lo / 1000, hi / 1000, 1001) - T_REF_C
     c1, c2, c3 = m.c_mg[1:]
     slope = float(np.max(np.abs(c1 + 2 * c2 * grid + 3 * c3 * grid**2)))
-    branch_gain = 0.0 if half is None else m.branch_amp_mg / (m.play_width_c / 2.0)  # type: ignore[operator]
+    branch_gain = 0.0 if m.play_width_c is None else m.branch_amp_mg / (m.play_width_c / 2.0)
     rate_gain = 0.0 if m.rate_tau_s is None else m.rate_k_mg_per_c_per_min * 60.0 / m.rate_tau_s
-    lag = None
-    if m.lag_tau_s is not None:
-        lag = _lowpass(LAG, m.lag_tau_s, spec.rate_hz, span, slope + 2 * abs(branch_gain))
-    rate = None if m.rate_tau_s is None else _lowpass(RATE, m.rate_tau_s, spec.rate_hz, span, abs(rate_gain))
-    creep = None
-    if m.creep_tau_s is not None:
-        creep = _lowpass(CREEP, m.creep_tau_s, spec.rate_hz, span, abs(m.creep_gain_mg_per_c))
-    diff = (span + 1) * STATE_ONE
-    for frac in range(40, -1, -1):
-        coeffs = [round_half_away(v * Fraction(2) ** frac) for v in d]
-        poly_bound = sum(abs(c) for c in coeffs) + 3
-        if poly_bound << U_FRAC >= INT64_SAFE:
+    filt = {}
+    for name, tau, sensitivity in (
+        (LAG, m.lag_tau_s, slope + 2 * abs(branch_gain)),
+        (RATE, m.rate_tau_s, abs(rate_gain)),
+        (CREEP, m.creep_tau_s, abs(m.creep_gain_mg_per_c)),
+    ):
+        filt[name] = None if tau is None else _lowpass(name, tau, spec.rate_hz, tf, reach, span, sensitivity)
+    # the cubic about the centre, in U = T 2^(tf + u_shift) / 2^31 (T mdegC about the centre)
+    u_shift = 0
+    while (reach << (tf + u_shift + 1)) <= INT32_MAX:
+        u_shift += 1
+    delta = Fraction(centre) - Fraction(T_REF_C) * 1000
+    e = [Fraction(c) * ACCEL_PER_MG / Fraction(1000) ** k for k, c in enumerate(m.c_mg)]
+    about_centre = [sum(e[k] * math.comb(k, j) * delta ** (k - j) for k in range(j, 4)) for j in range(4)]
+    unit = Fraction(2**31, 2 ** (tf + u_shift))  # mdegC per unit of U
+    a = [v * unit**j for j, v in enumerate(about_centre)]  # accel LSB per U^j
+    per_mdegc = Fraction(ACCEL_PER_MG, 1000)
+    terms = [
+        ("branch", branch_gain, half_q),
+        (RATE, rate_gain if m.rate_tau_s is not None else None, (2 * reach) << tf),
+        (CREEP, m.creep_gain_mg_per_c if m.creep_tau_s is not None else None, (2 * reach) << tf),
+    ]
+    for frac in range(MAX_DRIFT_FRAC, -1, -1):
+        d = [round_half_away(v * Fraction(2) ** (frac + k)) for k, v in enumerate(a)]
+        horner = _horner_bounds(d)
+        if max(horner) > INT32_MAX:
             continue
-        try:
-            branch = None if half is None else _gain("branch", branch_gain, 2 * half, frac)
-            gr = None if rate is None else _gain(RATE, rate_gain, diff, frac)
-            gc = None if creep is None else _gain(CREEP, m.creep_gain_mg_per_c, diff, frac)
-        except UserError:
+        gains: list[QGain | None] = []
+        for name, gain_mg_per_c, diff_bound in terms:
+            if gain_mg_per_c is None or diff_bound is None:
+                gains.append(None)
+                continue
+            q = round_half_away(Fraction(gain_mg_per_c) * per_mdegc * Fraction(2) ** (frac + HI_BITS - tf))
+            gains.append(QGain(name, q, diff_bound, diff_bound * abs(q)))
+        if any(g is not None and abs(g.q) > INT32_MAX for g in gains):
             continue
-        bound = poly_bound + sum(g.bound for g in (branch, gr, gc) if g is not None)
+        bound = (horner[0] << HI_BITS) + sum(g.bound for g in gains if g is not None)
         if bound >= INT64_SAFE:
             continue
-        constants = (lo, hi, half, m.poly_reads_play, u_shift, coeffs, frac, lag, rate, creep, branch, gr, gc)
+        branch, gr, gc = gains
+        constants = (lo, hi, centre, tf, half_q, m.poly_reads_play, u_shift, d, frac, filt, branch, gr, gc)
         tag = int(hashlib.sha256(repr(constants).encode()).hexdigest()[:8], 16)
         return QPhysics(
             spec.method,
@@ -732,20 +777,21 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
             spec.rate_hz,
             lo,
             hi,
-            lag,
-            rate,
-            creep,
-            half,
+            centre,
+            tf,
+            filt[LAG],
+            filt[RATE],
+            filt[CREEP],
+            half_q,
             m.poly_reads_play,
             t_ref,
             u_shift,
-            STATE_FRAC + u_shift - U_FRAC,
-            tuple(coeffs),
+            tuple(d),
+            tuple(horner),
             branch,
             gr,
             gc,
             frac,
-            poly_bound,
             bound,
             tag,
         )

@@ -21,9 +21,6 @@ from codegen.qformats import (
     ACT_SEGMENTS,
     C_FRAC,
     EST_FRAC,
-    PHYS_DIFF_SHIFT,
-    PHYS_STATE_FRAC,
-    PHYS_U_FRAC,
     header_with_block,
 )
 from codegen.qformats import HEADER as KERNEL_HEADER
@@ -32,6 +29,7 @@ from codegen.quantize import (
     FLAG_INPUT_CLAMPED,
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
+    HI_BITS,
     QGain,
     QLowpass,
     QPhysics,
@@ -129,15 +127,31 @@ def state_fields(model: QuantModel) -> list[Field]:
         Field("uint32_t", "samples", (), "samples since init (saturating)"),
     ]
     if isinstance(model, QPhysics):
-        unit = f"Q{PHYS_STATE_FRAC} mdegC"
+        wide = f"Q{model.temp_frac + HI_BITS} mdegC about {model.centre_mdegc} mdegC"
         docs = {
-            "proof_mass": f"thermal_lag: proof-mass temperature T_pm, {unit}",
-            "play": f"play operator output P (the hysteresis branch), {unit}",
-            "rate_lp": f"temp_rate: the rate filter R, {unit}",
-            "creep_lp": f"stress_relaxation: the creep filter C, {unit}",
+            "proof_mass": f"thermal_lag: proof-mass temperature T_pm, {wide}",
+            "rate_lp": f"temp_rate: the rate filter R, {wide}",
+            "creep_lp": f"stress_relaxation: the creep filter C, {wide}",
         }
+        play = (
+            [
+                Field(
+                    "int32_t",
+                    "play",
+                    (),
+                    f"play operator output P (the hysteresis branch), Q{model.temp_frac} mdegC",
+                )
+            ]
+            if model.half_width_q is not None
+            else []
+        )
         return [
-            *(Field("int64_t", name, (), docs[name]) for name in physics_filter_fields(model)),
+            *(
+                Field("int64_t", name, (), docs[name])
+                for name in physics_filter_fields(model)
+                if name != "play"
+            ),
+            *play,
             Field("int32_t", "temp_prev", (), "previous clipped temperature, mdegC"),
             Field("uint32_t", "started", (), "0 until the first sample after init/reset"),
             Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
@@ -208,7 +222,7 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
             sizes["weights"] = sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size
             sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
     elif isinstance(model, QPhysics):
-        sizes["physics_coefficients"] = 32
+        sizes["physics_coefficients"] = 16
     elif isinstance(model, QPla):
         sizes["pla_tables"] = (
             4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
@@ -368,44 +382,37 @@ def _physics_context(model: QPhysics) -> dict[str, object]:
         return {
             "name": f.name,
             "tau": f"{f.tau_s:g}",
-            "c": _c_int(f.c.q, 64),
-            "c_shift": f.c.shift,
-            "b0": _c_int(f.b0.q, 64),
-            "b0_shift": f.b0.shift,
-            "c_real": f"{f.c.q / 2.0**f.c.frac:.9g}",
-            "b0_real": f"{f.b0.q / 2.0**f.b0.frac:.9g}",
+            "c": f.c_q,
+            "b0": f.b_q,
+            "shift": f.shift,
+            "c_real": f"{f.c_real:.9g}",
+            "b0_real": f"{f.b0_real:.9g}",
         }
 
     def gain(g: QGain | None) -> dict[str, object] | None:
-        if g is None:
-            return None
-        return {"q": _c_int(g.q, 64), "shift": g.shift}
+        return None if g is None else {"q": g.q}
 
     return {
         "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
         "rate_hz": f"{model.rate_hz:g}",
-        "state_frac": PHYS_STATE_FRAC,
-        "diff_shift": PHYS_DIFF_SHIFT,
-        "u_frac": PHYS_U_FRAC,
+        "tf": model.temp_frac,
+        "centre": model.centre_mdegc,
         "frac": model.frac,
         "bound_text": _bound_text(model.bound),
         "clip_lo": model.clip_lo_mdegc,
         "clip_hi": model.clip_hi_mdegc,
         "filters": [lowpass(f) for f in model.filters],
         "filter_fields": physics_filter_fields(model),
-        "gains": bool(model.gains),
         "lag": lowpass(model.lag),
         "rate": lowpass(model.rate),
         "creep": lowpass(model.creep),
         "branch": gain(model.branch),
         "rate_gain": gain(model.rate_gain),
         "creep_gain": gain(model.creep_gain),
-        "half_width": _c_int(model.half_width_q, 64) if model.half_width_q is not None else None,
+        "half_width": model.half_width_q,
         "poly_reads_play": model.poly_reads_play,
-        "t_ref": model.t_ref_mdegc,
         "u_shift": model.u_shift,
-        "u_round": model.u_round,
-        "coefficients": _rows(model.coefficients_q, width=64, per_line=2),
+        "coefficients": _rows(model.coefficients_q, per_line=4),
     }
 
 
@@ -421,6 +428,8 @@ def _environment() -> jinja2.Environment:
 
 
 KERNEL_FILE = "tdc_kernels.h"
+PHYSICS_KERNEL_FILE = "tdc_physics_kernels.h"  # shipped with physics modules only
+PHYSICS_KERNEL_HEADER = KERNEL_HEADER.parent / PHYSICS_KERNEL_FILE
 
 
 def kernel_header() -> str:
@@ -432,15 +441,19 @@ def kernel_header() -> str:
 
 
 def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = ()) -> dict[str, str]:
-    """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}``; ``notes`` are lines for the header's comment."""
+    """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` (and ``tdc_physics_kernels.h`` for a physics
+    model); ``notes`` are lines for the header's comment."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
-    return {
+    files = {
         f"{name}.h": env.get_template("module.h.j2").render(ctx),
         f"{name}.c": env.get_template("module.c.j2").render(ctx),
         KERNEL_FILE: kernel_header(),
     }
+    if isinstance(model, QPhysics):
+        files[PHYSICS_KERNEL_FILE] = PHYSICS_KERNEL_HEADER.read_text(encoding="utf-8")
+    return files
 
 
 def render_template(template: str, model: QuantModel, name: str, sha256: str, **extra: object) -> str:

@@ -6,12 +6,15 @@ save/restore across a power cycle, the out-of-range flag and the export's refusa
 from __future__ import annotations
 
 import itertools
+import json
 import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 
 from codegen.cli import main as codegen_main
 from codegen.export import LoadedModel, export
@@ -39,6 +42,7 @@ from trainer.fitting import fit_with_stats
 from trainer.greybox.compensator import PhysicsCompensator
 from trainer.greybox.stream import PhysicsStream, StreamState
 from trainer.physics.config import parse_config_text
+from trainer.physics.effects import EffectConfig
 from trainer.physics.simulate import simulate
 
 NAME = "tdc_phys"
@@ -234,3 +238,101 @@ def test_warm_up_model_and_missing_rate_are_refused_in_one_line(
         err = capsys.readouterr().err.strip()
         assert code == 2 and message in err and "\n" not in err and "Traceback" not in err
         assert not (tmp_path / "never").exists()
+
+
+def test_export_is_byte_identical_and_ships_the_physics_kernels(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path
+) -> None:
+    path, out, _, _ = fitted
+    export(path, tmp_path / "again", name=NAME)
+    files = sorted(p.name for p in out.iterdir())
+    assert files == sorted(p.name for p in (tmp_path / "again").iterdir())
+    for name in files:
+        assert (out / name).read_bytes() == (tmp_path / "again" / name).read_bytes(), name
+    shipped = Path(__file__).resolve().parents[1] / "codegen" / "kernels" / "tdc_physics_kernels.h"
+    assert (out / "tdc_physics_kernels.h").read_bytes() == shipped.read_bytes()
+    manifest = json.loads((out / f"{NAME}.manifest.json").read_text())
+    assert manifest["files"]["physics_kernels"] == "tdc_physics_kernels.h"
+    host = load_module(out, NAME, flags=("-O1",))
+    assert host.sizeof_state() == manifest["sizes"]["ram_state_bytes"] <= 48  # a few words of state
+
+
+@st.composite
+def plausible_physics(draw: st.DrawFn) -> tuple[dict[str, dict[str, float]], tuple[float, float], float]:
+    """Any structure, parameters across the catalogue's plausible ranges, training ranges and rates."""
+    sign = st.sampled_from([-1.0, 1.0])
+    effects: dict[str, dict[str, float]] = {
+        "bias_poly": {
+            "c0_mg": draw(st.floats(-50, 50)),
+            "c1_mg_per_c": draw(st.floats(-1, 1)),
+            "c2_mg_per_c2": draw(st.floats(-0.01, 0.01)),
+            "c3_mg_per_c3": draw(st.floats(-1e-4, 1e-4)),
+        }
+    }
+    if draw(st.booleans()):
+        effects["thermal_lag"] = {"tau_s": draw(st.floats(10, 900))}
+    if draw(st.booleans()):
+        k = draw(st.floats(0.01, 2)) * draw(sign)
+        effects["temp_rate"] = {"k_mg_per_c_per_min": k, "tau_s": draw(st.floats(30, 600))}
+    branch = draw(st.sampled_from([None, "hysteresis", "hysteresis_offset"]))
+    if branch is not None:
+        amp = draw(st.floats(0.02, 2 if branch == "hysteresis" else 20)) * draw(sign)
+        width = draw(st.floats(2, 30 if branch == "hysteresis" else 60))
+        effects[branch] = {"amp_mg": amp, "width_c": width}
+    if draw(st.booleans()):
+        gain = draw(st.floats(0.001, 0.05)) * draw(sign)
+        effects["stress_relaxation"] = {"gain_mg_per_c": gain, "tau_s": draw(st.floats(1200, 20000))}
+    lo = round(draw(st.floats(-60, 20)), 3)  # the range's ends are thermometer readings: whole mdegC
+    hi = round(lo + draw(st.floats(5, 150)), 3)
+    return effects, (lo, hi), draw(st.sampled_from([5.0, 50.0, 200.0]))
+
+
+@settings(
+    max_examples=8,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],  # no shrinking: an example costs seconds
+)
+@given(case=plausible_physics(), seed=st.integers(0, 2**32 - 1))
+def test_plausible_models_export_and_the_c_equals_golden_under_sanitizers(
+    case: tuple[dict[str, dict[str, float]], tuple[float, float], float], seed: int, tmp_path: Path
+) -> None:
+    """Every plausible model exports (the bounds hold), the C equals the golden model bit for bit on
+    a stream with slews, clips and int32 extremes (ASan/UBSan: no overflow), and the golden model
+    follows the float64 stream within the budget on the in-range part."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    effects, (lo, hi), rate_hz = case
+    model = PhysicsCompensator()
+    model.effects = tuple(EffectConfig(k, dict(v)) for k, v in effects.items())
+    model.temp_range_c, model.report = (lo, hi), {}
+    checkpoint = tm.checkpoint_dict("physics", model.to_payload(), (lo, hi))
+    checkpoint["train_stats"] = {"sample_rate_hz": rate_hz}
+    tm.save_checkpoint(checkpoint, tmp_path / "model.pt")
+    loaded, _ = export(tmp_path / "model.pt", tmp_path / "out", name=NAME)
+    rng = np.random.default_rng(seed)
+    n = 4_000
+    ramp = lo + (hi - lo) * (0.5 - 0.5 * np.cos(np.linspace(0, 3 * np.pi, n)))  # two warm-ups, a cool-down
+    temp = np.round(1000 * ramp + rng.normal(0, 20, n)).astype(np.int64)
+    accel = rng.integers(-(2**24), 2**24, n)
+    inside = slice(0, n)
+    burst_t = rng.choice([-(2**31), 2**31 - 1, -300_000, 500_000], 300)
+    burst_a = rng.choice([-(2**31), 2**31 - 1, 0], 300)
+    accel, temp = np.concatenate([accel, burst_a]), np.concatenate([temp, burst_t])
+    commands = np.zeros(accel.size, dtype=np.int64)
+    commands[n + 150] = CMD_RESET
+    vectors, outputs = tmp_path / "v.bin", tmp_path / "o.bin"
+    write_vectors(vectors, accel, temp, commands)
+    harness = render_template("harness_vectors.c.j2", loaded.quantised, NAME, loaded.sha256)
+    binary = build_harness(tmp_path / "out", NAME, harness, tmp_path / "san", flags=("-O1", *SANITIZER_FLAGS))
+    run_harness(binary, vectors, outputs)
+    golden = golden_for(loaded.quantised)
+    expected = [golden.run(accel[: n + 150], temp[: n + 150])]
+    golden.reset()
+    expected.append(golden.run(accel[n + 150 :], temp[n + 150 :]))
+    c_out = np.frombuffer(outputs.read_bytes(), dtype="<i4").astype(np.int64)
+    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    stream = PhysicsStream(model.model, 1.0 / rate_hz)
+    reference = np.array([stream.step(t / 1000.0) for t in temp[inside].tolist()])
+    err = (accel[inside] - expected[0][inside]) / ACCEL_PER_MG - reference
+    assert np.max(np.abs(err)) < BUDGET_MG, np.max(np.abs(err))

@@ -43,25 +43,21 @@
 #endif
 
 /* BEGIN Q FORMATS: written by `python -m codegen.qformats --write` from codegen/qformats.py */
-#define TDCK_X_FRAC          12 /* network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged) ... */
-#define TDCK_X_MIN_FRAC      10 /* ... or wider, down to Q5.10 (+-32), when layer 0 loses no accumulator bit */
-#define TDCK_H_FRAC          15 /* hidden states h: int16 Q15, |h| <= 32767 */
-#define TDCK_GATE_FRAC       16 /* sigmoid gates i, f, o: Q16 in 1 .. 65535 (a forget gate stays below 1) */
-#define TDCK_TANH_FRAC       15 /* tanh of the g gate and of the cell: Q15 in -32767 .. 32767 */
-#define TDCK_C_FRAC          24 /* cell states c: int32 Q7.24 (saturated at the int32 limits, flagged) */
-#define TDCK_EST_FRAC        16 /* held estimate: Q16 of the output LSB (1/16 ug) */
-#define TDCK_MIN_ACC_FRAC    17 /* gate accumulators: int32 Q(A) with A >= 17 (the table's step and position bits) */
-#define TDCK_MAX_ACC_FRAC    30 /* largest A the quantiser tries */
-#define TDCK_ACT_RANGE       8 /* the activation table covers tanh inputs -8 .. 8 (sigmoid: -16 .. 16) */
-#define TDCK_ACT_STEP_BITS   5 /* table step 2^-5 of the tanh input: 512 segments */
-#define TDCK_ACT_SEGMENTS    512 /* segments of the activation table (2 ACT_RANGE 2^ACT_STEP_BITS) */
-#define TDCK_ACT_POS_BITS    12 /* position inside a segment: 12 bits */
-#define TDCK_ACT_SLOPE_BITS  16 /* slopes carry 16 bits below the Q15 output: out = v + (s pos + 2^15) >> 16 */
-#define TDCK_ACT_VALUE_FRAC  15 /* table values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535 */
-#define TDCK_PHYS_STATE_FRAC 32 /* physics: temperatures and filter states int64 Q32 mdegC (2^-42 degC) */
-#define TDCK_PHYS_DIFF_SHIFT 16 /* physics: a state difference loses 16 bits before a coefficient multiply */
-#define TDCK_PHYS_COEF_BITS  24 /* physics: filter and gain coefficients carry 24 significant bits */
-#define TDCK_PHYS_U_FRAC     30 /* physics: polynomial argument u = (T_b - 25 degC) / 2^p in Q30, |u| <= 1 */
+#define TDCK_X_FRAC         12 /* network inputs x: int16 Q3.12 (normalised, clamped to +-8, flagged) ... */
+#define TDCK_X_MIN_FRAC     10 /* ... or wider, down to Q5.10 (+-32), when layer 0 loses no accumulator bit */
+#define TDCK_H_FRAC         15 /* hidden states h: int16 Q15, |h| <= 32767 */
+#define TDCK_GATE_FRAC      16 /* sigmoid gates i, f, o: Q16 in 1 .. 65535 (a forget gate stays below 1) */
+#define TDCK_TANH_FRAC      15 /* tanh of the g gate and of the cell: Q15 in -32767 .. 32767 */
+#define TDCK_C_FRAC         24 /* cell states c: int32 Q7.24 (saturated at the int32 limits, flagged) */
+#define TDCK_EST_FRAC       16 /* held estimate: Q16 of the output LSB (1/16 ug) */
+#define TDCK_MIN_ACC_FRAC   17 /* gate accumulators: int32 Q(A) with A >= 17 (the table's step and position bits) */
+#define TDCK_MAX_ACC_FRAC   30 /* largest A the quantiser tries */
+#define TDCK_ACT_RANGE      8 /* the activation table covers tanh inputs -8 .. 8 (sigmoid: -16 .. 16) */
+#define TDCK_ACT_STEP_BITS  5 /* table step 2^-5 of the tanh input: 512 segments */
+#define TDCK_ACT_SEGMENTS   512 /* segments of the activation table (2 ACT_RANGE 2^ACT_STEP_BITS) */
+#define TDCK_ACT_POS_BITS   12 /* position inside a segment: 12 bits */
+#define TDCK_ACT_SLOPE_BITS 16 /* slopes carry 16 bits below the Q15 output: out = v + (s pos + 2^15) >> 16 */
+#define TDCK_ACT_VALUE_FRAC 15 /* table values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535 */
 /* END Q FORMATS */
 
 /* ---- saturation and rounding (generic: any model may use them) ------------------------------ */
