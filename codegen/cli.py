@@ -8,12 +8,19 @@ import sys
 
 from codegen import __version__
 from codegen.flightparams import EXTENSIONS
+from trainer.commands.channel_options import add_channels_option
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 
 EXIT_MISMATCH = 1
 
 
 def _export(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        from trainer.commands.channel_options import model_files
+
+        args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
+    if args.format == "calibration-blob" or args.blob or (args.format == "c" and len(args.model) > 1):
+        return _export_imu(args)
     if args.format != "c":
         return _export_params(args)
     for option, given in (
@@ -40,6 +47,32 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_imu(args: argparse.Namespace) -> int:
+    """Several channels: one IMU module (docs/imu-module.md) and/or its calibration blob."""
+    from pathlib import Path
+
+    from codegen.imu import export_imu
+
+    if args.format not in ("c", "calibration-blob"):
+        raise UserError(f"--blob applies to --format c, not {args.format}")
+    blob_only = args.format == "calibration-blob"
+    imu, written = export_imu(
+        [Path(p) for p in args.model],
+        args.out_dir,
+        name=args.name or "imu_tdc",
+        accel_limit_g=args.accel_limit_g,
+        blob=args.blob,
+        blob_only=blob_only,
+    )
+    what = "calibration blob" if blob_only else "data-only IMU module and blob" if args.blob else "IMU module"
+    print(
+        f"wrote {args.out_dir}/{{{', '.join(written)}}}: {what}, {len(imu.channels)} channels "
+        f"({', '.join(f'{c.name} {c.model.checkpoint.method}' for c in imu.channels)}), "
+        f"module id 0x{imu.module_id:08x}, calibration sha256:{imu.sha256[:16]}..."
+    )
+    return 0
+
+
 def _export_params(args: argparse.Namespace) -> int:
     """Flight-stack parameter files: one per command, all models' channels in it."""
     from codegen.export import write_files_atomically
@@ -63,7 +96,29 @@ def _export_params(args: argparse.Namespace) -> int:
     return 0
 
 
+def _verify_imu(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from codegen.imu_verify import imu_report_lines, verify_imu
+    from trainer.commands.channel_options import model_files
+    from trainer.data.recording_io import read_recording
+
+    rec = read_recording(args.recording)
+    models = model_files(args.model, args.channels)
+    result = verify_imu(models, Path(args.out_dir), rec, name=args.name, cc=args.cc, cortex_m4=args.cortex_m4)
+    for line in imu_report_lines(result):
+        print(line)
+    if not result.ok:
+        print("error: the generated IMU module differs from the golden model", file=sys.stderr)
+        return EXIT_MISMATCH
+    return 0
+
+
 def _verify(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        return _verify_imu(args)
+    if args.cortex_m4:
+        raise UserError("--cortex-m4 applies to an IMU module (--channels); see firmware_c/ for one channel")
     from codegen.verify import report_lines, verify
 
     result = verify(
@@ -106,12 +161,19 @@ def build_parser() -> argparse.ArgumentParser:
         default=16.0,
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
     )
+    add_channels_option(exp, "take the model from each MODEL directory (written by 'trainer fit --channels')")
+    exp.add_argument(
+        "--blob",
+        action="store_true",
+        help="several channels: a data-only module that reads its tables from NAME.cal.bin (also written)",
+    )
     exp.add_argument(
         "--format",
-        choices=("c", *EXTENSIONS),
+        choices=("c", *EXTENSIONS, "calibration-blob"),
         default="c",
-        help="c: the fixed-point C module (default); px4-params: a QGroundControl .params file of TC_*; "
-        "ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only)",
+        help="c: the fixed-point C module (default; one IMU module for several channels); px4-params: a "
+        "QGroundControl .params file of TC_*; ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only); "
+        "calibration-blob: only NAME.cal.bin, a unit's tables for a data-only IMU module",
     )
     exp.add_argument(
         "--channel", help="parameter files: the sensor axis of the model (default: as fitted), e.g. accel0_z"
@@ -135,6 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
     ver.add_argument("--name", help="module name when OUTDIR holds several")
     ver.add_argument("--cc", help="C compiler (default $CC, cc, gcc or clang)")
     ver.add_argument("--no-table", action="store_true", help="skip the Table 1 comparison (saves a few s)")
+    add_channels_option(ver, "verify an IMU module (MODEL: the 'trainer fit --channels' directory)")
+    ver.add_argument(
+        "--cortex-m4", action="store_true", help="IMU module: also run it on a Cortex-M4 under QEMU"
+    )
     ver.set_defaults(func=_verify)
     return parser
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from trainer.commands.channel_options import add_channels_option
 from trainer.data.flightlog import KIND_NAMES, log_kind
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import (
@@ -97,6 +98,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME",
         help=f"flight logs: the accelerometer axis that becomes the recording (default {DEFAULT_CHANNEL})",
     )
+    add_channels_option(
+        parser,
+        "keep the data column (with the preset's units converted to mg, deg/s, Pa) and its temperature",
+    )
     parser.add_argument(
         "--list-channels", action="store_true", help="flight logs: print every channel of the log and stop"
     )
@@ -163,6 +168,10 @@ def run(args: argparse.Namespace) -> int:
     how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
     rate_hz = float(rec.meta["sample_rate_hz"])
     picked = f" ({rec.meta['channel']})" if kind is not None else ""
+    if args.channels is not None:
+        from trainer.data.channels import recording_channels
+
+        picked = f" (channels {', '.join(recording_channels(rec))})"
     print(f"{args.output}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}{picked}")
     return 0
 
@@ -183,6 +192,7 @@ def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Re
         resample=resample,
         retime=args.retime,
         fill_temp=args.fill_temp,
+        channels=args.channels,
     )
     return import_flight_log(args.foreign, options, checks)
 
@@ -214,4 +224,5 @@ def import_options(args: argparse.Namespace) -> ImportOptions:
         temp_unit=args.temp_unit,
         decimal_comma=args.decimal_comma or None,
         fill_temp=args.fill_temp,
+        channels=getattr(args, "channels", None),
     )

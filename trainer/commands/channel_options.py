@@ -1,0 +1,95 @@
+"""``--channels all|LIST``: the one declaration every per-channel command uses.
+
+``trainer import``, ``fit``, ``evaluate``, ``compare``, ``diagnose`` and ``codegen export`` add
+it with :func:`add_channels_option`; the names are checked against a recording by
+:func:`trainer.data.channels.select_channels`. Per-channel outputs go to ``<OUT>/<channel>``
+(:func:`channel_output`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from trainer.data.channels import parse_channels_option, sort_key
+from trainer.errors import UserError
+
+CHANNELS_OPTION = "--channels"
+MODEL_SUFFIX = ".pt"  # trainer fit --channels writes OUT/<channel>.pt
+INDEX_FILE = "channels.json"  # ... and OUT/channels.json (what was fitted, units)
+
+
+def _channels(text: str) -> tuple[str, ...]:
+    try:
+        return parse_channels_option(text)
+    except UserError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--channels ")) from None
+
+
+def add_channels_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--channels``; ``what`` says what the command does per channel (for the help text)."""
+    parser.add_argument(
+        CHANNELS_OPTION,
+        type=_channels,
+        metavar="all|LIST",
+        help=f"multi-channel recordings: {what} for each channel, 'all' or a list such as "
+        "accel0_z,gyro0_x (column names: shared/specs/recording-format.md, 'Several channels')",
+    )
+
+
+def channel_output(out: str | Path, channel: str, suffix: str = "") -> Path:
+    """Where a per-channel output of a command whose output is ``out`` goes: ``out/<channel><suffix>``."""
+    return Path(out) / f"{channel}{suffix}"
+
+
+def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
+    """The per-channel models ``trainer fit --channels`` wrote into ``directory``, as ``wanted``."""
+    root = Path(directory)
+    if not root.is_dir():
+        raise UserError(
+            f"{root}: {CHANNELS_OPTION} reads a directory written by 'trainer fit {CHANNELS_OPTION}'"
+        )
+    available = sorted((p.stem for p in root.glob(f"*{MODEL_SUFFIX}")), key=sort_key)
+    if not available:
+        raise UserError(f"{root}: no per-channel models (*{MODEL_SUFFIX}) in it")
+    names = available if wanted == ("all",) else list(wanted)
+    missing = [name for name in names if name not in available]
+    if missing:
+        raise UserError(
+            f"{root}: {CHANNELS_OPTION} {missing[0]!r} has no model in this directory; available: "
+            f"{', '.join(available)}"
+        )
+    return [root / f"{name}{MODEL_SUFFIX}" for name in names]
+
+
+@contextmanager
+def staged_directory(out: str | Path) -> Iterator[Path]:
+    """Yield an empty staging folder; its files move into ``out`` (created if absent) only on success,
+    so a failure on the fifth channel leaves no partial set of models."""
+    target = Path(out)
+    if target.exists() and not target.is_dir():
+        raise UserError(f"{target}: exists and is not a directory (per-channel outputs go into a directory)")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UserError(f"{target}: parent directory {parent} does not exist")
+    base = target if target.is_dir() else parent
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise UserError(f"{target}: directory {base} is not writable")
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
+    try:
+        yield staging
+        if base == target:
+            for item in sorted(staging.iterdir()):
+                os.replace(item, target / item.name)
+            staging.rmdir()
+        else:
+            os.chmod(staging, 0o755)
+            os.rename(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
