@@ -79,16 +79,34 @@ def _export_params(args: argparse.Namespace) -> int:
     from codegen.flightparams import load_channel_cubic, render
     from codegen.render import validate_name
 
-    if len(args.model) > 1 and (args.channel is not None or args.device_id is not None):
-        raise UserError("--channel and --device-id name the channel of a single model; give one model")
+    per_sensor = args.device_id if isinstance(args.device_id, dict) else {}
+    device_id = None if per_sensor else args.device_id
+    if len(args.model) > 1 and (args.channel is not None or device_id is not None):
+        raise UserError(
+            "--channel and --device-id ID name the channel of a single model; give one model "
+            "(or --device-id SENSOR=ID,... such as accel0=ID,gyro0=ID)"
+        )
     name = (
         validate_name(args.name)
         if args.name
         else ("px4_thermal" if args.format == "px4-params" else "ardupilot_tcal")
     )
-    channels = [
-        load_channel_cubic(path, channel=args.channel, device_id=args.device_id) for path in args.model
-    ]
+    channels = [load_channel_cubic(path, channel=args.channel, device_id=device_id) for path in args.model]
+    if per_sensor:
+        import dataclasses
+
+        sensors = {f"{c.channel.sensor}{c.channel.instance}" for c in channels}
+        unknown = sorted(set(per_sensor) - sensors)
+        if unknown:
+            raise UserError(
+                f"--device-id {unknown[0]}=...: no model of that sensor (models: {', '.join(sorted(sensors))})"
+            )
+        channels = [
+            dataclasses.replace(
+                c, device_id=per_sensor.get(f"{c.channel.sensor}{c.channel.instance}", c.device_id)
+            )
+            for c in channels
+        ]
     text = render(args.format, channels, keep_constant=args.keep_constant)
     file_name = name + EXTENSIONS[args.format]
     write_files_atomically({file_name: text}, args.out_dir)
@@ -135,6 +153,21 @@ def _verify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _device_ids(text: str) -> int | dict[str, int]:
+    """``ID`` (one model) or ``SENSOR=ID,...`` (sensor instances such as accel0, gyro0)."""
+    import re
+
+    if text.strip().isdigit():
+        return int(text)
+    ids = {}
+    for item in text.split(","):
+        match = re.fullmatch(r"\s*((?:accel|gyro|baro)[0-9])=([0-9]+)\s*", item)
+        if match is None:
+            raise argparse.ArgumentTypeError(f"{item!r} is not ID or SENSOR=ID (e.g. accel0=2490378)")
+        ids[match.group(1)] = int(match.group(2))
+    return ids
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineArgumentParser(
         prog="codegen", description="Fixed-point C99 export of mems-tdc compensators."
@@ -179,7 +212,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--channel", help="parameter files: the sensor axis of the model (default: as fitted), e.g. accel0_z"
     )
     exp.add_argument(
-        "--device-id", type=int, help="px4-params: the sensor's device id (default: as imported)"
+        "--device-id",
+        type=_device_ids,
+        metavar="ID|SENSOR=ID,...",
+        help="px4-params: the sensor's device id (default: as imported); several models: accel0=ID,gyro0=ID",
     )
     exp.add_argument(
         "--keep-constant",

@@ -9,14 +9,16 @@ it with :func:`add_channels_option`; the names are checked against a recording b
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from trainer.data.channels import parse_channels_option, sort_key
+from trainer.data.channels import Channel, parse_channels_option, sort_key
 from trainer.errors import UserError
 
 CHANNELS_OPTION = "--channels"
@@ -93,3 +95,80 @@ def staged_directory(out: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+
+
+def run_per_channel(
+    args: argparse.Namespace,
+    run_one: Callable[[argparse.Namespace], int],
+    *,
+    recordings: tuple[str, ...],
+    out_dirs: tuple[str, ...] = (),
+    out_files: tuple[str, ...] = (),
+    model: str | None = None,
+    refuse: Callable[[Channel], str | None] | None = None,
+) -> int:
+    """Run a one-channel command once per ``--channels`` channel.
+
+    Each channel's one-channel view of every recording argument (``recordings``: attribute
+    names) is written to a temporary ``.npz`` named ``<stem>[<channel>].npz``; the command's
+    output directories (``out_dirs``) become ``<dir>/<channel>``, output files (``out_files``)
+    ``<stem>.<channel><suffix>``, and ``model`` (a ``trainer fit --channels`` directory)
+    ``<dir>/<channel>.pt``. Text the command prints or writes (.md, .txt, .json) says the
+    channel's unit instead of mg (:func:`trainer.data.channels.relabel_units`).
+    """
+    from trainer.data.channels import channel_view, relabel_units, select_channels
+    from trainer.data.recording_io import read_recording, write_recording
+
+    given = {attr: getattr(args, attr) for attr in recordings if getattr(args, attr) is not None}
+    recs = {attr: read_recording(path) for attr, path in given.items()}
+    channels = select_channels(next(iter(recs.values())), args.channels)
+    for channel in channels:
+        reason = refuse(channel) if refuse is not None else None
+        if reason is not None:
+            raise UserError(reason)
+    models = model_files(getattr(args, model), tuple(c.name for c in channels)) if model else []
+    status = 0
+    with tempfile.TemporaryDirectory(prefix="channels-") as tmp:
+        for index, channel in enumerate(channels):
+            sub = argparse.Namespace(**vars(args))
+            sub.channels = None
+            for attr, rec in recs.items():
+                select_channels(rec, (channel.name,))  # every recording must carry the channel
+                path = Path(tmp) / f"{Path(given[attr]).stem}[{channel.name}].npz"
+                write_recording(channel_view(rec, channel), path)
+                setattr(sub, attr, str(path))
+            for attr in out_dirs:
+                if getattr(args, attr) is not None:
+                    setattr(sub, attr, str(channel_output(getattr(args, attr), channel.name)))
+                    Path(getattr(args, attr)).mkdir(exist_ok=True)
+            for attr in out_files:
+                if getattr(args, attr) is not None:
+                    original = Path(getattr(args, attr))
+                    setattr(
+                        sub, attr, str(original.with_name(f"{original.stem}.{channel.name}{original.suffix}"))
+                    )
+            if model:
+                setattr(sub, model, str(models[index]))
+            print(f"== {channel.name} [{channel.label}]", flush=True)
+            captured = io.StringIO()
+            with contextlib.redirect_stdout(captured):
+                status = max(status, run_one(sub))
+            print(relabel_units(captured.getvalue(), channel.unit), end="", flush=True)
+            if channel.unit != "mg":
+                _relabel_outputs(sub, out_dirs, out_files, channel.unit)
+    return status
+
+
+def _relabel_outputs(
+    sub: argparse.Namespace, out_dirs: tuple[str, ...], out_files: tuple[str, ...], unit: str
+) -> None:
+    from trainer.data.channels import relabel_units
+
+    paths: list[Path] = []
+    for attr in out_dirs:
+        if getattr(sub, attr) is not None and Path(getattr(sub, attr)).is_dir():
+            paths += [p for p in Path(getattr(sub, attr)).rglob("*") if p.suffix in (".md", ".txt", ".json")]
+    paths += [Path(getattr(sub, attr)) for attr in out_files if getattr(sub, attr) is not None]
+    for path in paths:
+        if path.is_file():
+            path.write_text(relabel_units(path.read_text(encoding="utf-8"), unit), encoding="utf-8")
