@@ -186,9 +186,12 @@ def test_imu_module_is_bit_exact_against_each_channel_golden_model(
     out = tmp_path / "c"
     assert codegen_main(["export", *map(str, models), "-o", str(out), "--name", "imu0"]) == 0
     wide = read_recording(imu["wide"])
-    result = verify_imu(models, out, wide)
-    assert [run.target for run in result.runs] == ["host"]
-    assert result.runs[0].mismatches == [0] * 7 and result.runs[0].state_equal
+    for cc in ("gcc", "clang"):  # strict warnings are errors with both
+        if shutil.which(cc) is None:
+            continue
+        result = verify_imu(models, out, wide, cc=cc)
+        assert [run.target for run in result.runs] == ["host"]
+        assert result.runs[0].mismatches == [0] * 7 and result.runs[0].state_equal
     # the golden flags saw the out-of-range temperatures; the C agrees on them (state_equal)
     model = load_imu(models)
     raw, temp = step_inputs(model, wide)
@@ -329,3 +332,40 @@ def test_import_real_run_keeps_accelerometer_and_gyroscope(tmp_path: Path) -> No
 def test_checkpoint_of_a_gyro_channel_names_its_unit(imu: dict[str, Path]) -> None:
     stats = load_checkpoint(imu["root"] / "poly3" / "gyro0_y.pt")["train_stats"]
     assert stats["channel"] == "gyro0_y" and stats["unit"] == "dps"
+
+
+# --------------------------------------------------------------------------- flight logs
+from tests.test_flightlog_import import dataflash, ulog_data, ulog_path  # noqa: E402, F401  (fixtures)
+
+
+def test_flight_log_channels_keep_what_was_asked_on_one_time_base(
+    tmp_path: Path,
+    dataflash: tuple[Path, dict],  # noqa: F811 (the fixture imported above)
+    ulog_path: Path,  # noqa: F811
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from trainer.data.channels import recording_channels
+
+    path, _ = dataflash
+    out = tmp_path / "df.npz"
+    assert (
+        trainer_main(["import", str(path), "--channel", "accel1_z", "--channels", "all", "-o", str(out)]) == 0
+    )
+    rec = read_recording(out)
+    # the test log writes both IMUs at the same timestamps: every channel of both is logged together
+    expected = [f"{s}{i}_{a}" for s in ("accel", "gyro") for i in (0, 1) for a in "xyz"]
+    assert list(recording_channels(rec)) == expected
+    assert recording_channels(rec)["gyro1_x"].temp_column == "gyro1_temp_c"
+    assert rec.meta["channel"] == "accel1_z"
+
+    out = tmp_path / "ulog.npz"
+    assert trainer_main(["import", str(ulog_path), "--channels", "accel0_x,accel0_z", "-o", str(out)]) == 0
+    assert list(recording_channels(read_recording(out))) == ["accel0_x", "accel0_z"]
+    code = run_cli(
+        trainer_main,
+        ["import", str(ulog_path), "--channels", "accel0_x,gyro0_x", "-o", str(tmp_path / "x.npz")],
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "'gyro0_x' is logged at other timestamps" in err and "accel0_x, accel0_y, accel0_z" in err
+    assert not (tmp_path / "x.npz").exists()
