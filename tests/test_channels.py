@@ -173,6 +173,35 @@ def test_refusals_say_why(imu: dict[str, Path], tmp_path: Path, capsys: pytest.C
     assert code == 2 and "gyro0_x" in err and "catalogue" in err
 
 
+def test_compare_and_diagnose_per_channel_outputs(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "cmp"
+    argv = [
+        "compare",
+        str(imu["rec"]),
+        "--holdout",
+        "0.5",
+        "--methods",
+        "poly3",
+        "--channels",
+        "gyro0_x,baro0",
+    ]
+    assert trainer_main([*argv, "--out-dir", str(out), "--quiet"]) == 0
+    for channel, unit in (("gyro0_x", "deg/s"), ("baro0", "Pa")):
+        report = (out / channel / "report.md").read_text()
+        assert f"drift left RMS ({unit})" in report and "(mg)" not in report
+        assert load_checkpoint(out / channel / "models" / "poly3.pt")["train_stats"]["channel"] == channel
+    code = run_cli(
+        trainer_main, [*argv[:-1], "baro0", "--methods", "dlstm,poly3", "--out-dir", str(tmp_path / "x")]
+    )
+    assert code == 2 and "recursive" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    (tmp_path / "j").mkdir()
+    argv = ["diagnose", str(imu["rec"]), "--channels", "accel0_x", "--json", str(tmp_path / "j" / "d.json")]
+    assert trainer_main(argv) == 0
+    assert json.loads((tmp_path / "j" / "d.accel0_x.json").read_text())
+
+
 def _mixed_models(imu: dict[str, Path]) -> list[Path]:
     """poly3 on accelerometer and gyro z, pla on gyro x/y and the barometer."""
     pla = {"gyro0_x", "gyro0_y", "baro0"}

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from trainer.data.channels import Channel, parse_channels_option, sort_key
+from trainer.data.recording import Recording
 from trainer.errors import UserError
 
 CHANNELS_OPTION = "--channels"
@@ -116,8 +117,8 @@ def run_per_channel(
     ``<dir>/<channel>.pt``. Text the command prints or writes (.md, .txt, .json) says the
     channel's unit instead of mg (:func:`trainer.data.channels.relabel_units`).
     """
-    from trainer.data.channels import channel_view, relabel_units, select_channels
-    from trainer.data.recording_io import read_recording, write_recording
+    from trainer.data.channels import select_channels
+    from trainer.data.recording_io import read_recording
 
     given = {attr: getattr(args, attr) for attr in recordings if getattr(args, attr) is not None}
     recs = {attr: read_recording(path) for attr, path in given.items()}
@@ -127,6 +128,36 @@ def run_per_channel(
         if reason is not None:
             raise UserError(reason)
     models = model_files(getattr(args, model), tuple(c.name for c in channels)) if model else []
+    status = 0
+    created = [
+        Path(getattr(args, a))
+        for a in out_dirs
+        if getattr(args, a) is not None and not Path(getattr(args, a)).exists()
+    ]
+    try:
+        status = _each_channel(args, run_one, channels, recs, given, out_dirs, out_files, model, models)
+    except BaseException:
+        for directory in created:  # nothing half-made is left behind
+            if directory.is_dir() and not any(directory.iterdir()):
+                directory.rmdir()
+        raise
+    return status
+
+
+def _each_channel(
+    args: argparse.Namespace,
+    run_one: Callable[[argparse.Namespace], int],
+    channels: list[Channel],
+    recs: dict[str, Recording],
+    given: dict[str, str],
+    out_dirs: tuple[str, ...],
+    out_files: tuple[str, ...],
+    model: str | None,
+    models: list[Path],
+) -> int:
+    from trainer.data.channels import channel_view, relabel_units, select_channels
+    from trainer.data.recording_io import write_recording
+
     status = 0
     with tempfile.TemporaryDirectory(prefix="channels-") as tmp:
         for index, channel in enumerate(channels):
@@ -139,8 +170,11 @@ def run_per_channel(
                 setattr(sub, attr, str(path))
             for attr in out_dirs:
                 if getattr(args, attr) is not None:
-                    setattr(sub, attr, str(channel_output(getattr(args, attr), channel.name)))
-                    Path(getattr(args, attr)).mkdir(exist_ok=True)
+                    directory = Path(getattr(args, attr))
+                    if not directory.parent.is_dir():
+                        raise UserError(f"{directory}: parent directory {directory.parent} does not exist")
+                    directory.mkdir(exist_ok=True)
+                    setattr(sub, attr, str(channel_output(directory, channel.name)))
             for attr in out_files:
                 if getattr(args, attr) is not None:
                     original = Path(getattr(args, attr))
