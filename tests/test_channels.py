@@ -398,3 +398,20 @@ def test_flight_log_channels_keep_what_was_asked_on_one_time_base(
     assert code == 2 and len(err.splitlines()) == 1
     assert "'gyro0_x' is logged at other timestamps" in err and "accel0_x, accel0_y, accel0_z" in err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_channel_map_of_a_delimited_file_converts_each_sensor_unit(tmp_path: Path) -> None:
+    n = 40
+    temp = 20.0 + 0.25 * np.arange(n)
+    ax, gx, p = 0.01 * np.arange(n), 0.001 * np.arange(n), 1013.0 + 0.01 * np.arange(n)
+    lines = ["t;T;ax;gx;p"] + [f"{0.1 * i:.1f};{temp[i]};{ax[i]};{gx[i]};{p[i]}" for i in range(n)]
+    source = tmp_path / "log.csv"
+    source.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "rec.npz"
+    argv = ["import", str(source), "--time", "t", "--temp", "T", "--accel", "ax", "--accel-unit", "g"]
+    argv += ["--channel-map", "accel0_x=ax,gyro0_x=gx,baro0=p", "--gyro-unit", "rad/s", "--baro-unit", "hPa"]
+    assert trainer_main([*argv, "--channels", "all", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    np.testing.assert_allclose(rec.columns["accel0_x_mg"], ax * 1000.0, rtol=1e-12)
+    np.testing.assert_allclose(rec.columns["gyro0_x_dps"], np.degrees(gx), rtol=1e-12)
+    np.testing.assert_allclose(rec.columns["baro0_pa"], p * 100.0, rtol=1e-12)

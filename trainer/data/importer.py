@@ -153,7 +153,10 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
     if values.get("resample") == "none":  # an explicit "enforce the jitter rule" beats the preset
         values["resample"] = None
     values["meta"] = dict(values.get("meta", {}))  # type: ignore[call-overload]
-    values["channel_map"] = dict(values.get("channel_map", {}))  # type: ignore[call-overload]
+    values["channel_map"] = {  # a given map adds to (and overrides) the preset's
+        **PRESETS.get(preset or "", {}).get("channel_map", {}),  # type: ignore[dict-item]
+        **(given.get("channel_map") or {}),  # type: ignore[dict-item]
+    }
     if values.get("channels") is not None:
         values.pop("extra_axes", None)  # the channels replace the older accel_x_mg spelling
     for required in ("temp", "accel"):
@@ -262,8 +265,8 @@ def _selected_channels(options: ImportOptions, source: str) -> list[tuple[str, s
         return []
     if not options.channel_map:
         raise UserError(
-            f"{source}: --channels needs a channel map for a delimited file (a --preset that has one, e.g. "
-            f"tofupilot); without it import one axis with --accel"
+            f"{source}: --channels needs a channel map for a delimited file (--channel-map accel0_x=COL,... or "
+            f"a --preset that has one, e.g. tofupilot); without it import one axis with --accel"
         )
     names = list(options.channel_map) if options.channels == (ALL,) else list(options.channels)
     for name in names:
