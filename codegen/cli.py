@@ -137,6 +137,15 @@ def _verify(args: argparse.Namespace) -> int:
         return _verify_imu(args)
     if args.cortex_m4:
         raise UserError("--cortex-m4 applies to an IMU module (--channels); see firmware_c/ for one channel")
+    from pathlib import Path
+
+    from codegen.imu_verify import imu_manifest
+
+    if args.name is None and imu_manifest(Path(args.out_dir), None) is not None:
+        raise UserError(
+            f"{args.out_dir} holds an IMU module: verify it with --channels all (MODEL: the 'trainer fit "
+            f"--channels' directory)"
+        )
     from codegen.verify import report_lines, verify
 
     result = verify(

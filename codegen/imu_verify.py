@@ -213,6 +213,12 @@ def verify_imu(
         raise UserError(f"{out_dir}: no IMU module (NAME.manifest.json of 'codegen export --channels')")
     name, manifest = found
     imu = load_imu(models)
+    module_channels = [c["name"] for c in manifest["channels"]]
+    if [c.name for c in imu.channels] != module_channels:
+        raise UserError(
+            f"{out_dir / name}.c holds the channels {', '.join(module_channels)}; verify it with --channels all "
+            f"or that list (models given: {', '.join(c.name for c in imu.channels)})"
+        )
     if manifest["calibration"]["sha256"] != imu.sha256 and manifest["calibration"]["builtin"]:
         raise UserError(f"{out_dir / name}.c was generated from other models (calibration sha256 differs)")
     raw, temp = step_inputs(imu, rec)
@@ -223,7 +229,12 @@ def verify_imu(
         sources.append(("builtin", None))
     blob_path = out_dir / f"{name}{BLOB_SUFFIX}"
     if blob_path.is_file():
-        sources.append(("blob", blob_path.read_bytes()))
+        blob = blob_path.read_bytes()
+        if blob[16:48] != bytes.fromhex(imu.sha256):
+            raise UserError(
+                f"{blob_path}: the calibration of other models (its sha256 is not the given models')"
+            )
+        sources.append(("blob", blob))
     if not sources:
         raise UserError(f"{out_dir}: a data-only module and no {blob_path.name} beside it")
     builtin = bool(manifest["calibration"]["builtin"])
