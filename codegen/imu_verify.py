@@ -229,12 +229,12 @@ def verify_imu(
         sources.append(("builtin", None))
     blob_path = out_dir / f"{name}{BLOB_SUFFIX}"
     if blob_path.is_file():
-        blob = blob_path.read_bytes()
-        if blob[16:48] != bytes.fromhex(imu.sha256):
+        data = blob_path.read_bytes()
+        if data[16:48] != bytes.fromhex(imu.sha256):
             raise UserError(
                 f"{blob_path}: the calibration of other models (its sha256 is not the given models')"
             )
-        sources.append(("blob", blob))
+        sources.append(("blob", data))
     if not sources:
         raise UserError(f"{out_dir}: a data-only module and no {blob_path.name} beside it")
     builtin = bool(manifest["calibration"]["builtin"])
