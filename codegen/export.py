@@ -10,6 +10,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -107,7 +108,7 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
     return files
 
 
-def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str]) -> None:
+def write_files_atomically(files: Mapping[str, str | bytes], out_dir: str | os.PathLike[str]) -> None:
     """Write ``files`` into ``out_dir`` (created if absent, parent must exist), all or nothing."""
     target = Path(out_dir)
     parent = target.parent if str(target.parent) else Path(".")
@@ -126,7 +127,10 @@ def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str
         raise UserError(f"{target}: cannot write ({exc.strerror})") from None
     try:
         for file_name, text in files.items():
-            (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
+            if isinstance(text, bytes):  # a calibration blob (codegen/imu.py)
+                (staging / file_name).write_bytes(text)
+            else:
+                (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
             os.chmod(staging / file_name, 0o644)
         if base == target:
             for file_name in files:

@@ -102,9 +102,7 @@ def _channel_of(raw: dict[str, Any], path: Path) -> str:
     return name
 
 
-def load_imu(
-    paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, capacity: int | None = None
-) -> ImuModel:
+def load_imu(paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> ImuModel:
     """Load the channels' models; refuse what one table-driven memoryless module cannot hold."""
     from trainer.checkpoint import load_checkpoint
 
@@ -139,12 +137,12 @@ def load_imu(
                 f"one temperature front end per sensor needs them fitted on one recording"
             )
         valid.append(ranges.pop())
-    needed = max(
-        [len(c.model.quantised.slopes_q) for c in channels if isinstance(c.model.quantised, QPla)] + [1]
+    capacity = (
+        max(  # pla intervals per channel (a unit's blob must have the module's: trainer fit --intervals)
+            [len(c.model.quantised.slopes_q) for c in channels if isinstance(c.model.quantised, QPla)] + [1]
+        )
     )
-    if capacity is not None and capacity < needed:
-        raise UserError(f"--max-intervals {capacity}: a channel has {needed} intervals")
-    return ImuModel(tuple(channels), sensors, tuple(valid), capacity or needed)
+    return ImuModel(tuple(channels), sensors, tuple(valid), capacity)
 
 
 # ------------------------------------------------------------------------------ tables and blob
@@ -285,7 +283,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
 
 
 def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:
-    """``{NAME.h, NAME.c, tdc_kernels.h, NAME.manifest.json[, NAME.cal.bin hex]}`` (pure)."""
+    """``{NAME.h, NAME.c, tdc_kernels.h, NAME.manifest.json}`` (pure)."""
     env = _environment()
     ctx = _context(imu, validate_name(name), builtin)
     files = {
@@ -333,23 +331,15 @@ def export_imu(
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
     blob: bool = False,
     blob_only: bool = False,
-    capacity: int | None = None,
 ) -> tuple[ImuModel, list[str]]:
     """Write the module (built-in tables, or data-only with ``blob``) and/or the blob, all or nothing."""
     from codegen.export import write_files_atomically
 
     validate_name(name)
-    imu = load_imu(paths, accel_limit_g=accel_limit_g, capacity=capacity)
-    files = {} if blob_only else render_imu(imu, name, builtin=not blob)
-    write_files_atomically(files, out_dir)  # text files (creates the directory, all or nothing)
-    written = list(files)
+    imu = load_imu(paths, accel_limit_g=accel_limit_g)
+    files: dict[str, str | bytes] = {} if blob_only else dict(render_imu(imu, name, builtin=not blob))
     if blob or blob_only:
-        from trainer.errors import atomic_output
-
-        target = Path(out_dir) / f"{name}{BLOB_SUFFIX}"
-        if blob_only:
-            Path(out_dir).mkdir(exist_ok=True)
-        with atomic_output(target) as tmp:
-            tmp.write_bytes(encode_blob(imu))
-        written.append(target.name)
+        files[f"{name}{BLOB_SUFFIX}"] = encode_blob(imu)
+    write_files_atomically(files, out_dir)  # all or nothing
+    written = list(files)
     return imu, written

@@ -18,7 +18,7 @@ import re
 from dataclasses import dataclass
 
 from trainer.data.flightlog import SENSOR_UNITS, parse_channel
-from trainer.data.recording import TRUTH_PREFIX, Recording
+from trainer.data.recording import Recording
 from trainer.errors import UserError
 
 ALL = "all"
@@ -123,16 +123,13 @@ def select_channels(rec: Recording, wanted: tuple[str, ...]) -> list[Channel]:
 def channel_view(rec: Recording, channel: Channel) -> Recording:
     """The one-channel recording of ``channel``: its data as ``accel_mg`` (in its own unit), its
     temperature as ``temp_c``, metadata ``channel``/``unit``; other channels and truth dropped
-    (a simulator's truth columns describe ``accel_mg`` of the file, not this channel)."""
+    (the format's truth columns describe the file's ``accel_mg``, not this channel)."""
     columns = {
         "time_s": rec.time_s,
         "temp_c": rec.columns[channel.temp_column],
         "accel_mg": rec.columns[channel.column],
     }
     columns.update((name, rec.columns[name]) for name in _KEPT if name in rec.columns)
-    truth = f"{TRUTH_PREFIX}{channel.name}_drift_{channel.unit}"  # per-channel truth, when simulated
-    if truth in rec.columns:
-        columns[f"{TRUTH_PREFIX}drift_mg"] = rec.columns[truth]
     meta = dict(rec.meta)
     meta["channel"] = channel.name
     meta["unit"] = channel.unit
