@@ -39,6 +39,7 @@ class ImuRun:
     calibration: str  # builtin | blob
     mismatches: list[int]  # per channel
     state_equal: bool
+    instructions_per_step: float | None = None  # cortex-m4: all channels, call included
 
 
 @dataclass
@@ -162,8 +163,9 @@ def target_run(
     blob: bytes | None,
     work: Path,
     builtin: bool,
-) -> tuple[np.ndarray, list[int], int]:
-    """The module on a Cortex-M4 (QEMU mps2-an386), built by firmware_c/Makefile's imu-app target."""
+) -> tuple[np.ndarray, list[int], int, float]:
+    """The module on a Cortex-M4 (QEMU mps2-an386), built by firmware_c/Makefile's imu-app target;
+    also the instructions per step call (SysTick under ``-icount shift=0``, the loop subtracted)."""
     cm = _cortex_m()
     reason = cm.ensure_toolchain()
     if reason is not None:
@@ -193,10 +195,13 @@ def target_run(
     if blob is not None:
         (work / "blob.bin").write_bytes(blob)
         args.append("blob.bin")
-    cm.run_qemu(build.elf("imu_app"), args, cwd=work)
+    stdout = cm.run_qemu(build.elf("imu_app"), args, cwd=work, icount=True)
     out = np.fromfile(work / "outputs.bin", dtype="<i4").reshape(raw.shape)
     state = np.fromfile(work / "state.bin", dtype="<u4")
-    return out, [int(v) for v in state[:-1]], int(state[-1])
+    ticks = next(line.split()[1:] for line in stdout.splitlines() if line.startswith("ticks "))
+    per_tick = 1e9 / cm.SYSCLK_HZ  # -icount shift=0: 1 ns per instruction
+    instructions = (int(ticks[0]) - int(ticks[1])) * per_tick / max(len(raw), 1)
+    return out, [int(v) for v in state[:-1]], int(state[-1]), instructions
 
 
 def verify_imu(
@@ -239,19 +244,25 @@ def verify_imu(
         raise UserError(f"{out_dir}: a data-only module and no {blob_path.name} beside it")
     builtin = bool(manifest["calibration"]["builtin"])
 
-    def record(target: str, calibration: str, run: tuple[np.ndarray, list[int], int]) -> None:
+    def record(
+        target: str, calibration: str, run: tuple[np.ndarray, list[int], int], cost: float | None = None
+    ) -> None:
         out, flags, samples = run
         mismatches = [
             int(np.count_nonzero(out[:, k].astype(np.int64) != g_out[:, k])) for k in range(out.shape[1])
         ]
-        result.runs.append(ImuRun(target, calibration, mismatches, flags == g_flags and samples == g_samples))
+        result.runs.append(
+            ImuRun(target, calibration, mismatches, flags == g_flags and samples == g_samples, cost)
+        )
 
     for calibration, blob in sources:
         record("host", calibration, _host_run(out_dir, name, raw, temp, blob, cc))
         if cortex_m4:
             with tempfile.TemporaryDirectory(prefix="imu-qemu-") as work:
-                run = target_run(out_dir, name, imu, raw, temp, blob, Path(work), builtin)
-            record("cortex-m4", calibration, run)
+                out, flags, samples, cost = target_run(
+                    out_dir, name, imu, raw, temp, blob, Path(work), builtin
+                )
+            record("cortex-m4", calibration, (out, flags, samples), cost)
     return result
 
 
@@ -264,5 +275,10 @@ def imu_report_lines(result: ImuVerifyResult) -> list[str]:
         lines.append(
             f"  {run.target} ({run.calibration} calibration): {sum(run.mismatches)} mismatches ({per}); "
             f"flags and sample counter {'equal' if run.state_equal else 'DIFFER'}"
+            + (
+                f"; {run.instructions_per_step:.0f} instructions per step"
+                if run.instructions_per_step
+                else ""
+            )
         )
     return lines
