@@ -70,10 +70,8 @@ def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
     return [root / f"{name}{MODEL_SUFFIX}" for name in names]
 
 
-@contextmanager
-def staged_directory(out: str | Path) -> Iterator[Path]:
-    """Yield an empty staging folder; its files move into ``out`` (created if absent) only on success,
-    so a failure on the fifth channel leaves no partial set of models."""
+def check_output_directory(out: str | Path) -> Path:
+    """Fail early when ``out`` cannot become a directory of outputs; returns where files are staged."""
     target = Path(out)
     if target.exists() and not target.is_dir():
         raise UserError(f"{target}: exists and is not a directory (per-channel outputs go into a directory)")
@@ -83,6 +81,15 @@ def staged_directory(out: str | Path) -> Iterator[Path]:
     base = target if target.is_dir() else parent
     if not os.access(base, os.W_OK | os.X_OK):
         raise UserError(f"{target}: directory {base} is not writable")
+    return base
+
+
+@contextmanager
+def staged_directory(out: str | Path) -> Iterator[Path]:
+    """Yield an empty staging folder; its files move into ``out`` (created if absent) only on success,
+    so a failure on the fifth channel leaves no partial set of models."""
+    target = Path(out)
+    base = check_output_directory(target)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
     try:
         yield staging

@@ -13,7 +13,12 @@ import json
 from typing import Any
 
 from trainer import methods
-from trainer.commands.channel_options import INDEX_FILE, MODEL_SUFFIX, staged_directory
+from trainer.commands.channel_options import (
+    INDEX_FILE,
+    MODEL_SUFFIX,
+    check_output_directory,
+    staged_directory,
+)
 from trainer.data.channels import channel_view, method_refusal, select_channels
 from trainer.errors import UserError
 from trainer.reference import OffsetPolicy
@@ -27,6 +32,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.reference import RECURSIVE_NOTE
 
     method = methods.get(args.method)
+    check_output_directory(args.output)  # before a possibly long fit
     train = read_recording(args.train)
     channels = select_channels(train, args.channels)
     for channel in channels:  # refuse before the first (possibly long) fit
