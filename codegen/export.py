@@ -49,7 +49,27 @@ def load_for_codegen(
         quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
-    return LoadedModel(p, sha256, ckpt, quantised, offset_notes(p, raw))
+    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, offset_notes(p, raw)))
+
+
+def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...]:
+    """A gyroscope or barometer channel's model (trainer fit --channels): its unit in every note and
+    a first note saying how the header's acceleration units read for it."""
+    from trainer.data.channels import UNIT_LABELS, relabel_units
+
+    stats = raw.get("train_stats")
+    if not isinstance(stats, dict) or stats.get("unit") not in UNIT_LABELS or stats["unit"] == "mg":
+        return notes
+    unit = str(stats["unit"])
+    label = UNIT_LABELS[unit]
+    first = (
+        f"channel {stats.get('channel')}: values in {label}, not acceleration; read '1/16 ug' as 1/16000 "
+        f"{label} (16000 LSB = 1 {label}) and 'mg' as {label}"
+    )
+    relabelled = (
+        relabel_units(note, unit).replace("accelerometer calibration", "sensor calibration") for note in notes
+    )
+    return (first, *relabelled)
 
 
 def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:

@@ -358,9 +358,19 @@ def test_import_real_run_keeps_accelerometer_and_gyroscope(tmp_path: Path) -> No
     assert "accel_x_mg" not in rec.columns  # the channels replace the older spelling
 
 
-def test_checkpoint_of_a_gyro_channel_names_its_unit(imu: dict[str, Path]) -> None:
+def test_a_gyro_channel_carries_its_unit_into_checkpoint_and_header(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
     stats = load_checkpoint(imu["root"] / "poly3" / "gyro0_y.pt")["train_stats"]
     assert stats["channel"] == "gyro0_y" and stats["unit"] == "dps"
+    assert (
+        codegen_main(
+            ["export", str(imu["root"] / "poly3" / "gyro0_y.pt"), "-o", str(tmp_path), "--name", "g"]
+        )
+        == 0
+    )
+    header = (tmp_path / "g.h").read_text()
+    assert "channel gyro0_y: values in deg/s" in header and "16000 LSB = 1 deg/s" in header
 
 
 # --------------------------------------------------------------------------- flight logs
