@@ -8,12 +8,19 @@ import sys
 
 from codegen import __version__
 from codegen.flightparams import EXTENSIONS
+from trainer.commands.channel_options import add_channels_option
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 
 EXIT_MISMATCH = 1
 
 
 def _export(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        from trainer.commands.channel_options import model_files
+
+        args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
+    if args.format == "calibration-blob" or args.blob or (args.format == "c" and len(args.model) > 1):
+        return _export_imu(args)
     if args.format != "c":
         if args.rate is not None:
             raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
@@ -46,22 +53,66 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_imu(args: argparse.Namespace) -> int:
+    """Several channels: one IMU module (docs/imu-module.md) and/or its calibration blob."""
+    from pathlib import Path
+
+    from codegen.imu import export_imu
+
+    if args.format not in ("c", "calibration-blob"):
+        raise UserError(f"--blob applies to --format c, not {args.format}")
+    blob_only = args.format == "calibration-blob"
+    imu, written = export_imu(
+        [Path(p) for p in args.model],
+        args.out_dir,
+        name=args.name or "imu_tdc",
+        accel_limit_g=args.accel_limit_g,
+        blob=args.blob,
+        blob_only=blob_only,
+    )
+    what = "calibration blob" if blob_only else "data-only IMU module and blob" if args.blob else "IMU module"
+    print(
+        f"wrote {args.out_dir}/{{{', '.join(written)}}}: {what}, {len(imu.channels)} channels "
+        f"({', '.join(f'{c.name} {c.model.checkpoint.method}' for c in imu.channels)}), "
+        f"module id 0x{imu.module_id:08x}, calibration sha256:{imu.sha256[:16]}..."
+    )
+    return 0
+
+
 def _export_params(args: argparse.Namespace) -> int:
     """Flight-stack parameter files: one per command, all models' channels in it."""
     from codegen.export import write_files_atomically
     from codegen.flightparams import load_channel_cubic, render
     from codegen.render import validate_name
 
-    if len(args.model) > 1 and (args.channel is not None or args.device_id is not None):
-        raise UserError("--channel and --device-id name the channel of a single model; give one model")
+    per_sensor = args.device_id if isinstance(args.device_id, dict) else {}
+    device_id = None if per_sensor else args.device_id
+    if len(args.model) > 1 and (args.channel is not None or device_id is not None):
+        raise UserError(
+            "--channel and --device-id ID name the channel of a single model; give one model "
+            "(or --device-id SENSOR=ID,... such as accel0=ID,gyro0=ID)"
+        )
     name = (
         validate_name(args.name)
         if args.name
         else ("px4_thermal" if args.format == "px4-params" else "ardupilot_tcal")
     )
-    channels = [
-        load_channel_cubic(path, channel=args.channel, device_id=args.device_id) for path in args.model
-    ]
+    channels = [load_channel_cubic(path, channel=args.channel, device_id=device_id) for path in args.model]
+    if per_sensor:
+        import dataclasses
+
+        sensors = {f"{c.channel.sensor}{c.channel.instance}" for c in channels}
+        unknown = sorted(set(per_sensor) - sensors)
+        if unknown:
+            raise UserError(
+                f"--device-id {unknown[0]}=...: no model of that sensor (models: {', '.join(sorted(sensors))})"
+            )
+        channels = [
+            dataclasses.replace(
+                c, device_id=per_sensor.get(f"{c.channel.sensor}{c.channel.instance}", c.device_id)
+            )
+            for c in channels
+        ]
     text = render(args.format, channels, keep_constant=args.keep_constant)
     file_name = name + EXTENSIONS[args.format]
     write_files_atomically({file_name: text}, args.out_dir)
@@ -69,7 +120,38 @@ def _export_params(args: argparse.Namespace) -> int:
     return 0
 
 
+def _verify_imu(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from codegen.imu_verify import imu_report_lines, verify_imu
+    from trainer.commands.channel_options import model_files
+    from trainer.data.recording_io import read_recording
+
+    rec = read_recording(args.recording)
+    models = model_files(args.model, args.channels)
+    result = verify_imu(models, Path(args.out_dir), rec, name=args.name, cc=args.cc, cortex_m4=args.cortex_m4)
+    for line in imu_report_lines(result):
+        print(line)
+    if not result.ok:
+        print("error: the generated IMU module differs from the golden model", file=sys.stderr)
+        return EXIT_MISMATCH
+    return 0
+
+
 def _verify(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        return _verify_imu(args)
+    if args.cortex_m4:
+        raise UserError("--cortex-m4 applies to an IMU module (--channels); see firmware_c/ for one channel")
+    from pathlib import Path
+
+    from codegen.imu_verify import imu_manifest
+
+    if args.name is None and imu_manifest(Path(args.out_dir), None) is not None:
+        raise UserError(
+            f"{args.out_dir} holds an IMU module: verify it with --channels all (MODEL: the 'trainer fit "
+            f"--channels' directory)"
+        )
     from codegen.verify import report_lines, verify, write_json
 
     result = verify(
@@ -92,6 +174,21 @@ def _verify(args: argparse.Namespace) -> int:
         )
         return EXIT_MISMATCH
     return 0
+
+
+def _device_ids(text: str) -> int | dict[str, int]:
+    """``ID`` (one model) or ``SENSOR=ID,...`` (sensor instances such as accel0, gyro0)."""
+    import re
+
+    if text.strip().isdigit():
+        return int(text)
+    ids = {}
+    for item in text.split(","):
+        match = re.fullmatch(r"\s*((?:accel|gyro|baro)[0-9])=([0-9]+)\s*", item)
+        if match is None:
+            raise argparse.ArgumentTypeError(f"{item!r} is not ID or SENSOR=ID (e.g. accel0=2490378)")
+        ids[match.group(1)] = int(match.group(2))
+    return ids
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -120,6 +217,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=16.0,
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
     )
+    add_channels_option(exp, "take the model from each MODEL directory (written by 'trainer fit --channels')")
+    exp.add_argument(
+        "--blob",
+        action="store_true",
+        help="several channels: a data-only module that reads its tables from NAME.cal.bin (also written)",
+    )
     exp.add_argument(
         "--rate",
         type=float,
@@ -129,16 +232,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     exp.add_argument(
         "--format",
-        choices=("c", *EXTENSIONS),
+        choices=("c", *EXTENSIONS, "calibration-blob"),
         default="c",
-        help="c: the fixed-point C module (default); px4-params: a QGroundControl .params file of TC_*; "
-        "ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only)",
+        help="c: the fixed-point C module (default; one IMU module for several channels); px4-params: a "
+        "QGroundControl .params file of TC_*; ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only); "
+        "calibration-blob: only NAME.cal.bin, a unit's tables for a data-only IMU module",
     )
     exp.add_argument(
         "--channel", help="parameter files: the sensor axis of the model (default: as fitted), e.g. accel0_z"
     )
     exp.add_argument(
-        "--device-id", type=int, help="px4-params: the sensor's device id (default: as imported)"
+        "--device-id",
+        type=_device_ids,
+        metavar="ID|SENSOR=ID,...",
+        help="px4-params: the sensor's device id (default: as imported); several models: accel0=ID,gyro0=ID",
     )
     exp.add_argument(
         "--keep-constant",
@@ -162,6 +269,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ver.add_argument("--json", metavar="PATH", help="also write the result as JSON (for 'trainer report')")
     ver.add_argument("--no-table", action="store_true", help="skip the Table 1 comparison (saves a few s)")
+    add_channels_option(ver, "verify an IMU module (MODEL: the 'trainer fit --channels' directory)")
+    ver.add_argument(
+        "--cortex-m4", action="store_true", help="IMU module: also run it on a Cortex-M4 under QEMU"
+    )
     ver.set_defaults(func=_verify)
     return parser
 

@@ -10,6 +10,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,7 +56,27 @@ def load_for_codegen(
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
     notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ())
-    return LoadedModel(p, sha256, ckpt, quantised, notes)
+    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes))
+
+
+def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...]:
+    """A gyroscope or barometer channel's model (trainer fit --channels): its unit in every note and
+    a first note saying how the header's acceleration units read for it."""
+    from trainer.data.channels import UNIT_LABELS, relabel_units
+
+    stats = raw.get("train_stats")
+    if not isinstance(stats, dict) or stats.get("unit") not in UNIT_LABELS or stats["unit"] == "mg":
+        return notes
+    unit = str(stats["unit"])
+    label = UNIT_LABELS[unit]
+    first = (
+        f"channel {stats.get('channel')}: values in {label}, not acceleration; read '1/16 ug' as 1/16000 "
+        f"{label} (16000 LSB = 1 {label}) and 'mg' as {label}"
+    )
+    relabelled = (
+        relabel_units(note, unit).replace("accelerometer calibration", "sensor calibration") for note in notes
+    )
+    return (first, *relabelled)
 
 
 def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
@@ -114,7 +135,7 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
     return files
 
 
-def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str]) -> None:
+def write_files_atomically(files: Mapping[str, str | bytes], out_dir: str | os.PathLike[str]) -> None:
     """Write ``files`` into ``out_dir`` (created if absent, parent must exist), all or nothing."""
     target = Path(out_dir)
     parent = target.parent if str(target.parent) else Path(".")
@@ -133,7 +154,10 @@ def write_files_atomically(files: dict[str, str], out_dir: str | os.PathLike[str
         raise UserError(f"{target}: cannot write ({exc.strerror})") from None
     try:
         for file_name, text in files.items():
-            (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
+            if isinstance(text, bytes):  # a calibration blob (codegen/imu.py)
+                (staging / file_name).write_bytes(text)
+            else:
+                (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
             os.chmod(staging / file_name, 0o644)
         if base == target:
             for file_name in files:

@@ -58,6 +58,8 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
     if channel is None:
         return {}
     stats: dict[str, Any] = {"channel": name}
+    if "unit" in rec.meta:  # a one-channel view of a multi-channel recording (trainer.data.channels)
+        stats["unit"] = rec.meta["unit"]
     device_id = rec.meta.get(f"device_id_{channel.sensor}{channel.instance}", "")
     if device_id.isdigit():
         stats["device_id"] = int(device_id)

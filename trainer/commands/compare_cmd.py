@@ -6,12 +6,15 @@ import argparse
 import shutil
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from trainer import methods
+from trainer.commands.channel_options import add_channels_option, run_per_channel
 from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
 from trainer.commands.offset_options import add_offset_options, policy_from_args
+from trainer.data.channels import Channel, method_refusal
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
 from trainer.physics.input_presets import INPUT_PRESETS
@@ -63,7 +66,22 @@ def add_parser(subparsers: Any) -> None:
     )
     add_dlstm_options(parser)
     add_offset_options(parser)
+    add_channels_option(parser, "compare the methods on the channel, report in OUT/<channel>")
     parser.set_defaults(func=run)
+
+
+def _refusal(args: argparse.Namespace) -> Callable[[Channel], str | None]:
+    """A recursive method in --methods on a barometer channel is refused (trainer.data.channels)."""
+    requested = [m.strip() for m in args.methods.split(",") if m.strip() in methods.REGISTRY]
+
+    def refuse(channel: Channel) -> str | None:
+        for name in requested:
+            reason = method_refusal(name, methods.get(name).family, channel)
+            if reason is not None:
+                return f"{reason}; leave it out of --methods"
+        return None
+
+    return refuse
 
 
 def publish(staging: Path, out_dir: Path) -> None:
@@ -83,6 +101,12 @@ def publish(staging: Path, out_dir: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        if args.input_test:
+            raise UserError("--input-test (a simulated true input on accel_mg) applies without --channels")
+        return run_per_channel(
+            args, run, recordings=("train", "valid"), out_dirs=("out_dir",), refuse=_refusal(args)
+        )
     known = methods.names()
     requested = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     unknown = [m for m in requested if m not in known]

@@ -6,6 +6,9 @@ import argparse
 import math
 from typing import TYPE_CHECKING
 
+from trainer.commands.channel_options import add_channels_option, run_per_channel
+from trainer.data.channels import Channel
+
 if TYPE_CHECKING:
     from trainer.diagnose.result import Diagnosis
 
@@ -44,6 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="F",
         help="score both models on the last fraction F of the run after fitting on the rest (default 0.25; 0: off)",
     )
+    add_channels_option(parser, "diagnose the channel (accelerometer channels: the catalogue is in mg)")
     parser.set_defaults(func=run)
 
 
@@ -63,7 +67,21 @@ def _check_outputs(args: argparse.Namespace) -> None:
             raise UserError(f"{args.report}: parent directory {parent} does not exist")
 
 
+def _refusal(channel: Channel) -> str | None:
+    if channel.unit == "mg":
+        return None
+    return (
+        f"{channel.name}: diagnose names effects of the physics catalogue (shared/specs/physics-catalogue.md), "
+        f"an accelerometer's, with sizes and plausibility limits in mg; a {channel.label} channel has no "
+        f"catalogue to diagnose against (fit and compare it instead)"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        return run_per_channel(
+            args, run, recordings=("recording",), out_dirs=("report",), out_files=("json",), refuse=_refusal
+        )
     from trainer.data.recording_io import read_recording
     from trainer.diagnose import diagnose
     from trainer.diagnose.report import write_json, write_report

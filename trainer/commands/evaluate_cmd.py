@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from trainer.commands.channel_options import add_channels_option, run_per_channel
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, atomic_output
 from trainer.physics.input_presets import INPUT_PRESETS
@@ -34,6 +35,9 @@ def add_parser(subparsers: Any) -> None:
         "--inject",
         choices=INPUT_PRESETS,
         help="add this known input to the recording and report how much of it the model keeps",
+    )
+    add_channels_option(
+        parser, "score MODEL/<channel>.pt (MODEL: a 'trainer fit --channels' directory) into OUT/<channel>"
     )
     parser.set_defaults(func=run)
 
@@ -70,6 +74,8 @@ def drift_lines(result: Any) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.channels is not None:
+        return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
     from trainer.checkpoint import load_model
     from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.recording_io import read_recording

@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from trainer import methods
+from trainer.commands.channel_options import add_channels_option
 from trainer.commands.offset_options import add_offset_options, policy_from_args
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
@@ -17,7 +18,10 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument(
         "--method", required=True, choices=methods.fit_cli_names(), help="compensation method"
     )
-    parser.add_argument("-o", "--output", required=True, help="checkpoint to write (model.pt)")
+    parser.add_argument(
+        "-o", "--output", required=True, help="checkpoint to write (model.pt); a directory with --channels"
+    )
+    add_channels_option(parser, "fit one model, written as OUT/<channel>.pt with OUT/channels.json,")
     parser.add_argument(
         "--accept-implausible",
         action="store_true",
@@ -40,9 +44,13 @@ def run(args: argparse.Namespace) -> int:
     from trainer.fitting import fit_with_stats
     from trainer.reference import RECURSIVE_NOTE
 
-    check_output_path(args.output)  # fail before a long training run, not after it
     options = methods.get(args.method).options.fit_kwargs(args)
     policy = policy_from_args(args)
+    if args.channels is not None:
+        from trainer.commands.fit_channels import fit_channels
+
+        return fit_channels(args, options, policy)
+    check_output_path(args.output)  # fail before a long training run, not after it
     train = read_recording(args.train)
     checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
     model, stats = fit_with_stats(args.method, train, options, policy)

@@ -9,14 +9,17 @@ from __future__ import annotations
 import argparse
 import math
 
+from trainer.commands.channel_options import add_channels_option
 from trainer.data.flightlog import KIND_NAMES, log_kind
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
+    BARO_UNIT_TO_PA,
     DEFAULT_CHANNEL,
     DELIMITER_NAMES,
     FILL_TEMP_MODES,
     GRAVITY_MODES,
+    GYRO_UNIT_TO_DPS,
     PRESETS,
     TEMP_UNIT_OFFSET_C,
     TIME_UNIT_SECONDS,
@@ -44,6 +47,9 @@ TEXT_ONLY_OPTIONS = (
     "extra_axes",
     "temp_unit",
     "decimal_comma",
+    "channel_map",
+    "gyro_unit",
+    "baro_unit",
 )
 
 _DELIMITER_ALIASES = {"tab": "\t", "\\t": "\t", "comma": ",", "semicolon": ";"}
@@ -68,6 +74,21 @@ def _positive_hz(text: str) -> float:
 
 def _resample(text: str) -> float | str:
     return text if text in ("auto", "none") else _positive_hz(text)
+
+
+def _channel_map(text: str) -> dict[str, str]:
+    """``accel0_x=COL,gyro0_x=COL,...``: recording-format channel names to the file's columns."""
+    from trainer.data.flightlog import CHANNEL_NAME
+
+    mapping = {}
+    for item in text.split(","):
+        name, sep, column = (part.strip() for part in item.partition("="))
+        if not sep or not column or not CHANNEL_NAME.fullmatch(name):
+            raise argparse.ArgumentTypeError(
+                f"{item!r} is not CHANNEL=COLUMN (channels: accelN_x|y|z, gyroN_x|y|z, baroN)"
+            )
+        mapping[name] = column
+    return mapping
 
 
 def _axes(text: str) -> tuple[str, ...]:
@@ -97,6 +118,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME",
         help=f"flight logs: the accelerometer axis that becomes the recording (default {DEFAULT_CHANNEL})",
     )
+    add_channels_option(
+        parser,
+        "keep the data column (with the preset's units converted to mg, deg/s, Pa) and its temperature",
+    )
     parser.add_argument(
         "--list-channels", action="store_true", help="flight logs: print every channel of the log and stop"
     )
@@ -119,6 +144,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--accel-unit", choices=list(ACCEL_UNIT_TO_MG), help="unit of the axes (default mg)")
     parser.add_argument(
         "--extra-axes", type=_axes, metavar="X,Y,Z", help="columns for accel_x_mg, accel_y_mg, accel_z_mg"
+    )
+    parser.add_argument(
+        "--channel-map",
+        type=_channel_map,
+        metavar="CH=COL,...",
+        help="delimited files: the columns of the channels --channels picks, e.g. accel0_x=ax,gyro0_x=gx",
+    )
+    parser.add_argument(
+        "--gyro-unit", choices=list(GYRO_UNIT_TO_DPS), help="unit of gyro columns (default dps)"
+    )
+    parser.add_argument(
+        "--baro-unit", choices=list(BARO_UNIT_TO_PA), help="unit of baro columns (default Pa)"
     )
     parser.add_argument(
         "--remove-gravity", choices=GRAVITY_MODES, help="subtract +-1 g (nominal) or the mean from accel_mg"
@@ -163,6 +200,10 @@ def run(args: argparse.Namespace) -> int:
     how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
     rate_hz = float(rec.meta["sample_rate_hz"])
     picked = f" ({rec.meta['channel']})" if kind is not None else ""
+    if args.channels is not None:
+        from trainer.data.channels import recording_channels
+
+        picked = f" (channels {', '.join(recording_channels(rec))})"
     print(f"{args.output}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}{picked}")
     return 0
 
@@ -183,6 +224,7 @@ def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Re
         resample=resample,
         retime=args.retime,
         fill_temp=args.fill_temp,
+        channels=args.channels,
     )
     return import_flight_log(args.foreign, options, checks)
 
@@ -214,4 +256,8 @@ def import_options(args: argparse.Namespace) -> ImportOptions:
         temp_unit=args.temp_unit,
         decimal_comma=args.decimal_comma or None,
         fill_temp=args.fill_temp,
+        channels=getattr(args, "channels", None),
+        channel_map=getattr(args, "channel_map", None),
+        gyro_unit=getattr(args, "gyro_unit", None),
+        baro_unit=getattr(args, "baro_unit", None),
     )

@@ -23,8 +23,18 @@ from typing import Literal
 
 import numpy as np
 
+from trainer.data.channels import ALL, names_text
 from trainer.data.csv_table import Table, read_table
-from trainer.data.flightlog import KIND_NAMES, MG_PER_MPS2, log_kind
+from trainer.data.flightlog import (
+    DPS_PER_RADPS,
+    KIND_NAMES,
+    MG_PER_MPS2,
+    SENSOR_UNITS,
+    FlightLog,
+    LogChannel,
+    log_kind,
+    parse_channel,
+)
 from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.plausibility import Plausibility
@@ -35,6 +45,8 @@ from trainer.errors import UserError
 TIME_UNIT_SECONDS: dict[str, float | None] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "index": None}
 ACCEL_UNIT_TO_MG: dict[str, float] = {"m/s^2": MG_PER_MPS2, "g": 1000.0, "mg": 1.0}
 TEMP_UNIT_OFFSET_C: dict[str, float] = {"degC": 0.0, "K": -273.15}  # added to the column
+GYRO_UNIT_TO_DPS: dict[str, float] = {"rad/s": DPS_PER_RADPS, "dps": 1.0}
+BARO_UNIT_TO_PA: dict[str, float] = {"Pa": 1.0, "hPa": 100.0}
 FILL_TEMP_MODES = ("previous",)
 DEFAULT_CHANNEL = "accel0_z"  # a level board's vertical axis: the one PX4's thermal run sees gravity on
 GRAVITY_MODES = ("none", "nominal", "mean")
@@ -73,6 +85,11 @@ class ImportOptions:
     temp_unit: str = "degC"
     decimal_comma: bool = False
     fill_temp: str | None = None  # "previous": an empty temperature field repeats the last reading
+    # Several channels: channel name -> column (a preset's map), and which of them to import.
+    channel_map: dict[str, str] = field(default_factory=dict)
+    channels: tuple[str, ...] | None = None  # None: the one-axis import; ("all",) or names
+    gyro_unit: str = "dps"
+    baro_unit: str = "Pa"
 
 
 @dataclass(frozen=True)
@@ -85,6 +102,9 @@ class LogImportOptions:
     resample: Resample = None
     retime: bool = False
     fill_temp: str | None = None
+    channels: tuple[str, ...] | None = (
+        None  # several channels: ("all",) or names; None: ``channel`` and its siblings
+    )
 
 
 # Known loggers: the option values that make their files import with no other flag.
@@ -101,6 +121,12 @@ PRESETS: dict[str, dict[str, object]] = {
         "sensor": "tofupilot-imu-acc-z",
         "retime": True,
         "meta": {"channel": "accel0_z", "license": "MIT (c) 2024 tofupilot, see LICENSE.tofupilot"},
+        # --channels: the README says gyro in rad/s, acceleration in m/s^2, one temperature for both
+        "channel_map": {
+            **{f"accel0_{axis}": f"imu.acc.{axis}" for axis in "xyz"},
+            **{f"gyro0_{axis}": f"imu.gyro.{axis}" for axis in "xyz"},
+        },
+        "gyro_unit": "rad/s",
     },
 }
 
@@ -127,6 +153,12 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
     if values.get("resample") == "none":  # an explicit "enforce the jitter rule" beats the preset
         values["resample"] = None
     values["meta"] = dict(values.get("meta", {}))  # type: ignore[call-overload]
+    values["channel_map"] = {  # a given map adds to (and overrides) the preset's
+        **PRESETS.get(preset or "", {}).get("channel_map", {}),  # type: ignore[dict-item]
+        **(given.get("channel_map") or {}),  # type: ignore[dict-item]
+    }
+    if values.get("channels") is not None:
+        values.pop("extra_axes", None)  # the channels replace the older accel_x_mg spelling
     for required in ("temp", "accel"):
         if values.get(required) is None:
             raise UserError(f"--{required} COLUMN is required (or use --preset)")
@@ -192,7 +224,9 @@ def import_foreign(path: str | Path, options: ImportOptions, checks: Plausibilit
     _refuse_binary(path)
     delimiter = options.delimiter or sniff_delimiter(path, decimal_comma=options.decimal_comma)
     extra = list(options.extra_axes or ())
+    selected = _selected_channels(options, source)
     wanted = [name for name in (options.time, options.temp, options.accel, *extra) if name is not None]
+    wanted += [column for _, column in selected]
     table = read_table(
         path,
         delimiter=delimiter,
@@ -216,10 +250,44 @@ def import_foreign(path: str | Path, options: ImportOptions, checks: Plausibilit
     columns["accel_mg"] = table.columns[options.accel] * to_mg
     for target, name in zip(EXTRA_AXIS_COLUMNS[: len(extra)], extra, strict=True):
         columns[target] = table.columns[name] * to_mg
+    for channel, column in selected:
+        target, scale = _channel_target(channel, options)
+        columns[target] = table.columns[column] * scale
     meta = {"temp_filled": fill_note} if fill_note else {}
     if options.decimal_comma:
         meta["decimal_comma"] = "yes"
     return _finish(table, options, columns, _mapping_note(options, delimiter), meta, checks)
+
+
+def _selected_channels(options: ImportOptions, source: str) -> list[tuple[str, str]]:
+    """(channel, column) pairs ``--channels`` picks from the preset's channel map."""
+    if options.channels is None:
+        return []
+    if not options.channel_map:
+        raise UserError(
+            f"{source}: --channels needs a channel map for a delimited file (--channel-map accel0_x=COL,... or "
+            f"a --preset that has one, e.g. tofupilot); without it import one axis with --accel"
+        )
+    names = list(options.channel_map) if options.channels == (ALL,) else list(options.channels)
+    for name in names:
+        if name not in options.channel_map:
+            raise UserError(
+                f"{source}: --channels {name!r} is not mapped for this file; available: "
+                f"{names_text(list(options.channel_map))}"
+            )
+    return [(name, options.channel_map[name]) for name in names]
+
+
+def _channel_target(channel: str, options: ImportOptions) -> tuple[str, float]:
+    """The recording-format column of ``channel`` and the factor from the file's unit to it."""
+    parsed = parse_channel(channel)
+    assert parsed is not None, "channel maps hold channel names"
+    scale = {
+        "accel": ACCEL_UNIT_TO_MG[options.accel_unit],
+        "gyro": GYRO_UNIT_TO_DPS[options.gyro_unit],
+        "baro": BARO_UNIT_TO_PA[options.baro_unit],
+    }[parsed.sensor]
+    return f"{channel}_{SENSOR_UNITS[parsed.sensor]}", scale
 
 
 class _LogTable(Table):
@@ -241,13 +309,15 @@ def import_flight_log(
     checks = checks or Plausibility()
     log = read_flight_log(path)
     chosen = log.channel(options.channel)
+    accels = ", ".join(name for name, c in log.channels.items() if c.sensor == "accel") or "(none)"
     if chosen.sensor != "accel":
-        accels = ", ".join(name for name, c in log.channels.items() if c.sensor == "accel") or "(none)"
         raise UserError(
             f"{log.source}: --channel {chosen.name!r}: a one-axis recording compensates an accelerometer "
             f"axis (column accel_mg); choose one of {accels}"
         )
     siblings = list(log.siblings(chosen))
+    if options.channels is not None:
+        chosen, siblings = _log_channels(log, options.channels, chosen, accels)
     raw: dict[str, np.ndarray] = {"timestamp": chosen.time_us.astype(np.float64)}
     for channel in siblings:
         raw[channel.column] = channel.values
@@ -287,6 +357,34 @@ def import_flight_log(
         f"accel_mg<-{chosen.column}; {len(siblings)} channels logged with it kept"
     )
     return _finish(table, imported, columns, mapping, meta, checks)
+
+
+def _log_channels(
+    log: FlightLog, wanted: tuple[str, ...], default: LogChannel, accels: str
+) -> tuple[LogChannel, list[LogChannel]]:
+    """``--channels`` of a flight log: (the accelerometer axis for ``accel_mg``, the channels kept).
+
+    A recording has one time base, so the channels must be logged together (one ULog topic
+    instance, one DataFlash IMU message); ``all`` is every channel logged with the first
+    accelerometer axis (``--channel`` picks another).
+    """
+    if wanted == (ALL,):
+        return default, list(log.siblings(default))
+    picked = [log.channel(name) for name in wanted]
+    chosen = next((c for c in picked if c.sensor == "accel"), None)
+    if chosen is None:
+        raise UserError(
+            f"{log.source}: --channels: a recording needs an accelerometer axis for its accel_mg column; "
+            f"add one of {accels}"
+        )
+    together = {c.name for c in log.siblings(chosen)}
+    apart = next((c for c in picked if c.name not in together), None)
+    if apart is not None:
+        raise UserError(
+            f"{log.source}: --channels {apart.name!r} is logged at other timestamps than {chosen.name!r} "
+            f"(another topic or message); channels logged with it: {names_text(sorted(together))}"
+        )
+    return chosen, picked
 
 
 def _fill_temperature(table: Table, names: list[str], mode: str | None) -> tuple[Table, str | None]:
@@ -411,6 +509,8 @@ def _check_options(options: ImportOptions) -> None:
         raise UserError("--decimal-comma needs a tab or semicolon delimiter (a comma cannot be both)")
     if options.temp_unit not in TEMP_UNIT_OFFSET_C:
         raise UserError(f"--temp-unit {options.temp_unit!r}: use one of {', '.join(TEMP_UNIT_OFFSET_C)}")
+    if options.gyro_unit not in GYRO_UNIT_TO_DPS:
+        raise UserError(f"--gyro-unit {options.gyro_unit!r}: use one of {', '.join(GYRO_UNIT_TO_DPS)}")
     if options.fill_temp is not None and options.fill_temp not in FILL_TEMP_MODES:
         raise UserError(f"--fill-temp {options.fill_temp!r}: use one of {', '.join(FILL_TEMP_MODES)}")
 
@@ -514,4 +614,10 @@ def _mapping_note(options: ImportOptions, delimiter: str) -> str:
     ]
     for target, name in zip(EXTRA_AXIS_COLUMNS, options.extra_axes or (), strict=False):
         parts.append(f"{target}<-{name}[{options.accel_unit}]")
+    for channel, column in _selected_channels(options, "<options>"):
+        target, _ = _channel_target(channel, options)
+        unit = {"mg": options.accel_unit, "dps": options.gyro_unit, "pa": options.baro_unit}[
+            target.rsplit("_", 1)[1]
+        ]
+        parts.append(f"{target}<-{column}[{unit}]")
     return f"{DELIMITER_NAMES[delimiter]}-delimited; " + " ".join(parts)

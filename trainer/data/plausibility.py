@@ -107,6 +107,7 @@ def check_training(rec: Recording, method: Method, *, accept: bool = False) -> P
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
     checks.temperature(rec.temp_c, f"{where}: column 'temp_c'", at_import=False)
-    checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
+    if rec.meta.get("unit", "mg") == "mg":  # a gyroscope or barometer view holds no gravity
+        checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
     checks.temperature_span(rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column 'temp_c'")
     return checks

@@ -1,0 +1,345 @@
+"""One C module for a whole IMU: every channel's model behind one state and one step call.
+
+``codegen export DIR --channels all`` (DIR written by ``trainer fit --channels``) renders
+``NAME.h``/``NAME.c`` from ``templates/imu.{h,c}.j2``. The module is table driven: the per-channel
+tables (a cubic's coefficients, a piecewise-linear model's splits, slopes and intercepts) sit in
+a ``NAME_calibration_t`` that is either compiled in (``NAME_builtin()``) or decoded at init from a
+*calibration blob* (``NAME_load``), a documented little-endian byte layout with a layout version,
+the module id and a CRC32 (docs/imu-module.md), so a factory flashes per-unit calibration without
+recompiling. The arithmetic is the kernel library's (``tdc_kernels.h``, included as is) in exactly
+the order of the one-channel templates, so each channel is bit-exact against the golden model of
+its own checkpoint (:func:`imu_golden`). Temperature-driven memoryless methods only (poly3, pla):
+a stateful or recursive channel is refused with one line.
+
+Channel units: raw and compensated values are int32 in 1/16000 of the channel's unit (mg -> the
+one-channel modules' 1/16 ug; deg/s; Pa), so the one-channel quantiser applies unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import struct
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from codegen import __version__
+from codegen.export import LoadedModel, load_for_codegen
+from codegen.golden import golden_for
+from codegen.quantize import (
+    DEFAULT_ACCEL_LIMIT_G,
+    TEMP_LIMITS_MDEGC,
+    QPla,
+    QPoly3,
+)
+from codegen.render import FLAGS, KERNEL_FILE, _environment, kernel_header, manifest_json, validate_name
+from trainer.data.channels import UNIT_LABELS, sort_key
+from trainer.data.flightlog import parse_channel
+from trainer.errors import UserError
+
+KIND_CUBIC, KIND_PLA = 1, 2
+BLOB_MAGIC = b"TDCC"
+BLOB_VERSION = 1
+BLOB_HEADER = struct.Struct(
+    "<4sHHHHI32s"
+)  # magic, version, channels, sensors, max intervals, module id, sha256
+CHANNEL_HEADER = struct.Struct(
+    "<BBBBHHiii"
+)  # kind, sensor, frac, u_shift, intervals, reserved, clip lo/hi, t_ref
+SENSOR_RECORD = struct.Struct("<ii")  # valid range lo, hi (mdegC)
+CRC_SIZE = 4
+LSB_PER_UNIT = 16000  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
+MANIFEST_FORMAT = "mems-tdc-imu-module"
+BLOB_SUFFIX = ".cal.bin"
+
+
+@dataclass(frozen=True)
+class ImuChannel:
+    """One channel of the module: name (accel0_x), unit suffix, temperature input, loaded model."""
+
+    name: str
+    unit: str
+    sensor: str  # accel0, gyro0, baro0: the temperature input it reads
+    model: LoadedModel
+
+    @property
+    def kind(self) -> int:
+        return KIND_CUBIC if isinstance(self.model.quantised, QPoly3) else KIND_PLA
+
+
+@dataclass(frozen=True)
+class ImuModel:
+    channels: tuple[ImuChannel, ...]
+    sensors: tuple[str, ...]
+    valid_mdegc: tuple[tuple[int, int], ...]  # per sensor
+    max_intervals: int  # capacity of a piecewise-linear channel's tables (>= 1)
+
+    @property
+    def sha256(self) -> str:
+        """The calibration's id: sha256 over the channel names and their model files' hashes."""
+        text = "\n".join(f"{c.name} {c.model.sha256}" for c in self.channels)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    @property
+    def module_id(self) -> int:
+        """CRC32 of the layout (channels, units, sensors, capacity): a blob must be for this layout."""
+        text = ";".join(f"{c.name}:{c.unit}:{self.sensors.index(c.sensor)}" for c in self.channels)
+        return zlib.crc32(f"{text};S={','.join(self.sensors)};I={self.max_intervals}".encode())
+
+
+def _channel_of(raw: dict[str, Any], path: Path) -> str:
+    stats = raw.get("train_stats")
+    name = stats.get("channel") if isinstance(stats, dict) else None
+    if not isinstance(name, str) or parse_channel(name) is None:
+        raise UserError(
+            f"{path}: the model does not name its channel (fit it with 'trainer fit --channels' on a "
+            f"multi-channel recording)"
+        )
+    return name
+
+
+def load_imu(paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> ImuModel:
+    """Load the channels' models; refuse what one table-driven memoryless module cannot hold."""
+    from trainer.checkpoint import load_checkpoint
+
+    channels = []
+    for path in paths:
+        name = _channel_of(load_checkpoint(path), path)
+        model = load_for_codegen(path, accel_limit_g=accel_limit_g)
+        if not isinstance(model.quantised, QPoly3 | QPla):
+            raise UserError(
+                f"{path}: channel {name}: method {model.checkpoint.method!r} is not memoryless; the IMU module "
+                f"holds poly3 and pla channels (export a {model.checkpoint.method} channel as its own module)"
+            )
+        parsed = parse_channel(name)
+        assert parsed is not None
+        channels.append(ImuChannel(name, parsed.unit, f"{parsed.sensor}{parsed.instance}", model))
+    names = [c.name for c in channels]
+    duplicate = next((n for n in names if names.count(n) > 1), None)
+    if duplicate is not None:
+        raise UserError(f"channel {duplicate} is given twice")
+    channels.sort(key=lambda c: sort_key(c.name))
+    sensors = tuple(dict.fromkeys(c.sensor for c in channels))
+    valid = []
+    for sensor in sensors:
+        ranges = {
+            (c.model.quantised.limits.valid_lo_mdegc, c.model.quantised.limits.valid_hi_mdegc)
+            for c in channels
+            if c.sensor == sensor
+        }
+        if len(ranges) > 1:
+            raise UserError(
+                f"sensor {sensor}: its channels have different valid temperature ranges {sorted(ranges)}; "
+                f"one temperature front end per sensor needs them fitted on one recording"
+            )
+        valid.append(ranges.pop())
+    capacity = (
+        max(  # pla intervals per channel (a unit's blob must have the module's: trainer fit --intervals)
+            [len(c.model.quantised.slopes_q) for c in channels if isinstance(c.model.quantised, QPla)] + [1]
+        )
+    )
+    return ImuModel(tuple(channels), sensors, tuple(valid), capacity)
+
+
+# ------------------------------------------------------------------------------ tables and blob
+
+
+@dataclass(frozen=True)
+class ChannelTables:
+    """One channel's numbers exactly as ``NAME_channel_t`` holds them."""
+
+    kind: int
+    sensor: int
+    frac: int
+    u_shift: int
+    clip_lo: int
+    clip_hi: int
+    t_ref: int
+    coefficients: tuple[int, ...]  # cubic d0..d3 (zeros for pla)
+    splits: tuple[int, ...]
+    slopes: tuple[int, ...]
+    intercepts: tuple[int, ...]
+
+
+def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
+    q = channel.model.quantised
+    sensor = imu.sensors.index(channel.sensor)
+    if isinstance(q, QPoly3):
+        return ChannelTables(
+            KIND_CUBIC, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, q.t_ref_mdegc,
+            tuple(q.coefficients_q), (), (), (),
+        )  # fmt: skip
+    assert isinstance(q, QPla)
+    return ChannelTables(
+        KIND_PLA, sensor, q.frac, 0, q.limits.temp_lo_mdegc, q.limits.temp_hi_mdegc, 0,
+        (0, 0, 0, 0), tuple(q.splits_mdegc), tuple(q.slopes_q), tuple(q.intercepts_q),
+    )  # fmt: skip
+
+
+def encode_blob(imu: ImuModel) -> bytes:
+    """The calibration blob (docs/imu-module.md): header, sensors, channels, CRC32 of all before it."""
+    parts = [
+        BLOB_HEADER.pack(
+            BLOB_MAGIC,
+            BLOB_VERSION,
+            len(imu.channels),
+            len(imu.sensors),
+            imu.max_intervals,
+            imu.module_id,
+            bytes.fromhex(imu.sha256),
+        )
+    ]
+    parts += [SENSOR_RECORD.pack(lo, hi) for lo, hi in imu.valid_mdegc]
+    for channel in imu.channels:
+        t = channel_tables(imu, channel)
+        intervals = len(t.slopes) if t.kind == KIND_PLA else 0
+        parts.append(
+            CHANNEL_HEADER.pack(
+                t.kind, t.sensor, t.frac, t.u_shift, intervals, 0, t.clip_lo, t.clip_hi, t.t_ref
+            )
+        )
+        if t.kind == KIND_CUBIC:
+            parts.append(struct.pack("<4i", *t.coefficients))
+        else:
+            n = len(t.slopes)
+            parts.append(struct.pack(f"<{n - 1}i{n}i{n}q", *t.splits, *t.slopes, *t.intercepts))
+    body = b"".join(parts)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+# ------------------------------------------------------------------------------ golden model
+
+
+def imu_golden(imu: ImuModel, raw: np.ndarray, temp: np.ndarray) -> tuple[np.ndarray, list[int], int]:
+    """(outputs [n, channels], flags per channel, samples): each channel through the golden model of
+    its own checkpoint, fed its sensor's temperature; ``raw`` is [n, channels], ``temp`` [n, sensors]."""
+    outputs = np.empty(raw.shape, dtype=np.int64)
+    flags = []
+    samples = 0
+    for k, channel in enumerate(imu.channels):
+        golden = golden_for(channel.model.quantised)
+        outputs[:, k] = golden.run(raw[:, k], temp[:, imu.sensors.index(channel.sensor)])
+        flags.append(golden.flags)
+        samples = golden.samples
+    return outputs, flags, samples
+
+
+# ------------------------------------------------------------------------------ rendering
+
+
+def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
+    tables = [channel_tables(imu, c) for c in imu.channels]
+    max_splits = max(imu.max_intervals - 1, 1)
+
+    def padded(values: tuple[int, ...], size: int) -> list[int]:
+        return list(values) + [0] * (size - len(values))
+
+    return {
+        "name": name,
+        "NAME": name.upper(),
+        "p": f"{name}_",
+        "guard": f"{name.upper()}_H_INCLUDED",
+        "version": __version__,
+        "sha256": imu.sha256,
+        "module_id": f"0x{imu.module_id:08x}u",
+        "blob_version": BLOB_VERSION,
+        "builtin": builtin,
+        "n_channels": len(imu.channels),
+        "n_sensors": len(imu.sensors),
+        "max_intervals": imu.max_intervals,
+        "max_splits": max_splits,
+        "flags": FLAGS,
+        "kind_cubic": KIND_CUBIC,
+        "kind_pla": KIND_PLA,
+        "temp_lo": TEMP_LIMITS_MDEGC[0],
+        "temp_hi": TEMP_LIMITS_MDEGC[1],
+        "sensors": [
+            {"name": s, "upper": s.upper(), "valid_lo": lo, "valid_hi": hi}
+            for s, (lo, hi) in zip(imu.sensors, imu.valid_mdegc, strict=True)
+        ],
+        "channels": [
+            {
+                "name": c.name,
+                "upper": c.name.upper(),
+                "unit": UNIT_LABELS[c.unit],
+                "method": c.model.checkpoint.method,
+                "sensor": c.sensor,
+                "sha256": c.model.sha256,
+                "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "
+                f"{c.model.checkpoint.valid_temp_range_c[1]:.2f} degC",
+                "t": t,
+                "splits": padded(t.splits, max_splits),
+                "slopes": padded(t.slopes, imu.max_intervals),
+                "intercepts": padded(t.intercepts, imu.max_intervals),
+            }
+            for c, t in zip(imu.channels, tables, strict=True)
+        ],
+        "sha_bytes": ", ".join(f"0x{b:02x}u" for b in bytes.fromhex(imu.sha256)),
+    }
+
+
+def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:
+    """``{NAME.h, NAME.c, tdc_kernels.h, NAME.manifest.json}`` (pure)."""
+    env = _environment()
+    ctx = _context(imu, validate_name(name), builtin)
+    files = {
+        f"{name}.h": env.get_template("imu.h.j2").render(ctx),
+        f"{name}.c": env.get_template("imu.c.j2").render(ctx),
+        KERNEL_FILE: kernel_header(),
+    }
+    files[f"{name}.manifest.json"] = manifest_json(_manifest(imu, name, builtin))
+    return files
+
+
+def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
+    return {
+        "format": MANIFEST_FORMAT,
+        "format_version": 1,
+        "generator": f"mems-tdc codegen {__version__}",
+        "name": name,
+        "calibration": {"sha256": imu.sha256, "builtin": builtin},
+        "module_id": f"0x{imu.module_id:08x}",
+        "blob": {"layout_version": BLOB_VERSION, "max_intervals": imu.max_intervals},
+        "sensors": [
+            {"name": s, "valid_temp_range_mdegc": [lo, hi]}
+            for s, (lo, hi) in zip(imu.sensors, imu.valid_mdegc, strict=True)
+        ],
+        "channels": [
+            {
+                "name": c.name,
+                "unit": UNIT_LABELS[c.unit],
+                "lsb_per_unit": LSB_PER_UNIT,
+                "method": c.model.checkpoint.method,
+                "sensor": c.sensor,
+                "model": {"file": c.model.path.name, "sha256": c.model.sha256},
+            }
+            for c in imu.channels
+        ],
+        "flags": dict(FLAGS),
+    }
+
+
+def export_imu(
+    paths: list[Path],
+    out_dir: str | os.PathLike[str],
+    *,
+    name: str,
+    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    blob: bool = False,
+    blob_only: bool = False,
+) -> tuple[ImuModel, list[str]]:
+    """Write the module (built-in tables, or data-only with ``blob``) and/or the blob, all or nothing."""
+    from codegen.export import write_files_atomically
+
+    validate_name(name)
+    imu = load_imu(paths, accel_limit_g=accel_limit_g)
+    files: dict[str, str | bytes] = {} if blob_only else dict(render_imu(imu, name, builtin=not blob))
+    if blob or blob_only:
+        files[f"{name}{BLOB_SUFFIX}"] = encode_blob(imu)
+    write_files_atomically(files, out_dir)  # all or nothing
+    written = list(files)
+    return imu, written

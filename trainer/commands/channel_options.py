@@ -1,0 +1,215 @@
+"""``--channels all|LIST``: the one declaration every per-channel command uses.
+
+``trainer import``, ``fit``, ``evaluate``, ``compare``, ``diagnose`` and ``codegen export`` add
+it with :func:`add_channels_option`; the names are checked against a recording by
+:func:`trainer.data.channels.select_channels`. Per-channel outputs go to ``<OUT>/<channel>``
+(:func:`channel_output`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from trainer.data.channels import Channel, parse_channels_option, sort_key
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+
+CHANNELS_OPTION = "--channels"
+MODEL_SUFFIX = ".pt"  # trainer fit --channels writes OUT/<channel>.pt
+INDEX_FILE = "channels.json"  # ... and OUT/channels.json (what was fitted, units)
+
+
+def _channels(text: str) -> tuple[str, ...]:
+    try:
+        return parse_channels_option(text)
+    except UserError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--channels ")) from None
+
+
+def add_channels_option(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--channels``; ``what`` says what the command does per channel (for the help text)."""
+    parser.add_argument(
+        CHANNELS_OPTION,
+        type=_channels,
+        metavar="all|LIST",
+        help=f"multi-channel recordings: {what} for each channel, 'all' or a list such as "
+        "accel0_z,gyro0_x (column names: shared/specs/recording-format.md, 'Several channels')",
+    )
+
+
+def channel_output(out: str | Path, channel: str, suffix: str = "") -> Path:
+    """Where a per-channel output of a command whose output is ``out`` goes: ``out/<channel><suffix>``."""
+    return Path(out) / f"{channel}{suffix}"
+
+
+def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
+    """The per-channel models ``trainer fit --channels`` wrote into ``directory``, as ``wanted``."""
+    root = Path(directory)
+    if not root.is_dir():
+        raise UserError(
+            f"{root}: {CHANNELS_OPTION} reads a directory written by 'trainer fit {CHANNELS_OPTION}'"
+        )
+    available = sorted((p.stem for p in root.glob(f"*{MODEL_SUFFIX}")), key=sort_key)
+    if not available:
+        raise UserError(f"{root}: no per-channel models (*{MODEL_SUFFIX}) in it")
+    names = available if wanted == ("all",) else list(wanted)
+    missing = [name for name in names if name not in available]
+    if missing:
+        raise UserError(
+            f"{root}: {CHANNELS_OPTION} {missing[0]!r} has no model in this directory; available: "
+            f"{', '.join(available)}"
+        )
+    return [root / f"{name}{MODEL_SUFFIX}" for name in names]
+
+
+def check_output_directory(out: str | Path) -> Path:
+    """Fail early when ``out`` cannot become a directory of outputs; returns where files are staged."""
+    target = Path(out)
+    if target.exists() and not target.is_dir():
+        raise UserError(f"{target}: exists and is not a directory (per-channel outputs go into a directory)")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UserError(f"{target}: parent directory {parent} does not exist")
+    base = target if target.is_dir() else parent
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise UserError(f"{target}: directory {base} is not writable")
+    return base
+
+
+@contextmanager
+def staged_directory(out: str | Path) -> Iterator[Path]:
+    """Yield an empty staging folder; its files move into ``out`` (created if absent) only on success,
+    so a failure on the fifth channel leaves no partial set of models."""
+    target = Path(out)
+    base = check_output_directory(target)
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
+    try:
+        yield staging
+        if base == target:
+            for item in sorted(staging.iterdir()):
+                os.replace(item, target / item.name)
+            staging.rmdir()
+        else:
+            os.chmod(staging, 0o755)
+            os.rename(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def run_per_channel(
+    args: argparse.Namespace,
+    run_one: Callable[[argparse.Namespace], int],
+    *,
+    recordings: tuple[str, ...],
+    out_dirs: tuple[str, ...] = (),
+    out_files: tuple[str, ...] = (),
+    model: str | None = None,
+    refuse: Callable[[Channel], str | None] | None = None,
+) -> int:
+    """Run a one-channel command once per ``--channels`` channel.
+
+    Each channel's one-channel view of every recording argument (``recordings``: attribute
+    names) is written to a temporary ``.npz`` named ``<stem>[<channel>].npz``; the command's
+    output directories (``out_dirs``) become ``<dir>/<channel>``, output files (``out_files``)
+    ``<stem>.<channel><suffix>``, and ``model`` (a ``trainer fit --channels`` directory)
+    ``<dir>/<channel>.pt``. Text the command prints or writes (.md, .txt, .json) says the
+    channel's unit instead of mg (:func:`trainer.data.channels.relabel_units`).
+    """
+    from trainer.data.channels import select_channels
+    from trainer.data.recording_io import read_recording
+
+    given = {attr: getattr(args, attr) for attr in recordings if getattr(args, attr) is not None}
+    recs = {attr: read_recording(path) for attr, path in given.items()}
+    channels = select_channels(next(iter(recs.values())), args.channels)
+    for channel in channels:
+        reason = refuse(channel) if refuse is not None else None
+        if reason is not None:
+            raise UserError(reason)
+    models = model_files(getattr(args, model), tuple(c.name for c in channels)) if model else []
+    status = 0
+    created = [
+        Path(getattr(args, a))
+        for a in out_dirs
+        if getattr(args, a) is not None and not Path(getattr(args, a)).exists()
+    ]
+    try:
+        status = _each_channel(args, run_one, channels, recs, given, out_dirs, out_files, model, models)
+    except BaseException:
+        for directory in created:  # nothing half-made is left behind
+            if directory.is_dir() and not any(directory.iterdir()):
+                directory.rmdir()
+        raise
+    return status
+
+
+def _each_channel(
+    args: argparse.Namespace,
+    run_one: Callable[[argparse.Namespace], int],
+    channels: list[Channel],
+    recs: dict[str, Recording],
+    given: dict[str, str],
+    out_dirs: tuple[str, ...],
+    out_files: tuple[str, ...],
+    model: str | None,
+    models: list[Path],
+) -> int:
+    from trainer.data.channels import channel_view, relabel_units, select_channels
+    from trainer.data.recording_io import write_recording
+
+    status = 0
+    with tempfile.TemporaryDirectory(prefix="channels-") as tmp:
+        for index, channel in enumerate(channels):
+            sub = argparse.Namespace(**vars(args))
+            sub.channels = None
+            for attr, rec in recs.items():
+                select_channels(rec, (channel.name,))  # every recording must carry the channel
+                path = Path(tmp) / f"{Path(given[attr]).stem}[{channel.name}].npz"
+                write_recording(channel_view(rec, channel), path)
+                setattr(sub, attr, str(path))
+            for attr in out_dirs:
+                if getattr(args, attr) is not None:
+                    directory = Path(getattr(args, attr))
+                    if not directory.parent.is_dir():
+                        raise UserError(f"{directory}: parent directory {directory.parent} does not exist")
+                    directory.mkdir(exist_ok=True)
+                    setattr(sub, attr, str(channel_output(directory, channel.name)))
+            for attr in out_files:
+                if getattr(args, attr) is not None:
+                    original = Path(getattr(args, attr))
+                    setattr(
+                        sub, attr, str(original.with_name(f"{original.stem}.{channel.name}{original.suffix}"))
+                    )
+            if model:
+                setattr(sub, model, str(models[index]))
+            print(f"== {channel.name} [{channel.label}]", flush=True)
+            captured = io.StringIO()
+            with contextlib.redirect_stdout(captured):
+                status = max(status, run_one(sub))
+            print(relabel_units(captured.getvalue(), channel.unit), end="", flush=True)
+            if channel.unit != "mg":
+                _relabel_outputs(sub, out_dirs, out_files, channel.unit)
+    return status
+
+
+def _relabel_outputs(
+    sub: argparse.Namespace, out_dirs: tuple[str, ...], out_files: tuple[str, ...], unit: str
+) -> None:
+    from trainer.data.channels import relabel_units
+
+    paths: list[Path] = []
+    for attr in out_dirs:
+        if getattr(sub, attr) is not None and Path(getattr(sub, attr)).is_dir():
+            paths += [p for p in Path(getattr(sub, attr)).rglob("*") if p.suffix in (".md", ".txt", ".json")]
+    paths += [Path(getattr(sub, attr)) for attr in out_files if getattr(sub, attr) is not None]
+    for path in paths:
+        if path.is_file():
+            path.write_text(relabel_units(path.read_text(encoding="utf-8"), unit), encoding="utf-8")

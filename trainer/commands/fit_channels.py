@@ -1,0 +1,80 @@
+"""``trainer fit --channels``: one model per channel of a multi-channel recording, into a directory.
+
+Layout (docs/channels.md): ``OUT/<channel>.pt`` is an ordinary checkpoint of the channel's
+one-channel view (its ``train_stats`` name the channel and unit), so ``evaluate``, ``codegen
+export`` and the flight-stack parameter files read it like any model; ``OUT/channels.json`` lists
+the channels with their units and fit figures. All models are fitted before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from trainer import methods
+from trainer.commands.channel_options import (
+    INDEX_FILE,
+    MODEL_SUFFIX,
+    check_output_directory,
+    staged_directory,
+)
+from trainer.data.channels import channel_view, method_refusal, select_channels
+from trainer.errors import UserError
+from trainer.reference import OffsetPolicy
+
+
+def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
+    from trainer.checkpoint import save_model
+    from trainer.data.plausibility import check_training
+    from trainer.data.recording_io import read_recording
+    from trainer.fitting import fit_with_stats
+    from trainer.reference import RECURSIVE_NOTE
+
+    method = methods.get(args.method)
+    check_output_directory(args.output)  # before a possibly long fit
+    train = read_recording(args.train)
+    channels = select_channels(train, args.channels)
+    for channel in channels:  # refuse before the first (possibly long) fit
+        refusal = method_refusal(method.name, method.family, channel)
+        if refusal is not None:
+            raise UserError(f"{train.source}: {refusal}")
+    fitted = []
+    for channel in channels:
+        view = channel_view(train, channel)
+        checks = check_training(view, method, accept=args.accept_implausible)
+        model, stats = fit_with_stats(args.method, view, options, policy)
+        fitted.append((channel, model, stats, checks))
+    index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
+    with staged_directory(args.output) as staging:
+        for channel, model, stats, _ in fitted:
+            save_model(
+                model,
+                staging / f"{channel.name}{MODEL_SUFFIX}",
+                train_stats=stats,
+                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+            )
+            index["channels"].append(
+                {
+                    "channel": channel.name,
+                    "model": f"{channel.name}{MODEL_SUFFIX}",
+                    "unit": channel.label,
+                    "column": channel.column,
+                    "temp_column": channel.temp_column,
+                    "temp_range_c": [stats["temp_min_c"], stats["temp_max_c"]],
+                    "fit_residual_rms": stats["fit_residual_rms_mg"],
+                }
+            )
+        (staging / INDEX_FILE).write_text(json.dumps(index, indent=2) + "\n", encoding="utf-8")
+    for channel, model, stats, checks in fitted:
+        checks.print_warnings()
+        print(
+            f"{args.method} {channel.name}: fitted on {stats['n_samples']} samples "
+            f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), fit residual RMS "
+            f"{stats['fit_residual_rms_mg']:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
+        )
+        note = model.offset.describe() if model.offset else RECURSIVE_NOTE
+        if channel.unit != "mg":  # the offset text is written for an accelerometer
+            note = note.replace(" mg", f" {channel.label}").replace("accelerometer", channel.sensor)
+        print(f"{args.method} {channel.name}: {note}")
+    return 0

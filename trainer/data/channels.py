@@ -1,0 +1,178 @@
+"""The channels of a multi-channel recording ("Several channels" of ``shared/specs/recording-format.md``).
+
+A recording may carry accelerometer, gyroscope and barometer channels of several instances, each
+with its own temperature. Every command works on one channel at a time through a *one-channel
+view*: a :class:`~trainer.data.recording.Recording` whose ``accel_mg`` column holds the channel's
+data in the channel's own unit and whose ``temp_c`` is the channel's temperature; the metadata
+keys ``channel`` and ``unit`` say what the numbers are. So fitting, scoring and code generation
+stay one-channel code, and the unit travels with the view (``channel_unit``) into reports and
+generated headers.
+
+``--channels all|LIST`` is parsed here (:func:`select_channels`); a bad name is one line that
+names the available channels.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from trainer.data.flightlog import SENSOR_UNITS, parse_channel
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+
+ALL = "all"
+UNIT_LABELS = {"mg": "mg", "dps": "deg/s", "pa": "Pa"}  # column unit suffix -> what reports print
+DEFAULT_UNIT = "mg"  # a one-axis recording's accel_mg
+_DATA_COLUMN = re.compile(r"(accel|gyro)([0-9])_([xyz])_(mg|dps)|(baro)([0-9])_(pa)")
+_LEGACY_AXIS = re.compile(r"accel_([xyz])_mg")  # the older spelling of accel0_<axis>_mg
+# Columns a view keeps besides the channel (other channels are dropped: a view is one channel).
+_KEPT = ("chamber_c",)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One channel of a recording: its name, data column, temperature column and unit suffix."""
+
+    name: str  # accel0_z, gyro1_x, baro0
+    column: str  # accel0_z_mg
+    temp_column: str  # accel0_temp_c, or temp_c when the instance has none
+    unit: str  # mg | dps | pa
+
+    @property
+    def sensor(self) -> str:
+        parsed = parse_channel(self.name)
+        assert parsed is not None, "a Channel is only built from a parsed name"
+        return parsed.sensor
+
+    @property
+    def label(self) -> str:
+        """The unit as reports print it (mg, deg/s, Pa)."""
+        return UNIT_LABELS[self.unit]
+
+
+def recording_channels(rec: Recording) -> dict[str, Channel]:
+    """Every channel a recording carries, in the order (sensor, instance, axis).
+
+    ``accel_x_mg`` etc. count as ``accel0_x`` unless ``accel0_x_mg`` is present too.
+    """
+    found: dict[str, Channel] = {}
+    for column in rec.columns:
+        match = _DATA_COLUMN.fullmatch(column)
+        if match is not None:
+            sensor = match.group(1) or match.group(5)
+            instance = match.group(2) or match.group(6)
+            axis = match.group(3)
+            unit = match.group(4) or match.group(7)
+            if unit != SENSOR_UNITS[sensor]:
+                continue  # e.g. gyro0_x_mg: not a column of the contract
+            name = f"{sensor}{instance}_{axis}" if axis else f"{sensor}{instance}"
+        else:
+            legacy = _LEGACY_AXIS.fullmatch(column)
+            if legacy is None:
+                continue
+            sensor, instance, unit, name = "accel", "0", "mg", f"accel0_{legacy.group(1)}"
+            if f"{name}_mg" in rec.columns:
+                continue
+        temp = f"{sensor}{instance}_temp_c"
+        found[name] = Channel(name, column, temp if temp in rec.columns else "temp_c", unit)
+    return dict(sorted(found.items(), key=lambda item: sort_key(item[0])))
+
+
+def parse_channels_option(text: str) -> tuple[str, ...]:
+    """``all`` or a comma list of names; the names are checked against the recording (or model
+    directory), so that a wrong one is reported with the channels that are there."""
+    if text.strip() == ALL:
+        return (ALL,)
+    names = tuple(dict.fromkeys(name.strip() for name in text.split(",")))
+    if not all(names):
+        raise UserError(f"--channels {text!r}: an empty name (all, or a list such as accel0_z,gyro0_x)")
+    return names
+
+
+def sort_key(name: str) -> tuple[int, str]:
+    """Channels in the order sensor (accel, gyro, baro), instance, axis."""
+    parsed = parse_channel(name)
+    return (list(SENSOR_UNITS).index(parsed.sensor) if parsed else len(SENSOR_UNITS), name)
+
+
+def names_text(channels: dict[str, Channel] | list[str]) -> str:
+    names = list(channels)
+    return ", ".join(names) if names else "(none)"
+
+
+def select_channels(rec: Recording, wanted: tuple[str, ...]) -> list[Channel]:
+    """The channels ``wanted`` (from :func:`parse_channels_option`) of ``rec``, in the order given."""
+    available = recording_channels(rec)
+    if not available:
+        raise UserError(
+            f"{rec.source}: --channels: the recording has no channel columns (accel0_x_mg, gyro0_x_dps, "
+            f"baro0_pa, ...; columns: {', '.join(rec.columns)}); a one-axis recording needs no --channels"
+        )
+    if wanted == (ALL,):
+        return list(available.values())
+    missing = [name for name in wanted if name not in available]
+    if missing:
+        raise UserError(
+            f"{rec.source}: --channels {missing[0]!r} is not in this recording; available: "
+            f"{names_text(available)}"
+        )
+    return [available[name] for name in wanted]
+
+
+def channel_view(rec: Recording, channel: Channel) -> Recording:
+    """The one-channel recording of ``channel``: its data as ``accel_mg`` (in its own unit), its
+    temperature as ``temp_c``, metadata ``channel``/``unit``; other channels and truth dropped
+    (the format's truth columns describe the file's ``accel_mg``, not this channel)."""
+    columns = {
+        "time_s": rec.time_s,
+        "temp_c": rec.columns[channel.temp_column],
+        "accel_mg": rec.columns[channel.column],
+    }
+    columns.update((name, rec.columns[name]) for name in _KEPT if name in rec.columns)
+    meta = dict(rec.meta)
+    meta["channel"] = channel.name
+    meta["unit"] = channel.unit
+    return Recording(columns, meta, f"{rec.source}[{channel.name}]")
+
+
+def channel_unit(rec: Recording) -> str:
+    """The unit suffix of a (view) recording's ``accel_mg`` column: ``mg`` unless a view says so."""
+    return rec.meta.get("unit", DEFAULT_UNIT)
+
+
+def unit_of_channel_name(name: str | None) -> str:
+    """The unit suffix of a channel name (``mg`` for None or an unknown name: a one-axis model)."""
+    parsed = parse_channel(name) if name else None
+    return parsed.unit if parsed is not None else DEFAULT_UNIT
+
+
+def method_refusal(method_name: str, family: str, channel: Channel) -> str | None:
+    """Why ``method`` makes no sense on ``channel`` (one line), or None.
+
+    Temperature-driven and memoryless methods (pla, poly3, physics, dlstm-temp) model a drift of
+    the temperature and fit any sensor in its own unit. A recursive method predicts the drift from
+    the signal's own past and removes whatever is sustained: on an accelerometer or gyroscope at
+    rest in a chamber that is the drift, but a barometer's sustained signal *is* the measurement
+    (altitude and weather change slowly), so the recursive methods are refused on a barometer.
+    """
+    if family == "recursive" and channel.sensor == "baro":
+        return (
+            f"{channel.name}: method {method_name!r} is recursive: it removes every slow change of the "
+            f"signal, and a barometer's slow changes are altitude and weather; use a temperature-driven "
+            f"method (poly3, pla, physics, dlstm-temp)"
+        )
+    return None
+
+
+_UNIT_TOKEN = re.compile(r"\bmg\b")  # the unit word; column names (accel_mg, true_drift_mg) never match
+
+
+def relabel_units(text: str, unit: str) -> str:
+    """Text written for milli-g with the unit word replaced by ``unit``'s label (deg/s, Pa).
+
+    The scoring and report code is one-channel code that says "mg"; a one-channel view of a
+    gyroscope holds deg/s in the same column, so its reports are relabelled rather than the
+    scoring code made unit-generic. Column names keep their spelling (``accel_mg``).
+    """
+    return text if unit == DEFAULT_UNIT else _UNIT_TOKEN.sub(UNIT_LABELS[unit], text)
