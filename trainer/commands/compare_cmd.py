@@ -132,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
     notes = []
+    lead_in = None
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
         train, valid = split(read_recording(args.train), holdout)
@@ -139,6 +140,12 @@ def run(args: argparse.Namespace) -> int:
             f"one recording, {holdout.describe()}: training t = {train.time_s[0]:g} .. {train.time_s[-1]:g} s, "
             f"validation t = {valid.time_s[0]:g} .. {valid.time_s[-1]:g} s"
         )
+        if holdout.side == "last":
+            lead_in = train.without_truth()
+            notes.append(
+                "the validation part follows the training part: every method runs through the training part "
+                "first (as firmware running since power-on) and is scored on the validation part only"
+            )
     else:
         train = read_recording(args.train)
         valid = read_recording(args.valid)
@@ -165,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
         log=log,
         policy=policy,
         inject=args.inject,
+        lead_in=lead_in,
     )
     comparison.notes += notes
     # Everything is written into a fresh directory first and moved into place at the end, so a

@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.recording_io import read_recording
     from trainer.fitting import data_fingerprint
     from trainer.scoring.allan import plot_allan
+    from trainer.scoring.compare import compensate_after
     from trainer.scoring.evaluate import evaluate
     from trainer.scoring.inject import injected_input, input_kept
     from trainer.scoring.plots import plot_series
@@ -89,10 +90,15 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)
     rec = read_recording(args.recording)
+    lead_in = None
     if args.holdout is not None:
-        _, rec = split(rec, parse_holdout(args.holdout))
+        holdout = parse_holdout(args.holdout)
+        train_part, rec = split(rec, holdout)
+        # a held-out end part is scored with the state run through the part before it (firmware that
+        # has run since power-on); a held-out start part starts cold, as at power-on
+        lead_in = train_part.without_truth() if holdout.side == "last" else None
     name = checkpoint["method"]
-    compensated = model.compensate(rec.without_truth())
+    compensated = compensate_after(model, rec.without_truth(), lead_in)
     lo, hi = checkpoint["valid_temp_range_c"]
     outside = (rec.temp_c < lo) | (rec.temp_c > hi)
     references = {name: model.offset.t_ref_c} if model.offset is not None and model.offset.relative else {}

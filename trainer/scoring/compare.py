@@ -88,6 +88,18 @@ def fit_all(
     return {m.name: models[m.name] for m in chosen}, seconds
 
 
+def compensate_after(model: Compensator, rec: Recording, lead_in: Recording | None) -> np.ndarray:
+    """``model``'s output on ``rec``, its state first run through ``lead_in`` (when given)."""
+    if lead_in is None:
+        return model.compensate(rec)
+    joined = Recording(
+        {k: np.concatenate([lead_in.columns[k], v]) for k, v in rec.columns.items() if k in lead_in.columns},
+        dict(rec.meta),
+        rec.source,
+    )
+    return model.compensate(joined)[len(lead_in) :]
+
+
 def compare(
     train: Recording,
     valid: Recording,
@@ -100,12 +112,17 @@ def compare(
     log: Callable[[str], None] = print,
     policy: OffsetPolicy | None = None,
     inject: str | None = None,
+    lead_in: Recording | None = None,
 ) -> Comparison:
     """Fit on ``train``, score on ``valid``; ``inject`` (an input preset) is added to ``valid`` to
-    measure how much of a known input each method keeps (:mod:`trainer.scoring.inject`)."""
+    measure how much of a known input each method keeps (:mod:`trainer.scoring.inject`).
+
+    ``lead_in``: the samples that precede ``valid`` in the same recording (a held-out end part):
+    every method runs through them first and is scored on ``valid`` only, as firmware that has run
+    since power-on; without it a method with state (filters, a branch, a network) starts cold."""
     models, seconds = fit_all(train, settings, methods=methods, progress=progress, log=log, policy=policy)
     blind = valid.without_truth()
-    compensated = {name: model.compensate(blind) for name, model in models.items()}
+    compensated = {name: compensate_after(model, blind, lead_in) for name, model in models.items()}
     references = {
         name: model.offset.t_ref_c
         for name, model in models.items()

@@ -14,7 +14,7 @@ is always a headline figure.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,6 +67,9 @@ class Evaluation:
     noise_floor_mg: float  # white-noise RMS of the raw output after the smoothing
     branch_fractions: tuple[float, float]  # share of heating and of cooling samples
     raw_drift: DriftScore | None = None  # the uncompensated output against the truth (common T_ref)
+    # static deviation over the samples inside the training temperature range (range-checked methods
+    # and "raw"; empty when every sample is inside): extrapolation is scored apart from compensation
+    static_in_range: dict[str, DriftLeft] = field(default_factory=dict)
 
     def drift_left(self, name: str) -> DriftLeft | None:
         """The headline drift left of ``name``: against ground truth when there is one, else static."""
@@ -142,10 +145,28 @@ def evaluate(
     window = window_samples(smoothing_s, rate) if smoothing_s > 0 else 1
     floor = noise_floor_mg(rec.accel_mg, window)
     shares = (float(np.mean(branch == HEATING)), float(np.mean(branch == COOLING)))
+    in_range = {
+        name: static_drift_left(smoothed[name][~mask], branch[~mask])
+        for name, mask in (out_of_range or {}).items()
+        if mask.any() and not mask.all()
+    }
+    if in_range:
+        mask = next(m for m in (out_of_range or {}).values() if m.any() and not m.all())
+        in_range["raw"] = static_drift_left(smoothed["raw"][~mask], branch[~mask])
     common = set(refs.values())
     raw_drift = drift_score(rec, rec.accel_mg, common.pop() if len(common) == 1 else None, branch)
     return Evaluation(
-        table, table.curves, smoothed, drift, fractions, smoothing_s, static, floor, shares, raw_drift
+        table,
+        table.curves,
+        smoothed,
+        drift,
+        fractions,
+        smoothing_s,
+        static,
+        floor,
+        shares,
+        raw_drift,
+        in_range,
     )
 
 

@@ -54,16 +54,25 @@ def headline_table(comparison: Comparison) -> str:
     table = evaluation.table
     survival_sets = list(comparison.survival.items())
     header = ["method", "drift left RMS (mg)", "max (mg)", "heating RMS (mg)", "cooling RMS (mg)"]
+    in_range = evaluation.static_in_range if not evaluation.drift else {}
+    if in_range:  # a static recording partly outside the training range: extrapolation apart
+        header.append("in training range RMS (mg)")
+
+    def in_range_cell(name: str) -> list[str]:
+        if not in_range:
+            return []
+        return [_sci(in_range[name].rms_mg) if name in in_range else ""]
+
     header += [f"input kept: {Path(src).stem} (%)" for src, _ in survival_sets]
     header += ["B (mg)", "K (mg/s^1/2)", "R (mg/s)", "Allan aver. impr. (%)", "fit time (s)"]
     raw = table.raw
     rows = [
-        ["uncompensated", *_drift_cells(evaluation.drift_left("raw"))]
+        ["uncompensated", *_drift_cells(evaluation.drift_left("raw")), *in_range_cell("raw")]
         + ["100" for _ in survival_sets]
         + [_sci(raw.b_mg), _sci(raw.k_mg_per_rt_s), _sci(raw.r_mg_per_s), "", ""]
     ]
     for name, coefficients in table.compensated.items():
-        row = [name, *_drift_cells(evaluation.drift_left(name))]
+        row = [name, *_drift_cells(evaluation.drift_left(name)), *in_range_cell(name)]
         for _, scores in survival_sets:
             row.append(f"{100 * scores[name].gain:.1f}" if name in scores else "n/a")
         row += [
@@ -75,7 +84,7 @@ def headline_table(comparison: Comparison) -> str:
         ]
         rows.append(row)
     floor = _sci(evaluation.noise_floor_mg)
-    rows.append(["noise floor (white noise)", floor, "", "", ""] + [""] * (len(header) - 5))
+    rows.append(["noise floor (white noise)", floor] + [""] * (len(header) - 2))
     return markdown_table(header, rows)
 
 
@@ -105,6 +114,12 @@ def drift_left_explanation(evaluation: Evaluation) -> str:
         "everything the compensated output does besides noise is drift left. `drift left` is the "
         f"deviation of the compensated output ({evaluation.smoothing_s} s smoothing) from one constant "
         f"(its mean), RMS and maximum magnitude. {branches} {floor}"
+        + (
+            " `in training range`: the RMS over the samples whose temperature lies inside the training "
+            "range (outside it every temperature-driven method extrapolates or holds its end value)."
+            if evaluation.static_in_range
+            else ""
+        )
     )
 
 
