@@ -8,6 +8,7 @@ import sys
 
 from codegen import __version__
 from codegen.flightparams import EXTENSIONS
+from codegen.quantize import SCHEDULES
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 
 EXIT_MISMATCH = 1
@@ -15,6 +16,8 @@ EXIT_MISMATCH = 1
 
 def _export(args: argparse.Namespace) -> int:
     if args.format != "c":
+        if args.schedule != "step":
+            raise UserError("--schedule applies to the C module (--format c), not to parameter files")
         return _export_params(args)
     for option, given in (
         ("--channel", args.channel),
@@ -27,7 +30,9 @@ def _export(args: argparse.Namespace) -> int:
         raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
 
-    model, files = export(args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g)
+    model, files = export(
+        args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g, schedule=args.schedule
+    )
     name = next(f for f in files if f.endswith(".manifest.json"))[: -len(".manifest.json")]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
@@ -105,6 +110,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=16.0,
         help="acceleration full scale in g; the front end clamps beyond it (default 16)",
+    )
+    exp.add_argument(
+        "--schedule",
+        choices=SCHEDULES,
+        default="step",
+        help="DLSTMs: step runs the network on the sample that ends its window (default); spread splits it "
+        "into tasks over the samples of the decimation period (worst sample about 2x the average, the "
+        "estimate takes effect D - 1 samples later)",
     )
     exp.add_argument(
         "--format",

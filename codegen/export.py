@@ -37,7 +37,7 @@ class LoadedModel:
 
 
 def load_for_codegen(
-    path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G
+    path: str | os.PathLike[str], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, schedule: str = "step"
 ) -> LoadedModel:
     """Validate (``load_checkpoint``), parse and quantise; every failure is a one-line UserError."""
     p = Path(path)
@@ -45,7 +45,7 @@ def load_for_codegen(
     sha256 = hashlib.sha256(p.read_bytes()).hexdigest()
     ckpt = parse_checkpoint(raw, str(p))
     try:
-        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
+        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
     return LoadedModel(p, sha256, ckpt, quantised, offset_notes(p, raw))
@@ -149,11 +149,12 @@ def export(
     *,
     name: str | None = None,
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    schedule: str = "step",
 ) -> tuple[LoadedModel, dict[str, str]]:
     """Load, quantise, render and write; returns the model and the written files."""
     if name is not None:
         validate_name(name)
-    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g, schedule=schedule)
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)
     return model, files

@@ -257,7 +257,8 @@ def verify(
         accel_limit_g = float(manifest["input_limits"]["accel_g"][1])
     except (KeyError, TypeError, IndexError, ValueError):
         raise UserError(f"{out / manifest_name(name)}: field 'input_limits.accel_g' is missing") from None
-    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g)
+    schedule = str(manifest.get("schedule", {}).get("name", "step"))
+    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g, schedule=schedule)
     model_entry = manifest.get("model")
     stamped = model_entry.get("sha256") if isinstance(model_entry, dict) else None
     if stamped != model.sha256:
