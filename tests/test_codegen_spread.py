@@ -6,6 +6,7 @@ documented latency of D - 1 samples (so the drift left is unchanged up to that d
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 import json
 import shutil
@@ -141,3 +142,29 @@ def test_cli_refuses_a_schedule_without_a_network_step(
     assert done.returncode != 0 and message in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and "Traceback" not in done.stderr
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
+def test_bit_exact_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
+    """The spread module on the target (QEMU), SMLAD and portable paths, with resets mid-period."""
+    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
+    assert spec is not None and spec.loader is not None
+    cm = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("cortex_m", cm)
+    spec.loader.exec_module(cm)
+    reason = cm.ensure_toolchain()
+    if reason is not None:
+        pytest.skip(f"Cortex-M toolchain unavailable: {reason}")
+    model, _ = export(ref.REF_DIR / "dlstm.pt", tmp_path / "out", name="spr", schedule="spread")
+    accel, temp = ref.load_stream()
+    commands = np.zeros(accel.size, dtype=np.int64)
+    commands[[1_003, 2_222]] = CMD_RESET
+    build = cm.Build(tmp_path / "out", "spr", tmp_path / "build", extra_cflags=flags)
+    result = cm.stream(build, accel, temp, commands, tmp_path / "run")
+    golden = golden_for(model.quantised)
+    expected = []
+    for k, (a, b) in enumerate(itertools.pairwise([0, 1_003, 2_222, accel.size])):
+        if k:
+            golden.reset()
+        expected.append(golden.run(accel[a:b], temp[a:b]))
+    np.testing.assert_array_equal(result.outputs, np.concatenate(expected))
