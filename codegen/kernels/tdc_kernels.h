@@ -32,7 +32,7 @@
 #define TDCK_DSP 0
 #endif
 
-#define TDCK_VERSION 1
+#define TDCK_VERSION 2 /* 2: knot table, excess-2^31 accumulators, biases in the weight stream */
 
 /* The layer kernel is inlined into each call so that its shifts become immediates (gcc would
  * otherwise share one copy with variable shifts: 25 % slower on a Cortex-M4); a generated module
