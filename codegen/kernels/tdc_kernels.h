@@ -343,7 +343,7 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
         case 2u:
             TDCK_PAIR_;
             /* fall through */
-        default:
+        case 1u:
             TDCK_PAIR_;
         } while (--blocks > 0u);
     }
