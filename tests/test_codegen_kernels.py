@@ -313,3 +313,27 @@ def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     stdout = cm.run_qemu(out / "kernel_app.elf", ["in.bin", "out.bin"], cwd=tmp_path)
     assert f"dsp {0 if flags else 1}" in stdout
     check_outputs(records, (tmp_path / "out.bin").read_bytes())
+
+
+@pytest.mark.parametrize("opt", ["-O0", "-Os", "-O2 -fno-omit-frame-pointer"])
+def test_dsp_path_builds_at_any_optimisation(opt: str, tmp_path: Path) -> None:
+    """The DSP path's inline assembly (LDM into fixed registers, SMULL/SMLAL, SMMULR) leaves the
+    Thumb frame pointer r7 alone: it builds warning-free with and without a frame pointer."""
+    if shutil.which("arm-none-eabi-gcc") is None:
+        pytest.skip("arm-none-eabi-gcc is not installed")
+    cmd = [
+        "arm-none-eabi-gcc",
+        *STRICT_FLAGS,
+        "-mcpu=cortex-m4",
+        "-mthumb",
+        "-mfloat-abi=hard",
+        "-mfpu=fpv4-sp-d16",
+        *opt.split(),
+        f"-I{KERNELS}",
+        "-c",
+        str(HARNESS),
+        "-o",
+        str(tmp_path / "k.o"),
+    ]
+    result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert result.returncode == 0 and not result.stderr, result.stderr

@@ -259,14 +259,14 @@ static inline uint32_t tdck_mac2(uint32_t u, int32_t word, int32_t x0, int32_t x
         register int32_t tdck_r4_ __asm__("r4");                                                         \
         register int32_t tdck_r5_ __asm__("r5");                                                         \
         register int32_t tdck_r6_ __asm__("r6");                                                         \
-        register int32_t tdck_r7_ __asm__("r7");                                                         \
+        register int32_t tdck_r8_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
         __asm__("ldmia %4!, {%0, %1, %2, %3}"                                                             \
-                : "=r"(tdck_r4_), "=r"(tdck_r5_), "=r"(tdck_r6_), "=r"(tdck_r7_), "+r"(w)                  \
+                : "=r"(tdck_r4_), "=r"(tdck_r5_), "=r"(tdck_r6_), "=r"(tdck_r8_), "+r"(w)                  \
                 : "m"(*(const int32_t(*)[4])(w)));                                                        \
         (q0) = tdck_r4_;                                                                                  \
         (q1) = tdck_r5_;                                                                                  \
         (q2) = tdck_r6_;                                                                                  \
-        (q3) = tdck_r7_;                                                                                  \
+        (q3) = tdck_r8_;                                                                                  \
     } while (0)
 #elif TDCK_DSP
 #define TDCK_LOAD4(w, q0, q1, q2, q3)                                                                     \
