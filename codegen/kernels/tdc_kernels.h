@@ -418,27 +418,44 @@ static inline int16_t tdck_lstm_cell(int32_t gi, int32_t gf, int32_t gg, int32_t
 }
 
 /* A unit's cell from its four gate accumulators (excess-2^31 form, Q(shift + ACT_STEP_BITS)): the
- * activations, then tdck_lstm_cell; returns h. */
+ * activations, then tdck_lstm_cell; returns h. `sig` is table + 256 - 2^(30 - shift) when the
+ * sigmoid gates' accumulators cannot leave the table (shift >= 22: the caller passes it, so that
+ * the compiler keeps that base address in a register), else NULL. */
 TDCK_INLINE int16_t tdck_lstm_unit(const uint32_t *acc, unsigned shift, int32_t *c, const uint16_t *table,
-    uint32_t *flags, uint32_t sat_bit)
+    const uint16_t *sig, uint32_t *flags, uint32_t sat_bit)
 {
-    return tdck_lstm_cell(tdck_act_x(table, acc[0], shift + 1u), tdck_act_x(table, acc[1], shift + 1u),
-        tdck_act_x(table, acc[2], shift) - (1 << TDCK_ACT_VALUE_FRAC), tdck_act_x(table, acc[3], shift + 1u), c,
-        table, flags, sat_bit);
+    int32_t gi;
+    int32_t gf;
+    int32_t go;
+    if (sig != NULL && shift + 1u >= 23u) {
+        unsigned s = shift + 1u;
+        uint32_t mask = (1u << TDCK_ACT_POS_BITS) - 1u;
+        gi = tdck_act_lerp(sig, (int32_t)(acc[0] >> s), (acc[0] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        gf = tdck_act_lerp(sig, (int32_t)(acc[1] >> s), (acc[1] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        go = tdck_act_lerp(sig, (int32_t)(acc[3] >> s), (acc[3] >> (s - TDCK_ACT_POS_BITS)) & mask);
+    } else {
+        gi = tdck_act_x(table, acc[0], shift + 1u);
+        gf = tdck_act_x(table, acc[1], shift + 1u);
+        go = tdck_act_x(table, acc[3], shift + 1u);
+    }
+    return tdck_lstm_cell(gi, gf, tdck_act_x(table, acc[2], shift) - (1 << TDCK_ACT_VALUE_FRAC), go, c, table,
+        flags, sat_bit);
 }
 
 /* One LSTM layer of `hidden` units: unit j's four gate rows (i, f, g, o) are tdck_dot4 of block j of
  * w (4 biases, then 4 packed words per input pair) against v (2 pairs int16, the layer's input
  * then its own h). The gate accumulators are Q(shift + ACT_STEP_BITS). New h go to h_new (not v:
- * the later units still read the old h); cell states are updated in place. */
+ * the later units still read the old h); cell states are updated in place. `sig`: as for
+ * tdck_lstm_unit. */
 TDCK_INLINE void tdck_lstm_layer(const int32_t *w, const int16_t *v, uint32_t pairs, uint32_t hidden,
-    unsigned shift, int32_t *c, int16_t *h_new, const uint16_t *table, uint32_t *flags, uint32_t sat_bit)
+    unsigned shift, int32_t *c, int16_t *h_new, const uint16_t *table, const uint16_t *sig, uint32_t *flags,
+    uint32_t sat_bit)
 {
     uint32_t j;
     for (j = 0u; j < hidden; ++j) {
         uint32_t acc[4];
         tdck_dot4(&w, v, pairs, acc);
-        h_new[j] = tdck_lstm_unit(acc, shift, &c[j], table, flags, sat_bit);
+        h_new[j] = tdck_lstm_unit(acc, shift, &c[j], table, sig, flags, sat_bit);
     }
 }
 
