@@ -223,6 +223,7 @@ def main() -> int:
         return 1
     rows: list[Row] = []
     apps: list[Path] = []
+    delays: list[tuple[str, int, bool, float]] = []
     with tempfile.TemporaryDirectory(prefix="bench-cortex-m-") as tmp:
         work = Path(tmp)
         models = [(p.name, p) for p in args.model] if args.model else default_models(work)
@@ -247,6 +248,12 @@ def main() -> int:
             rows.append(
                 measure(label, "generated, portable", model, portable, vectors, (accel, temp), work / f"p{k}")
             )
+            spread, _ = export(path, work / f"s{k}", name=name, schedule="spread")
+            sbuild = cm.Build(work / f"s{k}", name, work / f"sbuild{k}")
+            rows.append(
+                measure(label, "generated, spread", spread, sbuild, vectors, (accel, temp), work / f"s{k}r")
+            )
+            delays.append((label, *spread_delay(model, spread, accel, temp)))
             for variant in ("libm", "fast"):
                 folder = work / f"f{k}{variant}"
                 write_float_module(spec, q, name, folder, variant)
@@ -263,35 +270,56 @@ def main() -> int:
                 )
                 rows.append(row)
         app_sizes = cm.sizes(*apps) if apps else []
-    report(rows, app_sizes, accel.size)
+    report(rows, app_sizes, accel.size, delays)
     if args.json:
         write_json(rows, args.json)
     return 0 if all(r.mismatches in (0, None) for r in rows) else 1
 
 
-def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
+def spread_delay(
+    model: LoadedModel, spread: LoadedModel, accel: np.ndarray, temp: np.ndarray
+) -> tuple[int, bool, float]:
+    """The spread schedule's latency (samples), whether its drift estimate, on the whole stream,
+    is the step schedule's delayed by exactly that many samples (goldens: the C equals them), and
+    the sample rate."""
+    q = spread.quantised
+    assert isinstance(q, QStream)
+    lat = q.latency_samples
+    step_drift = accel - golden_for(model.quantised).run(accel, temp)
+    spread_drift = accel - golden_for(spread.quantised).run(accel, temp)
+    same = bool(np.array_equal(spread_drift[lat:], step_drift[: step_drift.size - lat]))
+    return lat, same and not np.any(spread_drift[:lat]), q.frontend.rate_hz
+
+
+def report(
+    rows: list[Row], app_sizes: list[Any], stream_samples: int, delays: list[tuple[str, int, bool, float]]
+) -> None:
     print("Cortex-M4F (-mcpu=cortex-m4 -mthumb -mfloat-abi=hard -O2) under QEMU mps2-an386, -icount shift=0;")
     print(f"{cm.build_env_note()}; {platform.platform()}")
     print(f"stream: {stream_samples} samples (5 min at 200 Hz, simulated oven run, seed 2); "
           "instructions per call of NAME_step, call and return included\n")  # fmt: skip
-    head = (f"{'model':<25} {'variant':<19} {'avg':>7} {'worst':>7} {'plain':>6} {'MAC/step':>9} {'MAC/smp':>8} "
-            f"{'instr/MAC':>9} {'us@168':>7} {'flash B':>8} {'state B':>8} {'stack B':>8} {'exact':>6}")  # fmt: skip
+    head = (f"{'model':<25} {'variant':<19} {'avg':>7} {'worst':>7} {'max/avg':>7} {'plain':>6} {'MAC/step':>9} "
+            f"{'MAC/smp':>8} {'instr/MAC':>9} {'us@168':>7} {'flash B':>8} {'state B':>8} {'stack B':>8} "
+            f"{'exact':>6}")  # fmt: skip
     print(head)
     print("-" * len(head))
     for r in rows:
         c = r.counts
-        ratio = c.worst / r.bound.per_step if r.bound.per_step else float("nan")
+        worst = c.worst_phase if r.variant == "generated, spread" else c.worst
+        ratio = worst / r.bound.per_step if r.bound.per_step else float("nan")
         print(
-            f"{r.label:<25} {r.variant:<19} {c.average:>7.1f} {c.worst:>7.0f} {c.plain:>6.1f} "
-            f"{r.bound.per_step:>9} {r.bound.per_sample:>8.2f} {ratio:>9.1f} {c.worst / CLOCK_MHZ:>7.1f} "
-            f"{r.module.flash:>8} {r.state_bytes:>8} {r.stack_bytes:>8} "
+            f"{r.label:<25} {r.variant:<19} {c.average:>7.1f} {worst:>7.0f} {c.worst_phase / c.average:>7.2f} "
+            f"{c.plain:>6.1f} {r.bound.per_step:>9} {r.bound.per_sample:>8.2f} {ratio:>9.1f} "
+            f"{worst / CLOCK_MHZ:>7.1f} {r.module.flash:>8} {r.state_bytes:>8} {r.stack_bytes:>8} "
             f"{'n/a' if r.mismatches is None else 'yes' if r.mismatches == 0 else 'NO':>6}"
         )
     print()
     print("avg   = instructions per sample averaged over the stream (streaming models: whole 1 s periods)")
     print(
-        "worst = a sample on which the network steps (streaming), the costliest batch of 250 samples (PLA, poly3)"
+        "worst = a sample on which the network steps (streaming), the costliest batch of 250 samples (PLA, poly3);"
     )
+    print("        spread schedule: the costliest phase of the period (averaged over the periods)")
+    print("max/avg = the costliest phase of the period / avg (streaming: every sample timed alone)")
     print("plain = a sample without network step; MAC/step = weight multiply-accumulates of one network step")
     print(
         "        (PLA, poly3: per sample), the lower bound: one MAC per instruction (SMLABB), two with SMLAD;"
@@ -319,6 +347,11 @@ def report(rows: list[Row], app_sizes: list[Any], stream_samples: int) -> None:
             if gen is not None and anchor in variants:
                 ratio = variants[anchor].counts.worst / gen.counts.worst
                 print(f"{label}: network step of {anchor} / generated (SMLAD) = {ratio:.2f}")
+    for label, lat, same, rate in delays:
+        print(
+            f"{label}: spread schedule latency {lat} samples ({lat / rate:g} s at {rate:g} Hz); its drift estimate "
+            f"= the step schedule's delayed by {lat} samples on every sample of the stream: {'yes' if same else 'NO'}"
+        )
     print()
     for s in app_sizes:
         print(f"whole app {s.path.name:<14} text {s.text:>7} data {s.data:>6} bss {s.bss:>7}  (newlib stdio and "

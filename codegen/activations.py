@@ -1,26 +1,30 @@
-"""Integer tanh and sigmoid from one table with linear interpolation, coefficients computed offline.
+"""Integer tanh and sigmoid from one table with linear interpolation, knots computed offline.
 
 * The table holds ``T(x) = 2**15 (tanh(x) + 1) = 2**16 sigmoid(2x)`` on ``x`` in [-8, 8) in
-  :data:`ACT_SEGMENTS` = 512 segments of 1/32 (``codegen.qformats``): per segment a start value
-  (uint16) and a slope (uint16, 16 bits below the output LSB per position step). The line of each
-  segment is the chord shifted by half the chord's deviation at the midpoint (the minimax line of a
-  function whose curvature is nearly constant over 1/16); values and slopes are computed with
-  :mod:`decimal` (correctly rounded ``exp``), so the table is the same on every machine. The first
-  and last segments are flat, which makes any input beyond the table need no special case.
+  :data:`ACT_SEGMENTS` = 512 segments of 1/32 (``codegen.qformats``) as :data:`ACT_KNOTS` = 513
+  knots (uint16, 1 KB): the knot at each segment end is T there moved by half the mean of the
+  chord deviations at the midpoints of its two segments (the continuous line then splits each
+  chord's error around zero, like the minimax line of a function whose curvature is nearly
+  constant over 1/16); knots are computed with :mod:`decimal` (correctly rounded ``exp``), so the
+  table is the same on every machine. The first and last segments are flat, which makes any input
+  beyond the table need no special case. A continuous line needs no slope column: half the flash
+  of a start-value-and-slope table at the same error (2.5 LSB).
 * ``act(acc, shift)``: the input is ``acc / 2**(shift + 5)``; segment ``k = floor(acc / 2**shift)
-  + 256`` clamped to 0 .. 511, position the 12 bits below it; ``T = value[k] + (slope[k] pos +
-  2**15) >> 16``. No 64-bit arithmetic, no branch but the clamp: 8 instructions on a Cortex-M4.
+  + 256`` clamped to 0 .. 511, position the 12 bits below it; ``T = v[k] + ((v[k+1] - v[k]) pos +
+  2**11) >> 12`` (the knots rise, so the difference is unsigned). No 64-bit arithmetic, no branch
+  but the clamp (none for a gate whose accumulator cannot leave the table): on a Cortex-M4 one
+  load of both knots, one SMLABB, 7 or 8 instructions.
 * ``tanh = T - 2**15`` (Q15, -32767 .. 32767); ``sigmoid(z) = T(z / 2)`` (Q16, 1 .. 65535: a
   forget gate stays below 1), the same table read with one more shift bit.
 
 Error (measured on every segment and position by the tests, quoted in the manifest): the line's
-own error (h**2 max|T''| / 16, 1.6 LSB of Q15 at the steepest curvature), the rounding of value
-and slope and the dropped input bits below the position: below 3 LSB of the output format (Q15
-for tanh, Q16 for sigmoid), i.e. 7.6e-5 for tanh (measured 2.5 LSB); the proofs use :data:`ACT_ERROR_LSB`. Why 1/32 and
-not 1/16 (half the flash): with 1/16 (7 LSB) the activations alone cost 1.4e-3 mg RMS on a trained
-2x10 network, above the 1e-3 mg budget; with 1/32 the total is 4.4e-4 mg. The golden functions here are an
-independent numpy implementation of the same arithmetic (floor divisions on int64, not the C's
-offset trick), compared with the C library bit for bit.
+own error (h**2 max|T''| / 16, 1.6 LSB of Q15 at the steepest curvature), the rounding of the
+knots and the dropped input bits below the position: below 3 LSB of the output format (Q15 for
+tanh, Q16 for sigmoid), i.e. 7.6e-5 for tanh (measured 2.5 LSB); the proofs use
+:data:`ACT_ERROR_LSB`. Why 1/32 and not 1/16: with 1/16 (7 LSB) the activations alone cost
+1.4e-3 mg RMS on a trained 2x10 network, above the 1e-3 mg budget. The golden functions here are
+an independent numpy implementation of the same arithmetic (floor divisions on int64, not the C's
+offset tricks), compared with the C library bit for bit.
 """
 
 from __future__ import annotations
@@ -32,11 +36,11 @@ from decimal import Decimal, localcontext
 import numpy as np
 
 from codegen.qformats import (
+    ACT_KNOTS,
     ACT_ONE,
     ACT_POS_BITS,
     ACT_RANGE,
     ACT_SEGMENTS,
-    ACT_SLOPE_BITS,
     ACT_STEP_BITS,
     ACT_VALUE_FRAC,
     GATE_FRAC,
@@ -57,31 +61,27 @@ def _round(value: Decimal) -> int:
     return int(value.to_integral_value(rounding="ROUND_HALF_UP"))
 
 
-def _build_table() -> tuple[np.ndarray, np.ndarray]:
-    values, slopes = [], []
+def _build_knots() -> np.ndarray:
+    knots = []
     step = Decimal(1) / Decimal(1 << ACT_STEP_BITS)
-    pos_top = (1 << ACT_POS_BITS) - 1
     with localcontext() as ctx:
         ctx.prec = 40
-        for k in range(ACT_SEGMENTS):
-            x0 = Decimal(-ACT_RANGE) + k * step
-            t0, tm, t1 = _t_decimal(x0), _t_decimal(x0 + step / 2), _t_decimal(x0 + step)
-            if k in (0, ACT_SEGMENTS - 1):  # flat: inputs beyond the table land here
-                value, slope = _round(tm), 0
-            else:
-                deviation = tm - (t0 + t1) / 2  # chord error at the midpoint; the line takes half of it
-                value = _round(t0 + deviation / 2)
-                slope = _round((t1 - t0) * (1 << (ACT_SLOPE_BITS - ACT_POS_BITS)))
-            value = max(T_MIN, min(value, T_MAX))
-            top = value + ((slope * pos_top + (1 << (ACT_SLOPE_BITS - 1))) >> ACT_SLOPE_BITS)
-            value -= max(0, top - T_MAX)  # cap the segment's end at T_MAX
-            values.append(value)
-            slopes.append(slope)
-    return np.asarray(values, dtype=np.int64), np.asarray(slopes, dtype=np.int64)
+        edges = [_t_decimal(Decimal(-ACT_RANGE) + k * step) for k in range(ACT_KNOTS)]
+        middles = [_t_decimal(Decimal(-ACT_RANGE) + k * step + step / 2) for k in range(ACT_SEGMENTS)]
+        # chord error at each segment's midpoint; a knot moves by half the mean of its two segments'
+        deviation = [m - (t0 + t1) / 2 for m, t0, t1 in zip(middles, edges, edges[1:], strict=False)]
+        for k in range(ACT_KNOTS):
+            if k in (0, ACT_KNOTS - 1):
+                continue
+            knots.append(_round(edges[k] + (deviation[k - 1] + deviation[k]) / 4))
+    knots = [max(T_MIN, min(v, T_MAX)) for v in knots]
+    # flat first and last segments: inputs beyond the table land there, whatever their position
+    return np.asarray([knots[0], *knots, knots[-1]], dtype=np.int64)
 
 
-ACT_VALUE, ACT_SLOPE = _build_table()
-assert ACT_VALUE.min() >= T_MIN and ACT_SLOPE.max() <= 0xFFFF and ACT_SLOPE.min() >= 0
+ACT_KNOT = _build_knots()
+assert ACT_KNOT.size == ACT_KNOTS and ACT_KNOT.min() >= T_MIN and ACT_KNOT.max() <= T_MAX
+assert np.all(np.diff(ACT_KNOT) >= 0)  # monotone: the C's knot differences are unsigned
 
 
 def act(acc: np.ndarray | int, shift: int) -> np.ndarray:
@@ -91,7 +91,8 @@ def act(acc: np.ndarray | int, shift: int) -> np.ndarray:
     acc = np.asarray(acc, dtype=np.int64)
     k = np.clip((acc >> shift) + ACT_SEGMENTS // 2, 0, ACT_SEGMENTS - 1)  # numpy >>: floor division
     pos = (acc >> (shift - ACT_POS_BITS)) & ((1 << ACT_POS_BITS) - 1)
-    return ACT_VALUE[k] + ((ACT_SLOPE[k] * pos + (1 << (ACT_SLOPE_BITS - 1))) >> ACT_SLOPE_BITS)
+    v0 = ACT_KNOT[k]
+    return v0 + (((ACT_KNOT[k + 1] - v0) * pos + (1 << (ACT_POS_BITS - 1))) >> ACT_POS_BITS)
 
 
 def sigmoid_q16(acc: np.ndarray | int, shift: int) -> np.ndarray:

@@ -8,6 +8,7 @@ import sys
 
 from codegen import __version__
 from codegen.flightparams import EXTENSIONS
+from codegen.quantize import SCHEDULES
 from trainer.commands.channel_options import add_channels_option
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 
@@ -24,6 +25,8 @@ def _export(args: argparse.Namespace) -> int:
     if args.format != "c":
         if args.rate is not None:
             raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
+        if args.schedule != "step":
+            raise UserError("--schedule applies to the C module (--format c), not to parameter files")
         return _export_params(args)
     for option, given in (
         ("--channel", args.channel),
@@ -39,7 +42,12 @@ def _export(args: argparse.Namespace) -> int:
 
     rate = None if args.rate is None else parse_rate_hz(args.rate)
     model, files = export(
-        args.model[0], args.out_dir, name=args.name, accel_limit_g=args.accel_limit_g, rate_millihz=rate
+        args.model[0],
+        args.out_dir,
+        name=args.name,
+        accel_limit_g=args.accel_limit_g,
+        rate_millihz=rate,
+        schedule=args.schedule,
     )
     name = next(f for f in files if f.endswith(".manifest.json"))[: -len(".manifest.json")]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
@@ -229,6 +237,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="HZ",
         help="the firmware's sample rate: a model with a time base (DLSTM front end, physics filters) is "
         "re-derived for it exactly or refused; memoryless models run at any rate (default: as trained)",
+    )
+    exp.add_argument(
+        "--schedule",
+        choices=SCHEDULES,
+        default="step",
+        help="DLSTMs: step runs the network on the sample that ends its window (default); spread splits it "
+        "into tasks over the samples of the decimation period (worst sample about 2x the average, the "
+        "estimate takes effect D - 1 samples later)",
     )
     exp.add_argument(
         "--format",

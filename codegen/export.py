@@ -43,6 +43,7 @@ def load_for_codegen(
     *,
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
     rate_millihz: int | None = None,
+    schedule: str = "step",
 ) -> LoadedModel:
     """Validate (``load_checkpoint``), re-derive for ``rate_millihz`` when given (codegen/rate.py),
     parse and quantise; every failure is a one-line UserError."""
@@ -52,7 +53,7 @@ def load_for_codegen(
     retimed, rate_note = retime_checkpoint(raw, rate_millihz, str(p))
     ckpt = parse_checkpoint(retimed, str(p))
     try:
-        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g)
+        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
     notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ())
@@ -181,11 +182,14 @@ def export(
     name: str | None = None,
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
     rate_millihz: int | None = None,
+    schedule: str = "step",
 ) -> tuple[LoadedModel, dict[str, str]]:
     """Load, quantise (for ``rate_millihz`` when given), render and write; returns the model and files."""
     if name is not None:
         validate_name(name)
-    model = load_for_codegen(model_path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
+    model = load_for_codegen(
+        model_path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz, schedule=schedule
+    )
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)
     return model, files

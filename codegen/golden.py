@@ -220,13 +220,7 @@ class GoldenStream(_Golden):
         count = np.minimum(count, W)  # min(n + 1, W): n = steps * D at a step
         window_sums = sums[position + 1] - sums[position + 1 - np.minimum(count, position + 1)]
         self._chunk_sums(signal)
-        estimates = self._steps(window_sums, count)
-
-        held = np.full(n, self.estimate_q16, dtype=np.int64)
-        if step_at.size:
-            index = np.cumsum(np.isin(np.arange(n), step_at)) - 1
-            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate_q16)
-            self.estimate_q16 = int(estimates[-1])
+        held = self._held(window_sums, count, step_at, n)
         # Output rounding with error feedback: sample i adds the fraction to the shaper and carries
         # one LSB when it reaches 2**16; the carries are the steps of floor(cumulative sum / 2**16).
         whole, fraction = held >> EST_FRAC, held & (EST_ONE - 1)  # floor and remainder (numpy: exact)
@@ -239,6 +233,16 @@ class GoldenStream(_Golden):
         self.steps = min(self.steps + step_at.size, UINT32_MAX)
         return self._output(accel, whole + carries)
 
+    def _held(self, window_sums: np.ndarray, count: np.ndarray, step_at: np.ndarray, n: int) -> np.ndarray:
+        """The held estimate (Q16 accel LSB) of each sample of the chunk: from each network step on."""
+        estimates = self._steps(window_sums, count)
+        held = np.full(n, self.estimate_q16, dtype=np.int64)
+        if step_at.size:
+            index = np.cumsum(np.isin(np.arange(n), step_at)) - 1
+            held = np.where(index >= 0, estimates[np.maximum(index, 0)], self.estimate_q16)
+            self.estimate_q16 = int(estimates[-1])
+        return held
+
     def _steps(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
         """The held estimate (Q16 accel LSB) produced at each network step of the chunk."""
         m = self.model
@@ -246,6 +250,11 @@ class GoldenStream(_Golden):
             if self.fine_estimates is not None:
                 self.fine_estimates.extend((window_sums / count).tolist())
             return rdiv_round(window_sums * (1 << m.mean_frac), count) * (1 << (EST_FRAC - m.mean_frac))
+        return np.array([self._network(row) for row in self._inputs(window_sums, count)], dtype=np.int64)
+
+    def _inputs(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
+        """The network's int16 inputs at each step of the chunk (one row per step)."""
+        m = self.model
         means = rdiv_round(window_sums * (1 << m.mean_frac), count)
         if m.kind == "temperature":
             previous = np.concatenate(([self.prev_mean], means[:-1]))
@@ -269,7 +278,25 @@ class GoldenStream(_Golden):
         clamped = np.clip(x, -X_MAX, X_MAX)
         if np.any(clamped != x):
             self.flags |= FLAG_SATURATED
-        return np.array([self._network(row) for row in clamped], dtype=np.int64)
+        return clamped
+
+    def _cells(self, index: int, acc: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """New cell states and h of layer ``index``'s units from their gate accumulators ``acc``
+        (rows i, f, g, o; one column per unit) and cell states ``c``."""
+        s = self.model.layers[index].shift
+        i, f, g, o = (
+            sigmoid_q16(acc[0], s),
+            sigmoid_q16(acc[1], s),
+            tanh_q15(acc[2], s),
+            sigmoid_q16(acc[3], s),
+        )
+        # c' = f c + i g: Q16 x Q24 and Q16 x Q15 lifted to Q40, rounded half up to Q24
+        wide = f * c + (i * g) * (1 << (C_FRAC + GATE_FRAC - GATE_FRAC - TANH_FRAC))
+        rounded = _half_up_shift(wide, GATE_FRAC)
+        c_new = sat32(rounded)
+        if np.any(c_new != rounded):
+            self.flags |= FLAG_SATURATED
+        return c_new, _half_up_shift(o * tanh_q15(c_new, C_FRAC - ACT_STEP_BITS), GATE_FRAC)
 
     def _network(self, x: np.ndarray) -> int:
         m = self.model
@@ -278,19 +305,15 @@ class GoldenStream(_Golden):
         for index, layer in enumerate(m.layers):
             v = self.vec[layer.offset : layer.offset + 2 * layer.pairs]
             acc = layer.b + layer.w_padded @ v  # |partial sums| < 2**31 (proved): the C's int32 sums
-            s = layer.shift
-            i, f, o = sigmoid_q16(acc[0:H], s), sigmoid_q16(acc[H : 2 * H], s), sigmoid_q16(acc[3 * H :], s)
-            g = tanh_q15(acc[2 * H : 3 * H], s)
-            # c' = f c + i g: Q16 x Q24 and Q16 x Q15 lifted to Q40, rounded half up to Q24
-            wide = f * self.c[index] + (i * g) * (1 << (C_FRAC + GATE_FRAC - GATE_FRAC - TANH_FRAC))
-            rounded = _half_up_shift(wide, GATE_FRAC)
-            c_new = sat32(rounded)
-            if np.any(c_new != rounded):
-                self.flags |= FLAG_SATURATED
-            h_new = _half_up_shift(o * tanh_q15(c_new, C_FRAC - ACT_STEP_BITS), GATE_FRAC)
-            self.c[index] = c_new
+            self.c[index], h_new = self._cells(index, acc.reshape(4, H), self.c[index])
             start = X_SLOTS + index * slots
             self.vec[start : start + H] = h_new
+        return self._head()
+
+    def _head(self) -> int:
+        """The head on the last layer's h: the estimate in Q16 accel LSB (saturated, flagged)."""
+        m = self.model
+        H, slots = m.hidden_size, m.hidden_slots
         head = m.head
         assert head is not None
         last = X_SLOTS + (len(m.layers) - 1) * slots
@@ -411,6 +434,10 @@ def golden_for(model: QuantModel) -> _Golden:
         golden = GoldenPoly3(model)
     elif isinstance(model, QPhysics):
         golden = GoldenPhysics(model)
+    elif model.layers and model.schedule == "spread":
+        from codegen.golden_spread import GoldenStreamSpread  # a subclass of GoldenStream
+
+        golden = GoldenStreamSpread(model)
     else:
         golden = GoldenStream(model)
     golden.init()

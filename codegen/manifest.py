@@ -94,6 +94,18 @@ def _stream(model: QStream) -> dict[str, object]:
             "decimation": fe.decimation,
             "network_step_hz": _num(fe.rate_hz / fe.decimation),
         },
+        **(
+            {
+                "schedule": {
+                    "name": model.schedule,
+                    "tasks_per_step": model.tasks if model.schedule == "spread" else 1,
+                    "latency_samples": model.latency_samples,
+                    "latency_s": _num(model.latency_samples / fe.rate_hz),
+                }
+            }
+            if model.layers
+            else {}
+        ),
         "frontend": {
             "kind": PERSISTENCE_KIND if not model.layers else model.kind,
             "smoothed_signal": "temperature" if model.kind == "temperature" else "acceleration",

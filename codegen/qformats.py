@@ -48,9 +48,11 @@ FORMATS: tuple[QFormat, ...] = (
     QFormat("ACT_SEGMENTS", 512, "segments of the activation table (2 ACT_RANGE 2^ACT_STEP_BITS)"),
     QFormat("ACT_POS_BITS", 12, "position inside a segment: 12 bits"),
     QFormat(
-        "ACT_SLOPE_BITS", 16, "slopes carry 16 bits below the Q15 output: out = v + (s pos + 2^15) >> 16"
+        "ACT_KNOTS",
+        513,
+        "knots v (uint16) at the segment ends: out = v[k] + ((v[k+1] - v[k]) pos + 2^11) >> 12",
     ),
-    QFormat("ACT_VALUE_FRAC", 15, "table values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535"),
+    QFormat("ACT_VALUE_FRAC", 15, "knot values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535"),
 )
 
 _BY_NAME = {f.name: f.value for f in FORMATS}
@@ -67,13 +69,13 @@ ACT_RANGE = _BY_NAME["ACT_RANGE"]
 ACT_STEP_BITS = _BY_NAME["ACT_STEP_BITS"]
 ACT_SEGMENTS = _BY_NAME["ACT_SEGMENTS"]
 ACT_POS_BITS = _BY_NAME["ACT_POS_BITS"]
-ACT_SLOPE_BITS = _BY_NAME["ACT_SLOPE_BITS"]
+ACT_KNOTS = _BY_NAME["ACT_KNOTS"]
 ACT_VALUE_FRAC = _BY_NAME["ACT_VALUE_FRAC"]
 
 X_MAX = (1 << 15) - 1  # |x_q|: 16 standard deviations
 H_MAX = (1 << 15) - 1
 ACT_ONE = 1 << ACT_VALUE_FRAC  # tanh = table value - ACT_ONE
-assert ACT_SEGMENTS == 2 * ACT_RANGE << ACT_STEP_BITS
+assert ACT_SEGMENTS == 2 * ACT_RANGE << ACT_STEP_BITS and ACT_KNOTS == ACT_SEGMENTS + 1
 assert MIN_ACC_FRAC == ACT_STEP_BITS + ACT_POS_BITS  # the tanh rows' position shift A - 4 - 12 >= 0
 
 HEADER = Path(__file__).resolve().parent / "kernels" / "tdc_kernels.h"

@@ -48,6 +48,7 @@ before the normalisation multiply so that the multiplier keeps 31 significant bi
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from dataclasses import dataclass
@@ -98,6 +99,10 @@ X_SLOTS = 2  # the network inputs take two int16 slots of the state vector (one 
 INT64_SAFE = 1 << 62  # every int64 intermediate stays below this (one bit of margin)
 DEFAULT_ACCEL_LIMIT_G = 16.0
 MAX_ACCEL_LIMIT_G = 128.0  # 128 g * 16e6 LSB/g < 2**31
+# When a DLSTM's network step runs: all on the sample that ends its window ("step"), or split into
+# tasks spread over the samples of the decimation period ("spread": no sample costs much more than
+# the average; the estimate then takes effect D - 1 samples later; docs/codegen.md "Schedules").
+SCHEDULES = ("step", "spread")
 TEMP_LIMITS_MDEGC = (-100_000, 200_000)  # the front end clamps temperatures to -100 .. 200 degC
 FLAG_TEMP_OUT_OF_RANGE = 1
 FLAG_INPUT_CLAMPED = 2
@@ -197,15 +202,16 @@ class QLayer:
         return headroom_bits(self.acc_bound, INT32_MAX)
 
     def kernel_weights(self) -> np.ndarray:
-        """Packed int32 words ``w[j][p][r] = hi 2**16 + (lo mod 2**16)`` with ``lo, hi =
-        w_padded[r H + j][2p], w_padded[r H + j][2p + 1]``: unit j's rows i, f, g, o pair by pair."""
+        """The C's stream of int32 words, unit by unit: the unit's 4 biases (rows i, f, g, o) with the
+        sign bit flipped (``b + 2**31`` mod 2**32 read as int32: the C accumulates in excess-2**31
+        form, so the activation's segment is one unsigned shift), then the packed pairs
+        ``w[p][r] = hi 2**16 + (lo mod 2**16)`` with ``lo, hi = w_padded[r H + j][2p], [2p + 1]``."""
         H = self.hidden_size
         blocks = self.w_padded.reshape(4, H, self.pairs, 2).transpose(1, 2, 0, 3)  # [j][p][r][e]
-        return blocks[..., 1] * 65536 + (blocks[..., 0] & 0xFFFF)
-
-    def kernel_biases(self) -> np.ndarray:
-        """``b[j][r] = b[r H + j]``."""
-        return self.b.reshape(4, self.hidden_size).T.copy()
+        packed = (blocks[..., 1] * 65536 + (blocks[..., 0] & 0xFFFF)).reshape(H, 4 * self.pairs)
+        b = self.b.reshape(4, H).T  # [j][r]
+        flipped = np.where(b >= 0, b - 2**31, b + 2**31)
+        return np.concatenate((flipped, packed), axis=1)
 
 
 @dataclass(frozen=True)
@@ -229,6 +235,7 @@ class QStream:
     layers: tuple[QLayer, ...]
     head: QHead | None
     mean_frac: int  # the window mean is Q(mean_frac) of the input unit (network models)
+    schedule: str = "step"  # one of SCHEDULES
 
     @property
     def window(self) -> int:
@@ -262,6 +269,20 @@ class QStream:
     def full_steps(self) -> int:
         """From this network step on the window is full: ceil((W - 1) / D)."""
         return -(-(self.window - 1) // self.frontend.decimation)
+
+    @property
+    def tasks(self) -> int:
+        """Spread schedule: the network step's tasks, a dot product and a cell per unit, then the head."""
+        return 2 * len(self.layers) * self.hidden_size + 1
+
+    @property
+    def latency_samples(self) -> int:
+        """Samples by which the spread schedule delays the estimate (0 for "step")."""
+        return self.frontend.decimation - 1 if self.schedule == "spread" else 0
+
+    def tasks_before(self, phase: int) -> int:
+        """Spread schedule: tasks done in the phases before ``phase`` (0 .. D), evenly spread."""
+        return phase * self.tasks // self.frontend.decimation
 
     def macs_per_step(self) -> int:
         """Multiply-accumulates of one network step (the lower bound of its cost)."""
@@ -798,12 +819,18 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     raise UserError("physics: coefficients too large for the fixed-point format")
 
 
-def quantise_checkpoint(ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> QuantModel:
+def quantise_checkpoint(
+    ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, schedule: str = "step"
+) -> QuantModel:
     """The fixed-point model of a parsed checkpoint (deterministic: same input, same integers)."""
     limits = _limits(ckpt, accel_limit_g)
     model = ckpt.model
+    if schedule not in SCHEDULES:
+        raise UserError(f"--schedule must be one of {', '.join(SCHEDULES)}, got {schedule!r}")
+    if schedule != "step" and not isinstance(model, DlstmModelSpec):
+        raise UserError(f"--schedule {schedule}: only a DLSTM has a network step to spread")
     if isinstance(model, DlstmModelSpec | PersistenceSpec):
-        return _stream(model, limits)
+        return dataclasses.replace(_stream(model, limits), schedule=schedule)
     if isinstance(model, PlaSpec):
         return _pla(model, limits)
     if isinstance(model, PhysicsSpec):

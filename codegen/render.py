@@ -16,7 +16,7 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.activations import ACT_SLOPE, ACT_VALUE, activation_errors
+from codegen.activations import ACT_KNOT, activation_errors
 from codegen.qformats import (
     ACT_SEGMENTS,
     C_FRAC,
@@ -184,6 +184,13 @@ def state_fields(model: QuantModel) -> list[Field]:
         Field("uint32_t", "steps", (), "network steps since reset (saturating)"),
         *common,
     ]
+    spread = L and model.schedule == "spread"
+    if spread:
+        fields += [
+            Field("uint32_t", "task", (), "spread schedule: the step's next task"),
+            Field("uint32_t", "credit", (), "spread schedule: phase x tasks mod decimation"),
+            Field("uint32_t", "acc", (4,), "spread schedule: a unit's gate accumulators, excess 2^31"),
+        ]
     if L:
         fields.append(
             Field(
@@ -193,6 +200,8 @@ def state_fields(model: QuantModel) -> list[Field]:
                 "network inputs x (Q11, a pair), then h of each layer (Q15)",
             )
         )
+    if spread:
+        fields.append(Field("int16_t", "h_new", (model.hidden_slots,), "spread schedule: the layer's new h"))
     return fields
 
 
@@ -218,7 +227,7 @@ def table_bytes(model: QuantModel) -> dict[str, int]:
     sizes = {"model_id_string": len("sha256:") + 64 + 1}
     if isinstance(model, QStream):
         if model.layers:
-            sizes["activation_table"] = 2 * (ACT_VALUE.size + ACT_SLOPE.size)
+            sizes["activation_table"] = 2 * ACT_KNOT.size
             sizes["weights"] = sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size
             sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
     elif isinstance(model, QPhysics):
@@ -312,9 +321,8 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                     "wh_frac": lay.wh.frac,
                     "acc_frac": lay.acc_frac,
                     "acc_bound_text": _bound_text(lay.acc_bound),
-                    "w": _rows(lay.kernel_weights(), per_line=8),
-                    "w_size": lay.w_padded.size,
-                    "b": _rows(lay.kernel_biases(), per_line=4),
+                    "w": _rows(lay.kernel_weights(), per_line=4 + 4 * lay.pairs),
+                    "w_words": lay.kernel_weights().size,
                     "shift": lay.shift,
                 }
                 for k, lay in enumerate(model.layers)
@@ -331,9 +339,11 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 }
                 for q in model.inputs
             ],
-            act_value=_rows(ACT_VALUE, per_line=12),
-            act_slope=_rows(ACT_SLOPE, per_line=12),
-            act_segments=ACT_SEGMENTS,
+            act_table=_rows(ACT_KNOT, per_line=12),
+            act_knots=ACT_KNOT.size,
+            schedule=model.schedule,
+            tasks=model.tasks,
+            hidden_slots=model.hidden_slots,
         )
         if model.head is not None:
             ctx["head"] = {
@@ -470,10 +480,10 @@ def manifest_json(manifest: dict[str, object]) -> str:
 def activation_summary(acc_frac: int) -> dict[str, object]:
     errors = activation_errors(acc_frac, C_FRAC)
     return {
-        "method": f"one table of tanh(x) + 1 in Q15 over x in -8 .. 8, {ACT_SEGMENTS} segments with "
-        "offline-computed value and slope (uint16 each), linear interpolation; sigmoid(z) = the same "
+        "method": f"one table of tanh(x) + 1 in Q15 over x in -8 .. 8, {ACT_SEGMENTS} segments: "
+        "offline-computed knots (uint16, moved by half the chords' deviation), linear interpolation between them; sigmoid(z) = the same "
         "table at z / 2, in Q16; tanh in Q15",
-        "table_bytes": 2 * (ACT_VALUE.size + ACT_SLOPE.size),
+        "table_bytes": 2 * ACT_KNOT.size,
         "measured_at_acc_frac_bits": acc_frac,
         **{kind: err.to_dict() for kind, err in errors.items()},
     }

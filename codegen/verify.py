@@ -265,7 +265,10 @@ def verify(
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
-    model: LoadedModel = load_for_codegen(model_path, accel_limit_g=accel_limit_g, rate_millihz=module_rate)
+    schedule = str(manifest.get("schedule", {}).get("name", "step"))
+    model: LoadedModel = load_for_codegen(
+        model_path, accel_limit_g=accel_limit_g, rate_millihz=module_rate, schedule=schedule
+    )
     model_entry = manifest.get("model")
     stamped = model_entry.get("sha256") if isinstance(model_entry, dict) else None
     if stamped != model.sha256:

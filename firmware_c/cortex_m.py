@@ -187,6 +187,8 @@ class BenchCounts:
     worst: float  # streaming: a sample on which the network steps; memoryless: the costliest batch
     plain: float  # streaming: a sample without network step; memoryless: = average
     worst_single: float  # streaming: the costliest single network-step sample (+-1 tick)
+    worst_phase: float  # streaming: the costliest phase of the period, averaged over the periods
+    phase_costs: tuple[float, ...] = ()  # streaming: every phase's cost, averaged over the periods
 
 
 def bench(
@@ -205,11 +207,14 @@ def bench(
     lines = run_qemu(build.elf("bench_app"), args, cwd=work, icount=True).splitlines()
     fields: dict[str, list[str]] = {}
     batches: list[tuple[int, int]] = []  # (samples, ticks net of the empty-call loop)
+    phases: list[int] = []  # per phase of the period: ticks net of the empty call, summed over periods
     for line in lines:
         key, *values = line.split()
         fields[key] = values
         if key == "batch":
             batches.append((int(values[0]), int(values[1]) - int(values[2])))
+        if key == "phase":
+            phases.append(int(values[1]) - int(values[2]))
     instr, ticks = (int(v) for v in fields["calibration"])
     ipt = float(round(instr / ticks))  # 1e9 / SYSCLK_HZ = 40: 1 ns per instruction, 25 MHz SysTick
     if abs(instr / ticks - ipt) > 0.01 or ipt != 1e9 / SYSCLK_HZ:
@@ -226,10 +231,15 @@ def bench(
         n_plain, plain, plain_null = (int(v) for v in fields["plain"])
         average = ((net - net_null) + (plain - plain_null)) * ipt / (n_net + n_plain)
         network, plain_cost = (net - net_null) * ipt / n_net, (plain - plain_null) * ipt / n_plain
-        return BenchCounts(model_id, decimation, samples, ipt, average, network, plain_cost, net_max * ipt)
+        costs = tuple(t * ipt / n_net for t in phases)
+        return BenchCounts(
+            model_id, decimation, samples, ipt, average, network, plain_cost, net_max * ipt, max(costs), costs
+        )
     per_batch = [t * ipt / count for count, t in batches]
     average = sum(t for _, t in batches) * ipt / sum(c for c, _ in batches)
-    return BenchCounts(model_id, 0, samples, ipt, average, max(per_batch), average, max(per_batch))
+    return BenchCounts(
+        model_id, 0, samples, ipt, average, max(per_batch), average, max(per_batch), max(per_batch)
+    )
 
 
 @dataclass(frozen=True)

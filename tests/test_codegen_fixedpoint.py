@@ -11,8 +11,7 @@ from hypothesis import strategies as st
 
 from codegen.activations import (
     ACT_ERROR_LSB,
-    ACT_SLOPE,
-    ACT_VALUE,
+    ACT_KNOT,
     T_MAX,
     activation_errors,
     exact_sigmoid,
@@ -21,7 +20,7 @@ from codegen.activations import (
     tanh_q15,
 )
 from codegen.fixedpoint import quantise, quantise_array, rdiv_round, rshift_round
-from codegen.qformats import ACT_POS_BITS, ACT_SEGMENTS, ACT_SLOPE_BITS, ACT_STEP_BITS
+from codegen.qformats import ACT_KNOTS, ACT_STEP_BITS
 
 INT62 = st.integers(min_value=-(2**62), max_value=2**62)
 
@@ -53,21 +52,16 @@ def test_ties_round_away_from_zero() -> None:
 
 
 def test_activation_table_is_the_documented_interpolant() -> None:
-    """Every segment's line against 2**15 (tanh(x) + 1) at its start, middle and end (math, not
-    decimal): within the interpolation bound; the ends are flat and capped to 1 .. 65535."""
-    k = np.arange(ACT_SEGMENTS)
-    h = 2.0**-ACT_STEP_BITS
-    x0 = -8.0 + k * h
-    end = ACT_VALUE + (
-        (ACT_SLOPE * ((1 << ACT_POS_BITS) - 1) + (1 << (ACT_SLOPE_BITS - 1))) >> ACT_SLOPE_BITS
-    )
-    middle = ACT_VALUE + ACT_SLOPE * (1 << (ACT_POS_BITS - 1)) / 2.0**ACT_SLOPE_BITS
-    for got, x in ((ACT_VALUE, x0), (middle, x0 + h / 2), (end, x0 + h)):
-        assert (
-            np.max(np.abs(got - 2.0**15 * (np.tanh(x) + 1))) < 2.5
-        )  # h**2 max|T''| / 16 = 1.6, plus roundings
-    assert ACT_SLOPE[0] == ACT_SLOPE[-1] == 0 and ACT_VALUE.min() >= 1 and end.max() <= T_MAX
-    assert np.all(ACT_SLOPE >= 0)
+    """Every knot and every segment's midpoint against 2**15 (tanh(x) + 1) (math, not decimal):
+    within the interpolation bound; the knots rise, the ends are flat and capped to 1 .. 65535."""
+    x = -8.0 + np.arange(ACT_KNOTS) * 2.0**-ACT_STEP_BITS
+    exact = 2.0**15 * (np.tanh(x) + 1)
+    middle = (ACT_KNOT[:-1] + ACT_KNOT[1:]) / 2.0
+    exact_middle = 2.0**15 * (np.tanh((x[:-1] + x[1:]) / 2) + 1)
+    assert np.max(np.abs(ACT_KNOT - exact)) < 2.5  # h**2 max|T''| / 16 = 1.6, plus the rounding
+    assert np.max(np.abs(middle - exact_middle)) < 2.5
+    assert ACT_KNOT[0] == ACT_KNOT[1] and ACT_KNOT[-1] == ACT_KNOT[-2]  # flat first and last segments
+    assert ACT_KNOT.min() >= 1 and ACT_KNOT.max() <= T_MAX and np.all(np.diff(ACT_KNOT) >= 0)
 
 
 def _inputs(frac: int, limit: float) -> np.ndarray:

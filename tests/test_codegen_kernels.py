@@ -23,9 +23,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from codegen import qformats
-from codegen.activations import ACT_SLOPE, ACT_VALUE
+from codegen.activations import ACT_KNOT
 from codegen.hostbuild import SANITIZER_FLAGS, STRICT_FLAGS, compile_c
-from codegen.qformats import ACT_POS_BITS, ACT_SEGMENTS, ACT_SLOPE_BITS, ACT_STEP_BITS, C_FRAC
+from codegen.qformats import ACT_KNOTS, ACT_POS_BITS, ACT_SEGMENTS, ACT_STEP_BITS, C_FRAC
 
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "firmware_c" / "harness" / "kernel_app.c"
@@ -44,7 +44,8 @@ I32 = (-(2**31), 2**31 - 1)
 def _act(acc: int, shift: int) -> int:
     k = min(max(acc // 2**shift + ACT_SEGMENTS // 2, 0), ACT_SEGMENTS - 1)
     pos = (acc // 2 ** (shift - ACT_POS_BITS)) % 2**ACT_POS_BITS
-    return int(ACT_VALUE[k]) + (int(ACT_SLOPE[k]) * pos + 2 ** (ACT_SLOPE_BITS - 1)) // 2**ACT_SLOPE_BITS
+    v0, v1 = int(ACT_KNOT[k]), int(ACT_KNOT[k + 1])
+    return v0 + ((v1 - v0) * pos + 2 ** (ACT_POS_BITS - 1)) // 2**ACT_POS_BITS
 
 
 def _half_up(x: int, s: int) -> int:
@@ -67,24 +68,23 @@ def expected(record: list[int], window: dict[str, object]) -> list[int]:
     if kid == K_TABLE:
         return []
     if kid == K_ACT:
-        return [_act(a[0], a[1]), _act(a[0], a[1] + 1), _act(a[0], a[1]) - 2**15]
+        return [_act(a[0], a[1]), _act(a[0], a[1] + 1), _act(a[0], a[1]) - 2**15, _act(a[0], a[1])]
     if kid in (K_RS64, K_RS32):
         return [_half_up(a[0], a[1])]
     if kid == K_RR64:
         return [_half_away(Fraction(a[0], 2 ** a[1]))]
     if kid == K_RDIV:
         return [_half_away(Fraction(a[0], a[1]))]
-    if kid == K_DOT4:
+    if kid == K_DOT4:  # the block: 4 biases, then per pair 4 words (reversed for odd pairs)
         words, (v0, v1), (b0, b1), pairs = a[0:4], a[4:6], a[6:8], a[8]
         out = []
         for r, bias in enumerate((b0, b1, -b0, -b1)):
-            lo, hi = _unpack(words[r])
-            acc = bias + lo * v0 + hi * v1
-            if pairs == 2:
-                lo, hi = _unpack(words[3 - r])
-                acc += lo * v1 + hi * v0
+            acc = bias
+            for p in range(pairs):
+                lo, hi = _unpack(words[3 - r] if p % 2 else words[r])
+                acc += lo * v1 + hi * v0 if p % 2 else lo * v0 + hi * v1
             out.append(acc)
-        return out
+        return [*out, 4 + 4 * pairs]
     if kid == K_CELL:
         gi, gf, gg, go, c = a[0:5]
         rounded = _half_up(gf * c + gi * gg * 2 ** (C_FRAC - 15), 16)
@@ -125,7 +125,7 @@ def expected(record: list[int], window: dict[str, object]) -> list[int]:
 
 
 def table_records() -> list[list[int]]:
-    return [[K_TABLE, k, int(ACT_VALUE[k]), int(ACT_SLOPE[k])] for k in range(ACT_SEGMENTS)]
+    return [[K_TABLE, k, int(ACT_KNOT[k])] for k in range(ACT_KNOTS)]
 
 
 def random_records(seed: int, n: int = 400) -> list[list[int]]:
@@ -147,11 +147,12 @@ def random_records(seed: int, n: int = 400) -> list[list[int]]:
         out.append([K_RS32, ints(I32[0], I32[1] - 2 ** (s32 - 1)) >> ints(0, 30), s32])
         out.append([K_RR64, ints(-(2**62), 2**62) >> ints(0, 60), ints(0, 62)])
         out.append([K_RDIV, ints(-(2**62), 2**62) >> ints(0, 60), ints(1, 2**32 - 1)])
-        v0, v1 = ints(-32767, 32767), ints(-32767, 32767)
+        pairs = ints(1, 9)  # every entry of the DSP path's unrolled loop
+        v_max = 32767 // pairs
+        v0, v1 = ints(-v_max, v_max), ints(-v_max, v_max)
         words = [ints(-32767, 32767) * 65536 + ints(0, 65535) for _ in range(4)]
-        pairs = ints(1, 2)
-        room = 2**31 - 1 - pairs * 2 * 32767 * 16384  # |bias| + sum |w v| < 2**31
-        out.append([K_DOT4, *words, v0 // 2, v1 // 2, ints(-room, room), ints(-room, room), pairs])
+        room = 2**31 - 1 - pairs * 2 * 32768 * v_max  # |bias| + sum |w v| < 2**31
+        out.append([K_DOT4, *words, v0, v1, ints(-room, room), ints(-room, room), pairs])
         cell = edge32[k % 6] if k < 12 else ints(*I32) >> ints(0, 16)
         out.append([K_CELL, ints(1, 65535), ints(1, 65535), ints(-32767, 32767), ints(1, 65535), cell])
         pre, shift_in = ints(0, 20), ints(0, 30)
@@ -312,3 +313,27 @@ def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     stdout = cm.run_qemu(out / "kernel_app.elf", ["in.bin", "out.bin"], cwd=tmp_path)
     assert f"dsp {0 if flags else 1}" in stdout
     check_outputs(records, (tmp_path / "out.bin").read_bytes())
+
+
+@pytest.mark.parametrize("opt", ["-O0", "-Os", "-O2 -fno-omit-frame-pointer"])
+def test_dsp_path_builds_at_any_optimisation(opt: str, tmp_path: Path) -> None:
+    """The DSP path's inline assembly (LDM into fixed registers, SMULL/SMLAL, SMMULR) leaves the
+    Thumb frame pointer r7 alone: it builds warning-free with and without a frame pointer."""
+    if shutil.which("arm-none-eabi-gcc") is None:
+        pytest.skip("arm-none-eabi-gcc is not installed")
+    cmd = [
+        "arm-none-eabi-gcc",
+        *STRICT_FLAGS,
+        "-mcpu=cortex-m4",
+        "-mthumb",
+        "-mfloat-abi=hard",
+        "-mfpu=fpv4-sp-d16",
+        *opt.split(),
+        f"-I{KERNELS}",
+        "-c",
+        str(HARNESS),
+        "-o",
+        str(tmp_path / "k.o"),
+    ]
+    result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert result.returncode == 0 and not result.stderr, result.stderr

@@ -32,14 +32,19 @@
 #define TDCK_DSP 0
 #endif
 
-#define TDCK_VERSION 1
+#define TDCK_VERSION 2 /* 2: knot table, excess-2^31 accumulators, biases in the weight stream */
 
-/* The layer kernel is inlined into each call so that its shifts and sizes become immediates (gcc
- * would otherwise share one copy with variable shifts: 25 % slower on a Cortex-M4). */
+/* The layer kernel is inlined into each call so that its shifts become immediates (gcc would
+ * otherwise share one copy with variable shifts: 25 % slower on a Cortex-M4); a generated module
+ * wraps it in one non-inlined function per distinct shift, shared by the layers (flash). */
 #if defined(__GNUC__)
 #define TDCK_INLINE static inline __attribute__((always_inline))
+#define TDCK_UNLIKELY(x) __builtin_expect(!!(x), 0)
+#define TDCK_NOINLINE __attribute__((noinline))
 #else
+#define TDCK_NOINLINE
 #define TDCK_INLINE static inline
+#define TDCK_UNLIKELY(x) (x)
 #endif
 
 /* BEGIN Q FORMATS: written by `python -m codegen.qformats --write` from codegen/qformats.py */
@@ -56,8 +61,8 @@
 #define TDCK_ACT_STEP_BITS  5 /* table step 2^-5 of the tanh input: 512 segments */
 #define TDCK_ACT_SEGMENTS   512 /* segments of the activation table (2 ACT_RANGE 2^ACT_STEP_BITS) */
 #define TDCK_ACT_POS_BITS   12 /* position inside a segment: 12 bits */
-#define TDCK_ACT_SLOPE_BITS 16 /* slopes carry 16 bits below the Q15 output: out = v + (s pos + 2^15) >> 16 */
-#define TDCK_ACT_VALUE_FRAC 15 /* table values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535 */
+#define TDCK_ACT_KNOTS      513 /* knots v (uint16) at the segment ends: out = v[k] + ((v[k+1] - v[k]) pos + 2^11) >> 12 */
+#define TDCK_ACT_VALUE_FRAC 15 /* knot values: tanh(x) + 1 in Q15 (= sigmoid(2x) in Q16), 1 .. 65535 */
 /* END Q FORMATS */
 
 /* ---- saturation and rounding (generic: any model may use them) ------------------------------ */
@@ -133,38 +138,91 @@ static inline int32_t tdck_round_shift32(int32_t x, unsigned s)
 }
 
 /* ---- activations: one table of tanh(x) + 1, linear interpolation ----------------------------
- * value[k], slope[k]: segment k covers x in [-ACT_RANGE + k 2^-ACT_STEP_BITS, + 2^-ACT_STEP_BITS);
- * inside it T = value[k] + (slope[k] pos + 2^15) >> 16 with pos the ACT_POS_BITS bits below the
- * segment index, all computed offline (codegen/activations.py). The first and last segments are
- * flat (slope 0), so an input beyond the table needs no special case: its segment index is
- * clamped and its position does not matter. T is tanh(x) + 1 in Q15 in 1 .. 65535; the same number
- * is sigmoid(2x) in Q16, so sigmoid(z) reads the table at z / 2 (one more shift bit). */
+ * knot[k] (k = 0 .. ACT_SEGMENTS) is T at x = -ACT_RANGE + k 2^-ACT_STEP_BITS, moved offline by
+ * half the chord's mean deviation (codegen/activations.py); inside segment k,
+ * T = knot[k] + ((knot[k+1] - knot[k]) pos + 2^11) >> 12 with pos the ACT_POS_BITS bits below the
+ * segment index: a continuous line through the knots, 2 bytes of flash per segment. The knots
+ * rise monotonically (the difference is unsigned, at most 1024) and the first and last segments
+ * are flat, so an input beyond the table needs no special case: its segment index is clamped and
+ * its position does not matter. T is tanh(x) + 1 in Q15 in 1 .. 65535; the same number is
+ * sigmoid(2x) in Q16, so sigmoid(z) reads the table at z / 2 (one more shift bit). The _x variants
+ * take the accumulator in excess-2^31 form, u = acc + 2^31 (mod 2^32), which the network's dot
+ * products produce directly (the excess is folded into the biases): monotone in acc, so one
+ * unsigned shift gives the segment. */
 
-/* T of acc / 2^(shift + ACT_STEP_BITS), ACT_POS_BITS <= shift <= 30. */
-static inline int32_t tdck_act(const uint16_t *value, const uint16_t *slope, int32_t acc, unsigned shift)
+#if (1 << 9) != TDCK_ACT_SEGMENTS || TDCK_ACT_KNOTS != TDCK_ACT_SEGMENTS + 1
+#error "tdc_kernels.h: the clamp to the table (USAT #9) assumes 512 segments"
+#endif
+
+/* T from segment k (0 .. 511) and position pos (ACT_POS_BITS bits). */
+static inline int32_t tdck_act_lerp(const uint16_t *knot, int32_t k, uint32_t pos)
 {
-    uint32_t u = (uint32_t)acc + 0x80000000u; /* excess 2^31: monotone in acc, no wrap */
+#if TDCK_DSP
+    uint32_t e; /* both knots with one (unaligned) load, little-endian: knot[k] in bits 0-15 */
+    int32_t v0;
+    __builtin_memcpy(&e, knot + k, sizeof e);
+    v0 = (int32_t)(e & 0xFFFFu);
+    /* difference (< 2^15) times pos (< 2^12) plus the rounding half: one SMLABB */
+    return v0 + (int32_t)((uint32_t)__smlabb((int32_t)(e >> 16) - v0, (int32_t)pos, 1 << (TDCK_ACT_POS_BITS - 1)) >> TDCK_ACT_POS_BITS);
+#else
+    uint32_t v0 = knot[k];
+    return (int32_t)(v0 + ((((uint32_t)knot[k + 1] - v0) * pos + (1u << (TDCK_ACT_POS_BITS - 1))) >> TDCK_ACT_POS_BITS));
+#endif
+}
+
+/* T of (u - 2^31) / 2^(shift + ACT_STEP_BITS), ACT_POS_BITS <= shift <= 30. When the table covers
+ * every u (shift >= 23: all gates of a layer with A >= 28, the sigmoid gates with A = 27), the
+ * segment is u >> shift counted from a fixed knot (2^(31 - shift) <= 256 below the middle, no
+ * clamp); else it is clamped. */
+static inline int32_t tdck_act_x(const uint16_t *table, uint32_t u, unsigned shift)
+{
+    uint32_t pos = (u >> (shift - TDCK_ACT_POS_BITS)) & ((1u << TDCK_ACT_POS_BITS) - 1u);
+    if (shift >= 23u) {
+        return tdck_act_lerp(table + (TDCK_ACT_SEGMENTS / 2 - (int32_t)(0x80000000u >> shift)), (int32_t)(u >> shift), pos);
+    } else {
+        int32_t k = (int32_t)(u >> shift) - ((int32_t)(0x80000000u >> shift) - TDCK_ACT_SEGMENTS / 2);
+        if (k < 0) {
+            k = 0;
+        } else if (k > TDCK_ACT_SEGMENTS - 1) {
+            k = TDCK_ACT_SEGMENTS - 1;
+        }
+        return tdck_act_lerp(table, k, pos);
+    }
+}
+
+/* tdck_act_x for inputs that do reach beyond the table (the cell state): the clamp is one USAT. */
+static inline int32_t tdck_act_x_clamped(const uint16_t *table, uint32_t u, unsigned shift)
+{
     int32_t k = (int32_t)(u >> shift) - ((int32_t)(0x80000000u >> shift) - TDCK_ACT_SEGMENTS / 2);
     uint32_t pos = (u >> (shift - TDCK_ACT_POS_BITS)) & ((1u << TDCK_ACT_POS_BITS) - 1u);
+#if TDCK_DSP
+    k = (int32_t)__usat(k, 9);
+#else
     if (k < 0) {
         k = 0;
     } else if (k > TDCK_ACT_SEGMENTS - 1) {
         k = TDCK_ACT_SEGMENTS - 1;
     }
-    return (int32_t)value[k]
-        + (int32_t)(((uint32_t)slope[k] * pos + (1u << (TDCK_ACT_SLOPE_BITS - 1))) >> TDCK_ACT_SLOPE_BITS);
+#endif
+    return tdck_act_lerp(table, k, pos);
+}
+
+/* T of acc / 2^(shift + ACT_STEP_BITS), ACT_POS_BITS <= shift <= 30. */
+static inline int32_t tdck_act(const uint16_t *table, int32_t acc, unsigned shift)
+{
+    return tdck_act_x_clamped(table, (uint32_t)acc + 0x80000000u, shift);
 }
 
 /* sigmoid in Q16 (1 .. 65535) of acc / 2^(shift + ACT_STEP_BITS). */
-static inline int32_t tdck_sigmoid_q16(const uint16_t *value, const uint16_t *slope, int32_t acc, unsigned shift)
+static inline int32_t tdck_sigmoid_q16(const uint16_t *table, int32_t acc, unsigned shift)
 {
-    return tdck_act(value, slope, acc, shift + 1u);
+    return tdck_act(table, acc, shift + 1u);
 }
 
 /* tanh in Q15 (-32767 .. 32767) of acc / 2^(shift + ACT_STEP_BITS). */
-static inline int32_t tdck_tanh_q15(const uint16_t *value, const uint16_t *slope, int32_t acc, unsigned shift)
+static inline int32_t tdck_tanh_q15(const uint16_t *table, int32_t acc, unsigned shift)
 {
-    return tdck_act(value, slope, acc, shift) - (1 << TDCK_ACT_VALUE_FRAC);
+    return tdck_act(table, acc, shift) - (1 << TDCK_ACT_VALUE_FRAC);
 }
 
 /* ---- the LSTM ------------------------------------------------------------------------------- */
@@ -182,37 +240,122 @@ static inline int32_t tdck_pair_hi(int32_t word)
     return (word - (int32_t)((uint32_t)word & 0xFFFFu)) / 65536;
 }
 
-/* acc + w . x for one packed weight pair and the vector pair x0 (first), x1 (second). */
-static inline int32_t tdck_mac2(int32_t acc, int32_t word, int32_t x0, int32_t x1)
+/* u + w . x (mod 2^32) for one packed weight pair and the vector pair x0 (first), x1 (second):
+ * |w . x| <= 2 32767^2 < 2^31, so the int32 product sum is exact before the modular add. */
+static inline uint32_t tdck_mac2(uint32_t u, int32_t word, int32_t x0, int32_t x1)
 {
-    return acc + tdck_pair_lo(word) * x0 + tdck_pair_hi(word) * x1;
+    return u + (uint32_t)(tdck_pair_lo(word) * x0 + tdck_pair_hi(word) * x1);
 }
 
-/* Four gate rows against one int16 vector, int32 accumulators started at bias[0..3]:
- * acc[r] = bias[r] + sum_p lo(w[4p + r]) v[2p] + hi(w[4p + r]) v[2p + 1]. The rows' packed weight
- * pairs are interleaved (4 words per pair of inputs), so the DSP path loads the four words of a
- * pair at once and SMLAD takes each as it is. Precondition (proved by the quantiser for every
- * row): |bias| + sum |w| |v| < 2^31, so no partial sum leaves int32 and both paths give the same
- * numbers. */
-static inline void tdck_dot4(const int32_t *w, const int16_t *v, uint32_t pairs, const int32_t *bias, int32_t *acc)
-{
-    int32_t a0 = bias[0];
-    int32_t a1 = bias[1];
-    int32_t a2 = bias[2];
-    int32_t a3 = bias[3];
-    uint32_t p = 0u;
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__)
+/* Four consecutive weight words in four registers with one LDM and the pointer post-incremented
+ * (gcc forms at most LDRD from C): one instruction instead of two to four. */
+#define TDCK_LOAD4(w, q0, q1, q2, q3)                                                                     \
+    do {                                                                                                  \
+        register int32_t tdck_r4_ __asm__("r4");                                                         \
+        register int32_t tdck_r5_ __asm__("r5");                                                         \
+        register int32_t tdck_r6_ __asm__("r6");                                                         \
+        register int32_t tdck_r8_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
+        __asm__("ldmia %4!, {%0, %1, %2, %3}"                                                             \
+                : "=r"(tdck_r4_), "=r"(tdck_r5_), "=r"(tdck_r6_), "=r"(tdck_r8_), "+r"(w)                  \
+                : "m"(*(const int32_t(*)[4])(w)));                                                        \
+        (q0) = tdck_r4_;                                                                                  \
+        (q1) = tdck_r5_;                                                                                  \
+        (q2) = tdck_r6_;                                                                                  \
+        (q3) = tdck_r8_;                                                                                  \
+    } while (0)
+#elif TDCK_DSP
+#define TDCK_LOAD4(w, q0, q1, q2, q3)                                                                     \
+    do {                                                                                                  \
+        (q0) = (w)[0];                                                                                    \
+        (q1) = (w)[1];                                                                                    \
+        (q2) = (w)[2];                                                                                    \
+        (q3) = (w)[3];                                                                                    \
+        (w) += 4;                                                                                         \
+    } while (0)
+#endif
+
 #if TDCK_DSP
-    for (; p < pairs; ++p) {
-        int32_t x;
-        __builtin_memcpy(&x, v + 2u * p, sizeof x);
-        a0 = __smlad(w[0], x, a0);
-        a1 = __smlad(w[1], x, a1);
-        a2 = __smlad(w[2], x, a2);
-        a3 = __smlad(w[3], x, a3);
-        w += 4;
+/* acc[r] += w[r] . x for one pair (DSP path: four SMLADs on the words as they are) */
+#define TDCK_SMLAD4(w, x, a0, a1, a2, a3)                                                                 \
+    do {                                                                                                  \
+        int32_t tdck_q0_, tdck_q1_, tdck_q2_, tdck_q3_;                                                   \
+        TDCK_LOAD4(w, tdck_q0_, tdck_q1_, tdck_q2_, tdck_q3_);                                            \
+        (a0) = __smlad(tdck_q0_, (x), (a0));                                                              \
+        (a1) = __smlad(tdck_q1_, (x), (a1));                                                              \
+        (a2) = __smlad(tdck_q2_, (x), (a2));                                                              \
+        (a3) = __smlad(tdck_q3_, (x), (a3));                                                              \
+    } while (0)
+#endif
+
+/* Four gate rows against one int16 vector, in excess-2^31 form. *wp points at a unit's block:
+ * bias_x[0..3], then 4 packed words per input pair, w[4p + r]; on return it points past the block.
+ * acc[r] = bias[r] + 2^31 + sum_p lo(w[4p + r]) v[2p] + hi(w[4p + r]) v[2p + 1] (mod 2^32), where
+ * bias_x[r] is the bias with its sign bit flipped (bias + 2^31 mod 2^32 read as int32, as the
+ * generator writes it). Biases and the rows' packed weight pairs are interleaved in one stream, so
+ * the DSP path loads the biases and then the four words of each pair with one LDM each, runs
+ * unrolled by 8 pairs, and SMLAD takes each word as it is. Preconditions: pairs >= 1; |bias| + sum |w| |v| < 2^31 (proved by the quantiser for
+ * every row), so the true sum stays in int32 and both paths give the same numbers. */
+TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
+{
+    const int32_t *w = *wp;
+#if TDCK_DSP
+    /* Duff's device: unrolled by 8 pairs, entered at pairs mod 8 (no per-pair loop test) */
+    int32_t a0;
+    int32_t a1;
+    int32_t a2;
+    int32_t a3;
+    uint32_t blocks = (pairs + 7u) / 8u;
+    int32_t x;
+    a0 = w[0]; /* plain loads (LDRD): LDM's fixed registers would cost four moves */
+    a1 = w[1];
+    a2 = w[2];
+    a3 = w[3];
+    w += 4;
+#define TDCK_PAIR_                                                                                         \
+    __builtin_memcpy(&x, v, sizeof x);                                                                    \
+    v += 2;                                                                                               \
+    TDCK_SMLAD4(w, x, a0, a1, a2, a3)
+    switch (pairs % 8u) {
+    case 0u:
+        do {
+            TDCK_PAIR_;
+            /* fall through */
+        case 7u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 6u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 5u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 4u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 3u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 2u:
+            TDCK_PAIR_;
+            /* fall through */
+        case 1u:
+            TDCK_PAIR_;
+        } while (--blocks > 0u);
     }
+#undef TDCK_PAIR_
+    acc[0] = (uint32_t)a0;
+    acc[1] = (uint32_t)a1;
+    acc[2] = (uint32_t)a2;
+    acc[3] = (uint32_t)a3;
 #else
-    for (; p < pairs; ++p) {
+    uint32_t a0 = (uint32_t)w[0];
+    uint32_t a1 = (uint32_t)w[1];
+    uint32_t a2 = (uint32_t)w[2];
+    uint32_t a3 = (uint32_t)w[3];
+    uint32_t p;
+    w += 4;
+    for (p = 0u; p < pairs; ++p) {
         int32_t x0 = v[2u * p];
         int32_t x1 = v[2u * p + 1u];
         a0 = tdck_mac2(a0, w[0], x0, x1);
@@ -221,42 +364,94 @@ static inline void tdck_dot4(const int32_t *w, const int16_t *v, uint32_t pairs,
         a3 = tdck_mac2(a3, w[3], x0, x1);
         w += 4;
     }
-#endif
     acc[0] = a0;
     acc[1] = a1;
     acc[2] = a2;
     acc[3] = a3;
+#endif
+    *wp = w;
 }
 
 /* One cell from its gates (i, f, o sigmoid Q16; g tanh Q15): c' = f c + i g, rounded half up to
- * Q24 from Q40 (below 2^48) and saturated to int32 (sets `sat_bit`); returns h = o tanh(c') in Q15
- * (|h| <= 32767: o <= 65535, |tanh| <= 32767). */
+ * Q24 from Q40 and saturated to int32 (sets `sat_bit`); returns h = o tanh(c') in Q15
+ * (|h| <= 32767: o <= 65535, |tanh| <= 32767). Two int64 multiply-accumulates, f c + i (g 2^9)
+ * (|g| 2^9 < 2^24), plus 2^15 (the rounding half) and 2^47: the sum s is in [0, 2^48) iff
+ * c' = floor(s / 2^16) - 2^31 fits int32, and s / 2^16 is already tanh's excess-2^31 input. */
 static inline int16_t tdck_lstm_cell(int32_t gi, int32_t gf, int32_t gg, int32_t go, int32_t *c,
-    const uint16_t *value, const uint16_t *slope, uint32_t *flags, uint32_t sat_bit)
+    const uint16_t *table, uint32_t *flags, uint32_t sat_bit)
 {
-    int64_t wide = (int64_t)gf * (int64_t)*c
-        + (int64_t)(gi * gg) * ((int64_t)1 << (TDCK_C_FRAC + TDCK_GATE_FRAC - TDCK_GATE_FRAC - TDCK_TANH_FRAC));
-    int32_t cell = tdck_sat32_flag(tdck_round_shift64(wide, TDCK_GATE_FRAC), flags, sat_bit);
-    int32_t th = tdck_tanh_q15(value, slope, cell, TDCK_C_FRAC - TDCK_ACT_STEP_BITS);
-    *c = cell;
+    int64_t wide;
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__)
+    /* gcc knows the gates are non-negative and widens them unsigned (UMULL + MLA each): force the
+     * two signed 32 x 32 -> 64 multiply-accumulates */
+    __asm__("smull %Q0, %R0, %1, %2\n\tsmlal %Q0, %R0, %3, %4"
+            : "=&r"(wide)
+            : "r"(gf), "r"(*c), "r"(gi), "r"(gg * (1 << (TDCK_C_FRAC - TDCK_TANH_FRAC))));
+#else
+    wide = (int64_t)gf * (int64_t)*c + (int64_t)gi * (int64_t)(gg * (1 << (TDCK_C_FRAC - TDCK_TANH_FRAC)));
+#endif
+    uint64_t s = (uint64_t)wide + (((uint64_t)1 << 47) + ((uint64_t)1 << (TDCK_GATE_FRAC - 1)));
+    uint32_t u;
+    int32_t th;
+    if (TDCK_UNLIKELY((s >> 48) != 0u)) {
+        *flags |= sat_bit;
+        u = (wide < 0) ? 0u : 0xFFFFFFFFu;
+    } else {
+        u = (uint32_t)(s >> TDCK_GATE_FRAC);
+    }
+    th = tdck_act_x_clamped(table, u, TDCK_C_FRAC - TDCK_ACT_STEP_BITS) - (1 << TDCK_ACT_VALUE_FRAC);
+    *c = (int32_t)((int64_t)u - ((int64_t)1 << 31));
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__)
+    {
+        /* floor((o 2^15 th 2^1 + 2^31) / 2^32) = floor((o th + 2^15) / 2^16): one SMMULR */
+        int32_t h;
+        __asm__("smmulr %0, %1, %2" : "=r"(h) : "r"(go * (1 << 15)), "r"(th * 2));
+        return (int16_t)h;
+    }
+#else
     return (int16_t)tdck_round_shift32(go * th, TDCK_GATE_FRAC);
+#endif
+}
+
+/* A unit's cell from its four gate accumulators (excess-2^31 form, Q(shift + ACT_STEP_BITS)): the
+ * activations, then tdck_lstm_cell; returns h. `sig` is table + 256 - 2^(30 - shift) when the
+ * sigmoid gates' accumulators cannot leave the table (shift >= 22: the caller passes it, so that
+ * the compiler keeps that base address in a register), else NULL. */
+TDCK_INLINE int16_t tdck_lstm_unit(const uint32_t *acc, unsigned shift, int32_t *c, const uint16_t *table,
+    const uint16_t *sig, uint32_t *flags, uint32_t sat_bit)
+{
+    int32_t gi;
+    int32_t gf;
+    int32_t go;
+    if (sig != NULL && shift + 1u >= 23u) {
+        unsigned s = shift + 1u;
+        uint32_t mask = (1u << TDCK_ACT_POS_BITS) - 1u;
+        gi = tdck_act_lerp(sig, (int32_t)(acc[0] >> s), (acc[0] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        gf = tdck_act_lerp(sig, (int32_t)(acc[1] >> s), (acc[1] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        go = tdck_act_lerp(sig, (int32_t)(acc[3] >> s), (acc[3] >> (s - TDCK_ACT_POS_BITS)) & mask);
+    } else {
+        gi = tdck_act_x(table, acc[0], shift + 1u);
+        gf = tdck_act_x(table, acc[1], shift + 1u);
+        go = tdck_act_x(table, acc[3], shift + 1u);
+    }
+    return tdck_lstm_cell(gi, gf, tdck_act_x(table, acc[2], shift) - (1 << TDCK_ACT_VALUE_FRAC), go, c, table,
+        flags, sat_bit);
 }
 
 /* One LSTM layer of `hidden` units: unit j's four gate rows (i, f, g, o) are tdck_dot4 of block j of
- * w (4 packed words per input pair) and bias[4j..4j+3] against v (2 pairs int16, the layer's input
+ * w (4 biases, then 4 packed words per input pair) against v (2 pairs int16, the layer's input
  * then its own h). The gate accumulators are Q(shift + ACT_STEP_BITS). New h go to h_new (not v:
- * the later units still read the old h); cell states are updated in place. */
-TDCK_INLINE void tdck_lstm_layer(const int32_t *w, const int32_t *bias, const int16_t *v, uint32_t pairs,
-    uint32_t hidden, unsigned shift, int32_t *c, int16_t *h_new, const uint16_t *value, const uint16_t *slope,
-    uint32_t *flags, uint32_t sat_bit)
+ * the later units still read the old h); cell states are updated in place. `sig`: as for
+ * tdck_lstm_unit. */
+TDCK_INLINE void tdck_lstm_layer(const int32_t *w, const int16_t *v, uint32_t pairs, uint32_t hidden,
+    unsigned shift, int32_t *c, int16_t *h_new, const uint16_t *table, const uint16_t *sig, uint32_t *flags,
+    uint32_t sat_bit)
 {
     uint32_t j;
     for (j = 0u; j < hidden; ++j) {
-        int32_t acc[4];
-        tdck_dot4(w + 4u * pairs * j, v, pairs, bias + 4u * j, acc);
-        h_new[j] = tdck_lstm_cell(tdck_sigmoid_q16(value, slope, acc[0], shift),
-            tdck_sigmoid_q16(value, slope, acc[1], shift), tdck_tanh_q15(value, slope, acc[2], shift),
-            tdck_sigmoid_q16(value, slope, acc[3], shift), &c[j], value, slope, flags, sat_bit);
+        uint32_t acc[4];
+        tdck_dot4(&w, v, pairs, acc);
+        h_new[j] = tdck_lstm_unit(acc, shift, &c[j], table, sig, flags, sat_bit);
     }
 }
 

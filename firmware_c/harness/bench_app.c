@@ -13,14 +13,15 @@
  * (NAME_step including its call and return, not the loop or the timer reads).
  *
  * Streaming models (TDC_DECIMATION > 0, from the Makefile): the network steps on the first sample
- * of every period of D samples. Each such sample is timed alone; the D - 1 others of the period
- * are timed as one batch. Memoryless models (TDC_DECIMATION == 0): the stream is timed in batches
+ * of every period of D samples (or, spread schedule, on all of them). Every sample is timed alone;
+ * the ticks are also summed per phase of the period, whose average over the periods is the cost of
+ * that phase to well under one instruction (a spread schedule's worst sample). Memoryless models (TDC_DECIMATION == 0): the stream is timed in batches
  * of BATCH samples; the most expensive batch bounds the worst case (PLA's interval search grows
  * with temperature).
  *
  * Output lines (integers only): "calibration <instructions> <ticks>", "model_id <id>",
  * "decimation <D>", "samples <n>", "network <count> <ticks> <null ticks> <max ticks>",
- * "plain <count> <ticks> <null ticks>", "batch <count> <ticks> <null ticks>" (memoryless, one line
+ * "plain <count> <ticks> <null ticks>", "phase <p> <ticks> <null ticks>" (one line per phase), "batch <count> <ticks> <null ticks>" (memoryless, one line
  * per batch), "sink <value>".
  */
 #include <stdio.h>
@@ -127,27 +128,32 @@ struct stream_ticks {
     uint32_t plain;
 };
 
-/* Periods of D samples from the start of a stream (the network steps on sample 0 of each). */
-static struct stream_ticks time_stream(step_fn step, size_t periods)
+/* ticks summed per phase of the period over the stream (a spread schedule's worst phase) */
+static uint32_t phase_ticks[2][TDC_DECIMATION];
+
+/* Periods of D samples from the start of a stream (the network steps on sample 0 of each); every
+ * sample is timed alone, and its ticks are added to its phase's sum in phase_ticks[which]. */
+static struct stream_ticks time_stream(step_fn step, size_t periods, int which)
 {
     struct stream_ticks r = { 0u, 0u, 0u };
     size_t p;
     size_t i = 0u;
     tdc_init(&state);
     for (p = 0u; p < periods; ++p) {
-        uint32_t t0 = SYST_CVR;
-        uint32_t dt;
         size_t j;
-        sink = step(&state, accel[i], temp[i]);
-        dt = ticks_since(t0);
-        r.network += dt;
-        r.network_max = dt > r.network_max ? dt : r.network_max;
-        ++i;
-        t0 = SYST_CVR;
-        for (j = 1u; j < (size_t)TDC_DECIMATION; ++j, ++i) {
+        for (j = 0u; j < (size_t)TDC_DECIMATION; ++j, ++i) {
+            uint32_t t0 = SYST_CVR;
+            uint32_t dt;
             sink = step(&state, accel[i], temp[i]);
+            dt = ticks_since(t0);
+            phase_ticks[which][j] += dt;
+            if (j == 0u) {
+                r.network += dt;
+                r.network_max = dt > r.network_max ? dt : r.network_max;
+            } else {
+                r.plain += dt;
+            }
         }
-        r.plain += ticks_since(t0);
     }
     return r;
 }
@@ -179,13 +185,18 @@ int main(void)
 #if TDC_DECIMATION > 0
     {
         size_t periods = n / (size_t)TDC_DECIMATION;
-        struct stream_ticks real = time_stream(tdc_step, periods);
-        struct stream_ticks null = time_stream(null_step, periods);
+        struct stream_ticks real = time_stream(tdc_step, periods, 0);
+        struct stream_ticks null = time_stream(null_step, periods, 1);
+        size_t j;
         printf("samples %lu\n", (unsigned long)(periods * (size_t)TDC_DECIMATION));
         printf("network %lu %lu %lu %lu\n", (unsigned long)periods, (unsigned long)real.network,
             (unsigned long)null.network, (unsigned long)real.network_max);
         printf("plain %lu %lu %lu\n", (unsigned long)(periods * ((size_t)TDC_DECIMATION - 1u)),
             (unsigned long)real.plain, (unsigned long)null.plain);
+        for (j = 0u; j < (size_t)TDC_DECIMATION; ++j) {
+            printf("phase %lu %lu %lu\n", (unsigned long)j, (unsigned long)phase_ticks[0][j],
+                (unsigned long)phase_ticks[1][j]);
+        }
     }
 #else
     {

@@ -5,8 +5,8 @@
  *
  * Usage: kernel_app INPUTS OUTPUTS
  * INPUTS: little-endian int64 records of KERNEL_IN values: kernel id, then its arguments;
- * OUTPUTS: one record of KERNEL_OUT int64 values per input record (unused values 0). The tables of
- * tdck_act are the first 2 ACT_SEGMENTS records' arguments 0 (value) and 1 (slope) under id 0.
+ * OUTPUTS: one record of KERNEL_OUT int64 values per input record (unused values 0). The knots of
+ * tdck_act are set by the records with id 0 (arguments: index, knot).
  */
 #include <stdio.h>
 #include <string.h>
@@ -37,8 +37,7 @@ enum kernel {
     K_WINDOW = 13
 };
 
-static uint16_t act_value[TDCK_ACT_SEGMENTS];
-static uint16_t act_slope[TDCK_ACT_SEGMENTS];
+static uint16_t act_knot[TDCK_ACT_KNOTS];
 
 /* window stream state (K_WINDOW: in = chunks, chunk_start, phase, v, reset; out = current, sum, pos) */
 static int64_t window_current;
@@ -51,13 +50,14 @@ static void run(const int64_t *in, int64_t *out)
     memset(out, 0, KERNEL_OUT * sizeof out[0]);
     switch ((int)in[0]) {
     case K_TABLE:
-        act_value[in[1]] = (uint16_t)in[2];
-        act_slope[in[1]] = (uint16_t)in[3];
+        act_knot[in[1]] = (uint16_t)in[2];
         break;
     case K_ACT:
-        out[0] = tdck_act(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
-        out[1] = tdck_sigmoid_q16(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
-        out[2] = tdck_tanh_q15(act_value, act_slope, (int32_t)in[1], (unsigned)in[2]);
+        out[0] = tdck_act(act_knot, (int32_t)in[1], (unsigned)in[2]);
+        out[1] = tdck_sigmoid_q16(act_knot, (int32_t)in[1], (unsigned)in[2]);
+        out[2] = tdck_tanh_q15(act_knot, (int32_t)in[1], (unsigned)in[2]);
+        /* the excess-2^31 form the network uses, with the unclamped gate path where it applies */
+        out[3] = tdck_act_x(act_knot, (uint32_t)in[1] + 0x80000000u, (unsigned)in[2]);
         break;
     case K_ROUND_SHIFT64:
         out[0] = tdck_round_shift64(in[1], (unsigned)in[2]);
@@ -72,35 +72,43 @@ static void run(const int64_t *in, int64_t *out)
         out[0] = tdck_rdiv_round64(in[1], (uint32_t)in[2]);
         break;
     case K_DOT4: {
-        /* in = w0..w3 (the packed words of pair 0), v0, v1, b0, b1, pairs (1 or 2); pair 1 has the
-         * words in reverse order and the vector pair (v1, v0); the biases are b0, b1, -b0, -b1 */
-        int32_t w[8];
-        int16_t v[4];
-        int32_t bias[4];
-        int32_t acc[4];
+        /* in = w0..w3 (the packed words of pair 0), v0, v1, b0, b1, pairs (1 .. 9); the block is the
+         * biases b0, b1, -b0, -b1 (sign bit flipped), then pair p's words: pair 0's, then the reverse
+         * order for odd p, as they are for even p; the vector pairs alternate (v0, v1), (v1, v0) */
+        int32_t w[4 + 4 * 9];
+        int16_t v[2 * 9];
+        const int32_t *wp = w;
+        uint32_t acc[4];
+        uint32_t pairs = (uint32_t)in[9];
+        uint32_t p;
         int k;
+        int64_t bias[4];
+        bias[0] = in[7];
+        bias[1] = in[8];
+        bias[2] = -in[7];
+        bias[3] = -in[8];
         for (k = 0; k < 4; ++k) {
-            w[k] = (int32_t)in[1 + k];
-            w[4 + k] = (int32_t)in[4 - k];
+            /* bias + 2^31 mod 2^32, as int32 (the values are in int32 range, so this is exact) */
+            w[k] = (int32_t)(bias[k] >= 0 ? bias[k] - 2147483647 - 1 : bias[k] + 2147483647 + 1);
         }
-        bias[0] = (int32_t)in[7];
-        bias[1] = (int32_t)in[8];
-        bias[2] = -(int32_t)in[7];
-        bias[3] = -(int32_t)in[8];
-        v[0] = (int16_t)in[5];
-        v[1] = (int16_t)in[6];
-        v[2] = (int16_t)in[6];
-        v[3] = (int16_t)in[5];
-        tdck_dot4(w, v, (uint32_t)in[9], bias, acc);
+        for (p = 0u; p < pairs; ++p) {
+            for (k = 0; k < 4; ++k) {
+                w[4 + 4 * (int)p + k] = (int32_t)in[1 + ((p % 2u) != 0u ? 3 - k : k)];
+            }
+            v[2u * p] = (int16_t)in[(p % 2u) != 0u ? 6 : 5];
+            v[2u * p + 1u] = (int16_t)in[(p % 2u) != 0u ? 5 : 6];
+        }
+        tdck_dot4(&wp, v, pairs, acc);
         for (k = 0; k < 4; ++k) {
-            out[k] = acc[k];
+            out[k] = (int64_t)acc[k] - 2147483648;
         }
+        out[4] = wp - w; /* words consumed */
         break;
     }
     case K_CELL: {
         int32_t c = (int32_t)in[5];
-        out[0] = tdck_lstm_cell((int32_t)in[1], (int32_t)in[2], (int32_t)in[3], (int32_t)in[4], &c, act_value,
-            act_slope, &flags, 4u);
+        out[0] = tdck_lstm_cell((int32_t)in[1], (int32_t)in[2], (int32_t)in[3], (int32_t)in[4], &c, act_knot, &flags,
+            4u);
         out[1] = c;
         out[2] = flags;
         break;
