@@ -215,3 +215,14 @@ width_c = 6.0
     rec = simulate(replace(cfg, effects=tuple(e for e in cfg.effects if e.identifier != "temp_rate")), 8)
     model = PhysicsCompensator().fit(rec.without_truth())
     assert {e.identifier for e in model.effects} == {"bias_poly", "hysteresis_offset"}
+
+
+@pytest.mark.parametrize("seed", [2, 3, 7])
+def test_auto_adds_nothing_on_the_finders_clean_bench_recordings(seed: int) -> None:
+    """Clean chamber cycles (white noise, flicker and a random walk, no temperature-history effect):
+    the cross-validated stage alone added a term on these three; the noise-model test stops it."""
+    from trainer.diagnose.scenarios import make_scenario
+
+    rec = make_scenario([], seed).recording()
+    model = PhysicsCompensator().fit(rec.without_truth())
+    assert [e.identifier for e in model.effects] == ["bias_poly"]

@@ -356,3 +356,10 @@ def test_cli_exit_code_and_one_line_message(tmp_path: Path, capsys: pytest.Captu
     err = capsys.readouterr().err
     assert err.startswith("error: ")
     assert err.count("\n") == 1
+
+
+def test_another_preset_column_is_named_as_its_own_channel(tmp_path: Path) -> None:
+    """--accel imu.acc.x with the tofupilot preset is the x channel, not the preset's default z."""
+    rec = run_import(REAL, "--preset", "tofupilot", "--accel", "imu.acc.x", "-o", tmp_path / "x.csv")
+    assert rec.meta["channel"] == "accel0_x" and rec.meta["sensor"] == "tofupilot-imu-acc-x"
+    np.testing.assert_array_equal(rec.accel_mg, rec.columns["accel_x_mg"])

@@ -205,3 +205,20 @@ def test_evaluate_scores_the_held_out_part_with_an_injection(
     # the whole recording contains the training rows (written to another file: same data, new name)
     assert main(["evaluate", str(model), str(train_csv), "--out-dir", str(tmp_path / "e2")]) == 0
     assert "the validation data is the training data" in capsys.readouterr().out
+
+
+def test_a_held_out_end_part_is_scored_after_the_training_part() -> None:
+    """A stateful method's output on a held-out end part continues from the training part (firmware
+    that has run since power-on); cold, it would start with an empty history."""
+    from trainer.scoring.compare import compensate_after
+
+    rec = chamber_cycle()
+    train, valid = split(rec, parse_holdout("last:0.5"))
+    model = fit_compensator("persistence", train)
+    warm = compensate_after(model, valid, train)
+    cold = model.compensate(valid)
+    whole = model.compensate(rec)
+    np.testing.assert_array_equal(warm, whole[len(train) :])
+    # persistence subtracts the previous smoothed output: only the first window differs
+    assert not np.array_equal(warm[:10], cold[:10])
+    np.testing.assert_allclose(warm[200:], cold[200:], atol=1e-9)

@@ -157,6 +157,18 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
         **PRESETS.get(preset or "", {}).get("channel_map", {}),  # type: ignore[dict-item]
         **(given.get("channel_map") or {}),  # type: ignore[dict-item]
     }
+    if preset is not None and given.get("accel") not in (None, PRESETS[preset].get("accel")):
+        # the preset's channel and sensor name describe its own column; another --accel column is
+        # another channel (named from the preset's channel map, else left unnamed)
+        column = str(given["accel"])
+        channel = next((c for c, col in values["channel_map"].items() if col == column), None)  # type: ignore[union-attr]
+        meta: dict[str, str] = values["meta"]  # type: ignore[assignment]
+        if channel is None:
+            meta.pop("channel", None)
+        else:
+            meta["channel"] = channel
+        if given.get("sensor") is None and "sensor" in PRESETS[preset]:
+            values["sensor"] = f"{preset}-{column.replace('.', '-')}"
     if values.get("channels") is not None:
         values.pop("extra_axes", None)  # the channels replace the older accel_x_mg spelling
     for required in ("temp", "accel"):
