@@ -23,6 +23,16 @@ import numpy as np
 from trainer.errors import UserError
 
 STRICT_FLAGS = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Werror")
+# what a firmware build that includes generated code or the kernel headers may add to STRICT_FLAGS
+FIRMWARE_WARNINGS = (
+    "-Wstrict-prototypes",
+    "-Wmissing-prototypes",
+    "-Wundef",
+    "-Wcast-qual",
+    "-Wvla",
+    "-Wdouble-promotion",
+    "-Wfloat-equal",
+)
 SANITIZER_FLAGS = (
     "-fsanitize=address,undefined",
     "-fno-sanitize-recover=all",

@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from codegen.cli import main as codegen_main
-from codegen.hostbuild import STRICT_FLAGS, load_module
+from codegen.hostbuild import FIRMWARE_WARNINGS, STRICT_FLAGS, load_module
 from tests import testmodels as tm
 from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
@@ -27,15 +27,6 @@ from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import run_cli
 
 METHODS = ("dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3")
-EXTRA_WARNINGS = (
-    "-Wstrict-prototypes",
-    "-Wmissing-prototypes",
-    "-Wundef",
-    "-Wcast-qual",
-    "-Wvla",
-    "-Wdouble-promotion",
-    "-Wfloat-equal",
-)
 
 
 def _subprocess(*args: str) -> subprocess.CompletedProcess[str]:
@@ -149,7 +140,7 @@ def test_generated_c_is_warning_free(exported: dict[str, Path], compiler: str, t
             cmd = [
                 compiler,
                 *STRICT_FLAGS,
-                *EXTRA_WARNINGS,
+                *FIRMWARE_WARNINGS,
                 opt,
                 "-c",
                 str(out / f"{_name(method)}.c"),

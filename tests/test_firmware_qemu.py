@@ -11,14 +11,11 @@ be installed (scripts/install_arm_tools.sh).
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import re
 import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -29,6 +26,7 @@ from codegen.golden import golden_for
 from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
 from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
+from tests.kernel_checks import cortex_m_driver
 from trainer.cli import main as trainer_main
 from trainer.data.recording_io import read_recording
 
@@ -45,17 +43,7 @@ MODELS: dict[str, list[str]] = {
 }
 
 
-def _load_driver() -> ModuleType:
-    """firmware_c/cortex_m.py (firmware_c/ is no package: imported by path)."""
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("cortex_m", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-cm = _load_driver()
+cm = cortex_m_driver()
 
 
 @pytest.fixture(scope="module", autouse=True)
