@@ -211,11 +211,10 @@ def run(args: argparse.Namespace) -> int:
             held_text = None
             if holdout is not None:
                 _, held = split(rec, holdout)
-                scores.update(
-                    signoff.branch_scores(
-                        held, model.compensate(held.without_truth()), args.smoothing, "held-out "
-                    )
-                )
+                # the whole run's output cut to the held-out part: the state has run through what
+                # precedes it, as in firmware running since power-on (trainer compare does the same)
+                rows = slice(len(rec) - len(held), None) if holdout.side == "last" else slice(0, len(held))
+                scores.update(signoff.branch_scores(held, compensated[rows], args.smoothing, "held-out "))
                 held_text = (
                     f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
                 )
