@@ -11,6 +11,7 @@ import math
 import re
 import textwrap
 from dataclasses import dataclass
+from pathlib import Path
 
 import jinja2
 import numpy as np
@@ -426,8 +427,21 @@ def _physics_context(model: QPhysics) -> dict[str, object]:
     }
 
 
+KERNEL_FILE = "tdc_kernels.h"
+PHYSICS_KERNEL_FILE = "tdc_physics_kernels.h"  # shipped with physics modules only
+PHYSICS_KERNEL_HEADER = KERNEL_HEADER.parent / PHYSICS_KERNEL_FILE
+
+
+def header_version(path: Path, macro: str) -> int:
+    """A kernel header's ``#define MACRO N``: the generated modules check it, declared in the header only."""
+    found = re.search(rf"^#define {macro} (\d+)", path.read_text(encoding="utf-8"), re.MULTILINE)
+    if found is None:
+        raise UserError(f"{path}: no '#define {macro} N'")
+    return int(found.group(1))
+
+
 def _environment() -> jinja2.Environment:
-    return jinja2.Environment(
+    env = jinja2.Environment(
         loader=jinja2.PackageLoader("codegen", "templates"),
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
@@ -435,11 +449,9 @@ def _environment() -> jinja2.Environment:
         keep_trailing_newline=True,
         autoescape=False,
     )
-
-
-KERNEL_FILE = "tdc_kernels.h"
-PHYSICS_KERNEL_FILE = "tdc_physics_kernels.h"  # shipped with physics modules only
-PHYSICS_KERNEL_HEADER = KERNEL_HEADER.parent / PHYSICS_KERNEL_FILE
+    env.globals["kernels_version"] = header_version(KERNEL_HEADER, "TDCK_VERSION")
+    env.globals["physics_kernels_version"] = header_version(PHYSICS_KERNEL_HEADER, "TDCP_VERSION")
+    return env
 
 
 def kernel_header() -> str:

@@ -153,15 +153,16 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
     if values.get("resample") == "none":  # an explicit "enforce the jitter rule" beats the preset
         values["resample"] = None
     values["meta"] = dict(values.get("meta", {}))  # type: ignore[call-overload]
-    values["channel_map"] = {  # a given map adds to (and overrides) the preset's
+    channel_map: dict[str, str] = {  # a given map adds to (and overrides) the preset's
         **PRESETS.get(preset or "", {}).get("channel_map", {}),  # type: ignore[dict-item]
         **(given.get("channel_map") or {}),  # type: ignore[dict-item]
     }
+    values["channel_map"] = channel_map
     if preset is not None and given.get("accel") not in (None, PRESETS[preset].get("accel")):
         # the preset's channel and sensor name describe its own column; another --accel column is
         # another channel (named from the preset's channel map, else left unnamed)
         column = str(given["accel"])
-        channel = next((c for c, col in values["channel_map"].items() if col == column), None)  # type: ignore[union-attr]
+        channel = next((c for c, col in channel_map.items() if col == column), None)
         meta: dict[str, str] = values["meta"]  # type: ignore[assignment]
         if channel is None:
             meta.pop("channel", None)
