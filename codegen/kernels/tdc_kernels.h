@@ -372,6 +372,67 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
     *wp = w;
 }
 
+/* tdck_dot4 with a pair count PAIRS that is an integer constant expression (a literal: the layer
+ * functions dispatch on their layers' counts). With gcc on a DSP core the whole product is one
+ * assembly block unrolled PAIRS times with no loop test: per two pairs one LDRD of the two vector
+ * words and two LDMs of four weight words each (11 instructions per 8 SMLADs instead of 12, and no
+ * loop entry); the vector v must then be 4-byte aligned (LDRD faults otherwise; the state struct
+ * puts the vector at a multiple of 4 bytes and every layer's input at an even slot). Elsewhere it
+ * is tdck_dot4. The same numbers either way (the sums stay in int32). */
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__) && defined(__OPTIMIZE__)
+/* (optimised builds only: the block takes 12 registers, which gcc -O0 cannot find) */
+#define TDCK_DOT4_N(wp, v, PAIRS, acc)                                                                    \
+    do {                                                                                                  \
+        const int32_t *tdck_w_ = *(wp);                                                                   \
+        const int16_t *tdck_v_ = (v);                                                                     \
+        int32_t tdck_a0_ = tdck_w_[0];                                                                    \
+        int32_t tdck_a1_ = tdck_w_[1];                                                                    \
+        int32_t tdck_a2_ = tdck_w_[2];                                                                    \
+        int32_t tdck_a3_ = tdck_w_[3];                                                                    \
+        int32_t tdck_x0_;                                                                                 \
+        int32_t tdck_x1_;                                                                                 \
+        register int32_t tdck_q0_ __asm__("r4");                                                         \
+        register int32_t tdck_q1_ __asm__("r5");                                                         \
+        register int32_t tdck_q2_ __asm__("r6");                                                         \
+        register int32_t tdck_q3_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
+        tdck_w_ += 4;                                                                                     \
+        __asm__(".rept %c[n]\n\t"                                                                         \
+                "ldrd %[x0], %[x1], [%[v]], #8\n\t"                                                       \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x1], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x1], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x1], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x1], %[a3]\n\t"                                                    \
+                ".endr\n\t"                                                                               \
+                ".if %c[odd]\n\t"                                                                         \
+                "ldr %[x0], [%[v]], #4\n\t"                                                               \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
+                ".endif"                                                                                  \
+                : [a0] "+r"(tdck_a0_), [a1] "+r"(tdck_a1_), [a2] "+r"(tdck_a2_), [a3] "+r"(tdck_a3_),      \
+                  [w] "+r"(tdck_w_), [v] "+r"(tdck_v_), [x0] "=&r"(tdck_x0_), [x1] "=&r"(tdck_x1_),        \
+                  [q0] "=&r"(tdck_q0_), [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)   \
+                : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                           \
+                : "memory"); /* reads the weights and the vector */                                       \
+        (void)tdck_v_;                                                                                    \
+        (acc)[0] = (uint32_t)tdck_a0_;                                                                    \
+        (acc)[1] = (uint32_t)tdck_a1_;                                                                    \
+        (acc)[2] = (uint32_t)tdck_a2_;                                                                    \
+        (acc)[3] = (uint32_t)tdck_a3_;                                                                    \
+        *(wp) = tdck_w_;                                                                                  \
+    } while (0)
+#else
+#define TDCK_DOT4_N(wp, v, PAIRS, acc) tdck_dot4((wp), (v), (PAIRS), (acc))
+#endif
+
 /* One cell from its gates (i, f, o sigmoid Q16; g tanh Q15): c' = f c + i g, rounded half up to
  * Q24 from Q40 and saturated to int32 (sets `sat_bit`); returns h = o tanh(c') in Q15
  * (|h| <= 32767: o <= 65535, |tanh| <= 32767). Two int64 multiply-accumulates, f c + i (g 2^9)
