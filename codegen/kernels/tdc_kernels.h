@@ -374,29 +374,31 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
 
 /* tdck_dot4 with a pair count PAIRS that is an integer constant expression (a literal: the layer
  * functions dispatch on their layers' counts). With gcc on a DSP core the whole product is one
- * assembly block unrolled PAIRS times with no loop test: per two pairs one LDRD of the two vector
- * words and two LDMs of four weight words each (11 instructions per 8 SMLADs instead of 12, and no
- * loop entry); the vector v must then be 4-byte aligned (LDRD faults otherwise; the state struct
+ * assembly block unrolled PAIRS times with no loop test: one LDM of the four biases into the
+ * accumulators (r0-r3: LDM wants its registers in ascending order, and fixing them lets gcc plan
+ * the unit around them), then per two pairs one LDRD of the two vector words and two LDMs of four
+ * weight words each (11 instructions per 8 SMLADs instead of 12, and no loop entry); the vector v
+ * must be 4-byte aligned (LDRD faults otherwise; the state struct
  * puts the vector at a multiple of 4 bytes and every layer's input at an even slot). Elsewhere it
  * is tdck_dot4. The same numbers either way (the sums stay in int32). */
 #if TDCK_DSP && defined(__GNUC__) && !defined(__clang__) && defined(__OPTIMIZE__)
-/* (optimised builds only: the block takes 12 registers, which gcc -O0 cannot find) */
+/* (optimised builds only: the block takes 12 registers, 8 of them fixed, which gcc -O0 cannot find) */
 #define TDCK_DOT4_N(wpp, vec, PAIRS, accs)                                                                    \
     do {                                                                                                  \
         const int32_t *tdck_w_ = *(wpp);                                                                   \
         const int16_t *tdck_v_ = (vec);                                                                     \
-        int32_t tdck_a0_ = tdck_w_[0];                                                                    \
-        int32_t tdck_a1_ = tdck_w_[1];                                                                    \
-        int32_t tdck_a2_ = tdck_w_[2];                                                                    \
-        int32_t tdck_a3_ = tdck_w_[3];                                                                    \
+        register int32_t tdck_a0_ __asm__("r0");                                                         \
+        register int32_t tdck_a1_ __asm__("r1");                                                         \
+        register int32_t tdck_a2_ __asm__("r2");                                                         \
+        register int32_t tdck_a3_ __asm__("r3");                                                         \
         int32_t tdck_x0_;                                                                                 \
         int32_t tdck_x1_;                                                                                 \
         register int32_t tdck_q0_ __asm__("r4");                                                         \
         register int32_t tdck_q1_ __asm__("r5");                                                         \
         register int32_t tdck_q2_ __asm__("r6");                                                         \
         register int32_t tdck_q3_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
-        tdck_w_ += 4;                                                                                     \
-        __asm__(".rept %c[n]\n\t"                                                                         \
+        __asm__("ldmia %[w]!, {%[a0], %[a1], %[a2], %[a3]}\n\t"                                           \
+                ".rept %c[n]\n\t"                                                                         \
                 "ldrd %[x0], %[x1], [%[v]], #8\n\t"                                                       \
                 "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
                 "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
@@ -417,7 +419,7 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
                 "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
                 "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
                 ".endif"                                                                                  \
-                : [a0] "+r"(tdck_a0_), [a1] "+r"(tdck_a1_), [a2] "+r"(tdck_a2_), [a3] "+r"(tdck_a3_),      \
+                : [a0] "=&r"(tdck_a0_), [a1] "=&r"(tdck_a1_), [a2] "=&r"(tdck_a2_), [a3] "=&r"(tdck_a3_),      \
                   [w] "+r"(tdck_w_), [v] "+r"(tdck_v_), [x0] "=&r"(tdck_x0_), [x1] "=&r"(tdck_x1_),        \
                   [q0] "=&r"(tdck_q0_), [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)   \
                 : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                           \
