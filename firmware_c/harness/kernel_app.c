@@ -34,7 +34,8 @@ enum kernel {
     K_SAT = 10,
     K_CLAMP = 11,
     K_SHAPE = 12,
-    K_WINDOW = 13
+    K_WINDOW = 13,
+    K_DOT_WIDE = 14
 };
 
 static uint16_t act_knot[TDCK_ACT_KNOTS];
@@ -62,6 +63,27 @@ static void dot4_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, u
     case 8u: TDCK_DOT4_N(wp, v, 8u, acc); break;
     default: TDCK_DOT4_N(wp, v, 9u, acc); break;
     }
+}
+
+/* TDCK_DOT_WIDE_N with the literal count n (1 .. 10): the head's unrolled path. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static int64_t dot_wide_literal(const int32_t *w, const int16_t *h, uint32_t n, int64_t acc)
+{
+    switch (n) {
+    case 1u: TDCK_DOT_WIDE_N(w, h, 1u, acc); break;
+    case 2u: TDCK_DOT_WIDE_N(w, h, 2u, acc); break;
+    case 3u: TDCK_DOT_WIDE_N(w, h, 3u, acc); break;
+    case 4u: TDCK_DOT_WIDE_N(w, h, 4u, acc); break;
+    case 5u: TDCK_DOT_WIDE_N(w, h, 5u, acc); break;
+    case 6u: TDCK_DOT_WIDE_N(w, h, 6u, acc); break;
+    case 7u: TDCK_DOT_WIDE_N(w, h, 7u, acc); break;
+    case 8u: TDCK_DOT_WIDE_N(w, h, 8u, acc); break;
+    case 9u: TDCK_DOT_WIDE_N(w, h, 9u, acc); break;
+    default: TDCK_DOT_WIDE_N(w, h, 10u, acc); break;
+    }
+    return acc;
 }
 
 static void run(const int64_t *in, int64_t *out)
@@ -182,6 +204,20 @@ static void run(const int64_t *in, int64_t *out)
         out[1] = tdck_window_sum(window_current, window_ring, (uint32_t)in[1]);
         out[2] = window_pos;
         break;
+    case K_DOT_WIDE: {
+        /* in = w0..w3 (int32, repeated), h0, h1 (alternating), acc, n (1 .. 10) */
+        int32_t w[10];
+        int16_t h[10];
+        uint32_t n = (uint32_t)in[8];
+        uint32_t j;
+        for (j = 0u; j < n; ++j) {
+            w[j] = (int32_t)in[1u + j % 4u];
+            h[j] = (int16_t)in[5u + j % 2u];
+        }
+        out[0] = tdck_dot_wide(w, h, n, in[7]);
+        out[1] = dot_wide_literal(w, h, n, in[7]) != out[0]; /* 1: the two paths disagree */
+        break;
+    }
     default:
         out[0] = -1;
         break;
