@@ -82,6 +82,9 @@ def write_float_module(spec: DlstmModelSpec, q: QStream, name: str, out_dir: Pat
 #define {up}_FLAG_TEMP_OUT_OF_RANGE 1u
 #define {up}_FLAG_INPUT_CLAMPED 2u
 #define {up}_FLAG_SATURATED 4u
+#define {up}_SAMPLE_RATE_MILLIHZ {round(fe.rate_hz * 1000)}u
+#define {up}_CHECK_SAMPLE_RATE_MILLIHZ(millihz) \\
+    typedef char {name}_built_for_another_sample_rate[((millihz) == {up}_SAMPLE_RATE_MILLIHZ) ? 1 : -1]
 typedef struct {name}_state {{
     int64_t window_current;
     int64_t window_ring[{max(q.chunks, 1)}];

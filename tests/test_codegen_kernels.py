@@ -35,6 +35,7 @@ K_TABLE, K_ACT, K_RS64, K_RS32, K_RR64, K_RDIV, K_DOT4, K_CELL, K_INPUT, K_HOLD,
     range(13)
 )
 K_WINDOW = 13
+K_DOT_WIDE = 14
 I32 = (-(2**31), 2**31 - 1)
 
 
@@ -107,6 +108,9 @@ def expected(record: list[int], window: dict[str, object]) -> list[int]:
     if kid == K_SHAPE:
         total = a[0] + a[1]
         return [total >> 16, total & 0xFFFF]
+    if kid == K_DOT_WIDE:  # weights w0..w3 repeated, h0, h1 alternating; both paths agree (0)
+        n = a[7]
+        return [a[6] + sum(a[j % 4] * a[4 + j % 2] for j in range(n)), 0]
     assert kid == K_WINDOW  # the window sum by its definition: the samples since the last chunk start
     chunks, start, phase, v, reset = a[0:5]
     if reset:
@@ -164,6 +168,10 @@ def random_records(seed: int, n: int = 400) -> list[list[int]]:
         lo = ints(*I32)
         out.append([K_CLAMP, ints(*I32), lo, ints(lo, I32[1])])
         out.append([K_SHAPE, ints(0, 65535), ints(0, 65535)])
+        wide = [ints(*I32) for _ in range(4)]  # every count of the unrolled head, 1 .. 10
+        out.append(
+            [K_DOT_WIDE, *wide, ints(-32767, 32767), ints(-32767, 32767), ints(-(2**62), 2**62), ints(1, 10)]
+        )
     D = ints(1, 9)
     chunks, start = ints(0, 4), ints(0, D - 1)
     for k in range(3 * n):

@@ -372,6 +372,69 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
     *wp = w;
 }
 
+/* tdck_dot4 with a pair count PAIRS that is an integer constant expression (a literal: the layer
+ * functions dispatch on their layers' counts). With gcc on a DSP core the whole product is one
+ * assembly block unrolled PAIRS times with no loop test: one LDM of the four biases into the
+ * accumulators (r0-r3: LDM wants its registers in ascending order, and fixing them lets gcc plan
+ * the unit around them), then per two pairs one LDRD of the two vector words and two LDMs of four
+ * weight words each (11 instructions per 8 SMLADs instead of 12, and no loop entry); the vector v
+ * must be 4-byte aligned (LDRD faults otherwise; the state struct
+ * puts the vector at a multiple of 4 bytes and every layer's input at an even slot). Elsewhere it
+ * is tdck_dot4. The same numbers either way (the sums stay in int32). */
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__) && defined(__OPTIMIZE__)
+/* (optimised builds only: the block takes 12 registers, 8 of them fixed, which gcc -O0 cannot find) */
+#define TDCK_DOT4_N(wpp, vec, PAIRS, accs)                                                                    \
+    do {                                                                                                  \
+        const int32_t *tdck_w_ = *(wpp);                                                                   \
+        const int16_t *tdck_v_ = (vec);                                                                     \
+        register int32_t tdck_a0_ __asm__("r0");                                                         \
+        register int32_t tdck_a1_ __asm__("r1");                                                         \
+        register int32_t tdck_a2_ __asm__("r2");                                                         \
+        register int32_t tdck_a3_ __asm__("r3");                                                         \
+        int32_t tdck_x0_;                                                                                 \
+        int32_t tdck_x1_;                                                                                 \
+        register int32_t tdck_q0_ __asm__("r4");                                                         \
+        register int32_t tdck_q1_ __asm__("r5");                                                         \
+        register int32_t tdck_q2_ __asm__("r6");                                                         \
+        register int32_t tdck_q3_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
+        __asm__("ldmia %[w]!, {%[a0], %[a1], %[a2], %[a3]}\n\t"                                           \
+                ".rept %c[n]\n\t"                                                                         \
+                "ldrd %[x0], %[x1], [%[v]], #8\n\t"                                                       \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x1], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x1], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x1], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x1], %[a3]\n\t"                                                    \
+                ".endr\n\t"                                                                               \
+                ".if %c[odd]\n\t"                                                                         \
+                "ldr %[x0], [%[v]], #4\n\t"                                                               \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
+                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
+                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
+                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
+                ".endif"                                                                                  \
+                : [a0] "=&r"(tdck_a0_), [a1] "=&r"(tdck_a1_), [a2] "=&r"(tdck_a2_), [a3] "=&r"(tdck_a3_),      \
+                  [w] "+r"(tdck_w_), [v] "+r"(tdck_v_), [x0] "=&r"(tdck_x0_), [x1] "=&r"(tdck_x1_),        \
+                  [q0] "=&r"(tdck_q0_), [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)   \
+                : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                           \
+                : "memory"); /* reads the weights and the vector */                                       \
+        (void)tdck_v_;                                                                                    \
+        (accs)[0] = (uint32_t)tdck_a0_;                                                                    \
+        (accs)[1] = (uint32_t)tdck_a1_;                                                                    \
+        (accs)[2] = (uint32_t)tdck_a2_;                                                                    \
+        (accs)[3] = (uint32_t)tdck_a3_;                                                                    \
+        *(wpp) = tdck_w_;                                                                                  \
+    } while (0)
+#else
+#define TDCK_DOT4_N(wpp, vec, PAIRS, accs) tdck_dot4((wpp), (vec), (PAIRS), (accs))
+#endif
+
 /* One cell from its gates (i, f, o sigmoid Q16; g tanh Q15): c' = f c + i g, rounded half up to
  * Q24 from Q40 and saturated to int32 (sets `sat_bit`); returns h = o tanh(c') in Q15
  * (|h| <= 32767: o <= 65535, |tanh| <= 32767). Two int64 multiply-accumulates, f c + i (g 2^9)
@@ -464,6 +527,46 @@ static inline int64_t tdck_dot_wide(const int32_t *w, const int16_t *h, uint32_t
     }
     return acc;
 }
+
+/* acc += sum_j w[j] h[j] for a literal count N (an integer constant expression), int32 x int16
+ * into int64 as tdck_dot_wide. With gcc on a DSP core: one assembly block, an LDM per four weights,
+ * LDRSH and SMLAL per product, no loop. */
+#if TDCK_DSP && defined(__GNUC__) && !defined(__clang__) && defined(__OPTIMIZE__)
+#define TDCK_DOT_WIDE_N(wts, hs, N, acc64)                                                                     \
+    do {                                                                                                  \
+        const int32_t *tdck_w_ = (wts);                                                                     \
+        const int16_t *tdck_h_ = (hs);                                                                     \
+        int32_t tdck_t_;                                                                                  \
+        register int32_t tdck_q0_ __asm__("r4");                                                         \
+        register int32_t tdck_q1_ __asm__("r5");                                                         \
+        register int32_t tdck_q2_ __asm__("r6");                                                         \
+        register int32_t tdck_q3_ __asm__("r8");                                                         \
+        __asm__(".rept %c[n4]\n\t"                                                                        \
+                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
+                "ldrsh %[t], [%[h]], #2\n\t"                                                              \
+                "smlal %Q[a], %R[a], %[q0], %[t]\n\t"                                                     \
+                "ldrsh %[t], [%[h]], #2\n\t"                                                              \
+                "smlal %Q[a], %R[a], %[q1], %[t]\n\t"                                                     \
+                "ldrsh %[t], [%[h]], #2\n\t"                                                              \
+                "smlal %Q[a], %R[a], %[q2], %[t]\n\t"                                                     \
+                "ldrsh %[t], [%[h]], #2\n\t"                                                              \
+                "smlal %Q[a], %R[a], %[q3], %[t]\n\t"                                                     \
+                ".endr\n\t"                                                                               \
+                ".rept %c[n1]\n\t"                                                                        \
+                "ldr %[q0], [%[w]], #4\n\t"                                                               \
+                "ldrsh %[t], [%[h]], #2\n\t"                                                              \
+                "smlal %Q[a], %R[a], %[q0], %[t]\n\t"                                                     \
+                ".endr"                                                                                   \
+                : [a] "+r"(acc64), [w] "+r"(tdck_w_), [h] "+r"(tdck_h_), [t] "=&r"(tdck_t_),                 \
+                  [q0] "=&r"(tdck_q0_), [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)   \
+                : [n4] "i"((N) / 4u), [n1] "i"((N) % 4u)                                                   \
+                : "memory"); /* reads the weights and h */                                                \
+        (void)tdck_w_;                                                                                    \
+        (void)tdck_h_;                                                                                    \
+    } while (0)
+#else
+#define TDCK_DOT_WIDE_N(wts, hs, N, acc64) ((acc64) = tdck_dot_wide((wts), (hs), (N), (acc64)))
+#endif
 
 /* A network input as int16 (Q12 or Q10, the scale is in inv): clamp(rshift_round(clamp(
  * rshift_round(centred, pre), +-d_max) inv, shift), +-32767); the outer clamp sets `sat_bit`. |d| >= d_max saturates anyway; clamping it first

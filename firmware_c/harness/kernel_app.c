@@ -34,7 +34,8 @@ enum kernel {
     K_SAT = 10,
     K_CLAMP = 11,
     K_SHAPE = 12,
-    K_WINDOW = 13
+    K_WINDOW = 13,
+    K_DOT_WIDE = 14
 };
 
 static uint16_t act_knot[TDCK_ACT_KNOTS];
@@ -43,6 +44,47 @@ static uint16_t act_knot[TDCK_ACT_KNOTS];
 static int64_t window_current;
 static int64_t window_ring[8];
 static uint32_t window_pos;
+
+/* TDCK_DOT4_N with the literal pair count `pairs` (1 .. 9): the layers' unrolled path. A function of
+ * its own, so that its twelve-register assembly block does not compete with run's live values. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void dot4_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
+{
+    switch (pairs) {
+    case 1u: TDCK_DOT4_N(wp, v, 1u, acc); break;
+    case 2u: TDCK_DOT4_N(wp, v, 2u, acc); break;
+    case 3u: TDCK_DOT4_N(wp, v, 3u, acc); break;
+    case 4u: TDCK_DOT4_N(wp, v, 4u, acc); break;
+    case 5u: TDCK_DOT4_N(wp, v, 5u, acc); break;
+    case 6u: TDCK_DOT4_N(wp, v, 6u, acc); break;
+    case 7u: TDCK_DOT4_N(wp, v, 7u, acc); break;
+    case 8u: TDCK_DOT4_N(wp, v, 8u, acc); break;
+    default: TDCK_DOT4_N(wp, v, 9u, acc); break;
+    }
+}
+
+/* TDCK_DOT_WIDE_N with the literal count n (1 .. 10): the head's unrolled path. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static int64_t dot_wide_literal(const int32_t *w, const int16_t *h, uint32_t n, int64_t acc)
+{
+    switch (n) {
+    case 1u: TDCK_DOT_WIDE_N(w, h, 1u, acc); break;
+    case 2u: TDCK_DOT_WIDE_N(w, h, 2u, acc); break;
+    case 3u: TDCK_DOT_WIDE_N(w, h, 3u, acc); break;
+    case 4u: TDCK_DOT_WIDE_N(w, h, 4u, acc); break;
+    case 5u: TDCK_DOT_WIDE_N(w, h, 5u, acc); break;
+    case 6u: TDCK_DOT_WIDE_N(w, h, 6u, acc); break;
+    case 7u: TDCK_DOT_WIDE_N(w, h, 7u, acc); break;
+    case 8u: TDCK_DOT_WIDE_N(w, h, 8u, acc); break;
+    case 9u: TDCK_DOT_WIDE_N(w, h, 9u, acc); break;
+    default: TDCK_DOT_WIDE_N(w, h, 10u, acc); break;
+    }
+    return acc;
+}
 
 static void run(const int64_t *in, int64_t *out)
 {
@@ -76,9 +118,15 @@ static void run(const int64_t *in, int64_t *out)
          * biases b0, b1, -b0, -b1 (sign bit flipped), then pair p's words: pair 0's, then the reverse
          * order for odd p, as they are for even p; the vector pairs alternate (v0, v1), (v1, v0) */
         int32_t w[4 + 4 * 9];
-        int16_t v[2 * 9];
+        union {
+            int32_t align; /* TDCK_DOT4_N's LDRD needs the vector 4-byte aligned */
+            int16_t v[2 * 9];
+        } vec;
+        int16_t *v = vec.v;
         const int32_t *wp = w;
+        const int32_t *wn = w;
         uint32_t acc[4];
+        uint32_t acc_n[4];
         uint32_t pairs = (uint32_t)in[9];
         uint32_t p;
         int k;
@@ -99,10 +147,15 @@ static void run(const int64_t *in, int64_t *out)
             v[2u * p + 1u] = (int16_t)in[(p % 2u) != 0u ? 5 : 6];
         }
         tdck_dot4(&wp, v, pairs, acc);
+        /* the same product with a literal pair count (the layers' unrolled path) */
+        dot4_literal(&wn, v, pairs, acc_n);
         for (k = 0; k < 4; ++k) {
             out[k] = (int64_t)acc[k] - 2147483648;
         }
         out[4] = wp - w; /* words consumed */
+        if (wn != wp || acc_n[0] != acc[0] || acc_n[1] != acc[1] || acc_n[2] != acc[2] || acc_n[3] != acc[3]) {
+            out[4] = -1; /* the two paths disagree: never the expected count */
+        }
         break;
     }
     case K_CELL: {
@@ -151,6 +204,20 @@ static void run(const int64_t *in, int64_t *out)
         out[1] = tdck_window_sum(window_current, window_ring, (uint32_t)in[1]);
         out[2] = window_pos;
         break;
+    case K_DOT_WIDE: {
+        /* in = w0..w3 (int32, repeated), h0, h1 (alternating), acc, n (1 .. 10) */
+        int32_t w[10];
+        int16_t h[10];
+        uint32_t n = (uint32_t)in[8];
+        uint32_t j;
+        for (j = 0u; j < n; ++j) {
+            w[j] = (int32_t)in[1u + j % 4u];
+            h[j] = (int16_t)in[5u + j % 2u];
+        }
+        out[0] = tdck_dot_wide(w, h, n, in[7]);
+        out[1] = dot_wide_literal(w, h, n, in[7]) != out[0]; /* 1: the two paths disagree */
+        break;
+    }
     default:
         out[0] = -1;
         break;
