@@ -46,7 +46,7 @@ import numpy as np
 from float_anchor import write_float_module
 
 from codegen.export import LoadedModel, export
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.hostbuild import write_vectors
 from codegen.quantize import QPhysics, QPla, QPoly3, QStream
 from codegen.spec import DlstmModelSpec

@@ -423,22 +423,3 @@ class GoldenPhysics(_Golden):
             self.temp_prev = t
             drift[n] = (acc + (1 << (HI_BITS - 1 + m.frac))) >> (HI_BITS + m.frac)
         return self._output(accel, drift)  # |drift| < 2**30: only the output saturates
-
-
-def golden_for(model: QuantModel) -> _Golden:
-    """A fresh golden model, initialised like ``NAME_init``."""
-    golden: _Golden
-    if isinstance(model, QPla):
-        golden = GoldenPla(model)
-    elif isinstance(model, QPoly3):
-        golden = GoldenPoly3(model)
-    elif isinstance(model, QPhysics):
-        golden = GoldenPhysics(model)
-    elif model.layers and model.schedule == "spread":
-        from codegen.golden_spread import GoldenStreamSpread  # a subclass of GoldenStream
-
-        golden = GoldenStreamSpread(model)
-    else:
-        golden = GoldenStream(model)
-    golden.init()
-    return golden

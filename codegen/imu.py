@@ -29,7 +29,7 @@ import numpy as np
 
 from codegen import __version__
 from codegen.export import LoadedModel, load_for_codegen
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.quantize import (
     DEFAULT_ACCEL_LIMIT_G,
     TEMP_LIMITS_MDEGC,

@@ -21,7 +21,8 @@ import numpy as np
 
 from codegen.export import LoadedModel, load_for_codegen, manifest_name
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
-from codegen.golden import GoldenStream, golden_for
+from codegen.golden import GoldenStream
+from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
 from codegen.quantize import ACCEL_PER_MG, QPhysics
 from codegen.rate import declared_rate_millihz, retime_compensator

@@ -66,7 +66,7 @@ def _checkpoint(method: str) -> dict[str, object]:
 def expected_outputs(model_path: Path) -> np.ndarray:
     """The golden model's outputs on :func:`stream` with a reset at RESET_AT."""
     from codegen.export import load_for_codegen
-    from codegen.golden import golden_for
+    from codegen.golden_select import golden_for
 
     golden = golden_for(load_for_codegen(model_path).quantised)
     accel, temp = load_stream() if (REF_DIR / "stream.npz").exists() else stream()

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from codegen.export import LoadedModel, export
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
     CMD_RESET,

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 
 from codegen.cli import main as codegen_main
 from codegen.export import LoadedModel, export
-from codegen.golden import GoldenPhysics, golden_for
+from codegen.golden import GoldenPhysics
+from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
     CMD_RESET,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from codegen.export import export
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
 from tests import refvectors as ref
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from codegen.export import export
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
     CMD_RESET,

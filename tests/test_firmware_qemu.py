@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from codegen.export import LoadedModel, export
-from codegen.golden import golden_for
+from codegen.golden_select import golden_for
 from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
 from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
