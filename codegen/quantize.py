@@ -222,6 +222,14 @@ class QHead:
     acc_bound: int  # worst-case |accumulator|
     estimate_bound: float  # accel LSB
 
+    @property
+    def may_saturate(self) -> bool:
+        """Whether the rounded estimate (Q(EST_FRAC)) can reach EST_LIMIT: rounding is monotone, so
+        the accumulator's bound rounded the same way bounds it; when it cannot, the C omits the clamp."""
+        s = self.shift - EST_FRAC
+        estimate_q_bound = (self.acc_bound + ((1 << s) >> 1)) >> s
+        return estimate_q_bound > EST_LIMIT
+
 
 @dataclass(frozen=True)
 class QStream:

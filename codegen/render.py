@@ -353,6 +353,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                 "shift": model.head.shift,
                 "bias": _c_int(model.head.bias_q, 64),
                 "acc_bound_text": _bound_text(model.head.acc_bound),
+                "may_saturate": model.head.may_saturate,
                 "h_start": model.vector_slots - model.hidden_slots,
             }
         macros += [

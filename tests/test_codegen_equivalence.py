@@ -351,3 +351,45 @@ def test_output_rounding_errors_cancel_over_any_run_of_samples(recording: Record
     assert np.max(np.abs(errors)) < 2**16  # under one LSB per sample
     prefix = np.concatenate(([0], np.cumsum(errors)))
     assert np.ptp(prefix) < 2**16  # |sum over samples a..b| = |prefix[b + 1] - prefix[a]| < one LSB
+
+
+@pytest.mark.parametrize("output_std_mg", [50.0, 5e4])
+def test_head_clamp_only_where_the_bound_reaches_the_limit(output_std_mg: float, tmp_path: Path) -> None:
+    """The head's estimate clamp is emitted only when the accumulator's bound can reach it; a head
+    that can saturate keeps it and the C still equals the golden model, which always clamps."""
+    weights = tm.random_weights(1, 4, 1, seed=3, scale=30.0)
+    weights["b0"][:] = 8.0  # every gate open: h near its limits, the estimate near its bound
+    weights["w_out"][:] = 1.0  # with 5e4 mg per unit, four units reach 2e5 mg: beyond the clamp (1.3e5 mg)
+    frontend = {
+        "rate_hz": 200.0,
+        "accel_window": 4,
+        "temp_window": 4,
+        "decimation": 4,
+        "train_accel_window": 10,
+    }
+    normalisation = {
+        "inputs_mean": [0.0],
+        "inputs_std": [1.0],
+        "output_mean": 0.0,
+        "output_std": output_std_mg,
+    }
+    checkpoint = tm.checkpoint_dict(
+        "dlstm", tm.dlstm_payload("dlstm", weights, frontend, normalisation), (-40, 85)
+    )
+    model = export_checkpoint(checkpoint, tmp_path, "hd")
+    head = model.quantised.head
+    assert head is not None
+    limit_lsb = 2**31 - 1  # the estimate's clamp, whole accel LSB (independent of the quantiser's constant)
+    can_reach = head.acc_bound / 2.0**head.shift >= limit_lsb
+    assert head.may_saturate == can_reach
+    source = (tmp_path / "out" / "hd.c").read_text(encoding="utf-8")
+    assert ("HD_FLAG_SATURATED;\n        acc = (acc > 0)" in source) == can_reach
+    accel = np.resize(np.array([2.5e8, -2.5e8, 0, 1e6], dtype=np.int64), 2_000)
+    accel[1_000:] = np.sort(accel[1_000:])
+    temp = np.full(accel.size, 20_000, dtype=np.int64)
+    compare_stream(model, tmp_path / "out", "hd", accel, temp, reset_at=(777,))
+    golden = golden_for(model.quantised)
+    golden.fine_estimates = []
+    golden.run(accel, temp)
+    reached = max(abs(e) for e in golden.fine_estimates) > limit_lsb
+    assert reached == can_reach  # the saturating head is driven into its clamp on this stream
