@@ -8,14 +8,12 @@ the strict flags, and its Q-format block is the one codegen/qformats.py writes."
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import shutil
 import subprocess
 import sys
 from fractions import Fraction
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -26,6 +24,7 @@ from codegen import qformats
 from codegen.activations import ACT_KNOT
 from codegen.hostbuild import SANITIZER_FLAGS, STRICT_FLAGS, compile_c
 from codegen.qformats import ACT_KNOTS, ACT_POS_BITS, ACT_SEGMENTS, ACT_STEP_BITS, C_FRAC
+from tests.kernel_checks import assert_header_warning_free, cortex_m_driver
 
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "firmware_c" / "harness" / "kernel_app.c"
@@ -245,33 +244,7 @@ def test_activation_over_every_segment_and_position(sanitized_app: Path, tmp_pat
 def test_header_is_warning_free(compiler: str, tmp_path: Path) -> None:
     if shutil.which(compiler) is None:
         pytest.skip(f"{compiler} is not installed (run scripts/install_c_tools.sh)")
-    extra = (
-        "-Wstrict-prototypes",
-        "-Wmissing-prototypes",
-        "-Wundef",
-        "-Wcast-qual",
-        "-Wvla",
-        "-Wdouble-promotion",
-    )
-    unit = tmp_path / "unit.c"
-    unit.write_text(
-        '#include "tdc_kernels.h"\nint tdck_unit_marker(void);\nint tdck_unit_marker(void) { return 0; }\n'
-    )
-    for opt in ("-O0", "-O2"):
-        for source in (unit, HARNESS):
-            cmd = [
-                compiler,
-                *STRICT_FLAGS,
-                *extra,
-                opt,
-                f"-I{KERNELS}",
-                "-c",
-                str(source),
-                "-o",
-                str(tmp_path / "x.o"),
-            ]
-            result = subprocess.run(cmd, capture_output=True, text=True, check=False)
-            assert result.returncode == 0 and not result.stderr, f"{source.name} {opt}: {result.stderr}"
+    assert_header_warning_free(compiler, "tdc_kernels.h", HARNESS, tmp_path)
 
 
 def test_q_format_block_is_generated_from_qformats() -> None:
@@ -285,20 +258,10 @@ def test_q_format_block_is_generated_from_qformats() -> None:
 # ------------------------------------------------------------------------------ Cortex-M4
 
 
-def _driver() -> ModuleType:
-    """firmware_c/cortex_m.py (firmware_c/ is no package: imported by path)."""
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("cortex_m", module)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
 def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     """The SMLAD path (the default on a Cortex-M4) and the portable path on the target."""
-    cm = _driver()
+    cm = cortex_m_driver()
     reason = cm.ensure_toolchain()
     if reason is not None:
         pytest.skip(f"Cortex-M toolchain unavailable: {reason}")
