@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
 
-from codegen.hostbuild import FIRMWARE_WARNINGS, STRICT_FLAGS
+import numpy as np
+
+from codegen.hostbuild import FIRMWARE_WARNINGS, SANITIZER_FLAGS, STRICT_FLAGS, compile_c
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = ROOT / "codegen" / "kernels"
@@ -34,3 +37,29 @@ def assert_header_warning_free(compiler: str, header: str, harness: Path, work: 
             cmd += ["-o", str(work / "x.o")]
             result = subprocess.run(cmd, capture_output=True, text=True, check=False)
             assert result.returncode == 0 and not result.stderr, f"{source.name} {opt}: {result.stderr}"
+
+
+def write_records(path: Path, records: list[list[int]], width: int) -> None:
+    """A harness's input: one row of ``width`` little-endian int64 per record, zero-padded."""
+    rows = np.zeros((len(records), width), dtype="<i8")
+    for row, record in zip(rows, records, strict=True):
+        row[: len(record)] = record
+    path.write_bytes(rows.tobytes())
+
+
+def build_sanitized(harness: Path, binary: Path) -> Path:
+    """The harness built for the host with ASan/UBSan (gcc, -O1)."""
+    compile_c([harness], binary, include_dirs=[KERNELS], cc="gcc", flags=("-O1", *SANITIZER_FLAGS))
+    return binary
+
+
+def run_sanitized(binary: Path, records: list[list[int]], width: int, work: Path) -> bytes:
+    """Run a sanitized harness on ``records``; any sanitizer report fails the test."""
+    work.mkdir(parents=True, exist_ok=True)
+    write_records(work / "in.bin", records, width)
+    env = dict(os.environ, UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1", ASAN_OPTIONS="detect_leaks=1")
+    result = subprocess.run(
+        [str(binary), str(work / "in.bin"), str(work / "out.bin")], capture_output=True, env=env, check=False
+    )
+    assert result.returncode == 0 and b"runtime error" not in result.stderr, result.stderr.decode()[-3000:]
+    return (work / "out.bin").read_bytes()

@@ -30,6 +30,7 @@ from codegen.hostbuild import (
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from tests import testmodels as tm
+from tests.golden_checks import assert_states_equal, replay
 from trainer import methods as registry
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
@@ -56,12 +57,6 @@ def export_checkpoint(checkpoint: dict[str, Any], directory: Path, name: str) ->
     tm.save_checkpoint(checkpoint, path)
     model, _ = export(path, directory / "out", name=name)
     return model
-
-
-def assert_states_equal(c_state: dict[str, Any], golden_state: dict[str, Any]) -> None:
-    assert c_state.keys() == golden_state.keys()
-    for key in c_state:
-        np.testing.assert_array_equal(np.asarray(c_state[key]), np.asarray(golden_state[key]), err_msg=key)
 
 
 def compare_stream(
@@ -313,15 +308,7 @@ def test_under_address_and_undefined_behaviour_sanitizers(
     c_out = np.frombuffer((tmp_path / "outputs.bin").read_bytes(), dtype="<i4")
 
     golden = golden_for(model.quantised)
-    cuts = [0, 7_001, 15_555, 25_000, accel.size]
-    expected = []
-    for k, (a, b) in enumerate(itertools.pairwise(cuts)):
-        if k == 3:
-            golden.init()
-        elif k:
-            golden.reset()
-        expected.append(golden.run(accel[a:b], temp[a:b]))
-    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    np.testing.assert_array_equal(c_out, replay(golden, accel, temp, commands))
     host = load_module(tmp_path / "out", "san", flags=("-O0",))
     assert_states_equal(host.state_from_bytes(state_bytes), golden.state())
 

@@ -8,7 +8,6 @@ the strict flags, and its Q-format block is the one codegen/qformats.py writes."
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 import sys
@@ -22,9 +21,15 @@ from hypothesis import strategies as st
 
 from codegen import qformats
 from codegen.activations import ACT_KNOT
-from codegen.hostbuild import SANITIZER_FLAGS, STRICT_FLAGS, compile_c
+from codegen.hostbuild import STRICT_FLAGS
 from codegen.qformats import ACT_KNOTS, ACT_POS_BITS, ACT_SEGMENTS, ACT_STEP_BITS, C_FRAC
-from tests.kernel_checks import assert_header_warning_free, cortex_m_driver
+from tests.kernel_checks import (
+    assert_header_warning_free,
+    build_sanitized,
+    cortex_m_driver,
+    run_sanitized,
+    write_records,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "firmware_c" / "harness" / "kernel_app.c"
@@ -178,13 +183,6 @@ def random_records(seed: int, n: int = 400) -> list[list[int]]:
     return out
 
 
-def write_inputs(path: Path, records: list[list[int]]) -> None:
-    rows = np.zeros((len(records), N_IN), dtype="<i8")
-    for row, record in zip(rows, records, strict=True):
-        row[: len(record)] = record
-    path.write_bytes(rows.tobytes())
-
-
 def check_outputs(records: list[list[int]], raw: bytes) -> None:
     got = np.frombuffer(raw, dtype="<i8").reshape(-1, N_OUT)
     assert got.shape[0] == len(records)
@@ -201,20 +199,11 @@ def check_outputs(records: list[list[int]], raw: bytes) -> None:
 def sanitized_app(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed (scripts/install_c_tools.sh)")
-    binary = tmp_path_factory.mktemp("kernels") / "kernel_app"
-    compile_c([HARNESS], binary, include_dirs=[KERNELS], cc="gcc", flags=("-O1", *SANITIZER_FLAGS))
-    return binary
+    return build_sanitized(HARNESS, tmp_path_factory.mktemp("kernels") / "kernel_app")
 
 
 def run_host(binary: Path, records: list[list[int]], work: Path) -> bytes:
-    work.mkdir(parents=True, exist_ok=True)
-    write_inputs(work / "in.bin", records)
-    env = dict(os.environ, UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1", ASAN_OPTIONS="detect_leaks=1")
-    result = subprocess.run(
-        [str(binary), str(work / "in.bin"), str(work / "out.bin")], capture_output=True, env=env, check=False
-    )
-    assert result.returncode == 0 and b"runtime error" not in result.stderr, result.stderr.decode()[-3000:]
-    return (work / "out.bin").read_bytes()
+    return run_sanitized(binary, records, N_IN, work)
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -280,7 +269,7 @@ def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
         check=True,
     )
     records = table_records() + random_records(20240611, n=150)
-    write_inputs(tmp_path / "in.bin", records)
+    write_records(tmp_path / "in.bin", records, N_IN)
     stdout = cm.run_qemu(out / "kernel_app.elf", ["in.bin", "out.bin"], cwd=tmp_path)
     assert f"dsp {0 if flags else 1}" in stdout
     check_outputs(records, (tmp_path / "out.bin").read_bytes())

@@ -11,7 +11,6 @@ be installed (scripts/install_arm_tools.sh).
 
 from __future__ import annotations
 
-import itertools
 import re
 import subprocess
 from collections.abc import Callable
@@ -26,6 +25,7 @@ from codegen.golden_select import golden_for
 from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
 from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
+from tests.golden_checks import replay
 from tests.kernel_checks import cortex_m_driver
 from trainer.cli import main as trainer_main
 from trainer.data.recording_io import read_recording
@@ -110,14 +110,7 @@ def golden_replay(
     for instance in (0, 1):
         golden = golden_for(model)
         index = np.flatnonzero(((commands & cm.CMD_INSTANCE_B) != 0) == bool(instance))
-        ops = commands[index] & 3
-        cuts = sorted({0, *np.flatnonzero(ops != 0).tolist(), index.size})
-        for a, b in itertools.pairwise(cuts):
-            if ops[a] == CMD_RESET:
-                golden.reset()
-            elif ops[a] == CMD_INIT:
-                golden.init()
-            out[index[a:b]] = golden.run(accel[index[a:b]], temp[index[a:b]])
+        out[index] = replay(golden, accel[index], temp[index], commands[index] & 3)
         states.append(golden.state())
     return out, states
 
