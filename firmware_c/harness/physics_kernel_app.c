@@ -13,9 +13,6 @@
 
 #include "tdc_physics_kernels.h"
 
-#if defined(TDC_SEMIHOSTING)
-#include "semihost.h"
-#endif
 
 #define KERNEL_IN 7
 #define KERNEL_OUT 3
@@ -59,46 +56,6 @@ static void run(const int64_t *in, int64_t *out)
     }
 }
 
-static int run_files(int argc, char **argv)
-{
-    static int64_t in[KERNEL_IN];
-    static int64_t out[KERNEL_OUT];
-    FILE *fin;
-    FILE *fout;
-    unsigned long n = 0u;
-    if (argc < 3) {
-        printf("usage: physics_kernel_app INPUTS OUTPUTS\n");
-        return 2;
-    }
-    fin = fopen(argv[1], "rb");
-    fout = fopen(argv[2], "wb");
-    if (fin == NULL || fout == NULL) {
-        printf("error: cannot open the files\n");
-        return 3;
-    }
-    while (fread(in, sizeof in[0], KERNEL_IN, fin) == KERNEL_IN) {
-        run(in, out);
-        if (fwrite(out, sizeof out[0], KERNEL_OUT, fout) != KERNEL_OUT) {
-            return 4;
-        }
-        ++n;
-    }
-    fclose(fin);
-    printf("records %lu dsp %d\n", n, TDCP_DSP);
-    return fclose(fout) == 0 ? 0 : 5;
-}
-
-#if defined(TDC_SEMIHOSTING)
-int main(void)
-{
-    static char cmdline[512];
-    char *argv[4];
-    int argc = semihost_args(cmdline, sizeof cmdline, argv, 3);
-    return run_files(argc, argv);
-}
-#else
-int main(int argc, char **argv)
-{
-    return run_files(argc, argv);
-}
-#endif
+#define HARNESS_NAME "physics_kernel_app"
+#define HARNESS_DSP TDCP_DSP
+#include "record_main.h"
