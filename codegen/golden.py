@@ -42,6 +42,7 @@ from codegen.quantize import (
     FLAG_TEMP_OUT_OF_RANGE,
     HI_BITS,
     X_SLOTS,
+    QInput,
     QLowpass,
     QPhysics,
     QPla,
@@ -252,10 +253,24 @@ class GoldenStream(_Golden):
             return rdiv_round(window_sums * (1 << m.mean_frac), count) * (1 << (EST_FRAC - m.mean_frac))
         return np.array([self._network(row) for row in self._inputs(window_sums, count)], dtype=np.int64)
 
+    def _means(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
+        """The window means, Q(mean_frac) of the input unit, at each step of the chunk."""
+        return rdiv_round(window_sums * (1 << self.model.mean_frac), count)
+
+    def _normalise(self, values: np.ndarray, q: QInput) -> np.ndarray:
+        """Input q's int16 values from its feature (mean LSB): clamped to +-X_MAX, flagged."""
+        x = rshift_round(
+            np.clip(rshift_round(values - q.mu_q, q.pre_shift), -q.d_max, q.d_max) * q.inv_q, q.shift
+        )
+        clamped = np.clip(x, -X_MAX, X_MAX)
+        if np.any(clamped != x):
+            self.flags |= FLAG_SATURATED
+        return clamped
+
     def _inputs(self, window_sums: np.ndarray, count: np.ndarray) -> np.ndarray:
         """The network's int16 inputs at each step of the chunk (one row per step)."""
         m = self.model
-        means = rdiv_round(window_sums * (1 << m.mean_frac), count)
+        means = self._means(window_sums, count)
         if m.kind == "temperature":
             previous = np.concatenate(([self.prev_mean], means[:-1]))
             delta = means - previous
@@ -266,30 +281,17 @@ class GoldenStream(_Golden):
                 self.prev_mean = int(means[-1])
         else:
             features = [means]
-        x = np.stack(
-            [
-                rshift_round(
-                    np.clip(rshift_round(v - q.mu_q, q.pre_shift), -q.d_max, q.d_max) * q.inv_q, q.shift
-                )
-                for v, q in zip(features, m.inputs, strict=True)
-            ],
-            axis=1,
-        )
-        clamped = np.clip(x, -X_MAX, X_MAX)
-        if np.any(clamped != x):
-            self.flags |= FLAG_SATURATED
-        return clamped
+        return np.stack([self._normalise(v, q) for v, q in zip(features, m.inputs, strict=True)], axis=1)
 
-    def _cells(self, index: int, acc: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """New cell states and h of layer ``index``'s units from their gate accumulators ``acc``
-        (rows i, f, g, o; one column per unit) and cell states ``c``."""
+    def _gates(self, index: int, acc: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Activations i, f, o (sigmoid, Q16) and g (tanh, Q15) of layer ``index``'s units from their
+        gate accumulators ``acc`` (rows i, f, g, o; one column per unit)."""
         s = self.model.layers[index].shift
-        i, f, g, o = (
-            sigmoid_q16(acc[0], s),
-            sigmoid_q16(acc[1], s),
-            tanh_q15(acc[2], s),
-            sigmoid_q16(acc[3], s),
-        )
+        return sigmoid_q16(acc[0], s), sigmoid_q16(acc[1], s), tanh_q15(acc[2], s), sigmoid_q16(acc[3], s)
+
+    def _cell(self, gates: tuple[np.ndarray, ...], c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """New cell states and h from the activations (i, f, g, o) and the cell states ``c``."""
+        i, f, g, o = gates
         # c' = f c + i g: Q16 x Q24 and Q16 x Q15 lifted to Q40, rounded half up to Q24
         wide = f * c + (i * g) * (1 << (C_FRAC + GATE_FRAC - GATE_FRAC - TANH_FRAC))
         rounded = _half_up_shift(wide, GATE_FRAC)
@@ -297,6 +299,10 @@ class GoldenStream(_Golden):
         if np.any(c_new != rounded):
             self.flags |= FLAG_SATURATED
         return c_new, _half_up_shift(o * tanh_q15(c_new, C_FRAC - ACT_STEP_BITS), GATE_FRAC)
+
+    def _cells(self, index: int, acc: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """New cell states and h of layer ``index``'s units from their gate accumulators."""
+        return self._cell(self._gates(index, acc), c)
 
     def _network(self, x: np.ndarray) -> int:
         m = self.model

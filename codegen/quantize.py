@@ -91,6 +91,7 @@ from trainer.errors import UserError
 from trainer.greybox.terms import CREEP, LAG, RATE
 
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
+MAX_WINDOW_SAMPLES = 0xFFFF  # tdck_rdiv_round64 divides by fewer than 2**16 samples (32-bit divisions)
 MAX_MEAN_FRAC = 24  # window means: Q24 of the input unit when the window allows (the rate input needs it)
 ACCEL_FRAC = 4  # the step API's acceleration unit is 2**-4 ug
 ACCEL_PER_MG = 1000 << ACCEL_FRAC
@@ -103,6 +104,10 @@ MAX_ACCEL_LIMIT_G = 128.0  # 128 g * 16e6 LSB/g < 2**31
 # tasks spread over the samples of the decimation period ("spread": no sample costs much more than
 # the average; the estimate then takes effect D - 1 samples later; docs/codegen.md "Schedules").
 SCHEDULES = ("step", "spread")
+# The spread schedule's tasks per LSTM unit: the first pairs of its dot product, the other pairs, its
+# gates' activations, its cell (each small enough that one per sample keeps the worst sample under
+# twice the average).
+UNIT_TASKS = ("dot", "dot_rest", "gates", "cell")
 TEMP_LIMITS_MDEGC = (-100_000, 200_000)  # the front end clamps temperatures to -100 .. 200 degC
 FLAG_TEMP_OUT_OF_RANGE = 1
 FLAG_INPUT_CLAMPED = 2
@@ -193,6 +198,11 @@ class QLayer:
         return self.w_padded.shape[1] // 2
 
     @property
+    def first_pairs(self) -> int:
+        """Spread schedule: the pairs of the dot product's first task (the rest, at least one, follow)."""
+        return (self.pairs + 1) // 2
+
+    @property
     def shift(self) -> int:
         """The gate rows' activation shift: tanh reads acc / 2**(shift + 4), sigmoid one bit more."""
         return self.acc_frac - ACT_STEP_BITS
@@ -280,8 +290,9 @@ class QStream:
 
     @property
     def tasks(self) -> int:
-        """Spread schedule: the network step's tasks, a dot product and a cell per unit, then the head."""
-        return 2 * len(self.layers) * self.hidden_size + 1
+        """Spread schedule: the network step's tasks: one per input (its normalisation), UNIT_TASKS
+        per unit, then the head."""
+        return len(self.inputs) + len(UNIT_TASKS) * len(self.layers) * self.hidden_size + 1
 
     @property
     def latency_samples(self) -> int:
@@ -558,6 +569,12 @@ def _mean_frac(window: int, v_max: int) -> int:
 
 def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     fe = spec.frontend
+    for name in ("accel_window", "temp_window"):
+        if getattr(fe, name) > MAX_WINDOW_SAMPLES:
+            raise UserError(
+                f"frontend.{name}: {getattr(fe, name)} samples; the C module averages at most "
+                f"{MAX_WINDOW_SAMPLES} (shorten the window or export at a lower --rate)"
+            )
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)

@@ -31,6 +31,7 @@ from codegen.quantize import (
     FLAG_SATURATED,
     FLAG_TEMP_OUT_OF_RANGE,
     HI_BITS,
+    UNIT_TASKS,
     QGain,
     QLowpass,
     QPhysics,
@@ -188,6 +189,7 @@ def state_fields(model: QuantModel) -> list[Field]:
     spread = L and model.schedule == "spread"
     if spread:
         fields += [
+            Field("int64_t", "mean", (), f"spread schedule: the step's window mean, Q{model.mean_frac}"),
             Field("uint32_t", "task", (), "spread schedule: the step's next task"),
             Field("uint32_t", "credit", (), "spread schedule: phase x tasks mod decimation"),
             Field("uint32_t", "acc", (4,), "spread schedule: a unit's gate accumulators, excess 2^31"),
@@ -316,6 +318,8 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
                     "rows": lay.wx.q.shape[0],
                     "n_in": lay.wx.q.shape[1],
                     "pairs": lay.pairs,
+                    "first_pairs": lay.first_pairs,
+                    "rest_pairs": lay.pairs - lay.first_pairs,
                     "offset": lay.offset,
                     "h_start": model.vector_slots - (len(model.layers) - k) * model.hidden_slots,
                     "wx_frac": lay.wx.frac,
@@ -344,6 +348,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             act_knots=ACT_KNOT.size,
             schedule=model.schedule,
             tasks=model.tasks,
+            unit_tasks=len(UNIT_TASKS),
             hidden_slots=model.hidden_slots,
         )
         if model.head is not None:

@@ -252,6 +252,22 @@ def test_invalid_names_are_rejected(models: dict[str, Path], tmp_path: Path, nam
     assert not (tmp_path / "out").exists()
 
 
+def test_a_window_of_2_16_samples_or_more_is_refused(
+    recording: tuple[Recording, Path], tmp_path: Path
+) -> None:
+    """The C divides a window's sum by its count with 32-bit divisions (fewer than 2**16 samples)."""
+    rec = recording[0]
+    fe = tm.frontend_fields(rec.sample_rate_hz, temp_s=65536 / rec.sample_rate_hz)
+    path = tmp_path / "long.pt"
+    tm.save_checkpoint(tm.dlstm_checkpoint("dlstm-temp", rec, seed=3, frontend=fe), path)
+    result = _cli("export", str(path), "-o", str(tmp_path / "out"))
+    _assert_clean_failure(result, "frontend.temp_window: 65536 samples", "at most 65535")
+    assert not (tmp_path / "out").exists()
+    fe = tm.frontend_fields(rec.sample_rate_hz, temp_s=65535 / rec.sample_rate_hz)
+    tm.save_checkpoint(tm.dlstm_checkpoint("dlstm-temp", rec, seed=3, frontend=fe), path)
+    assert _cli("export", str(path), "-o", str(tmp_path / "out")).returncode == 0
+
+
 def _damaged(kind: str, models: dict[str, Path], tmp_path: Path) -> Path:
     path = tmp_path / "model.pt"
     data = models["dlstm-issa"].read_bytes()

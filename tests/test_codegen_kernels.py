@@ -40,6 +40,7 @@ K_TABLE, K_ACT, K_RS64, K_RS32, K_RR64, K_RDIV, K_DOT4, K_CELL, K_INPUT, K_HOLD,
 )
 K_WINDOW = 13
 K_DOT_WIDE = 14
+K_GATES = 15
 I32 = (-(2**31), 2**31 - 1)
 
 
@@ -89,7 +90,16 @@ def expected(record: list[int], window: dict[str, object]) -> list[int]:
                 lo, hi = _unpack(words[3 - r] if p % 2 else words[r])
                 acc += lo * v1 + hi * v0 if p % 2 else lo * v0 + hi * v1
             out.append(acc)
-        return [*out, 4 + 4 * pairs]
+        return [*out, 4 + 4 * pairs]  # a split product (a[9] > 0) must give the same, else -1
+    if kid == K_GATES:  # sigmoid of i, f, o at shift + 1; g's table value (tanh + 1) at shift
+        sums, shift = a[0:4], a[4]
+        return [
+            _act(sums[0], shift + 1),
+            _act(sums[1], shift + 1),
+            _act(sums[2], shift),
+            _act(sums[3], shift + 1),
+            0,
+        ]
     if kid == K_CELL:
         gi, gf, gg, go, c = a[0:5]
         rounded = _half_up(gf * c + gi * gg * 2 ** (C_FRAC - 15), 16)
@@ -154,13 +164,19 @@ def random_records(seed: int, n: int = 400) -> list[list[int]]:
         s32 = ints(1, 31)
         out.append([K_RS32, ints(I32[0], I32[1] - 2 ** (s32 - 1)) >> ints(0, 30), s32])
         out.append([K_RR64, ints(-(2**62), 2**62) >> ints(0, 60), ints(0, 62)])
-        out.append([K_RDIV, ints(-(2**62), 2**62) >> ints(0, 60), ints(1, 2**32 - 1)])
+        den = [1, 2, 0xFFFF][k] if k < 3 else ints(1, 0xFFFF)  # a window's count: below 2**16
+        out.append([K_RDIV, ints(-(2**62), 2**62) >> ints(0, 60), den])
         pairs = ints(1, 9)  # every entry of the DSP path's unrolled loop
         v_max = 32767 // pairs
         v0, v1 = ints(-v_max, v_max), ints(-v_max, v_max)
         words = [ints(-32767, 32767) * 65536 + ints(0, 65535) for _ in range(4)]
         room = 2**31 - 1 - pairs * 2 * 32768 * v_max  # |bias| + sum |w v| < 2**31
-        out.append([K_DOT4, *words, v0, v1, ints(-room, room), ints(-room, room), pairs])
+        split = ints(1, pairs - 1) if pairs > 1 else 0  # the spread schedule's two tasks
+        out.append([K_DOT4, *words, v0, v1, ints(-room, room), ints(-room, room), pairs, split])
+        gate_shift = ints(ACT_POS_BITS, 29)
+        with_sig = int(gate_shift >= 22 and k % 2 == 0)  # the caller's table base, where it applies
+        sums = [edge32[(k + r) % 6] if k < 12 else ints(*I32) >> ints(0, 30) for r in range(4)]
+        out.append([K_GATES, *sums, gate_shift, with_sig])
         cell = edge32[k % 6] if k < 12 else ints(*I32) >> ints(0, 16)
         out.append([K_CELL, ints(1, 65535), ints(1, 65535), ints(-32767, 32767), ints(1, 65535), cell])
         pre, shift_in = ints(0, 20), ints(0, 30)

@@ -101,7 +101,7 @@ def test_cli_export_manifest_and_verify(tmp_path: Path) -> None:
     manifest = json.loads((out / "tdc_dlstm.manifest.json").read_text())
     assert manifest["schedule"] == {
         "name": "spread",
-        "tasks_per_step": 2 * 2 * 10 + 1,
+        "tasks_per_step": 1 + 4 * 2 * 10 + 1,  # the input, 4 per unit of the 2x10 network, the head
         "latency_samples": 9,
         "latency_s": 9 / 200,
     }

@@ -32,7 +32,8 @@
 #define TDCK_DSP 0
 #endif
 
-#define TDCK_VERSION 2 /* 2: knot table, excess-2^31 accumulators, biases in the weight stream */
+#define TDCK_VERSION 3 /* 2: knot table, excess-2^31 accumulators, biases in the weight stream;
+                          3: tdck_dot4_add, tdck_lstm_gates (the spread schedule's tasks) */
 
 /* The layer kernel is inlined into each call so that its shifts become immediates (gcc would
  * otherwise share one copy with variable shifts: 25 % slower on a Cortex-M4); a generated module
@@ -115,11 +116,22 @@ static inline int64_t tdck_rshift_round64(int64_t x, unsigned s)
     return (x < 0) ? -(int64_t)mag : (int64_t)mag;
 }
 
-/* num / den (den > 0) rounded half away from zero. */
+/* num / den rounded half away from zero, 0 < den < 2^16 (a window's sample count; the quantiser
+ * refuses longer windows). The magnitude is divided as one 32-bit digit and two 16-bit digits, each
+ * remainder below den, so every division is 32-bit (one UDIV on a Cortex-M4): exact, and no 64-bit
+ * division routine (__aeabi_uldivmod, a few hundred instructions) in the module. */
 static inline int64_t tdck_rdiv_round64(int64_t num, uint32_t den)
 {
-    uint64_t mag = (num < 0) ? (0u - (uint64_t)num) : (uint64_t)num;
-    mag = (mag + (uint64_t)(den / 2u)) / (uint64_t)den;
+    uint64_t mag = ((num < 0) ? (0u - (uint64_t)num) : (uint64_t)num) + (uint64_t)(den / 2u);
+    uint32_t hi = (uint32_t)(mag >> 32);
+    uint32_t lo = (uint32_t)mag;
+    uint32_t q2 = hi / den;
+    uint32_t cur = ((hi - q2 * den) << 16) | (lo >> 16); /* remainder < den < 2^16 */
+    uint32_t q1 = cur / den;                              /* < 2^16 */
+    uint32_t q0;
+    cur = ((cur - q1 * den) << 16) | (lo & 0xFFFFu);
+    q0 = cur / den;
+    mag = ((uint64_t)q2 << 32) | ((uint64_t)q1 << 16) | (uint64_t)q0;
     return (num < 0) ? -(int64_t)mag : (int64_t)mag;
 }
 
@@ -276,6 +288,15 @@ static inline uint32_t tdck_mac2(uint32_t u, int32_t word, int32_t x0, int32_t x
 #endif
 
 #if TDCK_DSP
+/* The int32 whose bits are u (SMLAD's operand; a cast would be implementation-defined above
+ * INT32_MAX): one register move. */
+static inline int32_t tdck_bits_i32(uint32_t u)
+{
+    int32_t i;
+    __builtin_memcpy(&i, &u, sizeof i);
+    return i;
+}
+
 /* acc[r] += w[r] . x for one pair (DSP path: four SMLADs on the words as they are) */
 #define TDCK_SMLAD4(w, x, a0, a1, a2, a3)                                                                 \
     do {                                                                                                  \
@@ -288,15 +309,11 @@ static inline uint32_t tdck_mac2(uint32_t u, int32_t word, int32_t x0, int32_t x
     } while (0)
 #endif
 
-/* Four gate rows against one int16 vector, in excess-2^31 form. *wp points at a unit's block:
- * bias_x[0..3], then 4 packed words per input pair, w[4p + r]; on return it points past the block.
- * acc[r] = bias[r] + 2^31 + sum_p lo(w[4p + r]) v[2p] + hi(w[4p + r]) v[2p + 1] (mod 2^32), where
- * bias_x[r] is the bias with its sign bit flipped (bias + 2^31 mod 2^32 read as int32, as the
- * generator writes it). Biases and the rows' packed weight pairs are interleaved in one stream, so
- * the DSP path loads the biases and then the four words of each pair with one LDM each, runs
- * unrolled by 8 pairs, and SMLAD takes each word as it is. Preconditions: pairs >= 1; |bias| + sum |w| |v| < 2^31 (proved by the quantiser for
- * every row), so the true sum stays in int32 and both paths give the same numbers. */
-TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
+/* tdck_dot4 continued: the four sums in acc (excess-2^31 words, as tdck_dot4 leaves them) go on
+ * over `pairs` more pairs, *wp at their words (no biases); on return *wp points past them. A dot
+ * product split in two (the spread schedule's tasks) gives the sums of the whole one. Preconditions:
+ * pairs >= 1; those of tdck_dot4 for the whole product. */
+TDCK_INLINE void tdck_dot4_add(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
 {
     const int32_t *w = *wp;
 #if TDCK_DSP
@@ -307,11 +324,10 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
     int32_t a3;
     uint32_t blocks = (pairs + 7u) / 8u;
     int32_t x;
-    a0 = w[0]; /* plain loads (LDRD): LDM's fixed registers would cost four moves */
-    a1 = w[1];
-    a2 = w[2];
-    a3 = w[3];
-    w += 4;
+    a0 = tdck_bits_i32(acc[0]); /* the sums so far (SMLAD adds modulo 2^32) */
+    a1 = tdck_bits_i32(acc[1]);
+    a2 = tdck_bits_i32(acc[2]);
+    a3 = tdck_bits_i32(acc[3]);
 #define TDCK_PAIR_                                                                                         \
     __builtin_memcpy(&x, v, sizeof x);                                                                    \
     v += 2;                                                                                               \
@@ -349,12 +365,11 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
     acc[2] = (uint32_t)a2;
     acc[3] = (uint32_t)a3;
 #else
-    uint32_t a0 = (uint32_t)w[0];
-    uint32_t a1 = (uint32_t)w[1];
-    uint32_t a2 = (uint32_t)w[2];
-    uint32_t a3 = (uint32_t)w[3];
+    uint32_t a0 = acc[0];
+    uint32_t a1 = acc[1];
+    uint32_t a2 = acc[2];
+    uint32_t a3 = acc[3];
     uint32_t p;
-    w += 4;
     for (p = 0u; p < pairs; ++p) {
         int32_t x0 = v[2u * p];
         int32_t x1 = v[2u * p + 1u];
@@ -372,6 +387,25 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
     *wp = w;
 }
 
+/* Four gate rows against one int16 vector, in excess-2^31 form. *wp points at a unit's block:
+ * bias_x[0..3], then 4 packed words per input pair, w[4p + r]; on return it points past the block.
+ * acc[r] = bias[r] + 2^31 + sum_p lo(w[4p + r]) v[2p] + hi(w[4p + r]) v[2p + 1] (mod 2^32), where
+ * bias_x[r] is the bias with its sign bit flipped (bias + 2^31 mod 2^32 read as int32, as the
+ * generator writes it). Biases and the rows' packed weight pairs are interleaved in one stream, so
+ * the DSP path loads the biases and then the four words of each pair with one LDM each, runs
+ * unrolled by 8 pairs, and SMLAD takes each word as it is. Preconditions: pairs >= 1; |bias| + sum |w| |v| < 2^31 (proved by the quantiser for
+ * every row), so the true sum stays in int32 and both paths give the same numbers. */
+TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
+{
+    const int32_t *w = *wp;
+    acc[0] = (uint32_t)w[0]; /* the biases in excess-2^31 form (modular conversion) */
+    acc[1] = (uint32_t)w[1];
+    acc[2] = (uint32_t)w[2];
+    acc[3] = (uint32_t)w[3];
+    *wp = w + 4;
+    tdck_dot4_add(wp, v, pairs, acc);
+}
+
 /* tdck_dot4 with a pair count PAIRS that is an integer constant expression (a literal: the layer
  * functions dispatch on their layers' counts). With gcc on a DSP core the whole product is one
  * assembly block unrolled PAIRS times with no loop test: one LDM of the four biases into the
@@ -383,56 +417,80 @@ TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs,
  * is tdck_dot4. The same numbers either way (the sums stay in int32). */
 #if TDCK_DSP && defined(__GNUC__) && !defined(__clang__) && defined(__OPTIMIZE__)
 /* (optimised builds only: the block takes 12 registers, 8 of them fixed, which gcc -O0 cannot find) */
-#define TDCK_DOT4_N(wpp, vec, PAIRS, accs)                                                                    \
+/* The pairs of the product: per two pairs one LDRD and two LDMs, then one odd pair. */
+#define TDCK_DOT4_PAIRS_ASM_                                                                              \
+    ".rept %c[n]\n\t"                                                                                     \
+    "ldrd %[x0], %[x1], [%[v]], #8\n\t"                                                                   \
+    "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                                       \
+    "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                                \
+    "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                                \
+    "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                                \
+    "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                                \
+    "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                                       \
+    "smlad %[a0], %[q0], %[x1], %[a0]\n\t"                                                                \
+    "smlad %[a1], %[q1], %[x1], %[a1]\n\t"                                                                \
+    "smlad %[a2], %[q2], %[x1], %[a2]\n\t"                                                                \
+    "smlad %[a3], %[q3], %[x1], %[a3]\n\t"                                                                \
+    ".endr\n\t"                                                                                           \
+    ".if %c[odd]\n\t"                                                                                     \
+    "ldr %[x0], [%[v]], #4\n\t"                                                                           \
+    "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                                       \
+    "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                                \
+    "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                                \
+    "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                                \
+    "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                                \
+    ".endif"
+/* The registers both blocks use, declared once. */
+#define TDCK_DOT4_REGS_(wpp, vec)                                                                         \
+    const int32_t *tdck_w_ = *(wpp);                                                                      \
+    const int16_t *tdck_v_ = (vec);                                                                       \
+    register int32_t tdck_a0_ __asm__("r0");                                                             \
+    register int32_t tdck_a1_ __asm__("r1");                                                             \
+    register int32_t tdck_a2_ __asm__("r2");                                                             \
+    register int32_t tdck_a3_ __asm__("r3");                                                             \
+    int32_t tdck_x0_;                                                                                     \
+    int32_t tdck_x1_;                                                                                     \
+    register int32_t tdck_q0_ __asm__("r4");                                                             \
+    register int32_t tdck_q1_ __asm__("r5");                                                             \
+    register int32_t tdck_q2_ __asm__("r6");                                                             \
+    register int32_t tdck_q3_ __asm__("r8") /* not r7: the Thumb frame pointer at -O0 */
+#define TDCK_DOT4_OPERANDS_(A)                                                                            \
+    : [a0] A(tdck_a0_), [a1] A(tdck_a1_), [a2] A(tdck_a2_), [a3] A(tdck_a3_), [w] "+r"(tdck_w_),           \
+      [v] "+r"(tdck_v_), [x0] "=&r"(tdck_x0_), [x1] "=&r"(tdck_x1_), [q0] "=&r"(tdck_q0_),                 \
+      [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)
+#define TDCK_DOT4_STORE_(wpp, accs)                                                                       \
+    (void)tdck_v_;                                                                                        \
+    (accs)[0] = (uint32_t)tdck_a0_;                                                                       \
+    (accs)[1] = (uint32_t)tdck_a1_;                                                                       \
+    (accs)[2] = (uint32_t)tdck_a2_;                                                                       \
+    (accs)[3] = (uint32_t)tdck_a3_;                                                                       \
+    *(wpp) = tdck_w_
+#define TDCK_DOT4_N(wpp, vec, PAIRS, accs)                                                                \
     do {                                                                                                  \
-        const int32_t *tdck_w_ = *(wpp);                                                                   \
-        const int16_t *tdck_v_ = (vec);                                                                     \
-        register int32_t tdck_a0_ __asm__("r0");                                                         \
-        register int32_t tdck_a1_ __asm__("r1");                                                         \
-        register int32_t tdck_a2_ __asm__("r2");                                                         \
-        register int32_t tdck_a3_ __asm__("r3");                                                         \
-        int32_t tdck_x0_;                                                                                 \
-        int32_t tdck_x1_;                                                                                 \
-        register int32_t tdck_q0_ __asm__("r4");                                                         \
-        register int32_t tdck_q1_ __asm__("r5");                                                         \
-        register int32_t tdck_q2_ __asm__("r6");                                                         \
-        register int32_t tdck_q3_ __asm__("r8"); /* not r7: the Thumb frame pointer at -O0 */            \
-        __asm__("ldmia %[w]!, {%[a0], %[a1], %[a2], %[a3]}\n\t"                                           \
-                ".rept %c[n]\n\t"                                                                         \
-                "ldrd %[x0], %[x1], [%[v]], #8\n\t"                                                       \
-                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
-                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
-                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
-                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
-                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
-                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
-                "smlad %[a0], %[q0], %[x1], %[a0]\n\t"                                                    \
-                "smlad %[a1], %[q1], %[x1], %[a1]\n\t"                                                    \
-                "smlad %[a2], %[q2], %[x1], %[a2]\n\t"                                                    \
-                "smlad %[a3], %[q3], %[x1], %[a3]\n\t"                                                    \
-                ".endr\n\t"                                                                               \
-                ".if %c[odd]\n\t"                                                                         \
-                "ldr %[x0], [%[v]], #4\n\t"                                                               \
-                "ldmia %[w]!, {%[q0], %[q1], %[q2], %[q3]}\n\t"                                           \
-                "smlad %[a0], %[q0], %[x0], %[a0]\n\t"                                                    \
-                "smlad %[a1], %[q1], %[x0], %[a1]\n\t"                                                    \
-                "smlad %[a2], %[q2], %[x0], %[a2]\n\t"                                                    \
-                "smlad %[a3], %[q3], %[x0], %[a3]\n\t"                                                    \
-                ".endif"                                                                                  \
-                : [a0] "=&r"(tdck_a0_), [a1] "=&r"(tdck_a1_), [a2] "=&r"(tdck_a2_), [a3] "=&r"(tdck_a3_),      \
-                  [w] "+r"(tdck_w_), [v] "+r"(tdck_v_), [x0] "=&r"(tdck_x0_), [x1] "=&r"(tdck_x1_),        \
-                  [q0] "=&r"(tdck_q0_), [q1] "=&r"(tdck_q1_), [q2] "=&r"(tdck_q2_), [q3] "=&r"(tdck_q3_)   \
-                : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                           \
+        TDCK_DOT4_REGS_(wpp, vec);                                                                        \
+        __asm__("ldmia %[w]!, {%[a0], %[a1], %[a2], %[a3]}\n\t" TDCK_DOT4_PAIRS_ASM_                      \
+                TDCK_DOT4_OPERANDS_("=&r")                                                                \
+                : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                          \
                 : "memory"); /* reads the weights and the vector */                                       \
-        (void)tdck_v_;                                                                                    \
-        (accs)[0] = (uint32_t)tdck_a0_;                                                                    \
-        (accs)[1] = (uint32_t)tdck_a1_;                                                                    \
-        (accs)[2] = (uint32_t)tdck_a2_;                                                                    \
-        (accs)[3] = (uint32_t)tdck_a3_;                                                                    \
-        *(wpp) = tdck_w_;                                                                                  \
+        TDCK_DOT4_STORE_(wpp, accs);                                                                      \
+    } while (0)
+/* tdck_dot4_add with a literal PAIRS: the same block, its sums loaded from accs first. */
+#define TDCK_DOT4_ADD_N(wpp, vec, PAIRS, accs)                                                            \
+    do {                                                                                                  \
+        TDCK_DOT4_REGS_(wpp, vec);                                                                        \
+        tdck_a0_ = tdck_bits_i32((accs)[0]);                                                          \
+        tdck_a1_ = tdck_bits_i32((accs)[1]);                                                          \
+        tdck_a2_ = tdck_bits_i32((accs)[2]);                                                          \
+        tdck_a3_ = tdck_bits_i32((accs)[3]);                                                          \
+        __asm__(TDCK_DOT4_PAIRS_ASM_                                                                      \
+                TDCK_DOT4_OPERANDS_("+r")                                                                 \
+                : [n] "i"((PAIRS) / 2u), [odd] "i"((PAIRS) % 2u)                                          \
+                : "memory");                                                                              \
+        TDCK_DOT4_STORE_(wpp, accs);                                                                      \
     } while (0)
 #else
 #define TDCK_DOT4_N(wpp, vec, PAIRS, accs) tdck_dot4((wpp), (vec), (PAIRS), (accs))
+#define TDCK_DOT4_ADD_N(wpp, vec, PAIRS, accs) tdck_dot4_add((wpp), (vec), (PAIRS), (accs))
 #endif
 
 /* One cell from its gates (i, f, o sigmoid Q16; g tanh Q15): c' = f c + i g, rounded half up to
@@ -476,29 +534,44 @@ static inline int16_t tdck_lstm_cell(int32_t gi, int32_t gf, int32_t gg, int32_t
 #endif
 }
 
-/* A unit's cell from its four gate accumulators (excess-2^31 form, Q(shift + ACT_STEP_BITS)): the
- * activations, then tdck_lstm_cell; returns h. `sig` is table + 256 - 2^(30 - shift) when the
- * sigmoid gates' accumulators cannot leave the table (shift >= 22: the caller passes it, so that
- * the compiler keeps that base address in a register), else NULL. */
-TDCK_INLINE int16_t tdck_lstm_unit(const uint32_t *acc, unsigned shift, int32_t *c, const uint16_t *table,
-    const uint16_t *sig, uint32_t *flags, uint32_t sat_bit)
+/* A unit's four activations from its gate accumulators (excess-2^31 form, Q(shift + ACT_STEP_BITS)):
+ * gate[0], gate[1], gate[3] = sigmoid of i, f, o in Q16; gate[2] = tanh(g) + 1 in Q15 (the table's
+ * value; all four in 1 .. 65535, so unsigned words hold them). gate may be acc (each gate reads only
+ * its own accumulator). `sig` is table + 256 - 2^(30 - shift) when the sigmoid gates' accumulators
+ * cannot leave the table (shift >= 22: the caller passes it, so that the compiler keeps that base
+ * address in a register), else NULL. */
+TDCK_INLINE void tdck_lstm_gates(const uint32_t *acc, unsigned shift, const uint16_t *table, const uint16_t *sig,
+    uint32_t *gate)
 {
-    int32_t gi;
-    int32_t gf;
-    int32_t go;
     if (sig != NULL && shift + 1u >= 23u) {
         unsigned s = shift + 1u;
         uint32_t mask = (1u << TDCK_ACT_POS_BITS) - 1u;
-        gi = tdck_act_lerp(sig, (int32_t)(acc[0] >> s), (acc[0] >> (s - TDCK_ACT_POS_BITS)) & mask);
-        gf = tdck_act_lerp(sig, (int32_t)(acc[1] >> s), (acc[1] >> (s - TDCK_ACT_POS_BITS)) & mask);
-        go = tdck_act_lerp(sig, (int32_t)(acc[3] >> s), (acc[3] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        gate[0] = (uint32_t)tdck_act_lerp(sig, (int32_t)(acc[0] >> s), (acc[0] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        gate[1] = (uint32_t)tdck_act_lerp(sig, (int32_t)(acc[1] >> s), (acc[1] >> (s - TDCK_ACT_POS_BITS)) & mask);
+        gate[3] = (uint32_t)tdck_act_lerp(sig, (int32_t)(acc[3] >> s), (acc[3] >> (s - TDCK_ACT_POS_BITS)) & mask);
     } else {
-        gi = tdck_act_x(table, acc[0], shift + 1u);
-        gf = tdck_act_x(table, acc[1], shift + 1u);
-        go = tdck_act_x(table, acc[3], shift + 1u);
+        gate[0] = (uint32_t)tdck_act_x(table, acc[0], shift + 1u);
+        gate[1] = (uint32_t)tdck_act_x(table, acc[1], shift + 1u);
+        gate[3] = (uint32_t)tdck_act_x(table, acc[3], shift + 1u);
     }
-    return tdck_lstm_cell(gi, gf, tdck_act_x(table, acc[2], shift) - (1 << TDCK_ACT_VALUE_FRAC), go, c, table,
-        flags, sat_bit);
+    gate[2] = (uint32_t)tdck_act_x(table, acc[2], shift);
+}
+
+/* The cell from the four activations of tdck_lstm_gates: tdck_lstm_cell; returns h. */
+TDCK_INLINE int16_t tdck_lstm_cell_gates(const uint32_t *gate, int32_t *c, const uint16_t *table, uint32_t *flags,
+    uint32_t sat_bit)
+{
+    return tdck_lstm_cell((int32_t)gate[0], (int32_t)gate[1], (int32_t)gate[2] - (1 << TDCK_ACT_VALUE_FRAC),
+        (int32_t)gate[3], c, table, flags, sat_bit);
+}
+
+/* A unit's cell from its four gate accumulators: tdck_lstm_gates, then tdck_lstm_cell; returns h. */
+TDCK_INLINE int16_t tdck_lstm_unit(const uint32_t *acc, unsigned shift, int32_t *c, const uint16_t *table,
+    const uint16_t *sig, uint32_t *flags, uint32_t sat_bit)
+{
+    uint32_t gate[4];
+    tdck_lstm_gates(acc, shift, table, sig, gate);
+    return tdck_lstm_cell_gates(gate, c, table, flags, sat_bit);
 }
 
 /* One LSTM layer of `hidden` units: unit j's four gate rows (i, f, g, o) are tdck_dot4 of block j of

@@ -32,7 +32,8 @@ enum kernel {
     K_CLAMP = 11,
     K_SHAPE = 12,
     K_WINDOW = 13,
-    K_DOT_WIDE = 14
+    K_DOT_WIDE = 14,
+    K_GATES = 15
 };
 
 static uint16_t act_knot[TDCK_ACT_KNOTS];
@@ -59,6 +60,24 @@ static void dot4_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, u
     case 7u: TDCK_DOT4_N(wp, v, 7u, acc); break;
     case 8u: TDCK_DOT4_N(wp, v, 8u, acc); break;
     default: TDCK_DOT4_N(wp, v, 9u, acc); break;
+    }
+}
+
+/* TDCK_DOT4_ADD_N with the literal pair count `pairs` (1 .. 8): the spread schedule's second task. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void dot4_add_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
+{
+    switch (pairs) {
+    case 1u: TDCK_DOT4_ADD_N(wp, v, 1u, acc); break;
+    case 2u: TDCK_DOT4_ADD_N(wp, v, 2u, acc); break;
+    case 3u: TDCK_DOT4_ADD_N(wp, v, 3u, acc); break;
+    case 4u: TDCK_DOT4_ADD_N(wp, v, 4u, acc); break;
+    case 5u: TDCK_DOT4_ADD_N(wp, v, 5u, acc); break;
+    case 6u: TDCK_DOT4_ADD_N(wp, v, 6u, acc); break;
+    case 7u: TDCK_DOT4_ADD_N(wp, v, 7u, acc); break;
+    default: TDCK_DOT4_ADD_N(wp, v, 8u, acc); break;
     }
 }
 
@@ -125,6 +144,7 @@ static void run(const int64_t *in, int64_t *out)
         uint32_t acc[4];
         uint32_t acc_n[4];
         uint32_t pairs = (uint32_t)in[9];
+        uint32_t split = (uint32_t)in[10]; /* 0: whole only; else 1 .. pairs - 1 */
         uint32_t p;
         int k;
         int64_t bias[4];
@@ -152,6 +172,25 @@ static void run(const int64_t *in, int64_t *out)
         out[4] = wp - w; /* words consumed */
         if (wn != wp || acc_n[0] != acc[0] || acc_n[1] != acc[1] || acc_n[2] != acc[2] || acc_n[3] != acc[3]) {
             out[4] = -1; /* the two paths disagree: never the expected count */
+        }
+        if (split > 0u) {
+            /* the product split after `split` pairs (the spread schedule's two tasks), both ways */
+            const int32_t *ws = w;
+            const int32_t *wl = w;
+            uint32_t acc_s[4];
+            uint32_t acc_l[4];
+            tdck_dot4(&ws, v, split, acc_s);
+            tdck_dot4_add(&ws, v + 2u * split, pairs - split, acc_s);
+            dot4_literal(&wl, v, split, acc_l);
+            dot4_add_literal(&wl, v + 2u * split, pairs - split, acc_l);
+            for (k = 0; k < 4; ++k) {
+                if (acc_s[k] != acc[k] || acc_l[k] != acc[k]) {
+                    out[4] = -1;
+                }
+            }
+            if (ws != wp || wl != wp) {
+                out[4] = -1;
+            }
         }
         break;
     }
@@ -213,6 +252,26 @@ static void run(const int64_t *in, int64_t *out)
         }
         out[0] = tdck_dot_wide(w, h, n, in[7]);
         out[1] = dot_wide_literal(w, h, n, in[7]) != out[0]; /* 1: the two paths disagree */
+        break;
+    }
+    case K_GATES: {
+        /* in = the four sums (int32), shift, 1: with the sigmoid base `sig` (shift >= 22) */
+        unsigned shift = (unsigned)in[5];
+        const uint16_t *sig = in[6] != 0 ? &act_knot[256 - (1 << (30u - shift))] : NULL;
+        uint32_t acc[4];
+        uint32_t gate[4];
+        int k;
+        for (k = 0; k < 4; ++k) {
+            acc[k] = (uint32_t)in[1 + k] + 0x80000000u; /* excess-2^31 form */
+        }
+        tdck_lstm_gates(acc, shift, act_knot, sig, gate);
+        tdck_lstm_gates(acc, shift, act_knot, sig, acc); /* in place, as the spread schedule calls it */
+        for (k = 0; k < 4; ++k) {
+            out[k] = gate[k];
+            if (acc[k] != gate[k]) {
+                out[4] = -1;
+            }
+        }
         break;
     }
     default:
