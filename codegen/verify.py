@@ -11,6 +11,7 @@ model is compared with the float model's on both.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass
@@ -24,7 +25,7 @@ from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden import GoldenStream
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
-from codegen.quantize import ACCEL_PER_MG, QPhysics
+from codegen.quantize import ACCEL_PER_MG, QPhysics, QStream, QuantModel
 from codegen.rate import declared_rate_millihz, retime_compensator
 from codegen.rate import resample as resample_recording
 from trainer.data.recording import Recording
@@ -53,6 +54,21 @@ class ErrorBudget:
 
 
 @dataclass(frozen=True)
+class ScheduleCheck:
+    """A module whose network step is spread (``--schedule spread``) against the step schedule of
+    the same quantised model on the same integer inputs (both golden models; the C equals its own)."""
+
+    name: str
+    latency_samples: int
+    rate_hz: float
+    delayed_equal: bool  # its drift removed = the step schedule's delayed by the latency, every sample
+    output_mg: dict[str, np.ndarray]  # the fixed-point output (mg) by schedule: "step" and name
+    truth_drift_left_mg: (
+        dict[str, float] | None
+    )  # RMS drift left against true_drift_mg from sample latency on
+
+
+@dataclass(frozen=True)
 class VerifyResult:
     name: str
     method: str
@@ -65,6 +81,7 @@ class VerifyResult:
     table1_integer_inputs: Table1Check | None  # against the float model on the C's integer inputs
     rate_millihz: int = 0  # the module's NAME_SAMPLE_RATE_MILLIHZ (0: any rate)
     resampled_from_hz: float | None = None  # the recording's own rate when --resample interpolated it
+    schedule: ScheduleCheck | None = None  # a spread module: against the step schedule
 
 
 def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
@@ -297,9 +314,6 @@ def verify(
     state = host.new_state()
     c_out = host.run(state, accel, temp)
     golden = golden_for(q)
-    stream = golden if isinstance(golden, GoldenStream) else None
-    if stream is not None:
-        stream.fine_estimates = []
     g_out = golden.run(accel, temp)
     differ = np.flatnonzero(c_out.astype(np.int64) != g_out)
     c_state, g_state = host.read_state(state), golden.state()
@@ -307,6 +321,15 @@ def verify(
         np.array_equal(np.asarray(c_state[k]), np.asarray(g_state[k])) for k in c_state
     )
 
+    # The error budget and Table 1 measure the arithmetic, on the step schedule's output: a spread
+    # module's is the same delayed by its latency (checked below), which against the float model
+    # would count the delay as error.
+    step_q = dataclasses.replace(q, schedule="step") if isinstance(q, QStream) else q
+    step_golden = golden_for(step_q)
+    stream = step_golden if isinstance(step_golden, GoldenStream) else None
+    if stream is not None:
+        stream.fine_estimates = []
+    step_out = step_golden.run(accel, temp)
     float_model, _ = load_model(model_path)
     retime_compensator(float_model, declared_rate_millihz(q))
     float_out = float_model.compensate(rec.without_truth())
@@ -314,9 +337,9 @@ def verify(
     fine = None
     if stream is not None and stream.fine_estimates is not None:
         fine = held_fine_output(accel, stream.fine_estimates, stream.model.frontend.decimation)
-    budget = error_budget(g_out, float_out, float_on_ints, rec.accel_mg, rec.sample_rate_hz, fine)
+    budget = error_budget(step_out, float_out, float_on_ints, rec.accel_mg, rec.sample_rate_hz, fine)
     tables = (
-        compare_table1(rec, model.checkpoint.method, float_out, g_out / ACCEL_PER_MG, float_on_ints)
+        compare_table1(rec, model.checkpoint.method, float_out, step_out / ACCEL_PER_MG, float_on_ints)
         if table1
         else (None, None)
     )
@@ -332,6 +355,29 @@ def verify(
         tables[1],
         rate_millihz=declared_rate_millihz(q),
         resampled_from_hz=resampled_from,
+        schedule=schedule_check(q, rec, accel, g_out, step_out),
+    )
+
+
+def schedule_check(
+    q: QuantModel, rec: Recording, accel: np.ndarray, out: np.ndarray, step: np.ndarray
+) -> ScheduleCheck | None:
+    """For a spread module (output ``out``; ``step``: the step schedule's on the same inputs): whether
+    the drift removed is the step schedule's delayed by the latency on every sample (and none before),
+    and the drift left under each against the recording's true drift when it has one."""
+    if not isinstance(q, QStream) or q.schedule == "step":
+        return None
+    lat = q.latency_samples
+    removed, removed_step = accel.astype(np.int64) - out, accel.astype(np.int64) - step
+    delayed = bool(np.array_equal(removed[lat:], removed_step[: removed_step.size - lat]))
+    outputs = {"step": step / ACCEL_PER_MG, q.schedule: out / ACCEL_PER_MG}
+    truth = None
+    true_drift = rec.truth("drift_mg")
+    if true_drift is not None:  # from the first sample on which both hold an estimate
+        signal = rec.accel_mg - true_drift
+        truth = {k: float(np.sqrt(np.mean((v[lat:] - signal[lat:]) ** 2))) for k, v in outputs.items()}
+    return ScheduleCheck(
+        q.schedule, lat, q.frontend.rate_hz, delayed and not np.any(removed[:lat]), outputs, truth
     )
 
 
@@ -359,6 +405,19 @@ def report_lines(result: VerifyResult) -> list[str]:
         lines.append(
             f"  before the output's rounding to 1/16 ug (the model's own arithmetic): RMS "
             f"{b.network_rms_mg:.3g} mg, max {b.network_max_abs_mg:.3g} mg"
+        )
+    sc = result.schedule
+    if sc is not None:
+        lines.append(
+            f"schedule {sc.name}: the estimate takes effect {sc.latency_samples} samples "
+            f"({sc.latency_samples / sc.rate_hz:g} s) later; drift removed = the step schedule's delayed by "
+            f"{sc.latency_samples} samples on every sample: {'yes' if sc.delayed_equal else 'NO'}"
+            + (
+                f", drift left against the true drift from sample {sc.latency_samples} on: "
+                + ", ".join(f"{k} {v:.4g} mg RMS" for k, v in sc.truth_drift_left_mg.items())
+                if sc.truth_drift_left_mg is not None
+                else ""
+            )
         )
     for label, t in (
         ("float", result.table1),
@@ -398,6 +457,13 @@ def write_json(result: VerifyResult, out_dir: str | os.PathLike[str], path: str 
         "state_equal": result.state_equal,
         "rate_millihz": result.rate_millihz,
         "resampled_from_hz": result.resampled_from_hz,
+        "schedule": None
+        if result.schedule is None
+        else {
+            "name": result.schedule.name,
+            "latency_samples": result.schedule.latency_samples,
+            "delayed_equal": result.schedule.delayed_equal,
+        },
         "sizes": manifest.get("sizes"),
     }
     with atomic_output(path) as tmp:

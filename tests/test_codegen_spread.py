@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -112,6 +113,24 @@ def test_cli_export_manifest_and_verify(tmp_path: Path) -> None:
     checked = _codegen("verify", str(ref.REF_DIR / "dlstm.pt"), str(out), str(recording), "--no-table")
     assert checked.returncode == 0, checked.stdout + checked.stderr
     assert "mismatches: 0" in checked.stdout and "final state identical: yes" in checked.stdout
+    assert (
+        "schedule spread: the estimate takes effect 9 samples (0.045 s) later; drift removed = the step "
+        "schedule's delayed by 9 samples on every sample: yes" in checked.stdout
+    )
+    # the error budget is the arithmetic's (measured on the step schedule's output), not the delay's
+    rms, worst = (
+        float(v) for v in re.search(r"error budget .*?RMS (\S+) mg, max (\S+) mg", checked.stdout).groups()
+    )
+    assert rms <= 1e-3 and worst <= 5e-3
+    # the sign-off report states the schedule and the module's drift left under both schedules
+    assert trainer_main(["report", str(ref.REF_DIR / "dlstm.pt"), "--recording", str(recording), "--verify",
+                         str(out), "-o", str(tmp_path / "signoff")]) in (0, 1)  # fmt: skip
+    text = (tmp_path / "signoff" / "report.md").read_text()
+    line = next(row for row in text.splitlines() if row.startswith("- schedule `spread`"))
+    assert "9 samples later than with `step`" in line and "every sample: yes" in line
+    step_rms, spread_rms = (float(v) for v in re.findall(r"(?:step|spread) ([0-9.]+) mg RMS", line))
+    # the same samples, the estimate 9 of 4,000 samples later: the same drift left within 5 %
+    assert abs(spread_rms - step_rms) <= 0.05 * step_rms
 
 
 @pytest.mark.parametrize(

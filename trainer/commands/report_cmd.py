@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import shutil
@@ -87,15 +88,28 @@ def _field(data: Any, key: str, kind: type | tuple[type, ...], path: Path) -> An
     return value
 
 
-def _verify(model: Path, target: str, recording: str) -> tuple[Any, dict[str, Any] | None]:
-    """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON."""
+def _verify(
+    model: Path, target: str, recording: str, rec: Any, smoothing_s: float
+) -> tuple[Any, dict[str, Any] | None]:
+    """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON. A spread
+    module run now is also scored under both schedules on the recording (when it was not resampled)."""
     from codegen.verify import find_manifest, verify
-    from trainer.scoring.signoff import VerifySummary
+    from trainer.scoring.signoff import VerifySummary, branch_scores
 
     path = Path(target)
     if path.is_dir():
         result = verify(model, path, recording, table1=False, resample=True)
         _, manifest = find_manifest(path, result.name)
+        sc = result.schedule
+        scores: tuple[tuple[str, Any], ...] = ()
+        if sc is not None and result.resampled_from_hz is None:
+            # from the first sample on which both schedules hold an estimate (the spread one removes
+            # nothing before it): the same samples, so the two figures differ only by the schedule
+            both = rec.slice(sc.latency_samples, len(rec))
+            scores = tuple(
+                (k, branch_scores(both, v[sc.latency_samples :], smoothing_s)["all"])
+                for k, v in sc.output_mg.items()
+            )
         summary = VerifySummary(
             result.mismatches,
             result.samples,
@@ -104,6 +118,7 @@ def _verify(model: Path, target: str, recording: str) -> tuple[Any, dict[str, An
             str(path),
             result.rate_millihz,
             result.resampled_from_hz,
+            *(() if sc is None else (sc.name, sc.latency_samples, sc.delayed_equal, scores)),
         )
         return summary, manifest.get("sizes")
     data = _read_json(path, "verify result")
@@ -116,6 +131,16 @@ def _verify(model: Path, target: str, recording: str) -> tuple[Any, dict[str, An
         int(data.get("rate_millihz") or 0),
         data.get("resampled_from_hz") if isinstance(data.get("resampled_from_hz"), int | float) else None,
     )
+    schedule = data.get("schedule")
+    if isinstance(schedule, dict):
+        summary = dataclasses.replace(
+            summary,
+            schedule=str(schedule.get("name", "step")),
+            latency_samples=int(schedule.get("latency_samples") or 0),
+            delayed_equal=schedule.get("delayed_equal")
+            if isinstance(schedule.get("delayed_equal"), bool)
+            else None,
+        )
     sizes = data.get("sizes")
     return summary, sizes if isinstance(sizes, dict) else None
 
@@ -224,7 +249,9 @@ def run(args: argparse.Namespace) -> int:
             warning = overlap_warning(stats, rec, data_fingerprint(rec))
             if warning:
                 notes.append(f"whole recording: {warning}")
-            verify, sizes = (None, None) if target is None else _verify(model_path, target, rec_path)
+            verify, sizes = (
+                (None, None) if target is None else _verify(model_path, target, rec_path, rec, args.smoothing)
+            )
             entry = _bench_entry(bench, model_id, bench_path) if bench_path else None
             if bench_path is not None and entry is None:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")

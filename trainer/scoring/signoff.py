@@ -52,6 +52,11 @@ class VerifySummary:
     source: str  # the module directory or the JSON file
     rate_millihz: int = 0  # the module's declared rate (0: any)
     resampled_from_hz: float | None = None  # the recording's rate when verify interpolated it
+    schedule: str = "step"  # the module's network-step schedule (manifest)
+    latency_samples: int = 0  # spread: samples by which the estimate comes later than with "step"
+    delayed_equal: bool | None = None  # spread: drift removed = the step schedule's, delayed (None: not run)
+    # spread, run by the report: the fixed-point module's drift left by schedule, from sample latency on
+    schedule_scores: tuple[tuple[str, Score], ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -347,6 +352,23 @@ def _channel_section(r: ChannelReport) -> list[str]:
             + (f", recording resampled from {v.resampled_from_hz:g} Hz" if v.resampled_from_hz else "")
             + ("" if v.model_id == r.model_id else f"; WARNING: the module is of model {v.model_id}")
         )
+        if v.schedule != "step":
+            lines.append(
+                f"- schedule `{v.schedule}`: the estimate takes effect {v.latency_samples} samples later than "
+                f"with `step` (nothing is removed on the first {v.latency_samples} samples after init or reset)"
+                + (
+                    ""
+                    if v.delayed_equal is None
+                    else f"; drift removed = the step schedule's delayed by {v.latency_samples} samples on "
+                    f"every sample: {'yes' if v.delayed_equal else 'NO'}"
+                )
+                + (
+                    f"; drift left by the fixed-point module from sample {v.latency_samples} on: "
+                    + ", ".join(f"{k} {_mg(sc.rms_mg)} mg RMS" for k, sc in v.schedule_scores)
+                    if v.schedule_scores
+                    else ""
+                )
+            )
     for label, item, unit in (
         ("flash", r.cost.flash_bytes, "B"),
         ("RAM", r.cost.ram_bytes, "B"),
