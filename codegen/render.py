@@ -349,6 +349,10 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             schedule=model.schedule,
             tasks=model.tasks,
             unit_tasks=len(UNIT_TASKS),
+            # spread schedule: one dot-product function per pair count of a task (first pairs, rest)
+            dot_pair_counts=sorted(
+                {n for lay in model.layers for n in (lay.first_pairs, lay.pairs - lay.first_pairs)}
+            ),
             hidden_slots=model.hidden_slots,
         )
         if model.head is not None:

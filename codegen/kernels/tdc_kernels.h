@@ -309,6 +309,18 @@ static inline int32_t tdck_bits_i32(uint32_t u)
     } while (0)
 #endif
 
+/* The sums of a unit's block start at its biases: acc[r] = bias_x[r] as uint32 (modular), *wp past
+ * them. tdck_dot4 is this, then tdck_dot4_add over the pairs. */
+TDCK_INLINE void tdck_dot4_bias(const int32_t **wp, uint32_t *acc)
+{
+    const int32_t *w = *wp;
+    acc[0] = (uint32_t)w[0];
+    acc[1] = (uint32_t)w[1];
+    acc[2] = (uint32_t)w[2];
+    acc[3] = (uint32_t)w[3];
+    *wp = w + 4;
+}
+
 /* tdck_dot4 continued: the four sums in acc (excess-2^31 words, as tdck_dot4 leaves them) go on
  * over `pairs` more pairs, *wp at their words (no biases); on return *wp points past them. A dot
  * product split in two (the spread schedule's tasks) gives the sums of the whole one. Preconditions:
@@ -397,12 +409,7 @@ TDCK_INLINE void tdck_dot4_add(const int32_t **wp, const int16_t *v, uint32_t pa
  * every row), so the true sum stays in int32 and both paths give the same numbers. */
 TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
 {
-    const int32_t *w = *wp;
-    acc[0] = (uint32_t)w[0]; /* the biases in excess-2^31 form (modular conversion) */
-    acc[1] = (uint32_t)w[1];
-    acc[2] = (uint32_t)w[2];
-    acc[3] = (uint32_t)w[3];
-    *wp = w + 4;
+    tdck_dot4_bias(wp, acc);
     tdck_dot4_add(wp, v, pairs, acc);
 }
 

@@ -63,7 +63,7 @@ static void dot4_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, u
     }
 }
 
-/* TDCK_DOT4_ADD_N with the literal pair count `pairs` (1 .. 8): the spread schedule's second task. */
+/* TDCK_DOT4_ADD_N with the literal pair count `pairs` (1 .. 8): the spread schedule's dot-product tasks. */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
@@ -181,7 +181,8 @@ static void run(const int64_t *in, int64_t *out)
             uint32_t acc_l[4];
             tdck_dot4(&ws, v, split, acc_s);
             tdck_dot4_add(&ws, v + 2u * split, pairs - split, acc_s);
-            dot4_literal(&wl, v, split, acc_l);
+            tdck_dot4_bias(&wl, acc_l); /* as the spread schedule's first task: biases, then the pairs */
+            dot4_add_literal(&wl, v, split, acc_l);
             dot4_add_literal(&wl, v + 2u * split, pairs - split, acc_l);
             for (k = 0; k < 4; ++k) {
                 if (acc_s[k] != acc[k] || acc_l[k] != acc[k]) {
