@@ -256,20 +256,31 @@ def test_cell_state_saturates_explicitly_and_is_flagged(recording: Recording, tm
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "method", ["dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3"]
+    ("method", "schedule"),
+    [
+        *(
+            (m, "step")
+            for m in ("dlstm", "dlstm-ssa", "dlstm-issa", "dlstm-temp", "persistence", "pla", "poly3")
+        ),
+        ("dlstm-issa", "spread"),
+        ("dlstm-temp", "spread"),
+    ],
 )
 def test_full_paper_recording_verifies_with_zero_mismatches(
-    method: str, tmp_path_factory: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]
+    method: str, schedule: str, tmp_path_factory: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The issue's acceptance: export + verify on the simulated 2 h validation run (1.44 M samples)."""
     _, valid = _simulate_pair(tmp_path_factory.getbasetemp() / "paper_full", None)
     rec = read_recording(valid)
     base = tmp_path_factory.getbasetemp() / "random"
     path = _save(_checkpoint(method, rec), base / method)
-    out = base / method / "out"
-    assert codegen_main(["export", str(path), "-o", str(out)]) == 0
+    out = base / method / f"out_{schedule}"
+    extra = [] if schedule == "step" else ["--schedule", schedule]
+    assert codegen_main(["export", str(path), "-o", str(out), *extra]) == 0
     capsys.readouterr()
     assert codegen_main(["verify", str(path), str(out), str(valid)]) == 0
     printed = capsys.readouterr().out
     assert "samples compared: 1440000" in printed and "mismatches: 0\n" in printed
     assert "final state identical: yes" in printed
+    if schedule != "step":
+        assert "drift removed = the step schedule's delayed by 199 samples on every sample: yes" in printed
