@@ -43,42 +43,38 @@ static int64_t window_current;
 static int64_t window_ring[8];
 static uint32_t window_pos;
 
-/* TDCK_DOT4_N with the literal pair count `pairs` (1 .. 9): the layers' unrolled path. A function of
- * its own, so that its twelve-register assembly block does not compete with run's live values. */
+/* The dot product DOT (TDCK_DOT4_N or TDCK_DOT4_ADD_N) with the literal pair count `pairs` (1 .. 9). */
+#define DOT4_LITERAL_SWITCH(DOT)                                                                          \
+    switch (pairs) {                                                                                      \
+    case 1u: DOT(wp, v, 1u, acc); break;                                                                  \
+    case 2u: DOT(wp, v, 2u, acc); break;                                                                  \
+    case 3u: DOT(wp, v, 3u, acc); break;                                                                  \
+    case 4u: DOT(wp, v, 4u, acc); break;                                                                  \
+    case 5u: DOT(wp, v, 5u, acc); break;                                                                  \
+    case 6u: DOT(wp, v, 6u, acc); break;                                                                  \
+    case 7u: DOT(wp, v, 7u, acc); break;                                                                  \
+    case 8u: DOT(wp, v, 8u, acc); break;                                                                  \
+    default: DOT(wp, v, 9u, acc); break;                                                                  \
+    }
+
+/* TDCK_DOT4_N with a literal pair count: the layers' unrolled path. Functions of their own, so that
+ * the twelve-register assembly blocks do not compete with run's live values (and one function with
+ * both macros' eighteen blocks puts Thumb branches out of range). */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
 static void dot4_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
 {
-    switch (pairs) {
-    case 1u: TDCK_DOT4_N(wp, v, 1u, acc); break;
-    case 2u: TDCK_DOT4_N(wp, v, 2u, acc); break;
-    case 3u: TDCK_DOT4_N(wp, v, 3u, acc); break;
-    case 4u: TDCK_DOT4_N(wp, v, 4u, acc); break;
-    case 5u: TDCK_DOT4_N(wp, v, 5u, acc); break;
-    case 6u: TDCK_DOT4_N(wp, v, 6u, acc); break;
-    case 7u: TDCK_DOT4_N(wp, v, 7u, acc); break;
-    case 8u: TDCK_DOT4_N(wp, v, 8u, acc); break;
-    default: TDCK_DOT4_N(wp, v, 9u, acc); break;
-    }
+    DOT4_LITERAL_SWITCH(TDCK_DOT4_N)
 }
 
-/* TDCK_DOT4_ADD_N with the literal pair count `pairs` (1 .. 8): the spread schedule's dot-product tasks. */
+/* TDCK_DOT4_ADD_N with a literal pair count: the spread schedule's dot-product tasks. */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
 static void dot4_add_literal(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
 {
-    switch (pairs) {
-    case 1u: TDCK_DOT4_ADD_N(wp, v, 1u, acc); break;
-    case 2u: TDCK_DOT4_ADD_N(wp, v, 2u, acc); break;
-    case 3u: TDCK_DOT4_ADD_N(wp, v, 3u, acc); break;
-    case 4u: TDCK_DOT4_ADD_N(wp, v, 4u, acc); break;
-    case 5u: TDCK_DOT4_ADD_N(wp, v, 5u, acc); break;
-    case 6u: TDCK_DOT4_ADD_N(wp, v, 6u, acc); break;
-    case 7u: TDCK_DOT4_ADD_N(wp, v, 7u, acc); break;
-    default: TDCK_DOT4_ADD_N(wp, v, 8u, acc); break;
-    }
+    DOT4_LITERAL_SWITCH(TDCK_DOT4_ADD_N)
 }
 
 /* TDCK_DOT_WIDE_N with the literal count n (1 .. 10): the head's unrolled path. */
