@@ -569,12 +569,14 @@ def _mean_frac(window: int, v_max: int) -> int:
 
 def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     fe = spec.frontend
-    for name in ("accel_window", "temp_window"):
-        if getattr(fe, name) > MAX_WINDOW_SAMPLES:
-            raise UserError(
-                f"frontend.{name}: {getattr(fe, name)} samples; the C module averages at most "
-                f"{MAX_WINDOW_SAMPLES} (shorten the window or export at a lower --rate)"
-            )
+    used = (
+        "temp_window" if not isinstance(spec, PersistenceSpec) and fe.kind != "recursive" else "accel_window"
+    )
+    if getattr(fe, used) > MAX_WINDOW_SAMPLES:
+        raise UserError(
+            f"frontend.{used}: {getattr(fe, used)} samples; the C module averages at most "
+            f"{MAX_WINDOW_SAMPLES} (shorten the window or export at a lower --rate)"
+        )
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
         frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac)

@@ -266,6 +266,10 @@ def test_a_window_of_2_16_samples_or_more_is_refused(
     fe = tm.frontend_fields(rec.sample_rate_hz, temp_s=65535 / rec.sample_rate_hz)
     tm.save_checkpoint(tm.dlstm_checkpoint("dlstm-temp", rec, seed=3, frontend=fe), path)
     assert _cli("export", str(path), "-o", str(tmp_path / "out")).returncode == 0
+    # a recursive network averages the acceleration only: its long temperature window is not refused
+    fe = tm.frontend_fields(rec.sample_rate_hz, temp_s=70000 / rec.sample_rate_hz)
+    tm.save_checkpoint(tm.dlstm_checkpoint("dlstm", rec, seed=3, frontend=fe), path)
+    assert _cli("export", str(path), "-o", str(tmp_path / "out2")).returncode == 0
 
 
 def _damaged(kind: str, models: dict[str, Path], tmp_path: Path) -> Path:
