@@ -331,6 +331,8 @@ def verify(
         stream.fine_estimates = []
     step_out = step_golden.run(accel, temp)
     float_model, _ = load_model(model_path)
+    offset = float_model.offset
+    t_ref = offset.t_ref_c if offset is not None and offset.relative else None
     retime_compensator(float_model, declared_rate_millihz(q))
     float_out = float_model.compensate(rec.without_truth())
     float_on_ints = float_model.compensate(integer_recording(rec, accel, temp))
@@ -355,12 +357,20 @@ def verify(
         tables[1],
         rate_millihz=declared_rate_millihz(q),
         resampled_from_hz=resampled_from,
-        schedule=schedule_check(q, rec, accel, g_out, step_out),
+        schedule=schedule_check(q, rec, accel, g_out, step_out, t_ref),
     )
 
 
+def schedule_parts(n: int, latency: int) -> tuple[slice, slice]:
+    """The samples on which a schedule's drift left is compared with the step schedule's: each over
+    n - latency samples, the step schedule's from the first, the delayed one's from sample latency on,
+    so that both hold the same run of estimates, start-up transient included, and differ only by
+    the delay (scored on the same samples, the step schedule's start-up would fall outside)."""
+    return slice(0, n - latency), slice(latency, n)
+
+
 def schedule_check(
-    q: QuantModel, rec: Recording, accel: np.ndarray, out: np.ndarray, step: np.ndarray
+    q: QuantModel, rec: Recording, accel: np.ndarray, out: np.ndarray, step: np.ndarray, t_ref_c: float | None
 ) -> ScheduleCheck | None:
     """For a spread module (output ``out``; ``step``: the step schedule's on the same inputs): whether
     the drift removed is the step schedule's delayed by the latency on every sample (and none before),
@@ -372,10 +382,14 @@ def schedule_check(
     delayed = bool(np.array_equal(removed[lat:], removed_step[: removed_step.size - lat]))
     outputs = {"step": step / ACCEL_PER_MG, q.schedule: out / ACCEL_PER_MG}
     truth = None
-    true_drift = rec.truth("drift_mg")
-    if true_drift is not None:  # from the first sample on which both hold an estimate
-        signal = rec.accel_mg - true_drift
-        truth = {k: float(np.sqrt(np.mean((v[lat:] - signal[lat:]) ** 2))) for k, v in outputs.items()}
+    if rec.truth("drift_mg") is not None:  # as trainer evaluate scores it (relative to T_ref, if any)
+        from trainer.scoring.evaluate import drift_score
+
+        truth = {}
+        for (k, v), part in zip(outputs.items(), schedule_parts(out.size, lat), strict=True):
+            score = drift_score(rec.slice(part.start, part.stop), v[part], t_ref_c)
+            assert score is not None
+            truth[k] = score.residual_rms_mg
     return ScheduleCheck(
         q.schedule, lat, q.frontend.rate_hz, delayed and not np.any(removed[:lat]), outputs, truth
     )
@@ -413,7 +427,8 @@ def report_lines(result: VerifyResult) -> list[str]:
             f"({sc.latency_samples / sc.rate_hz:g} s) later; drift removed = the step schedule's delayed by "
             f"{sc.latency_samples} samples on every sample: {'yes' if sc.delayed_equal else 'NO'}"
             + (
-                f", drift left against the true drift from sample {sc.latency_samples} on: "
+                f", drift left against the true drift, each over its {result.samples - sc.latency_samples} "
+                f"samples with the same estimates: "
                 + ", ".join(f"{k} {v:.4g} mg RMS" for k, v in sc.truth_drift_left_mg.items())
                 if sc.truth_drift_left_mg is not None
                 else ""

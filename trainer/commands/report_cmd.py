@@ -93,7 +93,7 @@ def _verify(
 ) -> tuple[Any, dict[str, Any] | None]:
     """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON. A spread
     module run now is also scored under both schedules on the recording (when it was not resampled)."""
-    from codegen.verify import find_manifest, verify
+    from codegen.verify import find_manifest, schedule_parts, verify
     from trainer.scoring.signoff import VerifySummary, branch_scores
 
     path = Path(target)
@@ -103,12 +103,11 @@ def _verify(
         sc = result.schedule
         scores: tuple[tuple[str, Any], ...] = ()
         if sc is not None and result.resampled_from_hz is None:
-            # from the first sample on which both schedules hold an estimate (the spread one removes
-            # nothing before it): the same samples, so the two figures differ only by the schedule
-            both = rec.slice(sc.latency_samples, len(rec))
+            # each schedule over the samples holding the same run of estimates (schedule_parts)
+            parts = schedule_parts(len(rec), sc.latency_samples)
             scores = tuple(
-                (k, branch_scores(both, v[sc.latency_samples :], smoothing_s)["all"])
-                for k, v in sc.output_mg.items()
+                (k, branch_scores(rec.slice(part.start, part.stop), v[part], smoothing_s)["all"])
+                for (k, v), part in zip(sc.output_mg.items(), parts, strict=True)
             )
         summary = VerifySummary(
             result.mismatches,

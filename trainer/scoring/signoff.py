@@ -55,7 +55,7 @@ class VerifySummary:
     schedule: str = "step"  # the module's network-step schedule (manifest)
     latency_samples: int = 0  # spread: samples by which the estimate comes later than with "step"
     delayed_equal: bool | None = None  # spread: drift removed = the step schedule's, delayed (None: not run)
-    # spread, run by the report: the fixed-point module's drift left by schedule, from sample latency on
+    # spread, run by the report: the fixed-point module's drift left by schedule (codegen.verify.schedule_parts)
     schedule_scores: tuple[tuple[str, Score], ...] = ()
 
     @property
@@ -363,7 +363,8 @@ def _channel_section(r: ChannelReport) -> list[str]:
                     f"every sample: {'yes' if v.delayed_equal else 'NO'}"
                 )
                 + (
-                    f"; drift left by the fixed-point module from sample {v.latency_samples} on: "
+                    "; drift left by the fixed-point module, each schedule over the samples that hold the same "
+                    f"estimates (the step schedule's first n - {v.latency_samples}, the spread one's last): "
                     + ", ".join(f"{k} {_mg(sc.rms_mg)} mg RMS" for k, sc in v.schedule_scores)
                     if v.schedule_scores
                     else ""
