@@ -129,8 +129,46 @@ def test_cli_export_manifest_and_verify(tmp_path: Path) -> None:
     line = next(row for row in text.splitlines() if row.startswith("- schedule `spread`"))
     assert "9 samples later than with `step`" in line and "every sample: yes" in line
     step_rms, spread_rms = (float(v) for v in re.findall(r"(?:step|spread) ([0-9.]+) mg RMS", line))
-    # the same samples, the estimate 9 of 4,000 samples later: the same drift left within 5 %
+    # the same estimates, 9 of 4,000 samples later: the same drift left within 5 %
     assert abs(spread_rms - step_rms) <= 0.05 * step_rms
+
+
+def test_report_reads_the_schedule_of_a_verify_json_and_refuses_a_bad_one(tmp_path: Path) -> None:
+    out, recording, result = tmp_path / "out", tmp_path / "rec.npz", tmp_path / "verify.json"
+    assert (
+        _codegen("export", str(ref.REF_DIR / "dlstm.pt"), "-o", str(out), "--schedule", "spread").returncode
+        == 0
+    )
+    from trainer.cli import main as trainer_main
+
+    assert trainer_main(["simulate", "--seed", "4", "--duration", "20", "-o", str(recording)]) == 0
+    model = str(ref.REF_DIR / "dlstm.pt")
+    done = _codegen("verify", model, str(out), str(recording), "--no-table", "--json", str(result))
+    assert done.returncode == 0, done.stderr
+    data = json.loads(result.read_text())
+    assert data["schedule"] == {"name": "spread", "latency_samples": 9, "delayed_equal": True}
+
+    def report(json_path: Path, target: Path) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "trainer.cli", "report", model, "--recording", str(recording),
+             "--verify", str(json_path), "-o", str(target)],
+            cwd=ROOT, capture_output=True, text=True, check=False,
+        )  # fmt: skip
+
+    done = report(result, tmp_path / "ok")
+    assert done.returncode in (0, 1), done.stderr
+    assert (
+        "- schedule `spread`: the estimate takes effect 9 samples later"
+        in (tmp_path / "ok" / "report.md").read_text()
+    )
+    data["schedule"]["latency_samples"] = "nine"
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    done = report(bad, tmp_path / "bad")
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and "Traceback" not in done.stderr
+    assert "field 'latency_samples'" in lines[0] and str(bad) in lines[0]
+    assert not (tmp_path / "bad").exists()
 
 
 @pytest.mark.parametrize(

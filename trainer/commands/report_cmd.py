@@ -131,14 +131,12 @@ def _verify(
         data.get("resampled_from_hz") if isinstance(data.get("resampled_from_hz"), int | float) else None,
     )
     schedule = data.get("schedule")
-    if isinstance(schedule, dict):
+    if schedule is not None:  # a spread module's: every field checked like the others
         summary = dataclasses.replace(
             summary,
-            schedule=str(schedule.get("name", "step")),
-            latency_samples=int(schedule.get("latency_samples") or 0),
-            delayed_equal=schedule.get("delayed_equal")
-            if isinstance(schedule.get("delayed_equal"), bool)
-            else None,
+            schedule=str(_field(schedule, "name", str, path)),
+            latency_samples=int(_field(schedule, "latency_samples", int, path)),
+            delayed_equal=bool(_field(schedule, "delayed_equal", bool, path)),
         )
     sizes = data.get("sizes")
     return summary, sizes if isinstance(sizes, dict) else None
