@@ -348,7 +348,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
             act_knots=ACT_KNOT.size,
             schedule=model.schedule,
             tasks=model.tasks,
-            unit_tasks=len(UNIT_TASKS),
+            unit_tasks=UNIT_TASKS,  # the order of a unit's tasks (the C's switch follows it)
             # spread schedule: one dot-product function per pair count of a task (first pairs, rest)
             dot_pair_counts=sorted(
                 {n for lay in model.layers for n in (lay.first_pairs, lay.pairs - lay.first_pairs)}

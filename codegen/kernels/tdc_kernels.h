@@ -33,7 +33,8 @@
 #endif
 
 #define TDCK_VERSION 3 /* 2: knot table, excess-2^31 accumulators, biases in the weight stream;
-                          3: tdck_dot4_add, tdck_lstm_gates (the spread schedule's tasks) */
+                          3: tdck_dot4_bias, tdck_dot4_add, tdck_lstm_gates, tdck_lstm_cell_gates (the
+                          spread schedule's tasks); tdck_rdiv_round64 takes divisors below 2^16 */
 
 /* The layer kernel is inlined into each call so that its shifts become immediates (gcc would
  * otherwise share one copy with variable shifts: 25 % slower on a Cortex-M4); a generated module
@@ -403,9 +404,9 @@ TDCK_INLINE void tdck_dot4_add(const int32_t **wp, const int16_t *v, uint32_t pa
  * bias_x[0..3], then 4 packed words per input pair, w[4p + r]; on return it points past the block.
  * acc[r] = bias[r] + 2^31 + sum_p lo(w[4p + r]) v[2p] + hi(w[4p + r]) v[2p + 1] (mod 2^32), where
  * bias_x[r] is the bias with its sign bit flipped (bias + 2^31 mod 2^32 read as int32, as the
- * generator writes it). Biases and the rows' packed weight pairs are interleaved in one stream, so
- * the DSP path loads the biases and then the four words of each pair with one LDM each, runs
- * unrolled by 8 pairs, and SMLAD takes each word as it is. Preconditions: pairs >= 1; |bias| + sum |w| |v| < 2^31 (proved by the quantiser for
+ * generator writes it). Biases and the rows' packed weight pairs are interleaved in one stream:
+ * tdck_dot4_bias, then tdck_dot4_add over the pairs (whose DSP path loads the four words of each
+ * pair with one LDM, runs unrolled by 8 pairs, and SMLAD takes each word as it is). Preconditions: pairs >= 1; |bias| + sum |w| |v| < 2^31 (proved by the quantiser for
  * every row), so the true sum stays in int32 and both paths give the same numbers. */
 TDCK_INLINE void tdck_dot4(const int32_t **wp, const int16_t *v, uint32_t pairs, uint32_t *acc)
 {
