@@ -31,6 +31,10 @@ from trainer.reference import reference_temperature
 
 PX4_MEDIAN_KERNEL = 31
 PX4_TEMPERATURE_BINS = 2000
+# A lower order (a line, a parabola; 0: no compensation at all) is what `--method auto` tries where
+# the cubic over-fits a short range; the model keeps four coefficients, so the C and the flight-stack
+# parameters are those of the cubic with the higher ones zero.
+DEGREES = (0, 1, 2, 3)
 
 
 def bin_by_temperature(temp: np.ndarray, values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
@@ -54,7 +58,11 @@ class CubicPolynomial(TemperatureCompensator):
         remove_median: bool = False,
         median_kernel: int = PX4_MEDIAN_KERNEL,
         n_bins: int = PX4_TEMPERATURE_BINS,
+        degree: int = 3,
     ) -> None:
+        if degree not in DEGREES:
+            raise UserError(f"poly3: degree {degree} is not one of {DEGREES}")
+        self.degree = degree
         self.remove_median = remove_median
         self.median_kernel = median_kernel
         self.n_bins = n_bins
@@ -79,7 +87,9 @@ class CubicPolynomial(TemperatureCompensator):
             temp_rel, drift = bin_by_temperature(temp_rel, drift, self.n_bins)
         if np.unique(temp_rel).size < 4:
             raise UserError("poly3: fewer than 4 distinct temperatures; a cubic is not determined")
-        self.coefficients = np.polynomial.polynomial.polyfit(temp_rel, drift, 3)
+        self.coefficients = np.zeros(4)
+        if self.degree > 0:
+            self.coefficients[: self.degree + 1] = np.polynomial.polynomial.polyfit(temp_rel, drift, self.degree)
         self.temp_range_c = (t_min, t_max)
         return self
 
@@ -98,6 +108,7 @@ class CubicPolynomial(TemperatureCompensator):
             "remove_median": bool(self.remove_median),
             "median_kernel": int(self.median_kernel),
             "n_bins": int(self.n_bins),
+            "degree": int(self.degree),
         }
 
     @classmethod
@@ -106,6 +117,7 @@ class CubicPolynomial(TemperatureCompensator):
             remove_median=bool(payload["remove_median"]),
             median_kernel=int(payload["median_kernel"]),
             n_bins=int(payload["n_bins"]),
+            degree=int(payload.get("degree", 3)),
         )
         model.coefficients = payload["coefficients_mg"].double().numpy()
         if model.coefficients.shape != (4,):

@@ -1,0 +1,307 @@
+"""Blocked cross-validation of one real run over its thermal segments.
+
+A single split of one chamber run says little: which end is held out decides the verdict (the
+physics compensator won by 72 % at one split of the bundled run and lost by 23 % at another).
+Here every thermal segment of the run (each heating, cooling and dwell; :func:`thermal_segments`)
+is held out in turn, the method is trained on the rest, and the held-out segment is scored:
+
+- **warm**: the model runs from the recording's start, through the training rows, and is scored
+  on the segment, as firmware running since power-on;
+- **cold**: the model starts at the segment's first sample, as at power-on there (a method's
+  history states are then unknown and take their initial values);
+- the **natural** start of a fold is cold for a segment that starts the run and warm otherwise;
+  the cross-validated figure (:attr:`MethodCV.cv_rms`) pools the natural held-out samples.
+
+Training on a run with a hole: a memoryless method is fitted on the training rows alone (their
+order does not matter to it). A method with state needs the temperature history without gaps,
+so it sees the whole run's temperature, and the held-out segment's output is replaced by the cubic
+fitted on the training rows (:func:`impute_held_out`): those rows then carry no information the
+training rows do not have, and the method's filters run through the segment as they would.
+Recursive methods (the output's own past) cannot be trained on such a run and are not
+cross-validated; a single ``--holdout`` split scores them.
+
+Scores are the static drift left of :mod:`trainer.scoring.static` (RMS of the compensated output
+about its mean over the held-out segment, after the validation smoothing), in the channel's unit,
+over the whole segment and over its samples inside the training temperature range.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from trainer import methods as registry
+from trainer.data.recording import Recording
+from trainer.errors import UserError
+from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left, thermal_branch
+
+MIN_SEGMENT_FRACTION = 0.05  # a thermal run shorter than 5 % of the recording joins its neighbour
+MIN_SEGMENT_S = 300.0  # ... and so does one shorter than 5 minutes
+MIN_SEGMENTS = 2
+UNCOMPENSATED = "uncompensated"
+LABELS = {HEATING: "heating", COOLING: "cooling", NEITHER: "dwell"}
+BRANCH_OF = {label: branch for branch, label in LABELS.items()}
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Rows ``start:stop`` of one thermal segment, its label and its time span (s from the start)."""
+
+    start: int
+    stop: int
+    label: str
+    t0_s: float
+    t1_s: float
+    temp_from_c: float
+    temp_to_c: float
+
+    @property
+    def name(self) -> str:
+        return f"{self.label} {self.t0_s:.0f}-{self.t1_s:.0f} s ({self.temp_from_c:.1f} -> {self.temp_to_c:.1f} degC)"
+
+
+def thermal_segments(rec: Recording) -> list[Segment]:
+    """The recording's heating, cooling and dwell segments, short runs joined to their neighbour.
+
+    The branch of every sample comes from :func:`trainer.scoring.static.thermal_branch`; a run
+    shorter than :data:`MIN_SEGMENT_FRACTION` of the recording or :data:`MIN_SEGMENT_S` (a turning
+    point, a brief overshoot) is joined to the segment before it (the first one to the next).
+    """
+    temp = np.asarray(rec.temp_c, dtype=np.float64)
+    branch = thermal_branch(temp, rec.sample_rate_hz)
+    edges = np.flatnonzero(np.diff(branch)) + 1
+    starts, stops = np.r_[0, edges], np.r_[edges, len(branch)]
+    t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
+    shortest = max(MIN_SEGMENT_FRACTION * len(branch), MIN_SEGMENT_S * rec.sample_rate_hz)
+    runs: list[list[int]] = []  # [start, stop, branch]
+    for start, stop in zip(starts.tolist(), stops.tolist(), strict=True):
+        if runs and (stop - start < shortest or runs[-1][1] - runs[-1][0] < shortest):
+            longer = runs[-1][1] - runs[-1][0] >= stop - start
+            runs[-1] = [runs[-1][0], stop, runs[-1][2] if longer else int(branch[start])]
+        else:
+            runs.append([start, stop, int(branch[start])])
+    merged: list[list[int]] = []
+    for run in runs:  # neighbours that ended up with the same label are one segment
+        if merged and merged[-1][2] == run[2]:
+            merged[-1][1] = run[1]
+        else:
+            merged.append(run)
+    return [
+        Segment(a, b, LABELS[k], float(t[a]), float(t[b - 1]), float(temp[a]), float(temp[b - 1]))
+        for a, b, k in merged
+    ]
+
+
+@dataclass(frozen=True)
+class FoldScore:
+    """One method on one held-out segment: drift left RMS (channel unit), warm and cold."""
+
+    warm_rms: float
+    cold_rms: float
+    warm_in_range_rms: float  # NaN: no held-out sample inside the training range
+    cold_in_range_rms: float
+    in_range_fraction: float
+
+
+@dataclass
+class MethodCV:
+    """Every fold of one method (in segment order) and the pooled cross-validated figures."""
+
+    name: str
+    folds: list[FoldScore]
+    natural_cold: list[bool]
+    sizes: list[int]
+    fit_seconds: float = 0.0
+
+    def natural(self) -> list[float]:
+        """Each fold's figure at its natural start (cold for a segment that starts the run)."""
+        return [f.cold_rms if cold else f.warm_rms for f, cold in zip(self.folds, self.natural_cold, strict=True)]
+
+    @property
+    def cv_rms(self) -> float:
+        """The cross-validated drift left: RMS pooled over every held-out sample at its natural start."""
+        weights = np.asarray(self.sizes, dtype=np.float64)
+        return float(np.sqrt(np.sum(weights * np.square(self.natural())) / np.sum(weights)))
+
+    def stat(self, what: str, how: Callable[[np.ndarray], float]) -> float:
+        values = np.array([getattr(f, what) for f in self.folds], dtype=np.float64)
+        values = values[np.isfinite(values)]
+        return float(how(values)) if values.size else math.nan
+
+
+@dataclass
+class CrossValidation:
+    """Blocked cross-validation of one channel: segments, one :class:`MethodCV` per method."""
+
+    source: str
+    unit: str
+    segments: list[Segment]
+    results: dict[str, MethodCV]  # uncompensated first
+    skipped: dict[str, str] = field(default_factory=dict)  # method -> why it was not cross-validated
+
+    def to_dict(self) -> dict[str, object]:
+        """Plain values (the saved table and the checkpoint's selection record)."""
+        return {
+            "source": self.source,
+            "unit": self.unit,
+            "segments": [vars(s) for s in self.segments],
+            "methods": {
+                name: {
+                    "cv_rms": r.cv_rms,
+                    "fit_seconds": r.fit_seconds,
+                    "natural_cold": r.natural_cold,
+                    "folds": [vars(f) for f in r.folds],
+                }
+                for name, r in self.results.items()
+            },
+            "skipped": dict(self.skipped),
+        }
+
+
+def cross_validatable(method: str) -> bool:
+    """Methods that can be trained on a run with a hole (not the recursive ones)."""
+    return registry.get(method).family != registry.RECURSIVE
+
+
+def folds_of(rec: Recording) -> list[Segment]:
+    """The segments to hold out; a one-line error when the run has too few to cross-validate."""
+    segments = thermal_segments(rec)
+    if len(segments) < MIN_SEGMENTS:
+        raise UserError(
+            f"{rec.source}: cross-validation needs at least {MIN_SEGMENTS} thermal segments (heating, cooling, "
+            f"dwell), this run has {len(segments)} ({', '.join(s.label for s in segments)}); score it on "
+            "another recording (VALID) or give --holdout"
+        )
+    return segments
+
+
+def training_rows(n: int, segment: Segment) -> np.ndarray:
+    mask = np.ones(n, dtype=bool)
+    mask[segment.start : segment.stop] = False
+    return mask
+
+
+def impute_held_out(rec: Recording, train: np.ndarray) -> Recording:
+    """``rec`` with the held-out output replaced by the cubic fitted on the training rows alone."""
+    from trainer.baselines.poly3 import CubicPolynomial
+
+    cubic = CubicPolynomial().fit(rows(rec, train))
+    filled = np.where(train, rec.accel_mg, cubic.predict_drift(rec))
+    return Recording({**rec.columns, "accel_mg": filled}, dict(rec.meta), rec.source)
+
+
+def rows(rec: Recording, mask: np.ndarray) -> Recording:
+    """The rows of ``rec`` where ``mask`` holds (their times keep their values)."""
+    return Recording({k: v[mask] for k, v in rec.columns.items()}, dict(rec.meta), rec.source)
+
+
+def _score(
+    output_warm: np.ndarray,
+    output_cold: np.ndarray,
+    temp: np.ndarray,
+    branch: np.ndarray,
+    temp_range: tuple[float, float],
+) -> FoldScore:
+    inside = (temp >= temp_range[0]) & (temp <= temp_range[1])
+
+    def rms(x: np.ndarray, where: np.ndarray | None = None) -> float:
+        if where is not None:
+            if not np.any(where):
+                return math.nan
+            x, b = x[where], branch[where]
+        else:
+            b = branch
+        return static_drift_left(x, b).rms_mg
+
+    return FoldScore(
+        rms(output_warm), rms(output_cold), rms(output_warm, inside), rms(output_cold, inside), float(np.mean(inside))
+    )
+
+
+def cross_validate(
+    rec: Recording,
+    fitters: dict[str, Callable[[Recording], object]],
+    *,
+    stateful: set[str],
+    smoothing_s: float,
+    unit: str = "mg",
+    log: Callable[[str], None] | None = None,
+) -> CrossValidation:
+    """Hold out every thermal segment of ``rec`` in turn; ``fitters[name](train_rec)`` returns a fitted
+    compensator (anything with ``predict_drift``). ``stateful`` names the methods trained on the
+    imputed whole run (:func:`impute_held_out`) instead of on the training rows alone."""
+    from trainer.scoring.evaluate import smooth_for_scoring
+
+    rec = rec.without_truth()
+    segments = folds_of(rec)
+    rate = rec.sample_rate_hz
+    temp = np.asarray(rec.temp_c, dtype=np.float64)
+    branch = thermal_branch(temp, rate)
+    natural_cold = [s.start == 0 for s in segments]
+    sizes = [s.stop - s.start for s in segments]
+    results: dict[str, MethodCV] = {}
+
+    def smooth(x: np.ndarray) -> np.ndarray:
+        return np.asarray(smooth_for_scoring(np.asarray(x, dtype=np.float64), rate, smoothing_s))
+
+    raw_folds = []
+    for s in segments:
+        raw = smooth(rec.accel_mg[s.start : s.stop])
+        mask = training_rows(len(rec), s)
+        lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
+        raw_folds.append(_score(raw, raw, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
+    results[UNCOMPENSATED] = MethodCV(UNCOMPENSATED, raw_folds, natural_cold, sizes)
+    for name, fit in fitters.items():
+        folds: list[FoldScore] = []
+        seconds = 0.0
+        for index, s in enumerate(segments):
+            if log is not None:
+                log(f"cross-validation: {name}, holding out segment {index + 1}/{len(segments)}: {s.name}")
+            mask = training_rows(len(rec), s)
+            train = impute_held_out(rec, mask) if name in stateful else rows(rec, mask)
+            start = time.perf_counter()
+            model = fit(train)
+            seconds += time.perf_counter() - start
+            predict = model.predict_drift  # type: ignore[attr-defined]
+            warm = smooth(rec.accel_mg - predict(rec))[s.start : s.stop]
+            part = rec.slice(s.start, s.stop)
+            cold = smooth(part.accel_mg - predict(part))
+            lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
+            folds.append(_score(warm, cold, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
+        results[name] = MethodCV(name, folds, natural_cold, sizes, seconds / len(segments))
+    return CrossValidation(rec.source, unit, segments, results)
+
+
+def table_lines(cv: CrossValidation, chosen: str | None = None) -> list[str]:
+    """The cross-validation as a Markdown table: per method the pooled figure, median and worst
+    held-out drift left (natural start), warm and cold, whole segment and inside the training range."""
+    unit = cv.unit
+    lines = [
+        f"| method | CV drift left ({unit}) | median / worst, natural start | warm median / worst | "
+        f"cold median / worst | in range, warm median / worst | per segment (natural) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, r in cv.results.items():
+        natural = np.array(r.natural())
+        mark = f"**{name}** (chosen)" if name == chosen else name
+        lines.append(
+            f"| {mark} | {r.cv_rms:.4g} | {np.median(natural):.4g} / {np.max(natural):.4g} | "
+            f"{r.stat('warm_rms', np.median):.4g} / {r.stat('warm_rms', np.max):.4g} | "
+            f"{r.stat('cold_rms', np.median):.4g} / {r.stat('cold_rms', np.max):.4g} | "
+            f"{r.stat('warm_in_range_rms', np.median):.4g} / {r.stat('warm_in_range_rms', np.max):.4g} | "
+            + " / ".join(f"{v:.4g}" for v in natural)
+            + " |"
+        )
+    return lines
+
+
+def segment_lines(segments: Sequence[Segment]) -> list[str]:
+    return [
+        f"- segment {i + 1}: {s.name}, {s.stop - s.start} samples, scored "
+        + ("cold (it starts the run)" if s.start == 0 else "warm (the model runs from the recording's start)")
+        for i, s in enumerate(segments)
+    ]
