@@ -20,6 +20,7 @@ def _export(args: argparse.Namespace) -> int:
         from trainer.commands.channel_options import model_files
 
         args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
+    _identity_notes(args.model)
     if args.format == "calibration-blob" or args.blob or (args.format == "c" and len(args.model) > 1):
         return _export_imu(args)
     if args.format != "c":
@@ -59,6 +60,17 @@ def _export(args: argparse.Namespace) -> int:
     for note in model.notes:
         print(f"{model.checkpoint.method}: {note}")
     return 0
+
+
+def _identity_notes(paths: list[str]) -> None:
+    """Say, one line each, which models are the identity because auto found no compensation that helps."""
+    from trainer.checkpoint import load_checkpoint
+    from trainer.selection import identity_note
+
+    for path in paths:
+        note = identity_note(load_checkpoint(path)["train_stats"], path)
+        if note is not None:
+            print(note)
 
 
 def _export_imu(args: argparse.Namespace) -> int:

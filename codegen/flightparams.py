@@ -69,6 +69,11 @@ class ChannelCubic:
     t_max_c: float
     model_sha256: str
 
+    @property
+    def identity(self) -> bool:
+        """No compensation at all (``trainer fit --method auto`` chose none): every coefficient zero."""
+        return not bool(np.any(self.coefficients))
+
 
 def shift_polynomial(coefficients: np.ndarray, from_ref: float, to_ref: float) -> np.ndarray:
     """Coefficients of the same polynomial in ``T - to_ref`` (exact algebra: a binomial re-expansion)."""
@@ -247,11 +252,14 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
                 f"# {group.sensor}{group.instance} axes {', '.join(missing)}: no model given, coefficients 0"
             )
     lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
-    rows: list[tuple[str, float | int, int]] = [
-        (f"{PX4_PREFIX[sensor]}_ENABLE", 1, MAV_PARAM_TYPE_INT32)
-        for sensor in PX4_PREFIX
-        if any(group.sensor == sensor for group in groups)
-    ]
+    rows: list[tuple[str, float | int, int]] = []
+    for sensor in PX4_PREFIX:
+        given = [c for c in channels if c.channel.sensor == sensor]
+        if given:
+            enabled = not all(c.identity for c in given)
+            if not enabled:
+                lines.insert(-2, f"# {sensor}: every model given is the identity (no compensation): disabled")
+            rows.append((f"{PX4_PREFIX[sensor]}_ENABLE", int(enabled), MAV_PARAM_TYPE_INT32))
     for group in groups:
         rows += px4_values(group, keep_constant=keep_constant)
     for name, value, kind in rows:
@@ -291,7 +299,14 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
             raise UserError(
                 f"IMU {instance}: the accelerometer and gyroscope models' temperature ranges do not overlap"
             )
-        lines += [f"{prefix}_ENABLE 1", f"{prefix}_TMIN {_number(lo)}", f"{prefix}_TMAX {_number(hi)}"]
+        enabled = not all(c.identity for found in sensors.values() for c in found.axes.values())
+        if not enabled:
+            lines.append(f"# IMU {instance}: every model given is the identity (no compensation): disabled")
+        lines += [
+            f"{prefix}_ENABLE {int(enabled)}",
+            f"{prefix}_TMIN {_number(lo)}",
+            f"{prefix}_TMAX {_number(hi)}",
+        ]
         for sensor, short in ARDUPILOT_PREFIX.items():
             axes = sensors[sensor].axes if sensor in sensors else {}
             if not axes:

@@ -89,7 +89,9 @@ class CubicPolynomial(TemperatureCompensator):
             raise UserError("poly3: fewer than 4 distinct temperatures; a cubic is not determined")
         self.coefficients = np.zeros(4)
         if self.degree > 0:
-            self.coefficients[: self.degree + 1] = np.polynomial.polynomial.polyfit(temp_rel, drift, self.degree)
+            self.coefficients[: self.degree + 1] = np.polynomial.polynomial.polyfit(
+                temp_rel, drift, self.degree
+            )
         self.temp_range_c = (t_min, t_max)
         return self
 

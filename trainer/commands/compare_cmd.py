@@ -28,7 +28,9 @@ def add_parser(subparsers: Any) -> None:
     )
     parser.add_argument("train", help="training recording (.csv or .npz); with --holdout, the one recording")
     parser.add_argument(
-        "valid", nargs="?", help="validation recording (.csv or .npz); omitted with --holdout"
+        "valid",
+        nargs="?",
+        help="validation recording (.csv or .npz); without it and without --holdout, TRAIN is cross-validated over its thermal segments",
     )
     parser.add_argument(
         "--holdout",
@@ -118,8 +120,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     settings, frontend = settings_from_args(args)
     policy = policy_from_args(args)
-    if (args.valid is None) == (args.holdout is None):
-        raise UserError("compare: give a validation recording VALID or --holdout SPEC (exactly one)")
+    if args.valid is not None and args.holdout is not None:
+        raise UserError("compare: give a validation recording VALID or --holdout SPEC, not both")
+    if args.valid is None and args.holdout is None:
+        return run_crossval(args, requested, policy)
 
     from trainer.checkpoint import save_model
     from trainer.data.holdout import overlap_warning, parse_holdout, split
@@ -205,4 +209,79 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(headline_table(comparison))
     print(f"\nreport, figures and models written to {out_dir}/")
+    return 0
+
+
+def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: Any) -> int:
+    """One recording, no --holdout: blocked cross-validation over its thermal segments
+    (:mod:`trainer.scoring.crossval`); recursive methods cannot be trained on a run with a hole."""
+    import json
+
+    from trainer.data.channels import UNIT_LABELS, channel_unit
+    from trainer.data.recording_io import read_recording
+    from trainer.fitting import fit_compensator
+    from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
+
+    if args.inject is not None or args.input_test:
+        raise UserError(
+            "compare: --inject and --input-test need VALID or --holdout (cross-validation scores drift)"
+        )
+    out_dir = Path(args.out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
+    rec = read_recording(args.train)
+    unit = UNIT_LABELS[channel_unit(rec)]
+    settings, _ = settings_from_args(args)
+    chosen = [m for m in requested if cross_validatable(m)]
+    skipped = {
+        m: "recursive: it cannot be trained on a run with a hole; score it with --holdout"
+        for m in requested
+        if m not in chosen
+    }
+    if not chosen:
+        raise UserError(
+            f"compare: none of --methods {','.join(requested)} can be cross-validated; give --holdout"
+        )
+
+    def fitter(name: str) -> Callable[[Any], object]:
+        kwargs = methods.get(name).options.compare_kwargs(settings, False)
+        return lambda train: fit_compensator(name, train, kwargs, policy)
+
+    def log(message: str) -> None:
+        if not args.quiet:
+            print(message, file=sys.stderr, flush=True)
+
+    cv = cross_validate(
+        rec,
+        {name: fitter(name) for name in chosen},
+        stateful={m for m in chosen if methods.get(m).family == methods.TEMPERATURE_DRIVEN},
+        smoothing_s=args.smoothing,
+        unit=unit,
+        log=log,
+    )
+    cv.skipped.update(skipped)
+    lines = [
+        f"# Cross-validated comparison: {rec.source}",
+        "",
+        f"No validation recording and no --holdout: every thermal segment of the run is held out in turn, "
+        f"each method trained on the rest (docs/real-data.md). Drift left: RMS of the compensated output about "
+        f"its mean over the held-out segment, in {unit}.",
+        "",
+        *segment_lines(cv.segments),
+        "",
+        *table_lines(cv),
+        "",
+        *[f"- {name}: not cross-validated ({why})" for name, why in cv.skipped.items()],
+    ]
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        (staging / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        (staging / "crossval.json").write_text(json.dumps(cv.to_dict(), indent=2) + "\n", encoding="utf-8")
+        publish(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    print("\n".join([*segment_lines(cv.segments), *table_lines(cv)]))
+    print(f"\nreport and crossval.json written to {out_dir}/")
     return 0

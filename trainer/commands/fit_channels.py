@@ -26,12 +26,13 @@ from trainer.reference import OffsetPolicy
 
 def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
     from trainer.checkpoint import save_model
+    from trainer.commands.fit_cmd import checked_method, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_with_stats
     from trainer.reference import RECURSIVE_NOTE
 
-    method = methods.get(args.method)
+    method = checked_method(args.method)
     check_output_directory(args.output)  # before a possibly long fit
     train = read_recording(args.train)
     channels = select_channels(train, args.channels)
@@ -43,7 +44,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     for channel in channels:
         view = channel_view(train, channel)
         checks = check_training(view, method, accept=args.accept_implausible)
-        model, stats = fit_with_stats(args.method, view, options, policy)
+        model, stats = fit_with_stats(args.method, view, options, policy, log=progress_log(args))
         fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
     with staged_directory(args.output) as staging:
@@ -63,18 +64,23 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
                     "temp_column": channel.temp_column,
                     "temp_range_c": [stats["temp_min_c"], stats["temp_max_c"]],
                     "fit_residual_rms": stats["fit_residual_rms_mg"],
+                    "method": methods.name_of(model),
+                    **({"auto_chose": stats["selection"]["chosen"]} if "selection" in stats else {}),
                 }
             )
         (staging / INDEX_FILE).write_text(json.dumps(index, indent=2) + "\n", encoding="utf-8")
     for channel, model, stats, checks in fitted:
         checks.print_warnings()
+        if "selection" in stats:
+            print(f"== {channel.name} [{channel.label}]")
+            print_selection(stats)
         print(
-            f"{args.method} {channel.name}: fitted on {stats['n_samples']} samples "
+            f"{methods.name_of(model)} {channel.name}: fitted on {stats['n_samples']} samples "
             f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), fit residual RMS "
             f"{stats['fit_residual_rms_mg']:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
         )
         note = model.offset.describe() if model.offset else RECURSIVE_NOTE
         if channel.unit != "mg":  # the offset text is written for an accelerometer
             note = note.replace(" mg", f" {channel.label}").replace("accelerometer", channel.sensor)
-        print(f"{args.method} {channel.name}: {note}")
+        print(f"{methods.name_of(model)} {channel.name}: {note}")
     return 0

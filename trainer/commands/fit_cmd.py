@@ -8,6 +8,7 @@ from typing import Any
 from trainer import methods
 from trainer.commands.channel_options import add_channels_option
 from trainer.commands.offset_options import add_offset_options, policy_from_args
+from trainer.selection import AUTO, CANDIDATES, candidate_list
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -16,10 +17,20 @@ def add_parser(subparsers: Any) -> None:
     parser = subparsers.add_parser("fit", help="fit a compensator on a training recording")
     parser.add_argument("train", help="training recording (.csv or .npz)")
     parser.add_argument(
-        "--method", required=True, choices=methods.fit_cli_names(), help="compensation method"
+        "--method",
+        required=True,
+        choices=(*methods.fit_cli_names(), AUTO),
+        help="compensation method; auto: per channel, the candidate (none, polynomials of order 1-3, pla, physics) "
+        "that cross-validation over the run's thermal segments says leaves the least drift (docs/real-data.md)",
     )
     parser.add_argument(
         "-o", "--output", required=True, help="checkpoint to write (model.pt); a directory with --channels"
+    )
+    parser.add_argument(
+        "--candidates",
+        type=candidate_list,
+        metavar="LIST",
+        help=f"auto: the candidates to cross-validate (default all: {','.join(c.label for c in CANDIDATES)})",
     )
     add_channels_option(parser, "fit one model, written as OUT/<channel>.pt with OUT/channels.json,")
     parser.add_argument(
@@ -40,11 +51,17 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
-    from trainer.errors import check_output_path
+    from trainer.errors import UserError, check_output_path
     from trainer.fitting import fit_with_stats
     from trainer.reference import RECURSIVE_NOTE
 
-    options = methods.get(args.method).options.fit_kwargs(args)
+    if args.candidates is not None and args.method != AUTO:
+        raise UserError("--candidates applies to --method auto")
+    options = (
+        {"candidates": args.candidates}
+        if args.method == AUTO
+        else methods.get(args.method).options.fit_kwargs(args)
+    )
     policy = policy_from_args(args)
     if args.channels is not None:
         from trainer.commands.fit_channels import fit_channels
@@ -52,18 +69,44 @@ def run(args: argparse.Namespace) -> int:
         return fit_channels(args, options, policy)
     check_output_path(args.output)  # fail before a long training run, not after it
     train = read_recording(args.train)
-    checks = check_training(train, methods.get(args.method), accept=args.accept_implausible)
-    model, stats = fit_with_stats(args.method, train, options, policy)
+    checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
+    model, stats = fit_with_stats(args.method, train, options, policy, log=progress_log(args))
     checks.print_warnings()
+    print_selection(stats)
     save_model(
         model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
     )
+    name = methods.name_of(model)
     print(
-        f"{args.method}: fitted on {stats['n_samples']} samples "
+        f"{name}: fitted on {stats['n_samples']} samples "
         f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
         f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}"
     )
     for line in model.describe():
         print(line)
-    print(f"{args.method}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
+    print(f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
     return 0
+
+
+def checked_method(name: str) -> methods.Method:
+    """The method whose training checks apply (auto: the cubic's temperature span, its simplest fit)."""
+    return methods.get("poly3" if name == AUTO else name)
+
+
+def progress_log(args: argparse.Namespace) -> Any:
+    """Progress lines on stderr (a cross-validation fits every candidate once per segment)."""
+    import sys
+
+    if getattr(args, "quiet", False):
+        return None
+    return lambda message: print(message, file=sys.stderr, flush=True)
+
+
+def print_selection(stats: dict[str, Any]) -> None:
+    """The table that chose an auto model (from the checkpoint's record), and the choice in one line."""
+    from trainer.selection import record_lines
+
+    record = stats.get("selection")
+    if record is not None:
+        for line in record_lines(record):
+            print(line)

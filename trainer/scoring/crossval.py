@@ -31,6 +31,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -119,7 +120,9 @@ class MethodCV:
 
     def natural(self) -> list[float]:
         """Each fold's figure at its natural start (cold for a segment that starts the run)."""
-        return [f.cold_rms if cold else f.warm_rms for f, cold in zip(self.folds, self.natural_cold, strict=True)]
+        return [
+            f.cold_rms if cold else f.warm_rms for f, cold in zip(self.folds, self.natural_cold, strict=True)
+        ]
 
     @property
     def cv_rms(self) -> float:
@@ -143,7 +146,7 @@ class CrossValidation:
     results: dict[str, MethodCV]  # uncompensated first
     skipped: dict[str, str] = field(default_factory=dict)  # method -> why it was not cross-validated
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> dict[str, Any]:
         """Plain values (the saved table and the checkpoint's selection record)."""
         return {
             "source": self.source,
@@ -160,6 +163,19 @@ class CrossValidation:
             },
             "skipped": dict(self.skipped),
         }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> CrossValidation:
+        """The inverse of :meth:`to_dict` (a checkpoint's selection record)."""
+        segments = [Segment(**s) for s in data["segments"]]
+        sizes = [s.stop - s.start for s in segments]
+        results = {
+            name: MethodCV(
+                name, [FoldScore(**f) for f in r["folds"]], list(r["natural_cold"]), sizes, r["fit_seconds"]
+            )
+            for name, r in data["methods"].items()
+        }
+        return cls(str(data["source"]), str(data["unit"]), segments, results, dict(data.get("skipped", {})))
 
 
 def cross_validatable(method: str) -> bool:
@@ -218,7 +234,11 @@ def _score(
         return static_drift_left(x, b).rms_mg
 
     return FoldScore(
-        rms(output_warm), rms(output_cold), rms(output_warm, inside), rms(output_cold, inside), float(np.mean(inside))
+        rms(output_warm),
+        rms(output_cold),
+        rms(output_warm, inside),
+        rms(output_cold, inside),
+        float(np.mean(inside)),
     )
 
 

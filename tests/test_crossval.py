@@ -1,0 +1,231 @@
+"""Blocked cross-validation over thermal segments, ``--method auto`` and its identity export."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trainer.baselines.poly3 import CubicPolynomial
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import UserError
+from trainer.scoring.crossval import (
+    UNCOMPENSATED,
+    cross_validate,
+    impute_held_out,
+    thermal_segments,
+    training_rows,
+)
+from trainer.selection import NONE, choose, select
+
+RATE_HZ = 2.0
+# (temperature at the end of the leg, minutes): cooling, a 1-minute turn, heating, cooling
+PROFILE = ((50.0, 0.0), (-15.0, 22.0), (-15.0, 1.0), (70.0, 28.0), (35.0, 14.0))
+
+
+def profile_temperature() -> np.ndarray:
+    temps = [np.array([PROFILE[0][0]])]
+    for (start, _), (end, minutes) in itertools.pairwise(PROFILE):
+        n = round(minutes * 60 * RATE_HZ)
+        temps.append(np.linspace(start, end, n + 1)[1:])
+    return np.concatenate(temps)
+
+
+def chamber_run(drift_mg: np.ndarray | None = None, noise_mg: float = 0.05, seed: int = 0) -> Recording:
+    """A cooling / heating / cooling run at 2 Hz with ``drift_mg`` (default: a cubic) plus white noise."""
+    temp = profile_temperature()
+    rng = np.random.default_rng(seed)
+    if drift_mg is None:
+        d = temp - 25.0
+        drift_mg = 0.05 * d + 2e-3 * d**2 - 3e-5 * d**3
+    accel = 1000.0 + drift_mg + rng.normal(0.0, noise_mg, temp.size)
+    columns = {"time_s": np.arange(temp.size) / RATE_HZ, "temp_c": temp, "accel_mg": accel}
+    return Recording(columns, {"sample_rate_hz": repr(RATE_HZ)}, "<chamber>")
+
+
+def rms_about_mean(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((x - x.mean()) ** 2)))
+
+
+def test_segments_follow_the_profile_and_join_short_turns() -> None:
+    rec = chamber_run()
+    segments = thermal_segments(rec)
+    assert [s.label for s in segments] == ["cooling", "heating", "cooling"]
+    assert segments[0].start == 0 and segments[-1].stop == len(rec)
+    assert all(a.stop == b.start for a, b in itertools.pairwise(segments))
+    # the boundaries sit at the turning points of the set profile (within the rate window)
+    turn_heating = round(23 * 60 * RATE_HZ)
+    assert (
+        abs(segments[1].start - round(22 * 60 * RATE_HZ)) < 90 or abs(segments[1].start - turn_heating) < 90
+    )
+
+
+def test_uncompensated_and_cubic_scores_match_an_independent_computation() -> None:
+    rec = chamber_run()
+    segments = thermal_segments(rec)
+
+    def fit_cubic(train: Recording) -> CubicPolynomial:
+        return CubicPolynomial(median_kernel=1, n_bins=0).fit(train)
+
+    cv = cross_validate(rec, {"poly3": fit_cubic}, stateful=set(), smoothing_s=0.0)
+    raw = cv.results[UNCOMPENSATED]
+    for seg, fold in zip(segments, raw.folds, strict=True):
+        assert fold.warm_rms == pytest.approx(rms_about_mean(rec.accel_mg[seg.start : seg.stop]))
+    for seg, fold in zip(segments, cv.results["poly3"].folds, strict=True):
+        keep = training_rows(len(rec), seg)
+        d = rec.temp_c[keep] - rec.temp_c[keep].mean()
+        coef = np.polyfit(d, rec.accel_mg[keep], 3)
+        held = rec.accel_mg[seg.start : seg.stop] - np.polyval(
+            coef,
+            np.clip(rec.temp_c[seg.start : seg.stop], rec.temp_c[keep].min(), rec.temp_c[keep].max())
+            - rec.temp_c[keep].mean(),
+        )
+        assert fold.warm_rms == pytest.approx(rms_about_mean(held), rel=1e-6)
+        assert fold.warm_rms < 0.06  # the cubic drift is removed down to the 0.05 mg noise
+    assert cv.results["poly3"].cv_rms < 0.1 * raw.cv_rms
+
+
+def test_training_never_sees_the_held_out_output() -> None:
+    rec = chamber_run()
+    seen: list[tuple[str, Recording]] = []
+
+    class Spy:
+        def predict_drift(self, r: Recording) -> np.ndarray:
+            return np.zeros(len(r))
+
+    def spy(kind: str):  # type: ignore[no-untyped-def]
+        def fit(train: Recording) -> Spy:
+            seen.append((kind, train))
+            return Spy()
+
+        return fit
+
+    cross_validate(rec, {"rows": spy("rows"), "state": spy("state")}, stateful={"state"}, smoothing_s=0.0)
+    segments = thermal_segments(rec)
+    rows_seen = [r for kind, r in seen if kind == "rows"]
+    state_seen = [r for kind, r in seen if kind == "state"]
+    for seg, train in zip(segments, rows_seen, strict=True):
+        held_times = rec.time_s[seg.start : seg.stop]
+        assert not np.isin(train.time_s, held_times).any()
+        assert len(train) == len(rec) - (seg.stop - seg.start)
+    for seg, train in zip(segments, state_seen, strict=True):
+        # the whole temperature history, the held-out output replaced by the training rows' cubic
+        assert np.array_equal(train.temp_c, rec.temp_c)
+        expected = impute_held_out(rec, training_rows(len(rec), seg)).accel_mg
+        assert np.array_equal(train.accel_mg, expected)
+        assert not np.allclose(train.accel_mg[seg.start : seg.stop], rec.accel_mg[seg.start : seg.stop])
+
+
+def test_a_monotone_ramp_cannot_be_cross_validated() -> None:
+    temp = np.linspace(-20, 60, 4000)
+    rec = Recording(
+        {"time_s": np.arange(temp.size) / RATE_HZ, "temp_c": temp, "accel_mg": np.zeros(temp.size)},
+        {"sample_rate_hz": "2.0"},
+        "ramp.csv",
+    )
+    with pytest.raises(UserError, match=r"ramp\.csv: cross-validation needs at least 2 thermal segments"):
+        cross_validate(rec, {}, stateful=set(), smoothing_s=0.0)
+
+
+def test_auto_chooses_none_where_nothing_helps_and_a_polynomial_where_one_does() -> None:
+    flat = chamber_run(drift_mg=np.zeros(profile_temperature().size))
+    choice = select(flat, labels=("none", "poly1", "poly3"))
+    assert choice.chosen == NONE  # every fit adds its own noise: none is never beaten on pure noise
+    assert "no compensation" in choice.reason
+    drifting = select(chamber_run(), labels=("none", "poly1", "poly2", "poly3"))
+    assert drifting.chosen in ("poly2", "poly3")
+    chosen_cv = drifting.cv.results[drifting.chosen].cv_rms
+    assert chosen_cv < drifting.cv.results[UNCOMPENSATED].cv_rms
+    assert all(chosen_cv <= 1.02 * drifting.cv.results[c].cv_rms for c in ("poly1", "poly2", "poly3"))
+
+
+def test_the_rule_prefers_the_simpler_of_two_equal_candidates() -> None:
+    cv = select(chamber_run(), labels=("none", "poly2", "poly3")).cv
+    cv.results["poly2"].folds = list(cv.results["poly3"].folds)  # identical figures
+    assert choose(cv)[0] == "poly2"
+
+
+def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "trainer.cli", *args], cwd=cwd, capture_output=True, text=True, check=False
+    )
+
+
+def test_fit_auto_and_export_of_an_uncompensated_channel(tmp_path: Path) -> None:
+    temp = profile_temperature()
+    rng = np.random.default_rng(3)
+    d = temp - 25.0
+    columns = {
+        "time_s": np.arange(temp.size) / RATE_HZ,
+        "temp_c": temp,
+        "accel0_z_mg": -1000.0 + 0.1 * d + 3e-3 * d**2 + rng.normal(0, 0.05, temp.size),
+        "gyro0_x_dps": rng.normal(0.0, 0.01, temp.size),  # no drift: nothing can help it
+    }
+    columns["accel_mg"] = columns["accel0_z_mg"]
+    write_recording(Recording(columns, {"sample_rate_hz": "2.0"}, "imu"), tmp_path / "imu.csv")
+    fit = _run(
+        "fit",
+        "--method",
+        "auto",
+        "--candidates",
+        "none,poly1,poly3",
+        "imu.csv",
+        "--channels",
+        "all",
+        "-o",
+        "m",
+        cwd=tmp_path,
+    )
+    assert fit.returncode == 0, fit.stderr
+    assert "auto: chose none" in fit.stdout and "deg/s" in fit.stdout
+    index = json.loads((tmp_path / "m" / "channels.json").read_text())
+    chosen = {c["channel"]: c["auto_chose"] for c in index["channels"]}
+    assert chosen["gyro0_x"] == NONE and chosen["accel0_z"] != NONE
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "codegen.cli",
+            "export",
+            "m",
+            "--channels",
+            "all",
+            "--format",
+            "px4-params",
+            "--device-id",
+            "accel0=1,gyro0=2",
+            "-o",
+            "params",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "gyro0_x is exported as the identity" in out.stdout
+    params = (tmp_path / "params" / "px4_thermal.params").read_text()
+    assert "\tTC_G_ENABLE\t0\t" in params and "\tTC_A_ENABLE\t1\t" in params
+    bad = _run("fit", "--method", "poly3", "--candidates", "none", "imu.csv", "-o", "x.pt", cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--candidates applies" in bad.stderr
+
+
+def test_compare_without_validation_cross_validates(tmp_path: Path) -> None:
+    write_recording(chamber_run(), tmp_path / "run.csv")
+    out = _run(
+        "compare", "run.csv", "--methods", "poly3,pla,dlstm", "--out-dir", "cv", "--quiet", cwd=tmp_path
+    )
+    assert out.returncode == 0, out.stderr
+    data = json.loads((tmp_path / "cv" / "crossval.json").read_text())
+    assert set(data["methods"]) == {UNCOMPENSATED, "poly3", "pla"} and "dlstm" in data["skipped"]
+    assert len(data["segments"]) == 3
+    report = (tmp_path / "cv" / "report.md").read_text()
+    assert "| uncompensated |" in report and "not cross-validated" in report
+    refused = _run("compare", "run.csv", "--inject", "steps", "--out-dir", "x", cwd=tmp_path)
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr and not (tmp_path / "x").exists()

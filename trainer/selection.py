@@ -1,0 +1,177 @@
+"""``--method auto``: per channel, the compensator that cross-validation says leaves the least drift.
+
+The candidates (:data:`CANDIDATES`, declared here once): no compensation, polynomials of order 1
+to 3 in temperature (the flight stacks' cubic and the lower orders that do not over-fit a short
+range), PLA and the physics compensator with its automatic structure. Each is cross-validated over
+the run's thermal segments (:mod:`trainer.scoring.crossval`); the choice is the simplest candidate
+whose pooled cross-validated drift left is within :data:`TOLERANCE` of the best one (a more
+complex model must earn its place), and never one that leaves more than no compensation: then the
+choice is ``none``, which exports as the identity (C) or a disabled entry (flight-stack parameters).
+
+What is fitted and saved is the chosen candidate, trained on the whole run; the checkpoint's
+``train_stats.selection`` keeps the table that chose it (:func:`selection_record`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from trainer.data.recording import Recording
+from trainer.reference import OffsetPolicy
+from trainer.scoring.crossval import (
+    UNCOMPENSATED,
+    CrossValidation,
+    cross_validate,
+    segment_lines,
+    table_lines,
+)
+
+AUTO = "auto"  # the selector's name on the command line (trainer fit --method auto)
+NONE = "none"  # the candidate "no compensation" (a polynomial of order 0: zero drift)
+TOLERANCE = 0.02  # a candidate within 2 % of the best counts as as good (the simpler one wins)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate: a label, the registered method that implements it and its options."""
+
+    label: str
+    method: str
+    options: dict[str, Any] = field(default_factory=dict)
+    stateful: bool = False  # needs the run's whole temperature history (imputed hold-out)
+
+
+# In order of complexity: the first one within TOLERANCE of the best is chosen.
+CANDIDATES: tuple[Candidate, ...] = (
+    Candidate(NONE, "poly3", {"degree": 0}),
+    Candidate("poly1", "poly3", {"degree": 1}),
+    Candidate("poly2", "poly3", {"degree": 2}),
+    Candidate("poly3", "poly3"),
+    Candidate("pla", "pla"),
+    Candidate("physics", "physics", stateful=True),
+)
+
+
+def candidate(label: str) -> Candidate:
+    return next(c for c in CANDIDATES if c.label == label)
+
+
+def candidate_list(text: str) -> tuple[str, ...]:
+    """``--candidates``: a comma list of candidate labels (argparse type: a bad one is one line)."""
+    import argparse
+
+    labels = tuple(dict.fromkeys(x.strip() for x in text.split(",") if x.strip()))
+    known = [c.label for c in CANDIDATES]
+    bad = [x for x in labels if x not in known]
+    if bad or not labels:
+        raise argparse.ArgumentTypeError(
+            f"unknown candidate {bad[0] if bad else '(empty)'!r}; choose from {','.join(known)}"
+        )
+    return labels
+
+
+@dataclass
+class Selection:
+    """The cross-validation of every candidate and the one chosen, with the reason in one line."""
+
+    cv: CrossValidation
+    chosen: str
+    reason: str
+
+    @property
+    def candidate(self) -> Candidate:
+        return candidate(self.chosen)
+
+    def table(self) -> list[str]:
+        return table_lines(self.cv, chosen=UNCOMPENSATED if self.chosen == NONE else self.chosen)
+
+
+def choose(cv: CrossValidation) -> tuple[str, str]:
+    """(label, reason): the simplest candidate within :data:`TOLERANCE` of the best pooled figure;
+    ``none`` when no candidate leaves less than the uncompensated output."""
+    unit = cv.unit
+    raw = cv.results[UNCOMPENSATED].cv_rms
+    scores = {
+        c.label: cv.results[c.label].cv_rms for c in CANDIDATES if c.label in cv.results and c.label != NONE
+    }
+    best = min(scores.values(), default=raw)
+    if not best < raw:
+        return NONE, (
+            f"no candidate leaves less drift than no compensation held out (uncompensated {raw:.4g} {unit}, "
+            f"best candidate {best:.4g} {unit}): the channel is left uncompensated"
+        )
+    for label, score in scores.items():
+        if score <= best * (1.0 + TOLERANCE):
+            return label, (
+                f"{label} leaves {score:.4g} {unit} cross-validated (uncompensated {raw:.4g} {unit}, best "
+                f"{best:.4g} {unit}; the simplest candidate within {100 * TOLERANCE:g} % of the best is chosen)"
+            )
+    raise AssertionError("the best candidate is within the tolerance of itself")
+
+
+def select(
+    rec: Recording,
+    *,
+    policy: OffsetPolicy | None = None,
+    smoothing_s: float = 0.0,
+    unit: str = "mg",
+    labels: tuple[str, ...] | None = None,
+    log: Callable[[str], None] | None = None,
+) -> Selection:
+    """Cross-validate the candidates (all, or ``labels``) on ``rec`` and choose one."""
+    from trainer.fitting import fit_compensator
+
+    chosen = [c for c in CANDIDATES if labels is None or c.label in labels]
+
+    def fitter(c: Candidate) -> Callable[[Recording], object]:
+        return lambda train: fit_compensator(c.method, train, c.options, policy)
+
+    cv = cross_validate(
+        rec,
+        {c.label: fitter(c) for c in chosen if c.label != NONE},
+        stateful={c.label for c in chosen if c.stateful},
+        smoothing_s=smoothing_s,
+        unit=unit,
+        log=log,
+    )
+    label, reason = choose(cv)
+    return Selection(cv, label, reason)
+
+
+def selection_record(selection: Selection) -> dict[str, Any]:
+    """What the checkpoint keeps of the choice (plain values)."""
+    return {
+        "chosen": selection.chosen,
+        "method": selection.candidate.method,
+        "options": dict(selection.candidate.options),
+        "reason": selection.reason,
+        "rule": f"simplest candidate within {100 * TOLERANCE:g} % of the best pooled cross-validated drift left; "
+        "none when no candidate beats no compensation",
+        "crossval": selection.cv.to_dict(),
+    }
+
+
+def record_lines(record: dict[str, Any]) -> list[str]:
+    """The lines a user reads of a saved selection: segments, the table, the choice."""
+    cv = CrossValidation.from_dict(record["crossval"])
+    chosen = UNCOMPENSATED if record["chosen"] == NONE else str(record["chosen"])
+    return [
+        f"auto: cross-validation over {len(cv.segments)} thermal segments of {cv.source}:",
+        *segment_lines(cv.segments),
+        *table_lines(cv, chosen=chosen),
+        f"auto: chose {record['chosen']}: {record['reason']}",
+    ]
+
+
+def identity_note(train_stats: Any, source: str) -> str | None:
+    """One line for an export of a model that ``auto`` left uncompensated (None otherwise)."""
+    record = train_stats.get("selection") if isinstance(train_stats, dict) else None
+    if not isinstance(record, dict) or record.get("chosen") != NONE:
+        return None
+    channel = train_stats.get("channel", "the channel")
+    return (
+        f"{source}: {channel} is exported as the identity (C: zero correction; flight-stack parameters: zero "
+        f"coefficients, the sensor disabled where every axis is so): {record.get('reason', 'auto chose none')}"
+    )
