@@ -1,0 +1,87 @@
+"""``--method auto`` on every channel of the bundled real run, cross-validated over its segments.
+
+The recording (``shared/data/real/``, one 71 min cycle 51.6 -> -17.6 -> 74.0 -> 36.3 degC at
+1.98 Hz, static; 3 accelerometer axes in mg, 3 gyroscope axes in deg/s) is imported with all its
+channels as ``trainer import --preset tofupilot --channels all`` does. For each channel every
+candidate of :mod:`trainer.selection` is cross-validated over the three thermal segments (cooling,
+heating, cooling; each held out in turn, trained on the other two), exactly as ``trainer fit
+--method auto`` does, and the table is printed with the choice, each candidate's per-segment
+figures at their natural start (cold for the first segment, warm after), warm and cold medians,
+and the mean fit time per fold on this machine.
+
+The last block checks the issue-20 targets: auto within 2 % of the better of (cubic,
+uncompensated) or better on every segment, warm and cold; physics against the cubic (median).
+
+    python bench/bench_real_crossval.py [--channels accel0_z,gyro0_x] [--markdown table.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from trainer.data.channels import channel_view, select_channels
+from trainer.data.importer import import_foreign, options_with_preset
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.scoring.crossval import UNCOMPENSATED
+from trainer.selection import NONE, select
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--channels", default="all")
+    parser.add_argument("--markdown", type=Path)
+    args = parser.parse_args()
+    options = options_with_preset("tofupilot", channels=("all",))
+    rec = import_foreign(REAL, options)
+    wanted = tuple(args.channels.split(",")) if args.channels != "all" else ("all",)
+    out = [f"machine: {platform.processor() or platform.machine()}, {platform.python_version()}", ""]
+    checks: list[str] = []
+    for channel in select_channels(rec, wanted):
+        view = channel_view(rec, channel)
+        start = time.perf_counter()
+        selection = select(view, smoothing_s=PAPER_RUN_SMOOTHING_S, unit=channel.label)
+        seconds = time.perf_counter() - start
+        cv = selection.cv
+        out += [f"## {channel.name} ({channel.label}): auto chose {selection.chosen} ({seconds:.0f} s)", ""]
+        out += selection.table()
+        out += [
+            "",
+            "fit time per fold (s): "
+            + ", ".join(f"{n} {r.fit_seconds:.1f}" for n, r in cv.results.items() if n != UNCOMPENSATED),
+            "",
+        ]
+        chosen = UNCOMPENSATED if selection.chosen == NONE else selection.chosen
+        raw, cubic, auto = cv.results[UNCOMPENSATED], cv.results["poly3"], cv.results[chosen]
+        for mode in ("warm_rms", "cold_rms"):
+            ref = np.minimum([getattr(f, mode) for f in raw.folds], [getattr(f, mode) for f in cubic.folds])
+            mine = np.array([getattr(f, mode) for f in auto.folds])
+            worst = float(np.max(mine / ref - 1.0))
+            checks.append(
+                f"{channel.name} {mode[:4]}: auto vs better of (cubic, none), worst segment {100 * worst:+.1f} % "
+                f"({'met' if worst <= 0.02 else 'NOT met'})"
+            )
+        physics = np.median(cv.results["physics"].natural()) / np.median(cubic.natural()) - 1.0
+        auto_vs_cubic = np.median(auto.natural()) / np.median(cubic.natural()) - 1.0
+        checks.append(
+            f"{channel.name}: median over segments, physics {100 * physics:+.1f} % and auto {100 * auto_vs_cubic:+.1f} % "
+            "against the cubic"
+        )
+        print("\n".join(out[-len(selection.table()) - 4 :]), flush=True)
+    out += ["## Targets", "", *[f"- {c}" for c in checks]]
+    text = "\n".join(out)
+    print("\n".join(["", "## Targets", *checks]))
+    if args.markdown:
+        args.markdown.write_text(text + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
