@@ -35,4 +35,9 @@ trainer simulate --config "$REALISTIC" --protocol realistic-valid --seed 14 --in
 trainer compare "$OUT/realistic-train.npz" "$OUT/realistic-valid.npz" \
   --input-test "$OUT/realistic-input-steps.npz" --input-test "$OUT/realistic-input-motion.npz" \
   --out-dir "$OUT/realistic" "$@"
-echo "pipeline done: open $OUT/comparison/report.md and $OUT/realistic/report.md"
+# 4. the same experiment's gyroscope channel (gyro0_x in realistic.toml: the lag, rate and branch
+#    offset measured on the real run's gyro x, in deg/s): the cubic against the physics
+#    compensator on it (about 20 s). Report in $OUT/realistic-gyro/gyro0_x/.
+trainer compare "$OUT/realistic-train.npz" "$OUT/realistic-valid.npz" --channels gyro0_x \
+  --methods pla,poly3,physics --out-dir "$OUT/realistic-gyro"
+echo "pipeline done: open $OUT/comparison/report.md, $OUT/realistic/report.md and $OUT/realistic-gyro/gyro0_x/report.md"

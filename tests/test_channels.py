@@ -168,9 +168,6 @@ def test_refusals_say_why(imu: dict[str, Path], tmp_path: Path, capsys: pytest.C
                                   str(tmp_path / "d")])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and "baro0" in err and "recursive" in err and "altitude" in err
-    code = run_cli(trainer_main, ["diagnose", str(imu["rec"]), "--channels", "gyro0_x"])
-    err = capsys.readouterr().err
-    assert code == 2 and "gyro0_x" in err and "catalogue" in err
 
 
 def test_compare_and_diagnose_per_channel_outputs(

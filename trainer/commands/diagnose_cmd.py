@@ -7,7 +7,6 @@ import math
 from typing import TYPE_CHECKING
 
 from trainer.commands.channel_options import add_channels_option, run_per_channel
-from trainer.data.channels import Channel
 
 if TYPE_CHECKING:
     from trainer.diagnose.result import Diagnosis
@@ -47,7 +46,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="F",
         help="score both models on the last fraction F of the run after fitting on the rest (default 0.25; 0: off)",
     )
-    add_channels_option(parser, "diagnose the channel (accelerometer channels: the catalogue is in mg)")
+    add_channels_option(
+        parser, "diagnose the channel (parameters in its unit: amp_dps on a gyroscope, amp_pa on a barometer)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -67,20 +68,10 @@ def _check_outputs(args: argparse.Namespace) -> None:
             raise UserError(f"{args.report}: parent directory {parent} does not exist")
 
 
-def _refusal(channel: Channel) -> str | None:
-    if channel.unit == "mg":
-        return None
-    return (
-        f"{channel.name}: diagnose names effects of the physics catalogue (shared/specs/physics-catalogue.md), "
-        f"an accelerometer's, with sizes and plausibility limits in mg; a {channel.label} channel has no "
-        f"catalogue to diagnose against (fit and compare it instead)"
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(
-            args, run, recordings=("recording",), out_dirs=("report",), out_files=("json",), refuse=_refusal
+            args, run, recordings=("recording",), out_dirs=("report",), out_files=("json",)
         )
     from trainer.data.recording_io import read_recording
     from trainer.diagnose import diagnose
@@ -107,8 +98,10 @@ def summary(result: Diagnosis) -> str:
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
     if result.left_out:
         for e in result.left_out:
-            params = ", ".join(f"{k}={v:.4g}" for k, v in e.params.items())
-            extra = f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
+            params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(e.params).items())
+            extra = result.label + (
+                f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
+            )
             extra += f" (implausible: {'; '.join(e.flags)})" if e.flags else ""
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
@@ -119,16 +112,18 @@ def summary(result: Diagnosis) -> str:
                 f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags
             ]
             lines.append(
-                f"ambiguous (not named): {a.effects[0]} fits best but implausibly ({'; '.join(a.implausible.flags)}); "
-                f"plausible in its place, BIC: {', '.join(shown[:3]) or 'none'}"
+                f"ambiguous (not named): {a.effects[0]}{result.label} fits best but implausibly "
+                f"({'; '.join(a.implausible.flags)}); plausible in its place, BIC: {', '.join(shown[:3]) or 'none'}"
             )
         else:
-            lines.append(f"ambiguous: {' vs '.join(a.effects)} (BIC {a.delta_bic:+.1f})")
+            lines.append(f"ambiguous: {' vs '.join(a.effects)}{result.label} (BIC {a.delta_bic:+.1f})")
     for n in result.not_identifiable:
-        lines.append(f"not identifiable: {n.effect} ({n.recommended_test or n.reason})")
+        lines.append(f"not identifiable: {n.effect}{result.label} ({n.recommended_test or n.reason})")
     for t in result.tested:
         if t.note.startswith("weakly identifiable"):
-            lines.append(f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}', 1)}")
+            lines.append(
+                f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}{result.label}', 1)}"
+            )
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} mg, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"

@@ -120,16 +120,40 @@ def select_channels(rec: Recording, wanted: tuple[str, ...]) -> list[Channel]:
     return [available[name] for name in wanted]
 
 
+def truth_columns(name: str, unit: str) -> dict[str, str]:
+    """``{one-channel truth column: the recording's column}`` of channel ``name``.
+
+    The format's ``true_*`` columns describe the file's ``accel_mg``; a simulated channel's own
+    ground truth is ``true_<channel>_drift_<unit>``, ``true_<channel>_noise_<unit>``,
+    ``true_<channel>_<unit>`` (the true input) and ``true_<channel>_pm_temp_c``
+    (``trainer simulate`` with ``[channels]``), which its view carries under the one-channel names.
+    """
+    return {
+        "true_accel_mg": f"true_{name}_{unit}",
+        "true_drift_mg": f"true_{name}_drift_{unit}",
+        "true_noise_mg": f"true_{name}_noise_{unit}",
+        "true_pm_temp_c": f"true_{name}_pm_temp_c",
+    }
+
+
 def channel_view(rec: Recording, channel: Channel) -> Recording:
     """The one-channel recording of ``channel``: its data as ``accel_mg`` (in its own unit), its
-    temperature as ``temp_c``, metadata ``channel``/``unit``; other channels and truth dropped
-    (the format's truth columns describe the file's ``accel_mg``, not this channel)."""
+    temperature as ``temp_c``, metadata ``channel``/``unit``; other channels dropped, and the
+    file's truth too (it describes ``accel_mg``) except the channel's own (:func:`truth_columns`)."""
     columns = {
         "time_s": rec.time_s,
         "temp_c": rec.columns[channel.temp_column],
         "accel_mg": rec.columns[channel.column],
     }
     columns.update((name, rec.columns[name]) for name in _KEPT if name in rec.columns)
+    own_truth = {
+        view: column
+        for view, column in truth_columns(channel.name, channel.unit).items()
+        if column in rec.columns
+    }
+    if own_truth and channel.temp_column == "temp_c" and "true_temp_c" in rec.columns:
+        own_truth["true_temp_c"] = "true_temp_c"
+    columns.update((view, rec.columns[column]) for view, column in own_truth.items())
     meta = dict(rec.meta)
     meta["channel"] = channel.name
     meta["unit"] = channel.unit

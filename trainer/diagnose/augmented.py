@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.gls import NOISE_CANDIDATES
@@ -13,7 +14,8 @@ from trainer.diagnose.model import ModelFit, catalogue_effects
 from trainer.diagnose.profile import Profile
 from trainer.physics.catalogue import DEFINITIONS, NOISE, WHITE_NOISE
 from trainer.physics.catalogue.base import catalogue_params
-from trainer.physics.config import NoiseConfig, PhysicsConfig, ProtocolConfig, RecordingConfig
+from trainer.physics.catalogue.units import CATALOGUE_UNIT
+from trainer.physics.config import ChannelConfig, NoiseConfig, PhysicsConfig, ProtocolConfig, RecordingConfig
 from trainer.physics.effects import EFFECT_PARAMETERS
 from trainer.physics.profiles import SegmentSpec
 
@@ -24,7 +26,24 @@ TEMP_DIGITS = 4  # setpoints in the written protocol (degC)
 def augmented_config(
     sim: PhysicsConfig | None, final: ModelFit, data: BlockData, profile: Profile, rec: Recording
 ) -> PhysicsConfig:
-    """The user's simulation with the fitted (and found) effects, ready for ``trainer simulate``."""
+    """The user's simulation with the fitted (and found) effects, ready for ``trainer simulate``.
+
+    A non-mg channel's physics goes into its ``[channels.<name>]`` table (parameters in its unit);
+    the user's other tables are kept.
+    """
+    unit, name = channel_unit(rec), rec.meta.get("channel")
+    own = sim.for_channel(name, unit) if sim is not None else None
+    config = _augmented(own, final, data, profile, rec)
+    if unit == CATALOGUE_UNIT or name is None:
+        return config
+    channel = ChannelConfig(name, config.effects, config.noise)
+    base = sim if sim is not None else replace(config, effects=(), noise=())
+    return base.with_channel(channel)
+
+
+def _augmented(
+    sim: PhysicsConfig | None, final: ModelFit, data: BlockData, profile: Profile, rec: Recording
+) -> PhysicsConfig:
     effects = catalogue_effects(final)
     order = list(EFFECT_PARAMETERS)
     effects = sorted(effects, key=lambda e: order.index(e.identifier))

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose.fit_summary import FitSummary
 from trainer.diagnose.holdout import Holdout, HoldoutScore
 from trainer.diagnose.locate import AllanComparison
@@ -15,6 +16,7 @@ from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Ambiguity, Diagnosis, LeftOut, Tested
 from trainer.diagnose.select import AMBIGUOUS, THRESHOLD
 from trainer.diagnose.where import AllanWhere
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import MULTI_INSTANCE, EffectConfig
 
 CRITERION = (
@@ -202,7 +204,31 @@ def effects(calibrated: list[EffectConfig], noise: dict[str, dict[str, float]]) 
 
 
 def document(d: Diagnosis) -> dict[str, Any]:
-    """The ``--json`` document (numbers rounded; NaN left for :func:`json_text`)."""
+    """The ``--json`` document (numbers rounded; NaN left for :func:`json_text`).
+
+    On a non-mg channel every key that names a quantity in mg names it in the channel's unit
+    (``amp_mg`` -> ``amp_dps``, ``rms_block_mg`` -> ``rms_block_dps``: the catalogue's one renaming,
+    :func:`~trainer.physics.catalogue.units.channel_param_name`), and ``channel`` says which.
+    """
+    out = _document(d)
+    if d.unit == CATALOGUE_UNIT:
+        return out
+    renamed = _renamed_keys(out, d.unit)
+    channel: dict[str, Any] = {"name": d.channel, "unit": d.unit, "label": UNIT_LABELS[d.unit]}
+    if d.scale is not None:
+        channel["cubic_drift_span"] = sig(d.scale.drift_span, 6)
+    return {"channel": channel, **renamed}
+
+
+def _renamed_keys(value: Any, unit: str) -> Any:
+    if isinstance(value, dict):
+        return {channel_param_name(str(k), unit): _renamed_keys(v, unit) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_renamed_keys(v, unit) for v in value]
+    return value
+
+
+def _document(d: Diagnosis) -> dict[str, Any]:
     data = d.data
     return {
         "recording": {

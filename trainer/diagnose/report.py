@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose import document
 from trainer.diagnose.document import json_text
 from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
@@ -23,6 +24,7 @@ from trainer.diagnose.result import Diagnosis, LeftOut
 from trainer.diagnose.select import THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output
+from trainer.physics.catalogue.units import channel_param_name
 from trainer.physics.config import config_to_toml
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
@@ -56,10 +58,10 @@ def _fmt_where(where: list[Region | AllanWhere]) -> str:
     return "; ".join(parts) or "-"
 
 
-def _left_out_lines(entry: LeftOut) -> list[str]:
+def _left_out_lines(entry: LeftOut, d: Diagnosis) -> list[str]:
     ev = entry.evidence
     lines = [
-        f"- **{entry.effect}**: {_fmt_params(entry.params)}. Evidence: BIC -{ev.delta_bic_when_added:.1f} "
+        f"- **{entry.effect}**{d.label}: {_fmt_params(d.params(entry.params))}. Evidence: BIC -{ev.delta_bic_when_added:.1f} "
         f"when added, +{ev.delta_bic_when_dropped:.1f} when dropped from the final model. "
         f"Where: {_fmt_where(entry.where)}."
     ]
@@ -85,6 +87,16 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         f"{data.full_t.size} rows at {data.fs:g} Hz, {data.duration_s:.0f} s; analysed as {data.n} "
         f"block means of {data.block_s:.3g} s. Starting model: {', '.join(d.baseline.identifiers)}.",
         "",
+        *(
+            [
+                f"Channel {d.channel} in {UNIT_LABELS[d.unit]}: every amplitude is in {UNIT_LABELS[d.unit]} "
+                f"(`{channel_param_name('amp_mg', d.unit)}`, ...), plausible up to the channel's cubic drift span"
+                + (f" of {d.scale.drift_span:.4g} {UNIT_LABELS[d.unit]} over the run." if d.scale else "."),
+                "",
+            ]
+            if d.label
+            else []
+        ),
         "Criterion: " + document.CRITERION + f"; an effect is added when the BIC drops by at least "
         f"{THRESHOLD:g}.",
         "",
@@ -94,18 +106,18 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     if not d.left_out:
         lines.append("Nothing: the recording shows no structure beyond the calibrated simulation.")
     for entry in d.left_out:
-        lines += _left_out_lines(entry)
+        lines += _left_out_lines(entry, d)
     lines += ["", "## Ambiguous", ""]
-    lines += [f"- {' vs '.join(a.effects)}: {a.reason}" for a in d.ambiguous] or ["None."]
+    lines += [f"- {' vs '.join(a.effects)}{d.label}: {a.reason}" for a in d.ambiguous] or ["None."]
     lines += ["", "## Not identifiable from this temperature profile", ""]
     lines += [
-        f"- {n.effect}: {n.reason}."
+        f"- {n.effect}{d.label}: {n.reason}."
         + (f" Test that would identify it: {n.recommended_test}." if n.recommended_test else "")
         for n in d.not_identifiable
     ] or ["None."]
     if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
-        lines += [f"- {n.effect}: {n.reason}" for n in d.not_supported]
+        lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]
     before, after = d.before, d.after
     lines += [
         "",

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose.baseline import Baseline
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.fit_summary import FitSummary
@@ -12,6 +14,7 @@ from trainer.diagnose.model import ModelFit
 from trainer.diagnose.profile import Profile, Region
 from trainer.diagnose.select import Selection
 from trainer.diagnose.where import AllanWhere
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_params
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EffectConfig
 
@@ -111,3 +114,18 @@ class Diagnosis:
     holdout: Holdout | None
     seconds: float
     notes: list[str] = field(default_factory=list)
+    channel: str | None = None  # the channel of a one-channel view (None: a one-axis recording)
+    unit: str = "mg"  # the unit suffix of the recording's values (mg, dps, pa): names every amplitude
+    scale: ChannelScale | None = None  # what a non-mg channel's amplitudes were judged against
+
+    def params(self, values: Mapping[str, float]) -> dict[str, float]:
+        """Catalogue-named parameters as this channel names them (``amp_mg`` -> ``amp_dps``)."""
+        return channel_params(values, self.unit)
+
+    @property
+    def label(self) -> str:
+        """`` [gyro0_x, deg/s]``: what a report prints beside every finding on a non-mg channel
+        (empty on mg, whose reports stay as they were: the catalogue's own unit)."""
+        if self.unit == CATALOGUE_UNIT:
+            return ""
+        return f" [{self.channel or 'channel'}, {UNIT_LABELS[self.unit]}]"

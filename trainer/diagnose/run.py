@@ -8,11 +8,14 @@ simulation in :mod:`.augmented`; the result types in :mod:`.result`, their JSON 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from functools import partial
 from typing import cast
 
 import numpy as np
 from tqdm import tqdm
 
+from trainer.data.channels import UNIT_LABELS, channel_unit
 from trainer.data.recording import Recording
 from trainer.diagnose.augmented import augmented_config
 from trainer.diagnose.baseline import build_baseline
@@ -21,7 +24,6 @@ from trainer.diagnose.fit_summary import FitSummary, summarise
 from trainer.diagnose.holdout import holdout_check
 from trainer.diagnose.implausible import resolve_implausible
 from trainer.diagnose.model import (
-    PLAUSIBLE,
     ModelFit,
     catalogue_effects,
     fit_model,
@@ -57,21 +59,41 @@ from trainer.physics.catalogue import (  # the finder's order and advice, per ef
     CANDIDATE_ORDER,
     DEFINITIONS,
     EFFECTS,
+    PARAMETERS,
+    flagged_range,
 )
 from trainer.physics.catalogue.base import catalogue_params
+from trainer.physics.catalogue.units import ChannelScale, channel_param_name
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
 
 
-def _param_flags(effect: EffectConfig) -> list[str]:
+def _param_flags(effect: EffectConfig, scale: ChannelScale | None = None) -> list[str]:
+    """One line per parameter outside its plausible range, named as the channel names it."""
     flags = []
     for name, value in effect.params.items():
-        bounds = PLAUSIBLE.get((effect.identifier, name))
+        bounds = flagged_range(effect.identifier, name, scale)
         if bounds and not (bounds[0] <= abs(value) <= bounds[1]):
-            flags.append(
-                f"{name} = {value:.4g} is outside the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}"
-            )
+            if scale is None or bounds == PARAMETERS[(effect.identifier, name)].plausible:
+                flags.append(
+                    f"{channel_param_name(name, scale.unit if scale else 'mg')} = {value:.4g} is outside "
+                    f"the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}"
+                )
+            else:
+                flags.append(
+                    f"{channel_param_name(name, scale.unit)} = {value:.4g} is outside the plausible "
+                    f"0..{bounds[1]:.4g} (its contribution would exceed the channel's cubic drift "
+                    f"span of {scale.drift_span:.4g} {UNIT_LABELS[scale.unit]} over the run)"
+                )
     return flags
+
+
+def channel_scale(rec: Recording, data: BlockData) -> ChannelScale | None:
+    """What a non-mg channel's amplitudes are judged against (None on an mg channel)."""
+    unit = channel_unit(rec)
+    if unit == "mg":
+        return None
+    return ChannelScale.measure(unit, data.temperature(True), data.accel, data.rate(True))
 
 
 # ------------------------------------------------------------------------------------ main
@@ -100,6 +122,9 @@ def _diagnose(
 ) -> Diagnosis:
     started = time.perf_counter()
     rec = rec.without_truth()
+    user_sim = sim
+    if sim is not None:  # a gyroscope's or barometer's physics is its [channels.<name>] table
+        sim = sim.for_channel(rec.meta.get("channel"), channel_unit(rec))
     stages = tqdm(total=5, desc="diagnose", unit="stage", disable=None if progress else True, leave=False)
     t_axis = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
     probe = build_blocks(rec, max_blocks=max_blocks)
@@ -135,9 +160,11 @@ def _diagnose(
     after = summarise(final, profile, selection.final_ml.noise_params(), own=selection.final_ml)
     after.bic_common = final.bic
 
-    left_out = _left_out(selection, data, profile, baseline_common, cov_final, before)
+    scale = channel_scale(rec, data)
+    flags = partial(_param_flags, scale=scale)
+    left_out = _left_out(selection, data, profile, baseline_common, cov_final, before, flags)
     # An implausible best fit is not named: its plausible confounders are fitted in its place.
-    left_out, implausible = resolve_implausible(selection, data, identifiable, left_out, _param_flags)
+    left_out, implausible = resolve_implausible(selection, data, identifiable, left_out, flags)
     mismatch = locate_mismatch(baseline_common, data, profile, cov_final, before.allan)
     unexplained = locate_mismatch(final, data, profile, cov_final, after.allan)
     stages.update()
@@ -157,7 +184,7 @@ def _diagnose(
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))
         for n in baseline_support(baseline_common, data)
     ]
-    augmented = augmented_config(sim, selection.final_ml, data, profile, rec)
+    augmented = augmented_config(user_sim, selection.final_ml, data, profile, rec)
     holdout = holdout_check(baseline_common, final, data, holdout_fraction) if holdout_fraction > 0 else None
     stages.update()
     stages.close()
@@ -190,6 +217,9 @@ def _diagnose(
         holdout=holdout,
         seconds=time.perf_counter() - started,
         notes=notes,
+        channel=rec.meta.get("channel"),
+        unit=channel_unit(rec),
+        scale=scale,
     )
 
 
@@ -216,6 +246,7 @@ def _left_out(
     baseline_fit: ModelFit,
     cov: np.ndarray,
     before: FitSummary,
+    param_flags: Callable[[EffectConfig], list[str]],
 ) -> list[LeftOut]:
     final = selection.final
     effects_by_index = {}
@@ -249,7 +280,7 @@ def _left_out(
                 special = where_regions(visible, data, profile, baseline_fit.residual, cov)
             where = list(special)
             peak_visible = float(np.max(np.abs(visible)))
-            flags = _param_flags(effect)
+            flags = param_flags(effect)
         ambiguous_with = [
             cast(list[str], a["effects"])[1]
             for a in selection.ambiguous

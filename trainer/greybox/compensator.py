@@ -20,6 +20,7 @@ from typing import Any, Self
 import numpy as np
 
 from trainer.compensator import Compensator
+from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.greybox import structure as structures
@@ -27,6 +28,7 @@ from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.stream import PhysicsModel
 from trainer.greybox.terms import parse_effects
 from trainer.physics.catalogue import BACKBONE
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_params
 from trainer.physics.effects import EffectConfig, drift
 
 
@@ -59,7 +61,7 @@ class PhysicsCompensator(Compensator):
                 raise UserError(
                     f"--from-sim: {path}: no such file (trainer diagnose --report writes augmented.toml)"
                 )
-            return structures.from_sim(path, warmup_allowed=self.warmup)
+            return structures.from_sim(path, rec, warmup_allowed=self.warmup)
         if self.forced is not None:
             return structures.forced(self.forced)
         return structures.auto(rec, warmup_allowed=self.warmup, progress=self.progress)
@@ -133,11 +135,13 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
     final = fitted.structure
     added = [e.identifier for e in final.compensated if e not in chosen.compensated]
     how = chosen.how + (f"; cross-validation added {', '.join(added)}" if added else "")
-    return {
+    unit = fitted.unit  # parameters as the channel names them (amp_dps on a gyroscope)
+    report: dict[str, Any] = {} if unit == CATALOGUE_UNIT else {"unit": unit}
+    return report | {
         "structure": how,
         "effects": [e.identifier for e in fitted.effects],
-        "params": {e.identifier: dict(e.params) for e in fitted.effects},
-        "std": {e.identifier: dict(fitted.std.get(e.identifier, {})) for e in fitted.effects},
+        "params": {e.identifier: channel_params(e.params, unit) for e in fitted.effects},
+        "std": {e.identifier: channel_params(fitted.std.get(e.identifier, {}), unit) for e in fitted.effects},
         "nuisance": [e.identifier for e in fitted.nuisance],
         "at_bound": list(fitted.at_bound),
         "implausible": list(fitted.implausible),
@@ -148,6 +152,8 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """The fit summary a user reads: structure, parameters with one standard deviation, warnings."""
     lines = [f"physics structure: {report['structure']}"]
+    if "unit" in report:
+        lines[0] += f" (parameters in {UNIT_LABELS[report['unit']]})"
     for effect in report["effects"]:
         params = report["params"][effect]
         std = report["std"].get(effect, {})

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
 from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import BlockData, build_blocks
@@ -29,8 +30,9 @@ from trainer.errors import UserError
 from trainer.greybox.select import extend
 from trainer.greybox.structure import Structure
 from trainer.greybox.terms import RATE
-from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, PLAUSIBLE
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, flagged_range
 from trainer.physics.catalogue.base import catalogue_params
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name
 from trainer.physics.effects import EffectConfig
 
 # The shortest rate filter (s): the derivative of a thermometer with 0.01-0.04 degC noise and a
@@ -53,6 +55,7 @@ class FittedPhysics:
     block_s: float
     structure: Structure  # as finally chosen (auto: after the cross-validated stage)
     notes: tuple[str, ...] = ()
+    unit: str = CATALOGUE_UNIT  # the channel's unit suffix: how its parameters are named when shown
 
 
 def _start_term(effect: EffectConfig) -> Term | None:
@@ -125,6 +128,12 @@ def fit_physics(rec: Recording, structure: Structure) -> FittedPhysics:
 def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     rec = rec.without_truth()
     data = build_blocks(rec)
+    unit = channel_unit(rec)
+    scale = (
+        None
+        if unit == CATALOGUE_UNIT
+        else ChannelScale.measure(unit, data.temperature(True), data.accel, data.rate(True))
+    )
     baseline = build_baseline(None, np.asarray(rec.time_s) - float(rec.time_s[0]), data.lattice_lsb_c)
     noise_terms = baseline.noise_terms
     current = fit_model(baseline.terms, noise_terms, data)
@@ -174,11 +183,11 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
             if not term.fixed and (
                 term.nl[j] - lo < BOUND_MARGIN * span or hi - term.nl[j] < BOUND_MARGIN * span
             ):
-                at_bound.append(f"{term.identifier}.{name}")
+                at_bound.append(f"{term.identifier}.{channel_param_name(name, unit)}")
         for name, value in params.items():
-            rng = PLAUSIBLE.get((term.identifier, name))
+            rng = flagged_range(term.identifier, name, scale)
             if rng is not None and not (rng[0] <= abs(value) <= rng[1]):
-                implausible.append(f"{term.identifier}.{name}")
+                implausible.append(f"{term.identifier}.{channel_param_name(name, unit)}")
         config = EffectConfig(term.identifier, params)
         (effects if term.identifier in keep else nuisance).append(config)
         std[term.identifier] = sd
@@ -194,4 +203,5 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         data.block_s,
         structure,
         tuple(notes),
+        unit,
     )

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.greybox.terms import compensated
@@ -51,9 +52,10 @@ def _split(effects: list[EffectConfig], warmup_allowed: bool) -> tuple[tuple[Eff
     return comp, nuisance
 
 
-def from_sim(path: Path, *, warmup_allowed: bool) -> Structure:
-    """The effects of an augmented simulation (``trainer diagnose --report``), as starting values."""
-    cfg = load_config(path)
+def from_sim(path: Path, rec: Recording, *, warmup_allowed: bool) -> Structure:
+    """The effects of an augmented simulation (``trainer diagnose --report``), as starting values
+    (a gyroscope's or barometer's from its ``[channels.<name>]`` table)."""
+    cfg = load_config(path).for_channel(rec.meta.get("channel"), channel_unit(rec))
     effects = [e for e in cfg.effects if e.identifier != BACKBONE]
     comp, nuisance = _split(effects, warmup_allowed)
     return Structure(comp, nuisance, how=f"from {path.name}")

@@ -18,10 +18,13 @@ from typing import Any
 
 import tomli_w
 
+from trainer.data.channels import sort_key
+from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError, atomic_output
 from trainer.fields import TableFields, show
 from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS, excluded
 from trainer.physics.catalogue.base import Param
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import BUILTIN_PROTOCOLS, PROTOCOL_NAMES, SEGMENT_LABELS, SegmentSpec
 
@@ -93,6 +96,32 @@ class NoiseConfig:
 
 
 @dataclass(frozen=True)
+class ChannelConfig:
+    """A further output channel (a gyroscope axis, a barometer) beside ``accel_mg``.
+
+    It shares the recording's temperature chain (``T_die``, ``temp_c``) and has its own effects
+    and noise in its own unit, written in the TOML with the channel's parameter names
+    (``amp_dps``) and held here with the catalogue's (``amp_mg``), so that one formula
+    (:func:`trainer.physics.effects.drift`) serves every channel. Its true input is zero (a static
+    chamber test).
+    """
+
+    name: str  # gyro0_x, baro0: the recording format's channel name
+    effects: tuple[EffectConfig, ...] = ()
+    noise: tuple[NoiseConfig, ...] = ()
+
+    @property
+    def unit(self) -> str:
+        parsed = parse_channel(self.name)
+        assert parsed is not None, "a ChannelConfig is only built from a channel name"
+        return parsed.unit
+
+    @property
+    def column(self) -> str:
+        return f"{self.name}_{self.unit}"
+
+
+@dataclass(frozen=True)
 class PhysicsConfig:
     """Everything the simulator needs besides the seed. An effect is on iff it is listed."""
 
@@ -102,6 +131,7 @@ class PhysicsConfig:
     input: InputConfig = InputConfig()
     effects: tuple[EffectConfig, ...] = ()
     noise: tuple[NoiseConfig, ...] = ()
+    channels: tuple[ChannelConfig, ...] = ()  # further output channels, each in its own unit
     source: str = field(default="<memory>", compare=False)
 
     def effect_instances(self, identifier: str) -> list[EffectConfig]:
@@ -110,17 +140,42 @@ class PhysicsConfig:
     def noise_term(self, identifier: str) -> NoiseConfig | None:
         return next((n for n in self.noise if n.identifier == identifier), None)
 
+    def for_channel(self, name: str | None, unit: str) -> PhysicsConfig:
+        """The physics of one channel as a one-channel configuration (its effects and noise at the
+        top level), for the one-channel code that reads a recording's ``accel_mg`` view.
+
+        A channel with a ``[channels.<name>]`` table gets that table; an mg channel without one the
+        top-level physics (an accelerometer axis, as before); another unit without one is refused:
+        the top-level physics is in mg.
+        """
+        own = next((c for c in self.channels if c.name == name), None)
+        if own is not None:
+            return replace(self, effects=own.effects, noise=own.noise, channels=())
+        if unit == CATALOGUE_UNIT:
+            return self
+        raise UserError(
+            f"{self.source}: no [channels.{name}] table: its [effects] and [noise] are the accelerometer's "
+            f"(mg), not {name}'s ({unit})"
+        )
+
+    def with_channel(self, channel: ChannelConfig) -> PhysicsConfig:
+        """This configuration with ``channel``'s table set (added or replaced)."""
+        others = tuple(c for c in self.channels if c.name != channel.name)
+        return replace(self, channels=tuple(sorted((*others, channel), key=lambda c: sort_key(c.name))))
+
 
 # ----------------------------------------------------------------------------------- reading
 
 
-def _read_params(table: TableFields, spec: tuple[Param, ...]) -> dict[str, float]:
-    table.only(tuple(p.name for p in spec))
+def _read_params(table: TableFields, spec: tuple[Param, ...], unit: str = CATALOGUE_UNIT) -> dict[str, float]:
+    """The parameters of one table, as the channel of ``unit`` names them, under catalogue names."""
+    named = tuple(replace(p, name=channel_param_name(p.name, unit)) for p in spec)
+    table.only(tuple(p.name for p in named))
     params: dict[str, float] = {}
-    for param in spec:
+    for param, catalogue_param in zip(named, spec, strict=True):
         if table.has(param.name) or not param.optional:
-            params[param.name] = table.number(param.name, param.rule, param.default)
-    table.finish(tuple(p.name for p in spec))
+            params[catalogue_param.name] = table.number(param.name, param.rule, param.default)
+    table.finish(tuple(p.name for p in named))
     return params
 
 
@@ -267,7 +322,12 @@ def _read_steps(table: TableFields) -> tuple[tuple[float, float], ...]:
 
 
 def _read_terms(
-    source: str, section: str, data: Any, registry: dict[str, tuple[Param, ...]], multi: frozenset[str]
+    source: str,
+    section: str,
+    data: Any,
+    registry: dict[str, tuple[Param, ...]],
+    multi: frozenset[str],
+    unit: str = CATALOGUE_UNIT,
 ) -> list[tuple[str, dict[str, float]]]:
     if not isinstance(data, dict):
         raise UserError(f"{source}: [{section}] must be a table of [{section}.<identifier>] tables")
@@ -287,21 +347,78 @@ def _read_terms(
             for index, item in enumerate(body):
                 where = f"{section}.{identifier} #{index + 1}"
                 terms.append(
-                    (identifier, _read_params(TableFields(source, item, where), registry[identifier]))
+                    (identifier, _read_params(TableFields(source, item, where), registry[identifier], unit))
                 )
         else:
-            terms.append(
-                (
-                    identifier,
-                    _read_params(TableFields(source, body, f"{section}.{identifier}"), registry[identifier]),
-                )
-            )
+            table = TableFields(source, body, f"{section}.{identifier}")
+            terms.append((identifier, _read_params(table, registry[identifier], unit)))
     order = list(registry)
     terms.sort(key=lambda term: order.index(term[0]))  # stable: instances keep file order
     return terms
 
 
-_SECTIONS = ("recording", "protocol", "temperature", "input", "effects", "noise")
+_SECTIONS = ("recording", "protocol", "temperature", "input", "effects", "noise", "channels")
+_CHANNEL_SECTIONS = ("effects", "noise")
+
+
+def _check_exclusions(source: str, section: str, effects: Sequence[EffectConfig]) -> None:
+    names = [e.identifier for e in effects]
+    for i, first in enumerate(names):
+        for second in names[i + 1 :]:
+            if excluded(first, second):
+                raise UserError(
+                    f"{source}: [{section}.{first}] and [{section}.{second}] describe the same physics twice; "
+                    "keep one"
+                )
+
+
+def _read_channels(source: str, data: Any) -> tuple[ChannelConfig, ...]:
+    """``[channels.<name>.effects.<identifier>]`` and ``[channels.<name>.noise.<identifier>]``."""
+    if not isinstance(data, dict):
+        raise UserError(f"{source}: [channels] must be a table of [channels.<channel>] tables")
+    channels = []
+    for name, body in data.items():
+        parsed = parse_channel(name)
+        if parsed is None:
+            raise UserError(
+                f"{source}: [channels.{name}] is not a channel name of the recording format "
+                "(gyro0_x, accel1_z, baro0, ...)"
+            )
+        if not isinstance(body, dict):
+            raise UserError(f"{source}: [channels.{name}] must be a table")
+        for key in body:
+            if key not in _CHANNEL_SECTIONS:
+                raise UserError(
+                    f"{source}: [channels.{name}] unknown key {key!r} (expected tables: effects, noise)"
+                )
+        section = f"channels.{name}.effects"
+        effects = tuple(
+            EffectConfig(i, p)
+            for i, p in _read_terms(
+                source, section, body.get("effects", {}), EFFECT_PARAMETERS, MULTI_INSTANCE, parsed.unit
+            )
+        )
+        for effect in effects:
+            definition = EFFECTS[effect.identifier]
+            if definition.thermometer is not None or definition.input_param is not None:
+                raise UserError(
+                    f"{source}: [{section}.{effect.identifier}] acts on the recording's thermometer or true "
+                    "input, which a channel shares: give it in [effects]"
+                )
+        _check_exclusions(source, section, effects)
+        noise = tuple(
+            NoiseConfig(i, p)
+            for i, p in _read_terms(
+                source,
+                f"channels.{name}.noise",
+                body.get("noise", {}),
+                NOISE_PARAMETERS,
+                frozenset(),
+                parsed.unit,
+            )
+        )
+        channels.append(ChannelConfig(name, effects, noise))
+    return tuple(sorted(channels, key=lambda c: sort_key(c.name)))
 
 
 def input_setters(effects: Sequence[EffectConfig]) -> list[tuple[EffectConfig, str]]:
@@ -328,14 +445,7 @@ def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
         NoiseConfig(i, p)
         for i, p in _read_terms(source, "noise", data.get("noise", {}), NOISE_PARAMETERS, frozenset())
     )
-    names = [e.identifier for e in effects]
-    for i, first in enumerate(names):
-        for second in names[i + 1 :]:
-            if excluded(first, second):
-                raise UserError(
-                    f"{source}: [effects.{first}] and [effects.{second}] describe the same physics twice; "
-                    "keep one"
-                )
+    _check_exclusions(source, "effects", effects)
     sf_with_input = input_setters(effects)
     if sf_with_input and "input" in data:
         effect, name = sf_with_input[0]
@@ -349,6 +459,7 @@ def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
         input=_read_input(source, data["input"]) if "input" in data else InputConfig(),
         effects=effects,
         noise=noise,
+        channels=_read_channels(source, data["channels"]) if "channels" in data else (),
         source=source,
     )
 
@@ -408,17 +519,30 @@ def config_to_dict(cfg: PhysicsConfig) -> dict[str, Any]:
     sf_sets_input = bool(input_setters(cfg.effects))
     if not (sf_sets_input and cfg.input.kind == "zero"):
         doc["input"] = _input_to_dict(cfg.input)
-    effects: dict[str, Any] = {}
-    for effect in cfg.effects:
-        params = {k: float(v) for k, v in effect.params.items()}
+    doc.update(_terms_to_dict(cfg.effects, cfg.noise, CATALOGUE_UNIT))
+    if cfg.channels:
+        doc["channels"] = {c.name: _terms_to_dict(c.effects, c.noise, c.unit) for c in cfg.channels}
+    return doc
+
+
+def _terms_to_dict(
+    effects: Sequence[EffectConfig], noise: Sequence[NoiseConfig], unit: str
+) -> dict[str, Any]:
+    """``effects`` and ``noise`` tables, parameters named as a channel of ``unit`` names them."""
+    doc: dict[str, Any] = {}
+    tables: dict[str, Any] = {}
+    for effect in effects:
+        params = {channel_param_name(k, unit): float(v) for k, v in effect.params.items()}
         if effect.identifier in MULTI_INSTANCE:
-            effects.setdefault(effect.identifier, []).append(params)
+            tables.setdefault(effect.identifier, []).append(params)
         else:
-            effects[effect.identifier] = params
-    if effects:
-        doc["effects"] = effects
-    if cfg.noise:
-        doc["noise"] = {n.identifier: {k: float(v) for k, v in n.params.items()} for n in cfg.noise}
+            tables[effect.identifier] = params
+    if tables:
+        doc["effects"] = tables
+    if noise:
+        doc["noise"] = {
+            n.identifier: {channel_param_name(k, unit): float(v) for k, v in n.params.items()} for n in noise
+        }
     return doc
 
 

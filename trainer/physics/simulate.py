@@ -7,14 +7,17 @@ Chain (catalogue): set-point ``S`` -> ``T_die = LP(S, case_tau_s)`` -> thermomet
 
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 from tqdm import tqdm
 
 from trainer import __version__
+from trainer.data.channels import truth_columns
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.physics.catalogue import EFFECTS, NOISE
-from trainer.physics.config import PhysicsConfig, config_hash, input_setters
+from trainer.physics.config import ChannelConfig, PhysicsConfig, config_hash, input_setters
 from trainer.physics.effects import drift
 from trainer.physics.inputs import input_signal
 from trainer.physics.noise import noise_term
@@ -56,6 +59,35 @@ def _check(cfg: PhysicsConfig, seed: int, n: int, fs: float) -> None:
         raise UserError(
             f"{src}: [effects.{effect.identifier}] {name} and [input] both set the true input; give only one"
         )
+
+
+def channel_rngs(seed: int, name: str) -> dict[str, np.random.Generator]:
+    """One generator per noise term of channel ``name``: independent of the recording's streams
+    (adding a channel never changes ``accel_mg``) and of other channels' (the name is the key)."""
+    entropy = [int(seed), zlib.crc32(name.encode("ascii"))]
+    children = np.random.SeedSequence(entropy).spawn(len(NOISE))
+    return {term: np.random.default_rng(child) for term, child in zip(NOISE, children, strict=True)}
+
+
+def _channel_columns(
+    channel: ChannelConfig, seed: int, t: np.ndarray, T_die: np.ndarray, rate: np.ndarray
+) -> dict[str, np.ndarray]:
+    """A further channel's data and ground-truth columns (true input zero: a static chamber test)."""
+    n, dt = t.size, float(t[1] - t[0])
+    breakdown = drift(channel.effects, t, T_die, g_in_mg=0.0, dT_die_dt_c_per_min=rate)
+    rngs = channel_rngs(seed, channel.name)
+    noise = np.zeros(n)
+    for term in channel.noise:
+        noise += noise_term(term.identifier, term.params, n, dt, rngs[term.identifier])
+    total = np.ascontiguousarray(breakdown.total, dtype=np.float64)
+    truth = truth_columns(channel.name, channel.unit)
+    return {
+        channel.column: total + noise,
+        truth["true_accel_mg"]: np.zeros(n),
+        truth["true_drift_mg"]: total,
+        truth["true_noise_mg"]: noise,
+        truth["true_pm_temp_c"]: np.array(breakdown.T_pm, dtype=np.float64),
+    }
 
 
 def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Recording:
@@ -112,6 +144,8 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
         "true_drift_mg": total_drift,
         "true_noise_mg": noise,
     }
+    for channel in cfg.channels:
+        columns.update(_channel_columns(channel, int(seed), t, T_die, rate))
     meta = {
         "sample_rate_hz": f"{fs:.12g}",
         "sensor": cfg.recording.sensor,
@@ -120,6 +154,7 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
         "segments": format_segments(profile.segments),
         "effects": ",".join(e.identifier for e in cfg.effects) or "none",
         "noise": ",".join(term.identifier for term in cfg.noise) or "none",
+        **{f"effects_{c.name}": ",".join(e.identifier for e in c.effects) or "none" for c in cfg.channels},
         "config_hash": config_hash(cfg),
         "generator": f"mems-tdc {__version__} trainer simulate",
     }

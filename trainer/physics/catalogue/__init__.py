@@ -29,6 +29,7 @@ from trainer.physics.catalogue import (
     white_noise,
 )
 from trainer.physics.catalogue.base import T_REF_C, Effect, NoiseTerm, Param
+from trainer.physics.catalogue.units import ChannelScale, plausible_range
 
 # Catalogue order. Configurations are written in it (so it is part of their equality), the noise
 # order is also the order of the simulator's random streams (append new terms at the end), and the
@@ -81,6 +82,18 @@ PLAUSIBLE: dict[tuple[str, str], tuple[float, float]] = {
     for p in d.params
     if p.plausible is not None and p.flagged
 }
+PARAMETERS: dict[tuple[str, str], Param] = {(k, p.name): p for k, d in DEFINITIONS.items() for p in d.params}
+
+
+def flagged_range(
+    identifier: str, name: str, scale: ChannelScale | None = None
+) -> tuple[float, float] | None:
+    """The plausible range a fitted ``identifier.name`` is flagged against on a channel of ``scale``
+    (None: mg, the catalogue's own range; see :func:`~trainer.physics.catalogue.units.plausible_range`)."""
+    param = PARAMETERS.get((identifier, name))
+    return None if param is None else plausible_range(param, scale)
+
+
 CONFUSABLE: dict[str, tuple[str, ...]] = {
     k: DEFINITIONS[k].finder.confounders for k in CANDIDATE_ORDER if DEFINITIONS[k].finder.confounders
 }
@@ -128,11 +141,13 @@ __all__ = [
     "NOISE",
     "NOISE_EFFECTS",
     "NOISE_PARAMETERS",
+    "PARAMETERS",
     "PLAUSIBLE",
     "SEPARATING_SIGNATURE",
     "TEMPERATURE_CHAIN",
     "T_REF_C",
     "WHITE_NOISE",
     "excluded",
+    "flagged_range",
     "nonlinear_defaults",
 ]
