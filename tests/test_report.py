@@ -59,7 +59,7 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
     assert _report(unit, tmp_path / "pass", above, "--verify", str(unit["module"])) == 0
     text = (tmp_path / "pass" / "report.md").read_text()
     assert "## Verdict: PASS" in text and "0 mismatches" in text and "FAIL" not in text
-    assert f"{rms:.3f}" in text and f"{peak:.3f}" in text
+    assert f"{rms:.4g}" in text and f"{peak:.4g}" in text
     figures = sorted(p.name for p in (tmp_path / "pass").glob("*.png"))
     assert len(figures) == 2 and figures[0].endswith("_drift.png") and figures[1].endswith("_residual.png")
     assert all(f"]({name})" in text for name in figures)
