@@ -235,3 +235,24 @@ def test_a_recording_without_the_model_s_channel_is_one_line(
     assert err.startswith("error: ") and "\n" not in err and "Traceback" not in err
     assert "'gyro0_x'" in err and "available: accel0_x, accel0_y, accel0_z" in err
     assert not (tmp_path / "never").exists()
+
+
+def test_evaluate_scores_the_held_out_part_as_the_report_does(imu: dict[str, Path]) -> None:
+    """One scoring: `trainer evaluate --holdout`'s drift left (model and uncompensated) is the report's."""
+    from trainer.data.channels import channel_view, select_channels
+    from trainer.data.holdout import parse_holdout, split
+    from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.unit_scores import score_unit
+
+    rec = read_recording(imu["rec"])
+    view = channel_view(rec, select_channels(rec, ("gyro0_x",))[0])
+    model, checkpoint = load_model(imu["gyro"])
+    holdout = parse_holdout(f"first:{HELD_OUT}")
+    _, held = split(view, holdout)
+    compensated = model.compensate(view)
+    lo, hi = checkpoint["valid_temp_range_c"]
+    scores = score_unit(view, compensated, SMOOTHING_S, (lo, hi), holdout).held_out
+    assert scores is not None
+    result = evaluate(held, {"poly3": compensated[: len(held)]}, smoothing_s=SMOOTHING_S)
+    assert result.static["poly3"] == scores.model and result.static["raw"] == scores.uncompensated
+    assert result.noise_floor_mg == scores.noise_floor_mg

@@ -182,8 +182,10 @@ def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] |
 
 
 def model_view(rec: Any, channel: str | None, model_path: Path) -> Any:
-    """The part of ``rec`` the model compensates: its channel's one-channel view on a recording with
-    channel columns, else the recording itself (``accel_mg``); a missing channel is a UserError."""
+    """The part of ``rec`` the model compensates: the recording itself (``accel_mg``) when the model
+    has no channel, the recording has no channel columns or its ``accel_mg`` is the model's channel
+    (metadata ``channel``: a one-axis import), else the channel's one-channel view; a missing
+    channel is a UserError."""
     from trainer.data.channels import (
         channel_unit,
         channel_view,
@@ -194,7 +196,7 @@ def model_view(rec: Any, channel: str | None, model_path: Path) -> Any:
     )
 
     available = recording_channels(rec)
-    if channel and available:
+    if channel and available and rec.meta.get("channel") != channel:
         if channel not in available:
             raise UserError(
                 f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); available: "
