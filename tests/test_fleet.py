@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -26,7 +27,7 @@ from trainer.errors import UserError, run_cli
 from trainer.fleet.cache import unit_key
 from trainer.fleet.cluster import open_client
 from trainer.fleet.manifest import load_manifest
-from trainer.fleet.outliers import Z_LIMIT, find_out_of_family
+from trainer.fleet.outliers import Z_LIMIT, Finding, find_out_of_family
 from trainer.fleet.run import FleetRun, run_fleet
 from trainer.fleet.simulated import DEFAULT_DEFECTS, write_fleet
 
@@ -94,16 +95,92 @@ def test_every_unit_processed_and_verified(fleet: tuple[Path, FleetRun]) -> None
             )
             model, checkpoint = load_model(unit / method / "model.pt")
             assert checkpoint["method"] == method
-            # the stored drift left is the RMS of true drift minus the model's estimate on the second run
+            # simulated data: the residual against the truth is kept too, under its own name
             valid = read_recording(Path(result["recordings"][1]))
             residual = valid.columns["true_drift_mg"] - model.predict_drift(valid.without_truth())
             scores = json.loads((unit / method / "scores.json").read_text())
-            assert scores["drift_left_mg"] == pytest.approx(float(np.sqrt(np.mean(residual**2))), rel=1e-9)
+            truth = float(np.sqrt(np.mean(residual**2)))
+            assert scores["residual_vs_truth_mg"] == pytest.approx(truth, rel=1e-9)
         diagnosis = json.loads((unit / "diagnosis.json").read_text())
         assert "thermal_lag" in [e["effect"] for e in diagnosis["left_out"]]
     report = (run.out_dir / "report.md").read_text()
     for figure in ("drift_left.png", "parameters.png", "effects.png"):
         assert (run.out_dir / "figures" / figure).stat().st_size > 1000 and f"figures/{figure}" in report
+
+
+def _report_rows(model: Path, recording: Path, out: Path, *holdout: str) -> dict[str, list[float]]:
+    """``trainer report``'s drift-left table: row label -> RMS, max, uncompensated RMS, max."""
+    args = ["report", str(model), "--recording", str(recording), "-o", str(out), *holdout]
+    assert run_cli(main, args) in (0, 1)
+    rows = {}
+    for line in (out / "report.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 6 and cells[1].isdigit():
+            rows[cells[0]] = [float(c) if c != "n/a" else math.nan for c in cells[2:]]
+    return rows
+
+
+def _same(fleet_value: float, report_cell: float) -> bool:
+    """The report prints 4 significant digits."""
+    return report_cell == pytest.approx(fleet_value, rel=6e-4, abs=1e-12)
+
+
+def test_fleet_drift_left_is_the_report_s(fleet: tuple[Path, FleetRun], tmp_path: Path) -> None:
+    """A unit with a second run: the fleet's figures are `trainer report`'s on that run."""
+    _, run = fleet
+    for uid in ("U01", "U07"):
+        result = run.results[uid]
+        for method in ("poly3", "pla"):
+            summary = result["methods"][method]
+            rows = _report_rows(
+                run.out_dir / "units" / uid / method / "model.pt",
+                Path(result["recordings"][1]),
+                tmp_path / f"{uid}-{method}",
+            )
+            assert _same(summary["drift_left_mg"], rows["all"][0]), (summary, rows)
+            assert _same(summary["drift_left_uncompensated_mg"], rows["all"][2]), (summary, rows)
+
+
+def test_fleet_holdout_is_the_report_s(fleet: tuple[Path, FleetRun], client: Any, tmp_path: Path) -> None:
+    """A unit with one run and `holdout = "first:0.3"`: the fleet fits and scores exactly what
+    `trainer report --holdout first:0.3` scores (the same parser, split and scoring)."""
+    manifest, _ = fleet
+    run1 = manifest.parent / "runs" / "U02_run1.npz"
+    (tmp_path / "m.toml").write_text(
+        f'[fleet]\nmethods = ["poly3"]\nholdout = "first:0.3"\ndiagnose_blocks = 120\n'
+        f'[[unit]]\nid = "H1"\nrecordings = ["{run1}"]\n'
+    )
+    done = run_fleet(tmp_path / "m.toml", tmp_path / "out", progress=False, client=client)
+    result = done.results["H1"]
+    assert result["status"] == "ok", result["errors"]
+    summary = result["methods"]["poly3"]
+    model = tmp_path / "out" / "units" / "H1" / "poly3" / "model.pt"
+    _, checkpoint = load_model(model)
+    first = read_recording(run1)
+    assert checkpoint["train_stats"]["n_samples"] == len(first) - round(
+        0.3 * len(first)
+    )  # trained on the rest
+    rows = _report_rows(model, run1, tmp_path / "report", "--holdout", "first:0.3")
+    assert _same(summary["drift_left_mg"], rows["held-out all"][0]), (summary, rows)
+    assert _same(summary["drift_left_uncompensated_mg"], rows["held-out all"][2]), (summary, rows)
+    assert summary["drift_left_mg"] != pytest.approx(rows["all"][0], rel=1e-3)  # not the whole run's
+
+
+def test_a_method_worse_than_uncompensated_fails_its_unit() -> None:
+    """The fleet's verdict is the report's: the guard fails a model that leaves more drift."""
+    from trainer.fleet.report import unit_verdict
+
+    def result(model_mg: float, raw_mg: float = 2.0) -> dict[str, Any]:
+        figures = {"drift_left_mg": model_mg, "drift_left_uncompensated_mg": raw_mg, "noise_floor_mg": 0.1}
+        return {"status": "ok", "errors": [], "methods": {"poly3": {**figures, "verify": {"passed": True}}}}
+
+    assert unit_verdict("A", result(1.5), []).status == "PASS"
+    assert unit_verdict("A", result(1.5), [Finding("A", "x", "odd")]).status == "REVIEW"
+    worse = unit_verdict("A", result(2.5), [])
+    assert worse.status == "FAIL" and "worse than uncompensated" in worse.line()
+    # both at the noise floor: "worse" by noise is not worse
+    assert unit_verdict("A", result(0.11, 0.1), []).status == "PASS"
+    assert unit_verdict("A", result(0.5, 0.1), []).status == "FAIL"
 
 
 def test_flagged_units_are_exactly_the_planted_ones(fleet: tuple[Path, FleetRun]) -> None:
@@ -218,8 +295,12 @@ def test_csv_manifest_with_import_options(tmp_path: Path) -> None:
             "--intervalz",
         ),
         (
-            '[fleet]\neval_fraction = 0.7\n[[unit]]\nid = "A"\nrecordings = ["a.npz"]\n',
-            "eval_fraction must be < 0.5",
+            '[fleet]\neval_fraction = 0.3\n[[unit]]\nid = "A"\nrecordings = ["a.npz"]\n',
+            'holdout = "last:F"',
+        ),
+        (
+            '[fleet]\nholdout = "middle:0.3"\n[[unit]]\nid = "A"\nrecordings = ["a.npz"]\n',
+            "holdout: --holdout 'middle:0.3'",
         ),
         ('[[unit]]\nid = "A"\nrecordings = ["a.npz"]\nexport_name = "2x"\n', "export_name"),
         ('[[unit]]\nid = "A"\nrecordings = ["a.npz"]\ncolour = "red"\n', "unknown key 'colour'"),

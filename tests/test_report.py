@@ -59,7 +59,7 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
     assert _report(unit, tmp_path / "pass", above, "--verify", str(unit["module"])) == 0
     text = (tmp_path / "pass" / "report.md").read_text()
     assert "## Verdict: PASS" in text and "0 mismatches" in text and "FAIL" not in text
-    assert f"{rms:.3f}" in text and f"{peak:.3f}" in text
+    assert f"{rms:.4g}" in text and f"{peak:.4g}" in text
     figures = sorted(p.name for p in (tmp_path / "pass").glob("*.png"))
     assert len(figures) == 2 and figures[0].endswith("_drift.png") and figures[1].endswith("_residual.png")
     assert all(f"]({name})" in text for name in figures)
@@ -101,3 +101,158 @@ def test_a_bad_thresholds_file_is_one_line_and_writes_nothing(
     err = capsys.readouterr().err.strip()
     assert message in err and "never.toml" in err and "\n" not in err and "Traceback" not in err
     assert not (tmp_path / "never").exists()
+
+
+# ------------------------------------------------------------ a channel of a multi-channel recording
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
+HELD_OUT = 0.3  # first:0.3: the first cooling, which the cubic of gyro0_x fitted on the rest makes worse
+
+
+def _trailing_mean_about_mean(x: np.ndarray, n: int) -> np.ndarray:
+    csum = np.concatenate(([0.0], np.cumsum(x)))
+    k = np.arange(x.size)
+    lo = np.maximum(0, k - n + 1)
+    smoothed = (csum[k + 1] - csum[lo]) / (k + 1 - lo)
+    return smoothed - smoothed.mean()
+
+
+@pytest.fixture(scope="module")
+def imu(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The real run with all six channels, and a cubic of gyro0_x fitted on its last 70 %."""
+    if not REAL.is_file():
+        pytest.skip("the bundled real run is not next to this checkout")
+    folder = tmp_path_factory.mktemp("imu")
+    rec, train, models = folder / "imu.csv", folder / "train.csv", folder / "models"
+    importing = ["import", str(REAL), "--preset", "tofupilot", "--channels", "all", "-o", str(rec)]
+    assert trainer_main(importing) == 0
+    from trainer.data.holdout import parse_holdout, split
+    from trainer.data.recording_io import write_recording
+
+    write_recording(split(read_recording(rec), parse_holdout(f"first:{HELD_OUT}"))[0], train)
+    fitting = ["fit", "--method", "poly3", str(train), "--channels", "gyro0_x,accel0_x", "-o", str(models)]
+    assert trainer_main(fitting) == 0
+    return {"rec": rec, "gyro": models / "gyro0_x.pt", "accel": models / "accel0_x.pt", "folder": folder}
+
+
+def _table(text: str) -> dict[str, list[str]]:
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 6 and cells[1].isdigit():
+            rows[cells[0]] = cells[2:]
+    return rows
+
+
+def test_a_gyro_model_is_scored_on_its_channel_in_deg_s_beside_uncompensated(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["report", str(imu["gyro"]), "--recording", str(imu["rec"]), "--holdout", f"first:{HELD_OUT}"]
+    capsys.readouterr()
+    assert run_cli(trainer_main, [*args, "-o", str(tmp_path / "r")]) == 1  # worse than uncompensated
+    out = capsys.readouterr().out
+    text = (tmp_path / "r" / "report.md").read_text()
+    # independently: gyro0_x's held-out rows, the model's output and the raw column, 0.5 s trailing mean
+    rec = read_recording(imu["rec"])
+    model, _ = load_model(imu["gyro"])
+    from trainer.data.channels import channel_view, select_channels
+
+    view = channel_view(rec, select_channels(rec, ("gyro0_x",))[0])
+    held = round(HELD_OUT * len(rec))
+    n = max(1, round(SMOOTHING_S * rec.sample_rate_hz))
+    compensated = model.compensate(view)[:held]
+    left = _trailing_mean_about_mean(compensated, n)
+    raw = _trailing_mean_about_mean(rec.columns["gyro0_x_dps"][:held], n)
+    model_rms, raw_rms = (float(np.sqrt(np.mean(x**2))) for x in (left, raw))
+    assert model_rms > raw_rms  # the case this test is about
+    row = _table(text)["held-out all"]
+    assert float(row[0]) == pytest.approx(model_rms, rel=6e-4)
+    assert float(row[1]) == pytest.approx(float(np.max(np.abs(left))), rel=6e-4)
+    assert float(row[2]) == pytest.approx(raw_rms, rel=6e-4)
+    assert "| RMS (deg/s) |" in text and "RMS (mg)" not in text and " mg" not in text.split("## Channel")[1]
+    assert "## Verdict: FAIL" in text
+    (line,) = [x for x in out.splitlines() if "worse than uncompensated" in x]
+    assert "gyro0_x / poly3" in line and f"{model_rms:.4g} deg/s" in line and f"{raw_rms:.4g} deg/s" in line
+
+
+def test_thresholds_cannot_pass_a_model_worse_than_uncompensated(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
+    config = tmp_path / "loose.toml"
+    config.write_text("[thresholds]\nholdout_rms_mg = 100\n")
+    args = ["report", str(imu["gyro"]), "--recording", str(imu["rec"]), "--holdout", f"first:{HELD_OUT}"]
+    assert run_cli(trainer_main, [*args, "--config", str(config), "-o", str(tmp_path / "g")]) == 1
+    text = (tmp_path / "g" / "report.md").read_text()
+    assert "## Verdict: FAIL" in text and "<= 100 deg/s | PASS" in text
+    # the accelerometer x cubic on the same split removes most of its drift: it passes
+    args[1] = str(imu["accel"])
+    assert run_cli(trainer_main, [*args, "--config", str(config), "-o", str(tmp_path / "a")]) == 0
+    text = (tmp_path / "a" / "report.md").read_text()
+    assert "## Verdict: PASS" in text and "| RMS (mg) |" in text and "better than uncompensated" in text
+
+
+def test_a_model_without_a_channel_scores_accel_mg(imu: dict[str, Path], tmp_path: Path) -> None:
+    """A one-axis model (no channel in its train_stats) on a multi-channel recording: accel_mg."""
+    rec = read_recording(imu["rec"])
+    model_path = tmp_path / "plain.pt"
+    one_axis = tmp_path / "one.csv"
+    from trainer.data.recording import Recording
+    from trainer.data.recording_io import write_recording
+
+    meta = {k: v for k, v in rec.meta.items() if k != "channel"}
+    columns = {k: rec.columns[k] for k in ("time_s", "temp_c", "accel_mg")}
+    write_recording(Recording(columns, meta, str(one_axis)), one_axis)
+    assert trainer_main(["fit", "--method", "poly3", str(one_axis), "-o", str(model_path)]) == 0
+    assert "channel" not in load_model(model_path)[1]["train_stats"]
+    assert (
+        run_cli(
+            trainer_main,
+            ["report", str(model_path), "--recording", str(imu["rec"]), "-o", str(tmp_path / "r")],
+        )
+        == 0
+    )
+    model, _ = load_model(model_path)
+    left = _trailing_mean_about_mean(
+        model.compensate(rec.without_truth()), max(1, round(SMOOTHING_S * rec.sample_rate_hz))
+    )
+    row = _table((tmp_path / "r" / "report.md").read_text())["all"]
+    assert float(row[0]) == pytest.approx(float(np.sqrt(np.mean(left**2))), rel=6e-4)
+
+
+def test_a_recording_without_the_model_s_channel_is_one_line(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = read_recording(imu["rec"])
+    from trainer.data.recording import Recording
+    from trainer.data.recording_io import write_recording
+
+    accel_only = tmp_path / "accel.csv"
+    columns = {k: v for k, v in rec.columns.items() if not k.startswith("gyro")}
+    write_recording(Recording(columns, dict(rec.meta), str(accel_only)), accel_only)
+    capsys.readouterr()
+    args = ["report", str(imu["gyro"]), "--recording", str(accel_only), "-o", str(tmp_path / "never")]
+    assert run_cli(trainer_main, args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "\n" not in err and "Traceback" not in err
+    assert "'gyro0_x'" in err and "available: accel0_x, accel0_y, accel0_z" in err
+    assert not (tmp_path / "never").exists()
+
+
+def test_evaluate_scores_the_held_out_part_as_the_report_does(imu: dict[str, Path]) -> None:
+    """One scoring: `trainer evaluate --holdout`'s drift left (model and uncompensated) is the report's."""
+    from trainer.data.channels import channel_view, select_channels
+    from trainer.data.holdout import parse_holdout, split
+    from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.unit_scores import score_unit
+
+    rec = read_recording(imu["rec"])
+    view = channel_view(rec, select_channels(rec, ("gyro0_x",))[0])
+    model, checkpoint = load_model(imu["gyro"])
+    holdout = parse_holdout(f"first:{HELD_OUT}")
+    _, held = split(view, holdout)
+    compensated = model.compensate(view)
+    lo, hi = checkpoint["valid_temp_range_c"]
+    scores = score_unit(view, compensated, SMOOTHING_S, (lo, hi), holdout).held_out
+    assert scores is not None
+    result = evaluate(held, {"poly3": compensated[: len(held)]}, smoothing_s=SMOOTHING_S)
+    assert result.static["poly3"] == scores.model and result.static["raw"] == scores.uncompensated
+    assert result.noise_floor_mg == scores.noise_floor_mg

@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import math
 import shutil
 import tempfile
 from pathlib import Path
@@ -15,6 +16,7 @@ from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
 
 EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
+ANY_RANGE_C = (-math.inf, math.inf)  # scores that need no in-range part
 
 # Heavy modules (torch, matplotlib, cffi) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -94,7 +96,8 @@ def _verify(
     """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON. A spread
     module run now is also scored under both schedules on the recording (when it was not resampled)."""
     from codegen.verify import find_manifest, schedule_parts, verify
-    from trainer.scoring.signoff import VerifySummary, branch_scores
+    from trainer.scoring.signoff import VerifySummary
+    from trainer.scoring.unit_scores import score_part
 
     path = Path(target)
     if path.is_dir():
@@ -106,7 +109,7 @@ def _verify(
             # each schedule over the samples holding the same run of estimates (schedule_parts)
             parts = schedule_parts(len(rec), sc.latency_samples)
             scores = tuple(
-                (k, branch_scores(rec.slice(part.start, part.stop), v[part], smoothing_s)["all"])
+                (k, score_part(rec.slice(part.start, part.stop), v[part], smoothing_s, ANY_RANGE_C).model)
                 for (k, v), part in zip(sc.output_mg.items(), parts, strict=True)
             )
         summary = VerifySummary(
@@ -178,15 +181,48 @@ def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] |
     return None if item is None else (item[0], label)
 
 
+def model_view(rec: Any, channel: str | None, model_path: Path) -> Any:
+    """The part of ``rec`` the model compensates: the recording itself (``accel_mg``) when the model
+    has no channel, the recording has no channel columns or its ``accel_mg`` is the model's channel
+    (metadata ``channel``: a one-axis import), else the channel's one-channel view; a missing
+    channel is a UserError."""
+    from trainer.data.channels import (
+        channel_unit,
+        channel_view,
+        names_text,
+        recording_channels,
+        select_channels,
+        unit_of_channel_name,
+    )
+
+    available = recording_channels(rec)
+    if channel and available and rec.meta.get("channel") != channel:
+        if channel not in available:
+            raise UserError(
+                f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); available: "
+                f"{names_text(available)}"
+            )
+        (found,) = select_channels(rec, (channel,))
+        return channel_view(rec, found)
+    if channel and unit_of_channel_name(channel) != channel_unit(rec):
+        raise UserError(
+            f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); the recording holds "
+            f"one channel in {channel_unit(rec)} (accel_mg)"
+        )
+    return rec
+
+
 def run(args: argparse.Namespace) -> int:
     from trainer import __version__
     from trainer.checkpoint import load_model
     from trainer.commands.compare_cmd import publish
-    from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.channels import UNIT_LABELS, channel_unit
+    from trainer.data.holdout import overlap_warning, parse_holdout
     from trainer.data.recording_io import read_recording
     from trainer.fitting import data_fingerprint
     from trainer.scoring import signoff
     from trainer.scoring.thresholds import load_thresholds
+    from trainer.scoring.unit_scores import held_out_rows, score_unit
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
@@ -215,8 +251,8 @@ def run(args: argparse.Namespace) -> int:
             assert rec_path is not None
             model_path = Path(model_arg)
             model, ckpt = load_model(model_path)
-            rec = loaded[rec_path]
             stats = ckpt.get("train_stats", {}) if isinstance(ckpt.get("train_stats"), dict) else {}
+            rec = model_view(loaded[rec_path], str(stats.get("channel") or ""), model_path)
             channel = str(stats.get("channel") or model_path.stem)
             label = f"{channel} / {ckpt['method']}"
             if label in seen:
@@ -228,15 +264,13 @@ def run(args: argparse.Namespace) -> int:
             lo, hi = (float(v) for v in ckpt["valid_temp_range_c"])
             model_id = f"sha256:{hashlib.sha256(model_path.read_bytes()).hexdigest()}"
             compensated = model.compensate(rec.without_truth())
-            scores = signoff.branch_scores(rec, compensated, args.smoothing)
+            # the held-out part is cut from the whole run's output (unit_scores): the state has run
+            # through what precedes it, as in firmware running since power-on (as trainer compare)
+            scores = score_unit(rec, compensated, args.smoothing, (lo, hi), holdout)
             notes = []
             held_text = None
             if holdout is not None:
-                _, held = split(rec, holdout)
-                # the whole run's output cut to the held-out part: the state has run through what
-                # precedes it, as in firmware running since power-on (trainer compare does the same)
-                rows = slice(len(rec) - len(held), None) if holdout.side == "last" else slice(0, len(held))
-                scores.update(signoff.branch_scores(held, compensated[rows], args.smoothing, "held-out "))
+                held, _ = held_out_rows(rec, holdout)
                 held_text = (
                     f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
                 )
@@ -254,13 +288,13 @@ def run(args: argparse.Namespace) -> int:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
                 channel=channel,
+                unit=UNIT_LABELS[channel_unit(rec)],
                 model_path=str(model_path),
                 model_id=model_id,
                 method=str(ckpt["method"]),
                 trained_range_c=(lo, hi),
                 recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
                 scores=scores,
-                noise_floor_mg=signoff.noise_floor(rec, args.smoothing),
                 held_out=held_text,
                 verify=verify,
                 cost=_cost(sizes, entry, bench_path),
@@ -286,5 +320,4 @@ def run(args: argparse.Namespace) -> int:
         raise
     line = signoff.summary_line(unit, reports, thresholds)
     print(f"{line}; report written to {out_dir}/report.md")
-    failed = any(not c.ok for r in reports for c in signoff.checks(r, thresholds))
-    return EXIT_FAILED if failed else 0
+    return EXIT_FAILED if signoff.unit_verdict(reports, thresholds).failed else 0

@@ -51,7 +51,7 @@ def unit_key(unit: UnitSpec, settings: FleetSettings) -> str:
         "export_name": unit.export_name,
         "import": unit.import_text,
         "sim": None if settings.sim is None else file_sha256(settings.sim, "[fleet] sim"),
-        "eval_fraction": settings.eval_fraction,
+        "holdout": settings.holdout,
         "diagnose_holdout": settings.diagnose_holdout,
         "diagnose_blocks": settings.diagnose_blocks,
     }

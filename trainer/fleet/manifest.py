@@ -18,12 +18,13 @@ from typing import Any
 
 from codegen.render import validate_name
 from trainer import methods as registry
+from trainer.data.holdout import parse_holdout
 from trainer.data.importer import ImportOptions
 from trainer.errors import UserError
 from trainer.fields import TableFields, show
 from trainer.fleet import options
 
-DEFAULT_EVAL_FRACTION = 0.25
+DEFAULT_HOLDOUT = "last:0.25"  # a `--holdout` spec (trainer/data/holdout.py), as `trainer report` takes
 DEFAULT_DIAGNOSE_HOLDOUT = 0.25
 LIST_SEPARATOR = ";"  # inside one CSV cell
 UNIT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")  # a directory name on every system
@@ -32,7 +33,7 @@ FLEET_KEYS = (
     "method_options",
     "import",
     "sim",
-    "eval_fraction",
+    "holdout",
     "diagnose_holdout",
     "diagnose_blocks",
 )
@@ -48,7 +49,7 @@ class FleetSettings:
     method_options: dict[str, str] = field(default_factory=dict)
     import_text: str = ""
     sim: Path | None = None  # the physics the finder starts from (default: bias_poly + noise)
-    eval_fraction: float = DEFAULT_EVAL_FRACTION  # held-out tail when a unit has one recording
+    holdout: str = DEFAULT_HOLDOUT  # the part scored when a unit has one recording (a --holdout spec)
     diagnose_holdout: float = DEFAULT_DIAGNOSE_HOLDOUT
     diagnose_blocks: int | None = None  # None: the finder's default
 
@@ -104,7 +105,24 @@ def _methods(value: Any, where: str) -> tuple[str, ...]:
     return names
 
 
+def _holdout(table: TableFields) -> str:
+    """The ``holdout`` spec, checked by the parser ``trainer report --holdout`` uses; stored as text."""
+    if table.has("eval_fraction"):
+        table.fail(
+            'eval_fraction is now holdout, a --holdout spec: holdout = "last:F" (or F, first:F, T0:, :T1)'
+        )
+    value = table.raw("holdout") if table.has("holdout") else DEFAULT_HOLDOUT
+    if isinstance(value, bool) or not isinstance(value, str | int | float):
+        table.fail(f'holdout must be a --holdout spec such as "last:0.25", got {show(value)}')
+    try:
+        parse_holdout(str(value))
+    except UserError as exc:
+        table.fail(f"holdout: {exc}")
+    return str(value).strip()
+
+
 def _settings(table: TableFields, base: Path) -> FleetSettings:
+    holdout_spec = _holdout(table)
     table.only(FLEET_KEYS)
     where = f"{table.source}: [fleet]"
     methods = _methods(table.raw("methods"), where) if table.has("methods") else default_methods()
@@ -121,18 +139,16 @@ def _settings(table: TableFields, base: Path) -> FleetSettings:
     sim = base / table.string("sim") if table.has("sim") else None
     if sim is not None and not sim.is_file():
         raise UserError(f"{where}: sim {sim}: no such file")
-    eval_fraction = table.number("eval_fraction", "positive", DEFAULT_EVAL_FRACTION)
     holdout = table.number("diagnose_holdout", "nonnegative", DEFAULT_DIAGNOSE_HOLDOUT)
-    for key, value in (("eval_fraction", eval_fraction), ("diagnose_holdout", holdout)):
-        if not value < 0.5:
-            table.fail(f"{key} must be < 0.5, got {value}")
+    if not holdout < 0.5:
+        table.fail(f"diagnose_holdout must be < 0.5, got {holdout}")
     blocks = None
     if table.has("diagnose_blocks"):
         number = table.number("diagnose_blocks", "positive")
         if number != int(number) or number < 50:
             table.fail(f"diagnose_blocks must be a whole number >= 50, got {number:g}")
         blocks = int(number)
-    return FleetSettings(methods, method_options, import_text, sim, eval_fraction, holdout, blocks)
+    return FleetSettings(methods, method_options, import_text, sim, holdout_spec, holdout, blocks)
 
 
 def _unit(raw: dict[str, Any], where: str, base: Path, settings: FleetSettings) -> UnitSpec:

@@ -1,7 +1,9 @@
 """``OUTDIR/report.md``, its figures and ``OUTDIR/fleet.json``: the fleet as a production engineer reads it.
 
-Sections: the sign-off table (one row per unit: PASS, REVIEW when out of family, FAIL when a stage
-failed or an export did not verify), the failed units with their one-line errors, the exports that
+Sections: the sign-off table (one row per unit, the verdict of ``trainer report``,
+:func:`trainer.scoring.verdict.verdict`: FAIL when a stage failed, an export did not verify or a
+method leaves more drift than no compensation on the scored data, REVIEW when out of family),
+the failed units with their one-line errors, the exports that
 failed to verify, the out-of-family units with the reason, the effects the finder named and how
 often, and the distributions of each method's drift left and of every fitted physical parameter.
 The report holds no wall times, so identical runs write identical reports.
@@ -9,7 +11,9 @@ The report holds no wall times, so identical runs write identical reports.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,11 +33,12 @@ from trainer.fleet.outliers import (
     named_effects,
     unit_features,
 )
+from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
+from trainer.scoring.verdict import FAIL, PASS, REVIEW, Figures, Verdict, verdict
 
 FIGURES_DIR = "figures"
-PASS, REVIEW, FAIL = "PASS", "REVIEW", "FAIL"
 
 
 def verify_state(summary: dict[str, Any]) -> str:
@@ -45,12 +50,43 @@ def verify_state(summary: dict[str, Any]) -> str:
     return "n/a" if passed is None else ("yes" if passed else "NO")
 
 
-def sign_off(result: dict[str, Any] | None, findings: list[Finding]) -> str:
-    if result is None or result.get("status") != "ok":
-        return FAIL
-    if any(verify_state(m) == "NO" for m in result["methods"].values()):
-        return FAIL
-    return REVIEW if findings else PASS
+@dataclass(frozen=True)
+class PipelineCheck:
+    """A stage of the unit's pipeline (processing, a module's verification): passed or not."""
+
+    name: str
+    ok: bool
+    decisive: bool = True
+
+
+def _figures(summary: dict[str, Any], basis: str) -> Figures | None:
+    """A method's figures from ``result.json`` (None: not scored)."""
+    values = [summary.get(k) for k in DRIFT_LEFT_KEYS]
+    if not isinstance(values[0], int | float):
+        return None
+    model, raw, model_in, raw_in, floor = (
+        float(v) if isinstance(v, int | float) else math.nan for v in values
+    )
+    return Figures(basis, model, raw, model_in, raw_in, floor)
+
+
+def unit_verdict(uid: str, result: dict[str, Any] | None, findings: list[Finding]) -> Verdict:
+    """The unit's verdict: processed, every export verified, every method better than uncompensated
+    on the scored data (the guard of ``trainer report``); out of family asks for REVIEW."""
+    if result is None:
+        return verdict({}, [PipelineCheck(f"{uid}: no result", False)])
+    checks = [PipelineCheck(f"{uid} {e['stage']}: {e['error']}", False) for e in result.get("errors", [])]
+    checks.append(PipelineCheck(f"{uid} processed", result.get("status") == "ok"))
+    methods = result.get("methods") or {}
+    checks += [
+        PipelineCheck(f"{uid} / {m} C module verified", verify_state(s) != "NO") for m, s in methods.items()
+    ]
+    figures = {
+        f"{uid} / {m}": f
+        for m, s in methods.items()
+        if (f := _figures(s, str(result.get("evaluated_on") or "scored part"))) is not None
+    }
+    return verdict(figures, checks, [f.reason for f in findings])
 
 
 def _mg(value: Any) -> str:
@@ -118,7 +154,8 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     methods = list(dict.fromkeys(m for u in manifest.units for m in u.methods))
     findings = find_out_of_family({u: results[u] for u in units if u in results})
     by_unit: dict[str, list[Finding]] = {u: [f for f in findings if f.unit == u] for u in units}
-    verdicts = {u: sign_off(results.get(u), by_unit[u]) for u in units}
+    decided = {u: unit_verdict(u, results.get(u), by_unit[u]) for u in units}
+    verdicts = {u: v.status for u, v in decided.items()}
     ok = [u for u in units if results.get(u, {}).get("status") == "ok"]
     flagged = {f.unit for f in findings}
 
@@ -153,24 +190,29 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
         f"# Fleet report: {manifest.source.name}",
         "",
         f"{len(units)} units; {len(ok)} processed without error; sign-off: {tally[PASS]} PASS, "
-        f"{tally[REVIEW]} REVIEW (out of family), {tally[FAIL]} FAIL (a stage failed or an export did not verify).",
-        f"Methods: {', '.join(methods)}. Drift left: RMS of the residual against `true_drift_mg` on "
-        "simulated data, else the spread of the compensated output's 60 s means; scored on each unit's "
-        "second run or held-out tail.",
+        f"{tally[REVIEW]} REVIEW (out of family), {tally[FAIL]} FAIL (a stage failed, an export did not "
+        "verify or a method leaves more drift than no compensation).",
+        f"Methods: {', '.join(methods)}. Drift left: RMS of the compensated output (smoothed over "
+        f"{SMOOTHING_S:g} s) about one constant, scored on each unit's second run or its held-out part "
+        f"(holdout {manifest.settings.holdout}), exactly as `trainer report` scores the same model, "
+        "recording and hold-out; beside it the uncompensated output's.",
         "",
         "## Sign-off",
         "",
     ]
     header = ["unit", "sign-off", "effects named"]
-    header += [f"drift left {m} (mg)" for m in methods] + [f"C verified {m}" for m in methods]
-    header.append("out of family")
+    header += [f"drift left {m} (mg)" for m in methods] + ["drift left uncompensated (mg)"]
+    header += [f"C verified {m}" for m in methods] + ["failed", "out of family"]
     rows = []
     for u in units:
         result = results.get(u)
         summaries = result["methods"] if result else {}
         row = [u, verdicts[u], ", ".join(named_effects(result)) if result else "-"]
         row += [_mg(summaries.get(m, {}).get("drift_left_mg")) for m in methods]
+        raw = [s.get("drift_left_uncompensated_mg") for s in summaries.values() if isinstance(s, dict)]
+        row.append(_mg(next((v for v in raw if v is not None), None)))
         row += [verify_state(summaries.get(m, {})) for m in methods]
+        row.append("; ".join(decided[u].failed) or "-")
         row.append("; ".join(f.reason for f in by_unit[u]) or ("-" if u in ok else "n/a (failed)"))
         rows.append(row)
     lines += [markdown_table(header, rows), ""]
@@ -256,6 +298,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
                 "sign_off": verdicts[u],
                 "status": results.get(u, {}).get("status", "missing"),
                 "out_of_family": [f.reason for f in by_unit[u]],
+                "failed": list(decided[u].failed),
                 "errors": [e["error"] for e in results.get(u, {}).get("errors", [])],
             }
             for u in units

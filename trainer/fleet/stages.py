@@ -1,8 +1,10 @@
 """One unit's work as Dask tasks: load, diagnose, one task per method, assemble.
 
-``load`` (import and validate) feeds ``diagnose`` and every ``method`` task (fit, evaluate, export
+``load`` (import and validate) feeds ``diagnose`` and every ``method`` task (fit, score, export
 the C module, verify it bit for bit); ``assemble`` gathers them into the unit's files and its
-``result.json``. The tasks return plain data and write nothing under OUTDIR: the client writes a
+``result.json``. A method is scored exactly as ``trainer report`` scores the same model on the same
+recording and hold-out (:mod:`trainer.scoring.unit_scores`): the fleet's drift left of a unit is
+the sign-off report's. The tasks return plain data and write nothing under OUTDIR: the client writes a
 finished unit atomically (:mod:`.cache`), so workers only need to see the recordings.
 
 No task raises for a unit's own problem: a bad file, a failed fit or a failed export becomes a
@@ -24,14 +26,16 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from trainer.data.holdout import Holdout, parse_holdout
 from trainer.data.recording import Recording
+from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
 from trainer.fleet.cache import RESULT_FILE, json_bytes
 from trainer.fleet.cluster import pinned
 from trainer.fleet.manifest import FleetSettings, UnitSpec
 
 T = TypeVar("T")
-DRIFT_BLOCK_S = 60.0  # without ground truth, drift left = spread of the compensated output's 60 s means
+SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the scoring smoothing, `trainer report --smoothing`'s default
 TIMING_FILE = "timing.json"  # wall times: the one file of a unit that differs between identical runs
 
 
@@ -46,12 +50,28 @@ class Failure:
 
 @dataclass(frozen=True)
 class UnitData:
-    """A unit's recordings, validated: fit and diagnose on ``train``, score on ``valid``."""
+    """A unit's recordings, validated: fit and diagnose on ``train``; score the model's output over
+    ``scored`` (a second run, or the one run with its ``holdout`` part held out, as ``trainer report
+    --recording scored --holdout``)."""
 
     train: Recording
-    valid: Recording
+    scored: Recording
+    holdout: Holdout | None
     evaluated_on: str
     seconds: float
+
+    def valid_rows(self) -> tuple[Recording, slice]:
+        """The samples the figures are of (the held-out part, or the whole second run), and their rows
+        in ``scored``."""
+        if self.holdout is None:
+            return self.scored, slice(0, len(self.scored))
+        from trainer.scoring.unit_scores import held_out_rows
+
+        return held_out_rows(self.scored, self.holdout)
+
+    @property
+    def valid(self) -> Recording:
+        return self.valid_rows()[0]
 
 
 @dataclass(frozen=True)
@@ -103,31 +123,23 @@ def _read(path: Path, unit: UnitSpec) -> Recording:
     return read_recording(path)
 
 
-def _tail(rec: Recording, fraction: float) -> tuple[Recording, Recording]:
-    """The first ``1 - fraction`` for fitting, the rest (time restarting at 0) for scoring."""
-    n = len(rec)
-    cut = round(n * (1.0 - fraction))
-    if cut < 2 or n - cut < 2:
-        raise UserError(f"{rec.source}: {n} rows are too few to hold out the last {fraction:g} of them")
-    tail = rec.slice(cut, n)
-    tail.columns["time_s"] = tail.time_s - tail.time_s[0]
-    return rec.slice(0, cut), tail
-
-
 @pinned
 def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
     """Import (or read) and validate the unit's recordings; split off the scoring part."""
 
     def work() -> UnitData:
         started = time.perf_counter()
+        from trainer.data.holdout import split
+
         recordings = [_read(path, unit) for path in unit.recordings]
         if len(recordings) == 2:
-            train, valid = recordings
+            train, second = recordings
             where = f"second run {unit.recordings[1].name}"
-        else:
-            train, valid = _tail(recordings[0], settings.eval_fraction)
-            where = f"held-out last {100 * settings.eval_fraction:g} % of {unit.recordings[0].name}"
-        return UnitData(train, valid, where, time.perf_counter() - started)
+            return UnitData(train, second, None, where, time.perf_counter() - started)
+        holdout = parse_holdout(settings.holdout)
+        train, _ = split(recordings[0], holdout)
+        where = f"{unit.recordings[0].name}, {holdout.describe()} (--holdout {settings.holdout})"
+        return UnitData(train, recordings[0], holdout, where, time.perf_counter() - started)
 
     return _guarded("load", work)
 
@@ -185,39 +197,53 @@ def diagnose(
 # ----------------------------------------------------------------------------------- method
 
 
-def drift_left_mg(valid: Recording, compensated: np.ndarray) -> tuple[float, str]:
-    """RMS drift left and its basis: against ``true_drift_mg`` when present, else the spread of
-    the compensated output's :data:`DRIFT_BLOCK_S` means (a static run's output should be flat)."""
-    from trainer.scoring.evaluate import drift_score
+def _rms(left: Any) -> float:
+    return math.nan if left is None else float(left.rms_mg)
 
-    score = drift_score(valid, compensated)
-    if score is not None:
-        return score.residual_rms_mg, "true_drift_mg"
-    per_block = max(1, round(DRIFT_BLOCK_S * valid.sample_rate_hz))
-    blocks = len(compensated) // per_block
-    if blocks < 2:
-        raise UserError(
-            f"{valid.source}: shorter than two {DRIFT_BLOCK_S:g} s blocks; cannot score drift left"
-        )
-    means = compensated[: blocks * per_block].reshape(blocks, per_block).mean(axis=1)
-    return float(np.sqrt(np.mean((means - means.mean()) ** 2))), f"{DRIFT_BLOCK_S:g} s means"
+
+DRIFT_LEFT_KEYS = (  # the figures the verdict takes (trainer.scoring.verdict.Figures), in its order
+    "drift_left_mg",
+    "drift_left_uncompensated_mg",
+    "drift_left_in_range_mg",
+    "drift_left_uncompensated_in_range_mg",
+    "noise_floor_mg",
+)
+
+
+def drift_left_summary(scores: Any) -> dict[str, float]:
+    """What ``result.json`` keeps of a method's :class:`~trainer.scoring.unit_scores.UnitScores`:
+    the headline part's drift left RMS (mg), the model's and the uncompensated output's, whole and
+    in the trained range, and the noise floor."""
+    part = scores.headline
+    values = (part.model, part.uncompensated, part.model_in_range, part.uncompensated_in_range)
+    return dict(zip(DRIFT_LEFT_KEYS, [*map(_rms, values), float(part.noise_floor_mg)], strict=True))
 
 
 def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> dict[str, Any]:
-    from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.evaluate import drift_score, evaluate
+    from trainer.scoring.unit_scores import score_unit
 
-    valid = data.valid
-    compensated = model.compensate(valid.without_truth())
-    outside = (valid.temp_c < stats["temp_min_c"]) | (valid.temp_c > stats["temp_max_c"])
+    trained = (float(stats["temp_min_c"]), float(stats["temp_max_c"]))
+    whole_run = model.compensate(data.scored.without_truth())
+    scores = score_unit(data.scored, whole_run, SMOOTHING_S, trained, data.holdout)
+    valid, rows = data.valid_rows()
+    compensated = whole_run[rows]
+    outside = (valid.temp_c < trained[0]) | (valid.temp_c > trained[1])
     table = evaluate(valid, {method: compensated}, out_of_range={method: outside}).table
-    drift, basis = drift_left_mg(valid, compensated)
+    truth = drift_score(valid, compensated)
+    left = scores.headline.model
     coefficients = table.compensated[method]
     return {
         "method": method,
         "evaluated_on": data.evaluated_on,
         "samples": len(valid),
-        "drift_left_mg": drift,
-        "drift_left_basis": basis,
+        **drift_left_summary(scores),
+        "drift_left_max_mg": left.max_abs_mg,
+        "drift_left_heating_mg": left.heating_rms_mg,
+        "drift_left_cooling_mg": left.cooling_rms_mg,
+        "smoothing_s": SMOOTHING_S,
+        # simulated data only: the residual against the simulator's ground truth (trainer evaluate's headline)
+        "residual_vs_truth_mg": None if truth is None else truth.residual_rms_mg,
         "fit_residual_rms_mg": stats["fit_residual_rms_mg"],
         "out_of_range_fraction": float(np.mean(outside)),
         "allan": {
@@ -293,8 +319,7 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
         files["scores.json"] = json_bytes(_finite(scores))
         files["verify.json"] = json_bytes(_finite(verified))
         summary = {
-            "drift_left_mg": scores["drift_left_mg"],
-            "drift_left_basis": scores["drift_left_basis"],
+            **{k: scores[k] for k in (*DRIFT_LEFT_KEYS, "residual_vs_truth_mg")},
             "verify": verified,
         }
         return StageOutput(

@@ -1,12 +1,14 @@
 """The sign-off report of one unit (``trainer report``): per channel what a reviewer signs.
 
-Per channel (one model on its recording): the drift against temperature with the model's fit, the
-drift left against temperature by heating and cooling branch, its RMS and maximum per branch and on
-the held-out part (:mod:`trainer.scoring.static`, :mod:`trainer.data.holdout`), the coverage of the
-recording's temperatures by the trained range, the model id, the ``codegen verify`` result, the
-module's flash, RAM and instructions, and pass/fail against the thresholds
-(:mod:`trainer.scoring.thresholds`). Everything is a function of the inputs: no dates, no paths
-other than those given, so the same inputs give the same document.
+Per channel (one model on its own channel of the recording, in the channel's unit): the drift
+against temperature with the model's fit, the drift left against temperature by heating and cooling
+branch, its RMS and maximum per branch, on the held-out part and in the trained range, each beside
+the uncompensated output's (:mod:`trainer.scoring.unit_scores`, the fleet's scoring too), the
+coverage of the recording's temperatures by the trained range, the model id, the ``codegen verify``
+result, the module's flash, RAM and instructions, and the verdict (:mod:`trainer.scoring.verdict`)
+from the thresholds (:mod:`trainer.scoring.thresholds`) and the guard against a model that leaves
+more drift than no compensation. Everything is a function of the inputs: no dates, no paths other
+than those given, so the same inputs give the same document.
 """
 
 from __future__ import annotations
@@ -25,20 +27,12 @@ from trainer.data.recording import Recording
 from trainer.scoring.evaluate import smooth_for_scoring
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
-from trainer.scoring.static import COOLING, HEATING, noise_floor_mg, summarise, thermal_branch
+from trainer.scoring.static import COOLING, HEATING, DriftLeft, thermal_branch
 from trainer.scoring.thresholds import THRESHOLDS, passes
+from trainer.scoring.unit_scores import PartScores, UnitScores
+from trainer.scoring.verdict import NO_VERDICT, Figures, Verdict, verdict, worse_than_uncompensated
 
-BRANCHES = (("all", None), ("heating", HEATING), ("cooling", COOLING))
 NOT_MEASURED = "not measured"
-
-
-@dataclass(frozen=True)
-class Score:
-    """Drift left (about one constant) over a set of samples, mg; NaN when there are none."""
-
-    samples: int
-    rms_mg: float
-    max_abs_mg: float
 
 
 @dataclass(frozen=True)
@@ -56,7 +50,7 @@ class VerifySummary:
     latency_samples: int = 0  # spread: samples by which the estimate comes later than with "step"
     delayed_equal: bool | None = None  # spread: drift removed = the step schedule's, delayed (None: not run)
     # spread, run by the report: the fixed-point module's drift left by schedule (codegen.verify.schedule_parts)
-    schedule_scores: tuple[tuple[str, Score], ...] = ()
+    schedule_scores: tuple[tuple[str, DriftLeft], ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -75,13 +69,13 @@ class Cost:
 @dataclass
 class ChannelReport:
     channel: str  # what the report calls the channel: the training recording's channel, else the file stem
+    unit: str  # the channel's unit as printed: mg, deg/s, Pa
     model_path: str
     model_id: str
     method: str
     trained_range_c: tuple[float, float]
     recording_range_c: tuple[float, float]
-    scores: dict[str, Score]  # "all", "heating", "cooling", then "held-out ..." with --holdout
-    noise_floor_mg: float
+    scores: UnitScores
     held_out: str | None = None  # how the held-out part was chosen
     verify: VerifySummary | None = None
     cost: Cost = field(default_factory=Cost)
@@ -106,27 +100,23 @@ class ChannelReport:
             return 1.0 if t_lo <= lo <= t_hi else 0.0
         return max(0.0, min(hi, t_hi) - max(lo, t_lo)) / (hi - lo)
 
-
-def branch_scores(
-    rec: Recording, compensated: np.ndarray, smoothing_s: float, prefix: str = ""
-) -> dict[str, Score]:
-    """Drift left of a static recording (about its one mean) overall and per thermal branch."""
-    rate = rec.sample_rate_hz
-    x = smooth_for_scoring(np.asarray(compensated, dtype=np.float64), rate, smoothing_s)
-    residual = x - x.mean()
-    branch = thermal_branch(rec.temp_c, rate)
-    out = {}
-    for label, value in BRANCHES:
-        mask = np.ones(residual.size, dtype=bool) if value is None else branch == value
-        if not mask.any():
-            out[prefix + label] = Score(0, math.nan, math.nan)
-            continue
-        left = summarise(residual[mask], branch[mask])
-        out[prefix + label] = Score(int(mask.sum()), left.rms_mg, left.max_abs_mg)
-    return out
+    @property
+    def figures_for_verdict(self) -> Figures:
+        """The held-out figures (the whole recording's, in-sample, without a hold-out) the guard compares."""
+        part = self.scores.headline
+        return Figures(
+            "held-out" if self.scores.held_out is not None else "all samples (in-sample)",
+            part.model.rms_mg,
+            part.uncompensated.rms_mg,
+            math.nan if part.model_in_range is None else part.model_in_range.rms_mg,
+            math.nan if part.uncompensated_in_range is None else part.uncompensated_in_range.rms_mg,
+            part.noise_floor_mg,
+            self.unit,
+        )
 
 
 def drift_left(rec: Recording, compensated: np.ndarray, smoothing_s: float) -> np.ndarray:
+    """The smoothed compensated output minus its mean (the residual figure's points)."""
     x = smooth_for_scoring(np.asarray(compensated, dtype=np.float64), rec.sample_rate_hz, smoothing_s)
     return x - x.mean()
 
@@ -139,30 +129,47 @@ class Check:
     what: str
     measured: float | None  # None: not measured
     limit: float
+    unit: str = ""  # the channel's unit for the drift-left keys (the *_mg keys read in it)
+    decisive: bool = True  # a configured threshold: its pass counts towards PASS
 
     @property
     def ok(self) -> bool:
         return self.measured is not None and passes(self.key, self.measured, self.limit)
 
+    @property
+    def name(self) -> str:
+        return f"{self.channel} {self.key} ({self.what})"
+
+    @property
+    def limit_text(self) -> str:
+        t = THRESHOLDS[self.key]
+        unit = self.unit if t.unit == "mg" and self.unit else t.unit
+        return f"{'<=' if t.bound == 'max' else '>='} {_num(self.limit)} {unit}".strip()
+
+
+def _value(left: DriftLeft | None, kind: str) -> float | None:
+    """RMS or maximum of one branch ("", "heating_", "cooling_"); None when it has no samples."""
+    if left is None:
+        return None
+    branch, stat = kind.rsplit(":", 1)
+    samples = {"": left.samples, "heating_": left.heating_samples, "cooling_": left.cooling_samples}[branch]
+    if samples == 0:
+        return None
+    return float(getattr(left, f"{branch}{'rms_mg' if stat == 'rms' else 'max_abs_mg'}"))
+
 
 def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
     """One check per configured threshold (and per branch for the branch keys)."""
-    s = report.scores
-
-    def score(label: str, kind: str) -> float | None:
-        found = s.get(label)
-        if found is None or found.samples == 0:
-            return None
-        return found.rms_mg if kind == "rms" else found.max_abs_mg
-
+    whole = report.scores.whole.model
+    held = None if report.scores.held_out is None else report.scores.held_out.model
     cost = report.cost
     measured: dict[str, list[tuple[str, float | None]]] = {
-        "residual_rms_mg": [("all samples", score("all", "rms"))],
-        "residual_max_mg": [("all samples", score("all", "max"))],
-        "branch_rms_mg": [(b, score(b, "rms")) for b in ("heating", "cooling")],
-        "branch_max_mg": [(b, score(b, "max")) for b in ("heating", "cooling")],
-        "holdout_rms_mg": [("held-out", score("held-out all", "rms"))],
-        "holdout_max_mg": [("held-out", score("held-out all", "max"))],
+        "residual_rms_mg": [("all samples", _value(whole, ":rms"))],
+        "residual_max_mg": [("all samples", _value(whole, ":max"))],
+        "branch_rms_mg": [(b, _value(whole, f"{b}_:rms")) for b in ("heating", "cooling")],
+        "branch_max_mg": [(b, _value(whole, f"{b}_:max")) for b in ("heating", "cooling")],
+        "holdout_rms_mg": [("held-out", _value(held, ":rms"))],
+        "holdout_max_mg": [("held-out", _value(held, ":max"))],
         "min_coverage": [("trained range", report.coverage)],
         "max_verify_mismatches": [("codegen verify", _verify_count(report))],
         "max_flash_bytes": [("module", None if cost.flash_bytes is None else cost.flash_bytes[0])],
@@ -172,10 +179,17 @@ def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
         ],
     }
     return [
-        Check(report.label, key, what, value, limit)
+        Check(report.label, key, what, value, limit, report.unit)
         for key, limit in thresholds.items()
         for what, value in measured[key]
     ]
+
+
+def unit_verdict(reports: Sequence[ChannelReport], thresholds: dict[str, float]) -> Verdict:
+    """The unit's verdict: every channel's threshold checks and its guard against uncompensated."""
+    return verdict(
+        {r.label: r.figures_for_verdict for r in reports}, [c for r in reports for c in checks(r, thresholds)]
+    )
 
 
 def _verify_count(report: ChannelReport) -> float | None:
@@ -217,7 +231,9 @@ def write_figures(
         ax.plot(temp[order], predicted[order], color="black", linewidth=1.0, label=f"{report.method} fit")
     else:  # a function of the temperature history: one point per sample
         ax.scatter(temp, predicted, s=1, color="black", label=f"{report.method} fit")
-    _finish(ax, lo, hi, "drift (mg, measured minus its constant)", f"{report.label}: drift and fit")
+    _finish(
+        ax, lo, hi, f"drift ({report.unit}, measured minus its constant)", f"{report.label}: drift and fit"
+    )
     fig.tight_layout()
     save_figure(fig, out_dir / names[0])
 
@@ -228,7 +244,7 @@ def write_figures(
         if key in thresholds:
             for sign in (1, -1):
                 ax.axhline(sign * thresholds[key], color="gray", linestyle=style, linewidth=0.8)
-    _finish(ax, lo, hi, "drift left (mg)", f"{report.label}: drift left by branch")
+    _finish(ax, lo, hi, f"drift left ({report.unit})", f"{report.label}: drift left by branch")
     fig.tight_layout()
     save_figure(fig, out_dir / names[1])
     return names
@@ -254,17 +270,11 @@ def _finish(ax: Axes, lo: float, hi: float, ylabel: str, title: str) -> None:
 
 # -- the document ------------------------------------------------------------------------------
 def _mg(value: float) -> str:
-    return "n/a" if not math.isfinite(value) else f"{value:.3f}"
+    return "n/a" if not math.isfinite(value) else f"{value:.4g}"
 
 
 def _num(value: float) -> str:
     return f"{value:.4g}"
-
-
-def verdict(all_checks: Sequence[Check]) -> str:
-    if not all_checks:
-        return "NO VERDICT (no thresholds given: --config)"
-    return "PASS" if all(c.ok for c in all_checks) else "FAIL"
 
 
 def render(
@@ -279,6 +289,7 @@ def render(
 ) -> str:
     """The Markdown document (figures referenced by file name, beside it)."""
     all_checks = [c for r in reports for c in checks(r, thresholds)]
+    decided = unit_verdict(reports, thresholds)
     lines = [
         f"# Sign-off report: {unit}",
         "",
@@ -288,16 +299,20 @@ def render(
         "is drift the model left (docs/real-data.md). Branches from the temperature rate (60 s slope, "
         "+-0.2 degC/min dead band).",
         "",
-        f"## Verdict: {verdict(all_checks)}",
+        f"## Verdict: {_status(decided)}",
         "",
     ]
+    lines += [
+        f"- {r.label}: {worse_than_uncompensated(r.label, r.figures_for_verdict).detail}" for r in reports
+    ]
+    lines.append("")
     if all_checks:
         rows = [
             [
                 c.channel,
                 f"`{c.key}` ({c.what})",
                 NOT_MEASURED if c.measured is None else _num(c.measured),
-                f"{'<=' if THRESHOLDS[c.key].bound == 'max' else '>='} {_num(c.limit)} {THRESHOLDS[c.key].unit}".strip(),
+                c.limit_text,
                 "PASS" if c.ok else "FAIL",
             ]
             for c in all_checks
@@ -333,11 +348,19 @@ def _channel_section(r: ChannelReport) -> list[str]:
     lines.append("")
     lines += [f"![{name}]({name})" for name in r.figures]
     lines.append("")
-    rows = [[label, str(s.samples), _mg(s.rms_mg), _mg(s.max_abs_mg)] for label, s in r.scores.items()]
+    u = r.unit
+    header = ["part / branch", "samples", f"RMS ({u})", f"max ({u})", f"uncompensated RMS ({u})"]
+    header.append(f"uncompensated max ({u})")
     lines += [
-        markdown_table(["part / branch", "samples", "RMS (mg)", "max (mg)"], rows, "lrrr"),
+        markdown_table(header, score_rows(r.scores), "lrrrrr"),
         "",
-        f"Noise floor (no compensator removes it): {_mg(r.noise_floor_mg)} mg RMS.",
+        f"Noise floor (no compensator removes it): {_mg(r.scores.whole.noise_floor_mg)} {u} RMS"
+        + (
+            ""
+            if r.scores.held_out is None
+            else f" (held-out part: {_mg(r.scores.held_out.noise_floor_mg)} {u} RMS)"
+        )
+        + ".",
         "",
     ]
     v = r.verify
@@ -365,7 +388,7 @@ def _channel_section(r: ChannelReport) -> list[str]:
                 + (
                     "; drift left by the fixed-point module, each schedule over the samples that hold the same "
                     f"estimates (the step schedule's first n - {v.latency_samples}, the spread one's last): "
-                    + ", ".join(f"{k} {_mg(sc.rms_mg)} mg RMS" for k, sc in v.schedule_scores)
+                    + ", ".join(f"{k} {_mg(sc.rms_mg)} {r.unit} RMS" for k, sc in v.schedule_scores)
                     if v.schedule_scores
                     else ""
                 )
@@ -381,14 +404,39 @@ def _channel_section(r: ChannelReport) -> list[str]:
     return lines
 
 
+def _branch_cells(model: DriftLeft, raw: DriftLeft) -> list[list[str]]:
+    """samples, RMS and max of the model then of the uncompensated output: all, heating, cooling."""
+    rows = []
+    for label, branch in (("all", ""), ("heating", "heating_"), ("cooling", "cooling_")):
+        samples = {"": model.samples, "heating_": model.heating_samples, "cooling_": model.cooling_samples}
+        cells = [label, str(samples[branch])]
+        for left in (model, raw):
+            cells += [_mg(getattr(left, f"{branch}rms_mg")), _mg(getattr(left, f"{branch}max_abs_mg"))]
+        rows.append(cells)
+    return rows
+
+
+def _part_rows(part: PartScores, prefix: str) -> list[list[str]]:
+    rows = [[prefix + row[0], *row[1:]] for row in _branch_cells(part.model, part.uncompensated)]
+    if part.model_in_range is not None and part.uncompensated_in_range is not None:
+        cells = _branch_cells(part.model_in_range, part.uncompensated_in_range)[0]
+        rows.append([f"{prefix}in trained range", *cells[1:]])
+    return rows
+
+
+def score_rows(scores: UnitScores) -> list[list[str]]:
+    """The drift-left table: whole recording, then the held-out part (``held-out ...`` rows)."""
+    rows = _part_rows(scores.whole, "")
+    if scores.held_out is not None:
+        rows += _part_rows(scores.held_out, "held-out ")
+    return rows
+
+
+def _status(decided: Verdict) -> str:
+    return "NO VERDICT (no thresholds given: --config)" if decided.status == NO_VERDICT else decided.status
+
+
 def summary_line(unit: str, reports: Sequence[ChannelReport], thresholds: dict[str, float]) -> str:
-    all_checks = [c for r in reports for c in checks(r, thresholds)]
-    failed = [f"{c.channel} {c.key} ({c.what})" for c in all_checks if not c.ok]
-    return f"{unit}: {verdict(all_checks)}" + (f" (failed: {', '.join(failed)})" if failed else "")
-
-
-def noise_floor(rec: Recording, smoothing_s: float) -> float:
-    from trainer.data.smoothing import window_samples
-
-    n = window_samples(smoothing_s, rec.sample_rate_hz) if smoothing_s > 0 else 1
-    return noise_floor_mg(rec.accel_mg, n)
+    decided = unit_verdict(reports, thresholds)
+    failed = f" (failed: {', '.join(decided.failed)})" if decided.failed else ""
+    return f"{unit}: {_status(decided)}{failed}"

@@ -58,25 +58,44 @@ def thermal_branch(
 
 @dataclass(frozen=True)
 class DriftLeft:
-    """RMS and maximum of a drift-left series, overall and per branch (NaN: no such samples)."""
+    """RMS and maximum of a drift-left series, overall and per branch (NaN: no such samples).
+
+    The ``_mg`` fields are in the scored channel's unit (mg for an accelerometer's ``accel_mg``,
+    deg/s or Pa for a one-channel view of a gyroscope or barometer, :mod:`trainer.data.channels`).
+    """
 
     rms_mg: float
     max_abs_mg: float
     heating_rms_mg: float
     cooling_rms_mg: float
+    samples: int = 0
+    heating_samples: int = 0
+    cooling_samples: int = 0
+    heating_max_abs_mg: float = math.nan
+    cooling_max_abs_mg: float = math.nan
 
 
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2))) if x.size else math.nan
 
 
+def _max_abs(x: np.ndarray) -> float:
+    return float(np.max(np.abs(x))) if x.size else math.nan
+
+
 def summarise(residual: np.ndarray, branch: np.ndarray) -> DriftLeft:
     """The scores of a drift-left series (already about its reference)."""
+    heating, cooling = residual[branch == HEATING], residual[branch == COOLING]
     return DriftLeft(
         _rms(residual),
-        float(np.max(np.abs(residual))),
-        _rms(residual[branch == HEATING]),
-        _rms(residual[branch == COOLING]),
+        _max_abs(residual),
+        _rms(heating),
+        _rms(cooling),
+        int(residual.size),
+        int(heating.size),
+        int(cooling.size),
+        _max_abs(heating),
+        _max_abs(cooling),
     )
 
 

@@ -1,0 +1,135 @@
+"""The one sign-off verdict of ``trainer report`` and ``trainer fleet``, and its built-in guard.
+
+A verdict is a function of checks (each passed or failed, one line each) and of reasons for a
+human review: FAIL when any check fails; NO VERDICT when no *decisive* check was made (a report
+without thresholds: a guard alone can fail a unit but cannot pass it); REVIEW when every check
+passes but something asks for a look (the fleet's out-of-family units); PASS otherwise.
+
+The guard every sign-off carries, :func:`worse_than_uncompensated`, takes plain per-part figures
+(:class:`Figures`) rather than a recording, so that any scoring (one hold-out split today,
+cross-validated thermal segments later) can feed it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+PASS, REVIEW, FAIL, NO_VERDICT = "PASS", "REVIEW", "FAIL", "NO VERDICT"
+
+
+class Outcome(Protocol):
+    """A check as the verdict sees it."""
+
+    @property
+    def ok(self) -> bool: ...
+
+    @property
+    def decisive(self) -> bool:
+        """True: a pass counts towards PASS; False: a guard, whose pass alone says nothing."""
+        ...
+
+    @property
+    def name(self) -> str:
+        """What was checked, as the verdict line lists a failure."""
+        ...
+
+
+@dataclass(frozen=True)
+class Figures:
+    """A model's drift left on data it was not trained on, beside the uncompensated output's.
+
+    Plain numbers in the channel's unit (RMS about one constant, :mod:`trainer.scoring.static`);
+    NaN: not measured (e.g. no in-range figures because every sample is inside the trained range).
+    ``basis`` says where they come from ("held-out", "all samples (in-sample)", ...).
+    """
+
+    basis: str
+    model_rms: float
+    uncompensated_rms: float
+    model_in_range_rms: float = math.nan
+    uncompensated_in_range_rms: float = math.nan
+    noise_floor: float = math.nan
+    unit: str = "mg"
+
+
+@dataclass(frozen=True)
+class Guard:
+    """The built-in check: compensation must not leave more drift than no compensation."""
+
+    subject: str
+    ok: bool
+    detail: str  # one line: the comparison that decided
+    decisive: bool = False
+
+    @property
+    def name(self) -> str:
+        return f"{self.subject} {self.detail}"
+
+
+# A drift left within this factor of the noise floor is noise: a model that is "worse" only there is not.
+NOISE_MARGIN = 1.2
+
+
+def _worse(model: float, uncompensated: float, floor: float) -> bool:
+    if not (math.isfinite(model) and math.isfinite(uncompensated)):
+        return False
+    if math.isfinite(floor) and model <= NOISE_MARGIN * floor:
+        return False
+    return model > uncompensated
+
+
+def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
+    """Fails when the model's drift left (whole part, or in range) exceeds the uncompensated output's."""
+    f = figures
+    for where, model, raw in (
+        (f.basis, f.model_rms, f.uncompensated_rms),
+        (f"{f.basis} in range", f.model_in_range_rms, f.uncompensated_in_range_rms),
+    ):
+        if _worse(model, raw, f.noise_floor):
+            return Guard(
+                subject,
+                False,
+                f"worse than uncompensated: {where} drift left {model:.4g} {f.unit} RMS > {raw:.4g} {f.unit} "
+                "without the model",
+            )
+    return Guard(
+        subject,
+        True,
+        f"better than uncompensated: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS <= "
+        f"{f.uncompensated_rms:.4g} {f.unit} without the model",
+    )
+
+
+@dataclass(frozen=True)
+class Verdict:
+    status: str  # PASS | REVIEW | FAIL | NO VERDICT
+    failed: tuple[str, ...] = ()  # the failed checks' names
+    review: tuple[str, ...] = ()  # why a human should look (REVIEW)
+
+    def line(self) -> str:
+        """The status with what decided it, on one line."""
+        if self.failed:
+            return f"{self.status} (failed: {'; '.join(self.failed)})"
+        if self.status == REVIEW:
+            return f"{self.status} ({'; '.join(self.review)})"
+        return self.status
+
+
+def verdict(
+    figures: Mapping[str, Figures], checks: Sequence[Outcome] = (), review: Sequence[str] = ()
+) -> Verdict:
+    """FAIL, NO VERDICT, REVIEW or PASS (module docstring).
+
+    ``figures``: subject (a channel and method, a unit and method) -> its held-out figures, each
+    guarded by :func:`worse_than_uncompensated`; ``checks``: the thresholds' and the pipeline's
+    (verification, stages); ``review``: reasons for a human look."""
+    guards = [worse_than_uncompensated(subject, f) for subject, f in figures.items()]
+    failed = tuple(c.name for c in [*guards, *checks] if not c.ok)
+    if failed:
+        return Verdict(FAIL, failed, tuple(review))
+    if not any(c.decisive for c in checks):
+        return Verdict(NO_VERDICT, (), tuple(review))
+    return Verdict(REVIEW if review else PASS, (), tuple(review))
