@@ -212,6 +212,13 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(tmp_path: Path) -> None
     assert "gyro0_x is exported as the identity" in out.stdout
     params = (tmp_path / "params" / "px4_thermal.params").read_text()
     assert "\tTC_G_ENABLE\t0\t" in params and "\tTC_A_ENABLE\t1\t" in params
+    signoff = _run(
+        "report", "m/accel0_z.pt", "m/gyro0_x.pt", "--recording", "imu.csv", "-o", "so", cwd=tmp_path
+    )
+    assert signoff.returncode in (0, 1), signoff.stderr
+    text = (tmp_path / "so" / "report.md").read_text()
+    assert text.count("### Cross-validation") == 2 and "cross-validated over 3 thermal segments" in text
+    assert "worse than uncompensated" not in text  # auto never ships a channel CV says is made worse
     bad = _run("fit", "--method", "poly3", "--candidates", "none", "imu.csv", "-o", "x.pt", cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--candidates applies" in bad.stderr
 

@@ -175,3 +175,11 @@ def identity_note(train_stats: Any, source: str) -> str | None:
         f"{source}: {channel} is exported as the identity (C: zero correction; flight-stack parameters: zero "
         f"coefficients, the sensor disabled where every axis is so): {record.get('reason', 'auto chose none')}"
     )
+
+
+def cross_validated_figures(record: dict[str, Any]) -> tuple[float, float, int]:
+    """(chosen model's, uncompensated) pooled cross-validated drift left of a saved selection, and
+    the number of segments."""
+    cv = CrossValidation.from_dict(record["crossval"])
+    chosen = UNCOMPENSATED if record["chosen"] == NONE else str(record["chosen"])
+    return cv.results[chosen].cv_rms, cv.results[UNCOMPENSATED].cv_rms, len(cv.segments)

@@ -280,6 +280,14 @@ def run(args: argparse.Namespace) -> int:
             warning = overlap_warning(stats, rec, data_fingerprint(rec))
             if warning:
                 notes.append(f"whole recording: {warning}")
+            # an auto model carries the cross-validation that chose it: on its own training run those
+            # figures, not an in-sample or single-split one, are what the verdict judges
+            selection = stats.get("selection")
+            crossval = (
+                selection
+                if isinstance(selection, dict) and stats.get("data_sha256") == data_fingerprint(rec)
+                else None
+            )
             verify, sizes = (
                 (None, None) if target is None else _verify(model_path, target, rec_path, rec, args.smoothing)
             )
@@ -296,6 +304,7 @@ def run(args: argparse.Namespace) -> int:
                 recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
                 scores=scores,
                 held_out=held_text,
+                crossval=crossval,
                 verify=verify,
                 cost=_cost(sizes, entry, bench_path),
                 notes=notes,

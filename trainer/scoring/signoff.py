@@ -17,6 +17,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -77,6 +78,8 @@ class ChannelReport:
     recording_range_c: tuple[float, float]
     scores: UnitScores
     held_out: str | None = None  # how the held-out part was chosen
+    # the checkpoint's selection record (trainer.selection) when the report's recording is its training run
+    crossval: dict[str, Any] | None = None
     verify: VerifySummary | None = None
     cost: Cost = field(default_factory=Cost)
     notes: list[str] = field(default_factory=list)
@@ -102,8 +105,20 @@ class ChannelReport:
 
     @property
     def figures_for_verdict(self) -> Figures:
-        """The held-out figures (the whole recording's, in-sample, without a hold-out) the guard compares."""
+        """The figures the guard compares: cross-validated when the model carries its cross-validation
+        on this run, else held-out (the whole recording's, in-sample, without a hold-out)."""
         part = self.scores.headline
+        if self.crossval is not None:
+            from trainer.selection import cross_validated_figures
+
+            model_cv, raw_cv, segments = cross_validated_figures(self.crossval)
+            return Figures(
+                f"cross-validated over {segments} thermal segments",
+                model_cv,
+                raw_cv,
+                noise_floor=part.noise_floor_mg,
+                unit=self.unit,
+            )
         return Figures(
             "held-out" if self.scores.held_out is not None else "all samples (in-sample)",
             part.model.rms_mg,
@@ -345,6 +360,11 @@ def _channel_section(r: ChannelReport) -> list[str]:
     if r.held_out:
         lines.append(f"- Held-out data: {r.held_out}")
     lines += [f"- Note: {n}" for n in r.notes]
+    if r.crossval is not None:
+        from trainer.selection import record_lines
+
+        lines += ["", "### Cross-validation (how `--method auto` chose this model; the verdict uses it)", ""]
+        lines += record_lines(r.crossval)
     lines.append("")
     lines += [f"![{name}]({name})" for name in r.figures]
     lines.append("")
