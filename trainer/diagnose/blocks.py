@@ -23,6 +23,10 @@ DEFAULT_MAX_BLOCKS = 600  # dense GLS: Cholesky cost ~ N^3, a few ms at 600
 FINE_STEP_S = 0.5  # fine grid for periodograms: periods down to the catalogue's 5 s stay resolved
 RATE_WINDOW_S = 60.0  # Savitzky-Golay window for dT/dt: below the package time constants of interest
 MIN_BLOCKS = 60
+# A column a cross-validation adds (trainer.scoring.crossval): 1 on the held-out rows, whose output
+# was imputed. Blocks mostly held out get no weight in the GLS (Gls ``held_out``), and the white
+# noise is measured on the other rows, so the fit is the fit to the training rows alone.
+HELD_OUT_COLUMN = "held_out"
 
 
 def block_means(x: np.ndarray, m: int, nb: int) -> np.ndarray:
@@ -172,6 +176,7 @@ class BlockData:
     full_accel: np.ndarray = field(repr=False)
     known_input_block: np.ndarray | None = None
     plateaus: list[tuple[float, float]] = field(default_factory=list)  # quantised holds, see dequantize
+    held_out: np.ndarray | None = None  # blocks without weight (HELD_OUT_COLUMN), None: every block counts
 
     @property
     def n(self) -> int:
@@ -261,6 +266,12 @@ def build_blocks(
         )
     mf = max(1, round(FINE_STEP_S * fs))
     nf = n // mf
+    held = None
+    measured = accel
+    if HELD_OUT_COLUMN in rec.columns:
+        rows_held = np.asarray(rec.columns[HELD_OUT_COLUMN], dtype=np.float64) > 0.5
+        held = block_means(rows_held.astype(np.float64), m, nb) > 0.5
+        measured = accel[~rows_held]
     return BlockData(
         source=rec.source,
         fs=fs,
@@ -271,7 +282,7 @@ def build_blocks(
         duration_s=nb * m / fs,
         lattice_lsb_c=lsb,
         temp_smooth=smooth_block,
-        white_n_mg_rt_s=white_noise_density(accel, fs),
+        white_n_mg_rt_s=white_noise_density(measured, fs),
         fine_t=block_means(t, mf, nf) - t0,
         fine_accel=block_means(accel, mf, nf),
         fine_step_s=mf / fs,
@@ -279,4 +290,5 @@ def build_blocks(
         full_accel=accel,
         known_input_block=None if known_input is None else block_means(known_input, m, nb),
         plateaus=plateaus,
+        held_out=held if held is not None and held.any() else None,
     )

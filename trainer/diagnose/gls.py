@@ -30,6 +30,7 @@ from trainer.physics.catalogue import COVARIANCE_NOISE, NOISE, WHITE_NOISE
 
 NOISE_CANDIDATES: tuple[str, ...] = COVARIANCE_NOISE
 LOG_RATIO_BOUNDS = (-9.0, 7.0)
+HELD_OUT_VARIANCE = 1e12  # a held-out block's extra variance (units of the white block variance)
 
 
 def covariance_term(term: str) -> tuple[Callable[[int, float, float], np.ndarray], float]:
@@ -59,8 +60,11 @@ class NoiseState:
 class Gls:
     """A Cholesky-factored block covariance (up to the profiled scale ``s^2``)."""
 
-    def __init__(self, n: int, block_s: float, duration_s: float, state: NoiseState) -> None:
+    def __init__(
+        self, n: int, block_s: float, duration_s: float, state: NoiseState, held_out: np.ndarray | None = None
+    ) -> None:
         self.n = n
+        self.held_out = held_out
         self.block_s = block_s
         self.duration_s = duration_s
         self.state = state
@@ -74,12 +78,18 @@ class Gls:
         if cov is None:
             cov = np.zeros((n, n))
         cov[np.diag_indices(n)] += 1.0
+        if held_out is not None:
+            # a held-out block's variance so large that its (imputed) value carries no weight; the
+            # likelihood then counts the other blocks only (the constant log-det term cancels below)
+            cov[np.flatnonzero(held_out), np.flatnonzero(held_out)] += HELD_OUT_VARIANCE
+        self.n_weighted = n - (0 if held_out is None else int(np.sum(held_out)))
         self.cov_unit = cov
         chol, info = dpotrf(cov, lower=1, clean=1, overwrite_a=0)
         if info != 0:
             raise np.linalg.LinAlgError(f"noise covariance not positive definite (dpotrf info {info})")
         self.chol = chol
-        self.half_logdet = float(np.sum(np.log(np.diag(chol))))
+        diag = np.diag(chol)
+        self.half_logdet = float(np.sum(np.log(diag if held_out is None else diag[~held_out])))
 
     def whiten(self, m: np.ndarray) -> np.ndarray:
         return solve_triangular(self.chol, m, lower=True, check_finite=False)
@@ -109,18 +119,18 @@ class Gls:
         diag = np.abs(np.diag(np.linalg.qr(Xw, mode="r")))
         rank = int(np.sum(diag > 1e-10 * max(float(diag.max()), 1e-300)))
         logdet_xtx = 2.0 * float(np.sum(np.log(diag[diag > 1e-10 * max(float(diag.max()), 1e-300)])))
-        dof = self.n - rank
+        dof = self.n_weighted - rank
         s2 = max(rss / dof, 1e-300)
         return -0.5 * dof * (math.log(2.0 * math.pi * s2) + 1.0) - self.half_logdet - 0.5 * logdet_xtx
 
     def loglik_from_rss(self, rss: float) -> float:
-        n = self.n
+        n = self.n_weighted
         s2 = max(rss / n, 1e-300)
         return -0.5 * n * (math.log(2.0 * math.pi * s2) + 1.0) - self.half_logdet
 
     def noise_params(self, rss: float) -> dict[str, float]:
         """Catalogue noise coefficients implied by the fitted scale and ratios."""
-        s2 = rss / self.n
+        s2 = rss / self.n_weighted
         out = {WHITE_NOISE: math.sqrt(s2 * self.block_s)}
         ratios = self.state.ratios()
         for term in COVARIANCE_NOISE:
@@ -155,6 +165,7 @@ def fit_noise(
     *,
     max_evals: int = 30,
     explore: bool = True,
+    held_out: np.ndarray | None = None,
 ) -> tuple[Gls, GlsResult]:
     """Noise ratios for the linear model ``X`` by restricted maximum likelihood (REML).
 
@@ -163,14 +174,14 @@ def fit_noise(
     (whose ``loglik`` is the ML value the BIC uses).
     """
     if not start.terms:
-        gls = Gls(n, block_s, duration_s, start)
+        gls = Gls(n, block_s, duration_s, start, held_out)
         return gls, gls.fit(X, y)
     cache: dict[tuple[float, ...], tuple[Gls, GlsResult]] = {}
 
     def evaluate(logs: np.ndarray) -> tuple[Gls, GlsResult]:
         key = tuple(np.round(np.clip(logs, *LOG_RATIO_BOUNDS), 4))
         if key not in cache:
-            gls = Gls(n, block_s, duration_s, NoiseState(start.terms, key))
+            gls = Gls(n, block_s, duration_s, NoiseState(start.terms, key), held_out)
             cache[key] = (gls, gls.fit(X, y))
         return cache[key]
 

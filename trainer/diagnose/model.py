@@ -252,7 +252,7 @@ def fit_model(
     if gls is None:
         if start is None or start.terms != tuple(noise_terms):
             start = _restrict(start, noise_terms, data)
-        gls = Gls(data.n, data.block_s, data.duration_s, start)
+        gls = Gls(data.n, data.block_s, data.duration_s, start, data.held_out)
     fit = polish(terms, data, gls) if optimise else evaluate(terms, data, gls)
     if not refit_noise:
         return fit
@@ -266,6 +266,7 @@ def fit_model(
             data.duration_s,
             fit.noise,
             explore=explore,
+            held_out=data.held_out,
         )
         explore = False
         moved = np.max(np.abs(np.subtract(new_gls.state.log_ratios, fit.noise.log_ratios)), initial=0.0)

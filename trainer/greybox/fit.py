@@ -147,7 +147,8 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
 
     design = build_design(fit.terms, data)
     y = data.accel - design.offset
-    beta_ols, *_ = np.linalg.lstsq(design.X, y, rcond=None)
+    weighted = slice(None) if data.held_out is None else ~data.held_out  # cross-validation: training blocks
+    beta_ols, *_ = np.linalg.lstsq(design.X[weighted], y[weighted], rcond=None)
     Xw = fit.gls.whiten(design.X)
     dof = max(data.n - design.X.shape[1], 1)
     cov = (fit.rss / dof) * np.linalg.pinv(Xw.T @ Xw)

@@ -16,7 +16,10 @@ Training on a run with a hole: a memoryless method is fitted on the training row
 order does not matter to it). A method with state needs the temperature history without gaps,
 so it sees the whole run's temperature, and the held-out segment's output is replaced by the cubic
 fitted on the training rows (:func:`impute_held_out`): those rows then carry no information the
-training rows do not have, and the method's filters run through the segment as they would.
+training rows do not have, and the method's filters run through the segment as they would. The
+physics fit goes further: the rows are marked (``held_out``), and its least squares give the
+marked blocks no weight at all (:class:`trainer.diagnose.gls.Gls`), so it is the fit to the
+training rows alone, not pulled towards the imputed cubic.
 Recursive methods (the output's own past) cannot be trained on such a run and are not
 cross-validated; a single ``--holdout`` split scores them.
 
@@ -204,10 +207,12 @@ def training_rows(n: int, segment: Segment) -> np.ndarray:
 def impute_held_out(rec: Recording, train: np.ndarray) -> Recording:
     """``rec`` with the held-out output replaced by the cubic fitted on the training rows alone."""
     from trainer.baselines.poly3 import CubicPolynomial
+    from trainer.diagnose.blocks import HELD_OUT_COLUMN
 
     cubic = CubicPolynomial().fit(rows(rec, train))
     filled = np.where(train, rec.accel_mg, cubic.predict_drift(rec))
-    return Recording({**rec.columns, "accel_mg": filled}, dict(rec.meta), rec.source)
+    held = (~train).astype(np.float64)
+    return Recording({**rec.columns, "accel_mg": filled, HELD_OUT_COLUMN: held}, dict(rec.meta), rec.source)
 
 
 def rows(rec: Recording, mask: np.ndarray) -> Recording:
