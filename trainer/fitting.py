@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -127,34 +126,10 @@ def fit_with_stats(
     train: Recording,
     options: dict[str, Any] | None = None,
     policy: OffsetPolicy | None = None,
-    log: Callable[[str], None] | None = None,
 ) -> tuple[Compensator, dict[str, Any]]:
-    """Fit ``method`` and return it with its checkpoint's ``train_stats`` (incl. the fit residual RMS).
-
-    ``auto`` (:mod:`trainer.selection`) cross-validates the candidates on ``train`` first and fits the
-    chosen one on the whole of it; ``train_stats.selection`` records the table that chose it.
-    """
-    from trainer.selection import AUTO, select, selection_record
-
-    selection = None
-    if method == AUTO:
-        from trainer.data.channels import UNIT_LABELS, channel_unit
-        from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-
-        labels = (options or {}).get("candidates")
-        selection = select(
-            train,
-            labels=labels,
-            policy=policy,
-            smoothing_s=PAPER_RUN_SMOOTHING_S,
-            unit=UNIT_LABELS[channel_unit(train)],
-            log=log,
-        )
-        method, options = selection.candidate.method, selection.candidate.options
+    """Fit ``method`` and return it with its checkpoint's ``train_stats`` (incl. the fit residual RMS)."""
     model = fit_compensator(method, train, options, policy)
     stats = training_stats(train)
-    if selection is not None:
-        stats["selection"] = selection_record(selection)
     residual = train.accel_mg - model.predict_drift(train.without_truth())
     stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
     return model, stats

@@ -186,3 +186,32 @@ def cross_validated_figures(record: dict[str, Any]) -> tuple[float, float, int]:
     cv = CrossValidation.from_dict(record["crossval"])
     chosen = UNCOMPENSATED if record["chosen"] == NONE else str(record["chosen"])
     return cv.results[chosen].cv_rms, cv.results[UNCOMPENSATED].cv_rms, len(cv.segments)
+
+
+def fit_with_selection(
+    method: str,
+    train: Recording,
+    options: dict[str, Any] | None = None,
+    policy: OffsetPolicy | None = None,
+    log: Callable[[str], None] | None = None,
+) -> tuple[Any, dict[str, Any]]:
+    """:func:`trainer.fitting.fit_with_stats`, with ``auto`` resolved first: the candidates are
+    cross-validated on ``train``, the chosen one is fitted on the whole of it, and
+    ``train_stats.selection`` records the table that chose it."""
+    from trainer.data.channels import UNIT_LABELS, channel_unit
+    from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+    from trainer.fitting import fit_with_stats
+
+    if method != AUTO:
+        return fit_with_stats(method, train, options, policy)
+    selection = select(
+        train,
+        labels=(options or {}).get("candidates"),
+        policy=policy,
+        smoothing_s=PAPER_RUN_SMOOTHING_S,
+        unit=UNIT_LABELS[channel_unit(train)],
+        log=log,
+    )
+    model, stats = fit_with_stats(selection.candidate.method, train, selection.candidate.options, policy)
+    stats["selection"] = selection_record(selection)
+    return model, stats

@@ -29,8 +29,8 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.commands.fit_cmd import checked_method, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
-    from trainer.fitting import fit_with_stats
     from trainer.reference import RECURSIVE_NOTE
+    from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
     check_output_directory(args.output)  # before a possibly long fit
@@ -44,7 +44,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     for channel in channels:
         view = channel_view(train, channel)
         checks = check_training(view, method, accept=args.accept_implausible)
-        model, stats = fit_with_stats(args.method, view, options, policy, log=progress_log(args))
+        model, stats = fit_with_selection(args.method, view, options, policy, log=progress_log(args))
         fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
     with staged_directory(args.output) as staging:

@@ -52,8 +52,8 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import UserError, check_output_path
-    from trainer.fitting import fit_with_stats
     from trainer.reference import RECURSIVE_NOTE
+    from trainer.selection import fit_with_selection
 
     if args.candidates is not None and args.method != AUTO:
         raise UserError("--candidates applies to --method auto")
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output)  # fail before a long training run, not after it
     train = read_recording(args.train)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
-    model, stats = fit_with_stats(args.method, train, options, policy, log=progress_log(args))
+    model, stats = fit_with_selection(args.method, train, options, policy, log=progress_log(args))
     checks.print_warnings()
     print_selection(stats)
     save_model(
