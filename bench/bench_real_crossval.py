@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trainer import methods
 from trainer.data.channels import channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
@@ -59,7 +60,7 @@ def main() -> int:
             "",
         ]
         chosen = UNCOMPENSATED if selection.chosen == NONE else selection.chosen
-        raw, cubic, auto = cv.results[UNCOMPENSATED], cv.results["poly3"], cv.results[chosen]
+        raw, cubic, auto = cv.results[UNCOMPENSATED], cv.results[methods.CUBIC], cv.results[chosen]
         for mode in ("warm_rms", "cold_rms"):
             ref = np.minimum([getattr(f, mode) for f in raw.folds], [getattr(f, mode) for f in cubic.folds])
             mine = np.array([getattr(f, mode) for f in auto.folds])
@@ -68,7 +69,7 @@ def main() -> int:
                 f"{channel.name} {mode[:4]}: auto vs better of (cubic, none), worst segment {100 * worst:+.1f} % "
                 f"({'met' if worst <= 0.02 else 'NOT met'})"
             )
-        physics = np.median(cv.results["physics"].natural()) / np.median(cubic.natural()) - 1.0
+        physics = np.median(cv.results[methods.PHYSICS].natural()) / np.median(cubic.natural()) - 1.0
         auto_vs_cubic = np.median(auto.natural()) / np.median(cubic.natural()) - 1.0
         checks.append(
             f"{channel.name}: median over segments, physics {100 * physics:+.1f} % and auto {100 * auto_vs_cubic:+.1f} % "

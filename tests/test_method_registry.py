@@ -23,6 +23,7 @@ from trainer.commands.method_options import OptionGroup
 from trainer.compensator import Compensator
 from trainer.errors import run_cli
 from trainer.scoring.compare import fit_all
+from trainer.selection import AUTO
 
 ROOT = Path(__file__).resolve().parents[1]
 NAME = "linear-t"
@@ -192,7 +193,7 @@ def test_the_registry_order_is_the_comparison_order() -> None:
 
 
 def test_argparse_choices_equal_the_registry(linear_t: methods.Method) -> None:
-    assert _choices("fit", "--method") == methods.fit_cli_names()
+    assert _choices("fit", "--method") == (*methods.fit_cli_names(), AUTO)  # auto: a selector, not a method
     assert set(methods.fit_cli_names()) == {m.name for m in methods.entries() if not m.reference}
     assert NAME in _choices("fit", "--method")
     assert _choices("compare", "--methods") == methods.names()

@@ -177,13 +177,16 @@ def test_compare_warns_when_validation_is_the_training_data(
     assert "the validation data is the training data" in (out / "report.md").read_text()
 
 
-def test_compare_needs_exactly_one_of_valid_and_holdout(
-    chamber_csv: Path, capsys: pytest.CaptureFixture[str]
+def test_compare_takes_at_most_one_of_valid_and_holdout(
+    chamber_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    for extra in ([], [str(chamber_csv), "--holdout", "0.5"]):
-        assert run_cli(main, ["compare", str(chamber_csv), *extra, "--methods", "pla"]) == 2
-        lines = capsys.readouterr().err.strip().splitlines()
-        assert len(lines) == 1 and "--holdout" in lines[0]
+    """Neither one cross-validates (tests/test_crossval.py); both at once is one line, nothing written."""
+    out_dir = tmp_path / "cmp"
+    argv = ["compare", str(chamber_csv), str(chamber_csv), "--holdout", "0.5", "--methods", "pla"]
+    assert run_cli(main, [*argv, "--out-dir", str(out_dir)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "--holdout" in lines[0]
+    assert not out_dir.exists()
 
 
 def test_evaluate_scores_the_held_out_part_with_an_injection(

@@ -41,6 +41,11 @@ Renderer = Literal["lstm-stream", "mean-stream", "piecewise-linear", "cubic", "p
 RENDERERS: tuple[Renderer, ...] = ("lstm-stream", "mean-stream", "piecewise-linear", "cubic", "physics")
 PHYSICS_RENDERER: Renderer = "physics"  # the grey-box compensator's C (codegen/templates/_physics.c.j2)
 
+# The names other modules refer to in code (each written once, here, and registered below).
+PLA = "pla"
+CUBIC = "poly3"  # the flight stacks' cubic in temperature
+PHYSICS = "physics"
+
 
 @dataclass(frozen=True)
 class PaperRow:
@@ -204,7 +209,7 @@ register(
 )
 register(
     Method(
-        "pla",
+        PLA,
         "trainer.baselines.pla:PiecewiseLinear",
         MEMORYLESS,
         PLA_OPTIONS,
@@ -215,7 +220,7 @@ register(
 )
 register(
     Method(
-        "poly3",
+        CUBIC,
         "trainer.baselines.poly3:CubicPolynomial",
         MEMORYLESS,
         POLY3_OPTIONS,
@@ -234,7 +239,7 @@ register(
 )
 register(
     Method(
-        "physics",
+        PHYSICS,
         "trainer.greybox.compensator:PhysicsCompensator",
         TEMPERATURE_DRIVEN,
         PHYSICS_OPTIONS,

@@ -18,7 +18,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from trainer import methods
 from trainer.data.recording import Recording
+from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.reference import OffsetPolicy
 from trainer.scoring.crossval import (
     UNCOMPENSATED,
@@ -45,15 +47,17 @@ class Candidate:
 
 # In order of complexity: the first one within TOLERANCE of the best is chosen.
 CANDIDATES: tuple[Candidate, ...] = (
-    Candidate(NONE, "poly3", {"degree": 0}),
-    Candidate("poly1", "poly3", {"degree": 1}),
-    Candidate("poly2", "poly3", {"degree": 2}),
-    Candidate("poly3", "poly3"),
-    Candidate("pla", "pla"),
-    Candidate("physics", "physics", stateful=True),
+    Candidate(NONE, methods.CUBIC, {"degree": 0}),
+    Candidate("poly1", methods.CUBIC, {"degree": 1}),
+    Candidate("poly2", methods.CUBIC, {"degree": 2}),
+    Candidate(methods.CUBIC, methods.CUBIC),
+    Candidate(methods.PLA, methods.PLA),
+    Candidate(methods.PHYSICS, methods.PHYSICS, stateful=True),
     # the branch offset between heating and cooling, the loop measured on real sensors, fitted whatever the
     # finder says: on the bundled run the finder's structure misses the loop on accel z (CV 3.7 against 2.2 mg)
-    Candidate("physics-branch", "physics", {"effects": "hysteresis_offset"}, stateful=True),
+    Candidate(
+        f"{methods.PHYSICS}-branch", methods.PHYSICS, {"effects": BRANCH_OFFSET.identifier}, stateful=True
+    ),
 )
 
 

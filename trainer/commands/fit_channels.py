@@ -26,7 +26,7 @@ from trainer.reference import OffsetPolicy
 
 def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
     from trainer.checkpoint import save_model
-    from trainer.commands.fit_cmd import checked_method, print_selection, progress_log
+    from trainer.commands.selection_output import checked_method, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.reference import RECURSIVE_NOTE

@@ -8,6 +8,7 @@ from typing import Any
 from trainer import methods
 from trainer.commands.channel_options import add_channels_option
 from trainer.commands.offset_options import add_offset_options, policy_from_args
+from trainer.commands.selection_output import checked_method, print_selection, progress_log
 from trainer.selection import AUTO, CANDIDATES, candidate_list
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
@@ -86,27 +87,3 @@ def run(args: argparse.Namespace) -> int:
         print(line)
     print(f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
     return 0
-
-
-def checked_method(name: str) -> methods.Method:
-    """The method whose training checks apply (auto: the cubic's temperature span, its simplest fit)."""
-    return methods.get("poly3" if name == AUTO else name)
-
-
-def progress_log(args: argparse.Namespace) -> Any:
-    """Progress lines on stderr (a cross-validation fits every candidate once per segment)."""
-    import sys
-
-    if getattr(args, "quiet", False):
-        return None
-    return lambda message: print(message, file=sys.stderr, flush=True)
-
-
-def print_selection(stats: dict[str, Any]) -> None:
-    """The table that chose an auto model (from the checkpoint's record), and the choice in one line."""
-    from trainer.selection import record_lines
-
-    record = stats.get("selection")
-    if record is not None:
-        for line in record_lines(record):
-            print(line)
