@@ -266,3 +266,13 @@ def test_rate_option_rebuilds_the_physics_filters(fitted: dict[str, Path], tmp_p
     g_out, _, _ = imu_golden(imu, raw, temp)
     one_hz, _, _ = imu_golden(load_imu(_models(fitted)), raw, temp)
     assert np.any(g_out[:, 0] != one_hz[:, 0]) and np.array_equal(g_out[:, 1:], one_hz[:, 1:])
+
+
+def test_physics_channel_on_cortex_m4(fitted: dict[str, Path], tmp_path: Path) -> None:
+    if shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None:
+        pytest.skip("Cortex-M toolchain unavailable")
+    write_recording(read_recording(fitted["rec"]).slice(0, 2500), tmp_path / "part.npz")
+    result = verify_imu(_models(fitted), fitted["out"], read_recording(tmp_path / "part.npz"), cortex_m4=True)
+    assert [(r.target, sum(r.mismatches), r.state_equal) for r in result.runs] == [
+        ("host", 0, True), ("cortex-m4", 0, True)
+    ]  # fmt: skip
