@@ -78,9 +78,12 @@ def _export_imu(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from codegen.imu import export_imu
+    from codegen.rate import parse_rate_hz
 
     if args.format not in ("c", "calibration-blob"):
         raise UserError(f"--blob applies to --format c, not {args.format}")
+    if args.schedule != "step":
+        raise UserError("--schedule applies to a DLSTM's own module, not to the IMU module")
     blob_only = args.format == "calibration-blob"
     imu, written = export_imu(
         [Path(p) for p in args.model],
@@ -89,6 +92,7 @@ def _export_imu(args: argparse.Namespace) -> int:
         accel_limit_g=args.accel_limit_g,
         blob=args.blob,
         blob_only=blob_only,
+        rate_millihz=None if args.rate is None else parse_rate_hz(args.rate),
     )
     what = "calibration blob" if blob_only else "data-only IMU module and blob" if args.blob else "IMU module"
     print(

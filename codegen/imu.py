@@ -8,8 +8,10 @@ a ``NAME_calibration_t`` that is either compiled in (``NAME_builtin()``) or deco
 the module id and a CRC32 (docs/imu-module.md), so a factory flashes per-unit calibration without
 recompiling. The arithmetic is the kernel library's (``tdc_kernels.h``, included as is) in exactly
 the order of the one-channel templates, so each channel is bit-exact against the golden model of
-its own checkpoint (:func:`imu_golden`). Temperature-driven memoryless methods only (poly3, pla):
-a stateful or recursive channel is refused with one line.
+its own checkpoint (:func:`imu_golden`). Methods: poly3, pla and physics (the grey-box model: its
+filter and branch state per channel in the one state struct, its step the one-channel physics
+module's, rendered from the same template macro, ``_physics_step.c.j2``); a recursive channel
+(DLSTMs) is refused with one line.
 
 Channel units: raw and compensated values are int32 in 1/16000 of the channel's unit (mg -> the
 one-channel modules' 1/16 ug; deg/s; Pa), so the one-channel quantiser applies unchanged.
@@ -33,15 +35,29 @@ from codegen.golden_select import golden_for
 from codegen.quantize import (
     DEFAULT_ACCEL_LIMIT_G,
     TEMP_LIMITS_MDEGC,
+    QLowpass,
+    QPhysics,
     QPla,
     QPoly3,
 )
-from codegen.render import FLAGS, KERNEL_FILE, _environment, kernel_header, manifest_json, validate_name
+from codegen.rate import declared_rate_millihz
+from codegen.render import (
+    FLAGS,
+    KERNEL_FILE,
+    PHYSICS_KERNEL_FILE,
+    PHYSICS_KERNEL_HEADER,
+    _environment,
+    kernel_header,
+    manifest_json,
+    validate_name,
+)
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
 
-KIND_CUBIC, KIND_PLA = 1, 2
+KIND_CUBIC, KIND_PLA, KIND_PHYSICS = 1, 2, 3
+# a physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these)
+PHYS_TERMS = {"LAG": 1, "BRANCH": 2, "RATE": 4, "CREEP": 8, "READS_PLAY": 16}
 BLOB_MAGIC = b"TDCC"
 BLOB_VERSION = 1
 BLOB_HEADER = struct.Struct(
@@ -68,7 +84,8 @@ class ImuChannel:
 
     @property
     def kind(self) -> int:
-        return KIND_CUBIC if isinstance(self.model.quantised, QPoly3) else KIND_PLA
+        q = self.model.quantised
+        return KIND_CUBIC if isinstance(q, QPoly3) else KIND_PHYSICS if isinstance(q, QPhysics) else KIND_PLA
 
 
 @dataclass(frozen=True)
@@ -77,6 +94,12 @@ class ImuModel:
     sensors: tuple[str, ...]
     valid_mdegc: tuple[tuple[int, int], ...]  # per sensor
     max_intervals: int  # capacity of a piecewise-linear channel's tables (>= 1)
+    rate_millihz: int  # the physics channels' sample rate (one step call for all); 0: memoryless, any
+
+    @property
+    def physics(self) -> tuple[ImuChannel, ...]:
+        """The physics channels, in slot order (their tables and state are NAME_physics[slot])."""
+        return tuple(c for c in self.channels if c.kind == KIND_PHYSICS)
 
     @property
     def sha256(self) -> str:
@@ -88,7 +111,10 @@ class ImuModel:
     def module_id(self) -> int:
         """CRC32 of the layout (channels, units, sensors, capacity): a blob must be for this layout."""
         text = ";".join(f"{c.name}:{c.unit}:{self.sensors.index(c.sensor)}" for c in self.channels)
-        return zlib.crc32(f"{text};S={','.join(self.sensors)};I={self.max_intervals}".encode())
+        text += f";S={','.join(self.sensors)};I={self.max_intervals}"
+        if self.physics:  # the state holds their filters: a blob must put them on the same channels
+            text += f";P={','.join(c.name for c in self.physics)};R={self.rate_millihz}"
+        return zlib.crc32(text.encode())
 
 
 def _channel_of(raw: dict[str, Any], path: Path) -> str:
@@ -102,18 +128,22 @@ def _channel_of(raw: dict[str, Any], path: Path) -> str:
     return name
 
 
-def load_imu(paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G) -> ImuModel:
-    """Load the channels' models; refuse what one table-driven memoryless module cannot hold."""
+def load_imu(
+    paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, rate_millihz: int | None = None
+) -> ImuModel:
+    """Load the channels' models (physics ones re-derived for ``rate_millihz`` when given); refuse
+    what one table-driven module cannot hold."""
     from trainer.checkpoint import load_checkpoint
 
     channels = []
     for path in paths:
         name = _channel_of(load_checkpoint(path), path)
-        model = load_for_codegen(path, accel_limit_g=accel_limit_g)
-        if not isinstance(model.quantised, QPoly3 | QPla):
+        model = load_for_codegen(path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
+        if not isinstance(model.quantised, QPoly3 | QPla | QPhysics):
             raise UserError(
-                f"{path}: channel {name}: method {model.checkpoint.method!r} is not memoryless; the IMU module "
-                f"holds poly3 and pla channels (export a {model.checkpoint.method} channel as its own module)"
+                f"{path}: channel {name}: method {model.checkpoint.method!r} is recursive; the IMU module "
+                f"holds poly3, pla and physics channels (export a {model.checkpoint.method} channel as its "
+                f"own module)"
             )
         parsed = parse_channel(name)
         assert parsed is not None
@@ -142,10 +172,60 @@ def load_imu(paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G)
             [len(c.model.quantised.slopes_q) for c in channels if isinstance(c.model.quantised, QPla)] + [1]
         )
     )
-    return ImuModel(tuple(channels), sensors, tuple(valid), capacity)
+    rates = {declared_rate_millihz(c.model.quantised) for c in channels} - {0}
+    if len(rates) > 1:
+        raise UserError(
+            f"the physics channels are for different sample rates ({', '.join(f'{r / 1000:g} Hz' for r in sorted(rates))}); "
+            f"one step call runs them all: export with --rate HZ"
+        )
+    return ImuModel(tuple(channels), sensors, tuple(valid), capacity, rates.pop() if rates else 0)
 
 
 # ------------------------------------------------------------------------------ tables and blob
+
+
+@dataclass(frozen=True)
+class PhysicsTables:
+    """A physics channel's constants exactly as ``NAME_physics_t`` holds them (its clip range, frac
+    and cubic are in the channel's record: ``ChannelTables``)."""
+
+    terms: int  # PHYS_TERMS bits
+    centre: int  # mdegC
+    scale: int  # 2^tf
+    u_scale: int  # 2^u_shift
+    half_width: int  # play operator, Q(tf) mdegC
+    branch_q: int
+    rate_q: int
+    creep_q: int
+    lag: tuple[int, int, int, int]  # c, b0, step_scale 2^(tf - s), s (zeros: absent)
+    rate: tuple[int, int, int, int]
+    creep: tuple[int, int, int, int]
+
+
+def physics_tables(q: QPhysics) -> PhysicsTables:
+    def lowpass(f: QLowpass | None) -> tuple[int, int, int, int]:
+        return (0, 0, 0, 0) if f is None else (f.c_q, f.b_q, 1 << (q.temp_frac - f.shift), f.shift)
+
+    present = {
+        "LAG": q.lag is not None,
+        "BRANCH": q.half_width_q is not None,
+        "RATE": q.rate is not None,
+        "CREEP": q.creep is not None,
+        "READS_PLAY": q.poly_reads_play and q.half_width_q is not None,
+    }
+    return PhysicsTables(
+        sum(bit for term, bit in PHYS_TERMS.items() if present[term]),
+        q.centre_mdegc,
+        1 << q.temp_frac,
+        1 << q.u_shift,
+        q.half_width_q or 0,
+        q.branch.q if q.branch else 0,
+        q.rate_gain.q if q.rate_gain else 0,
+        q.creep_gain.q if q.creep_gain else 0,
+        lowpass(q.lag),
+        lowpass(q.rate),
+        lowpass(q.creep),
+    )
 
 
 @dataclass(frozen=True)
@@ -168,6 +248,11 @@ class ChannelTables:
 def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
     q = channel.model.quantised
     sensor = imu.sensors.index(channel.sensor)
+    if isinstance(q, QPhysics):
+        return ChannelTables(
+            KIND_PHYSICS, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, 0,
+            tuple(q.coefficients_q), (), (), (),
+        )  # fmt: skip
     if isinstance(q, QPoly3):
         return ChannelTables(
             KIND_CUBIC, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, q.t_ref_mdegc,
@@ -182,6 +267,11 @@ def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
 
 def encode_blob(imu: ImuModel) -> bytes:
     """The calibration blob (docs/imu-module.md): header, sensors, channels, CRC32 of all before it."""
+    if imu.physics:
+        raise UserError(
+            f"channel {imu.physics[0].name}: a physics channel has no calibration-blob record yet; export "
+            f"the module with built-in tables (without --blob / --format calibration-blob)"
+        )
     parts = [
         BLOB_HEADER.pack(
             BLOB_MAGIC,
@@ -255,6 +345,15 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "flags": FLAGS,
         "kind_cubic": KIND_CUBIC,
         "kind_pla": KIND_PLA,
+        "kind_physics": KIND_PHYSICS,
+        "phys_terms": PHYS_TERMS,
+        "rate_millihz": imu.rate_millihz,
+        "rate_hz": f"{imu.rate_millihz / 1000:g}",
+        "physics": [
+            {"name": c.name, "t": physics_tables(c.model.quantised)}
+            for c in imu.physics
+            if isinstance(c.model.quantised, QPhysics)
+        ],
         "temp_lo": TEMP_LIMITS_MDEGC[0],
         "temp_hi": TEMP_LIMITS_MDEGC[1],
         "sensors": [
@@ -272,6 +371,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "
                 f"{c.model.checkpoint.valid_temp_range_c[1]:.2f} degC",
                 "t": t,
+                "slot": imu.physics.index(c) if c.kind == KIND_PHYSICS else 0,
                 "splits": padded(t.splits, max_splits),
                 "slopes": padded(t.slopes, imu.max_intervals),
                 "intercepts": padded(t.intercepts, imu.max_intervals),
@@ -291,6 +391,8 @@ def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, s
         f"{name}.c": env.get_template("imu.c.j2").render(ctx),
         KERNEL_FILE: kernel_header(),
     }
+    if imu.physics:
+        files[PHYSICS_KERNEL_FILE] = PHYSICS_KERNEL_HEADER.read_text(encoding="utf-8")
     files[f"{name}.manifest.json"] = manifest_json(_manifest(imu, name, builtin))
     return files
 
@@ -304,6 +406,7 @@ def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "calibration": {"sha256": imu.sha256, "builtin": builtin},
         "module_id": f"0x{imu.module_id:08x}",
         "blob": {"layout_version": BLOB_VERSION, "max_intervals": imu.max_intervals},
+        "rates": {"sample_rate_millihz": imu.rate_millihz, "memoryless": not imu.physics},
         "sensors": [
             {"name": s, "valid_temp_range_mdegc": [lo, hi]}
             for s, (lo, hi) in zip(imu.sensors, imu.valid_mdegc, strict=True)
@@ -331,12 +434,13 @@ def export_imu(
     accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
     blob: bool = False,
     blob_only: bool = False,
+    rate_millihz: int | None = None,
 ) -> tuple[ImuModel, list[str]]:
     """Write the module (built-in tables, or data-only with ``blob``) and/or the blob, all or nothing."""
     from codegen.export import write_files_atomically
 
     validate_name(name)
-    imu = load_imu(paths, accel_limit_g=accel_limit_g)
+    imu = load_imu(paths, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
     files: dict[str, str | bytes] = {} if blob_only else dict(render_imu(imu, name, builtin=not blob))
     if blob or blob_only:
         files[f"{name}{BLOB_SUFFIX}"] = encode_blob(imu)

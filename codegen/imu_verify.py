@@ -217,7 +217,10 @@ def verify_imu(
     if found is None:
         raise UserError(f"{out_dir}: no IMU module (NAME.manifest.json of 'codegen export --channels')")
     name, manifest = found
-    imu = load_imu(models)
+    rates = manifest.get("rates")
+    declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
+    module_rate = declared if isinstance(declared, int) and declared > 0 else None
+    imu = load_imu(models, rate_millihz=module_rate)  # physics filters as exported (--rate)
     module_channels = [c["name"] for c in manifest["channels"]]
     if [c.name for c in imu.channels] != module_channels:
         raise UserError(
@@ -226,6 +229,12 @@ def verify_imu(
         )
     if manifest["calibration"]["sha256"] != imu.sha256 and manifest["calibration"]["builtin"]:
         raise UserError(f"{out_dir / name}.c was generated from other models (calibration sha256 differs)")
+    rate_hz = imu.rate_millihz / 1000
+    if rate_hz and abs(rec.sample_rate_hz - rate_hz) > 0.01 * rate_hz:
+        raise UserError(
+            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the physics channels' filters are for "
+            f"{rate_hz:g} Hz (export the module with --rate {rec.sample_rate_hz:g})"
+        )
     raw, temp = step_inputs(imu, rec)
     g_out, g_flags, g_samples = imu_golden(imu, raw, temp)
     result = ImuVerifyResult(name, len(rec), [c.name for c in imu.channels], [c.unit for c in imu.channels])
