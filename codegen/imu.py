@@ -349,7 +349,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "phys_terms": PHYS_TERMS,
         "rate_millihz": imu.rate_millihz,
         "rate_hz": f"{imu.rate_millihz / 1000:g}",
-        "physics": [
+        "physics_channels": [
             {"name": c.name, "t": physics_tables(c.model.quantised)}
             for c in imu.physics
             if isinstance(c.model.quantised, QPhysics)
