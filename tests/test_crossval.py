@@ -122,15 +122,31 @@ def test_training_never_sees_the_held_out_output() -> None:
         assert not np.allclose(train.accel_mg[seg.start : seg.stop], rec.accel_mg[seg.start : seg.stop])
 
 
-def test_a_monotone_ramp_cannot_be_cross_validated() -> None:
-    temp = np.linspace(-20, 60, 4000)
-    rec = Recording(
-        {"time_s": np.arange(temp.size) / RATE_HZ, "temp_c": temp, "accel_mg": np.zeros(temp.size)},
+def _ramp(rows: int) -> Recording:
+    temp = np.linspace(-20, 60, rows)
+    drift = 0.01 * (temp + 30.0) ** 2  # a curve a straight line leaves, a quadratic removes
+    return Recording(
+        {"time_s": np.arange(temp.size) / RATE_HZ, "temp_c": temp, "accel_mg": drift},
         {"sample_rate_hz": "2.0"},
         "ramp.csv",
     )
-    with pytest.raises(UserError, match=r"ramp\.csv: cross-validation needs at least 2 thermal segments"):
-        cross_validate(rec, {}, stateful=set(), smoothing_s=0.0)
+
+
+def test_a_monotone_ramp_is_cross_validated_in_thirds() -> None:
+    rec = _ramp(4000)
+    (segment,) = thermal_segments(rec)
+    cv = cross_validate(rec, {}, stateful=set(), smoothing_s=0.0)
+    assert [(s.start, s.stop) for s in cv.segments] == [(0, 1333), (1333, 2667), (2667, 4000)]
+    assert all(s.label.startswith(segment.label) for s in cv.segments)
+    results = select(rec, labels=("none", "poly1", "poly2")).cv.results
+    middle = {name: r.folds[1].warm_rms for name, r in results.items()}
+    assert middle["poly2"] < 1e-3 * middle["poly1"] < middle[UNCOMPENSATED]  # the exact shape wins inside
+    # the outer thirds lie outside the training range, where every model holds its edge value
+    assert results["poly2"].folds[0].warm_rms == pytest.approx(results[UNCOMPENSATED].folds[0].warm_rms)
+    with pytest.raises(
+        UserError, match=r"ramp\.csv: cross-validation needs at least 2 thermal segments or 48 rows"
+    ):
+        cross_validate(_ramp(40), {}, stateful=set(), smoothing_s=0.0)
 
 
 def test_auto_chooses_none_where_nothing_helps_and_a_polynomial_where_one_does() -> None:

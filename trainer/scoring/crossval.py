@@ -3,7 +3,8 @@
 A single split of one chamber run says little: which end is held out decides the verdict (the
 physics compensator won by 72 % at one split of the bundled run and lost by 23 % at another).
 Here every thermal segment of the run (each heating, cooling and dwell; :func:`thermal_segments`)
-is held out in turn, the method is trained on the rest, and the held-out segment is scored:
+is held out in turn, the method is trained on the rest, and the held-out segment is scored (a run
+of one segment, a single ramp, is cut into thirds in time; :func:`folds_of`):
 
 - **warm**: the model runs from the recording's start, through the training rows, and is scored
   on the segment, as firmware running since power-on;
@@ -30,6 +31,7 @@ over the whole segment and over its samples inside the training temperature rang
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -46,6 +48,8 @@ from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left,
 MIN_SEGMENT_FRACTION = 0.05  # a thermal run shorter than 5 % of the recording joins its neighbour
 MIN_SEGMENT_S = 300.0  # ... and so does one shorter than 5 minutes
 MIN_SEGMENTS = 2
+MIN_PART_ROWS = 16  # each part of a cut ramp holds at least this many samples
+RAMP_PARTS = 3  # a run of one thermal segment (one ramp) is cut into this many parts in time
 UNCOMPENSATED = "uncompensated"
 LABELS = {HEATING: "heating", COOLING: "cooling", NEITHER: "dwell"}
 BRANCH_OF = {label: branch for branch, label in LABELS.items()}
@@ -187,15 +191,36 @@ def cross_validatable(method: str) -> bool:
 
 
 def folds_of(rec: Recording) -> list[Segment]:
-    """The segments to hold out; a one-line error when the run has too few to cross-validate."""
+    """The segments to hold out: the thermal segments, or, on a run of one (a single ramp or
+    dwell), :data:`RAMP_PARTS` equal parts of it in time, each held out in turn (the first and last
+    then extrapolate in temperature, the middle one interpolates); a one-line error when even that
+    leaves too few rows."""
     segments = thermal_segments(rec)
-    if len(segments) < MIN_SEGMENTS:
+    if len(segments) >= MIN_SEGMENTS:
+        return segments
+    n = len(rec)
+    if n < RAMP_PARTS * MIN_PART_ROWS:
         raise UserError(
-            f"{rec.source}: cross-validation needs at least {MIN_SEGMENTS} thermal segments (heating, cooling, "
-            f"dwell), this run has {len(segments)} ({', '.join(s.label for s in segments)}); score it on "
-            "another recording (VALID) or give --holdout"
+            f"{rec.source}: cross-validation needs at least {MIN_SEGMENTS} thermal segments or "
+            f"{RAMP_PARTS * MIN_PART_ROWS} rows to cut one into {RAMP_PARTS} parts; this run has {n} rows; score it "
+            "on another recording (VALID) or give --holdout"
         )
-    return segments
+    (only,) = segments
+    temp = np.asarray(rec.temp_c, dtype=np.float64)
+    t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
+    edges = [round(k * n / RAMP_PARTS) for k in range(RAMP_PARTS + 1)]
+    return [
+        Segment(
+            a,
+            b,
+            f"{only.label} {k + 1}/{RAMP_PARTS}",
+            float(t[a]),
+            float(t[b - 1]),
+            float(temp[a]),
+            float(temp[b - 1]),
+        )
+        for k, (a, b) in enumerate(itertools.pairwise(edges))
+    ]
 
 
 def training_rows(n: int, segment: Segment) -> np.ndarray:
