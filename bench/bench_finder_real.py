@@ -62,9 +62,8 @@ class Case:
 def cases(duration_s: float) -> list[Case]:
     """Additive effects the run can identify, at two sizes, and pairs of instances of one effect.
 
-    Sizes are several block-noise levels (z axis: about 0.15 mg per 7 s block, a random walk of
-    0.05 mg/sqrt(s)) and beyond what a cubic plus a branch offset absorbs; times and periods are
-    placed away from the clean run's own findings.
+    The larger size is twice the smaller; step times and periods lie away from the bundled run's own
+    findings (steps at 1022 s and 4199 s on z, 1446 s on x).
     """
     d = duration_s
     out = []
@@ -76,6 +75,8 @@ def cases(duration_s: float) -> list[Case]:
                 (EffectConfig(PERIODIC, {"amp_mg": 0.45 * size, "period_s": 300.0, "phase_rad": 0.7}),),
             ),
             Case(f"warmup {label}", (EffectConfig(WARMUP, {"amp_mg": 2.0 * size, "tau_s": 400.0}),)),
+            Case(f"temp_rate {label}", (EffectConfig(RATE, {"k_mg_per_c_per_min": 0.3 * size}),)),
+            Case(f"branch offset {label}", (EffectConfig(BRANCH, {"amp_mg": 0.8 * size, "width_c": 10.0}),)),
         ]
     out += [
         Case(

@@ -6,6 +6,8 @@ walk (seeded), plus catalogue contributions (``physics.effects.effect_contributi
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,43 @@ def test_two_periods_are_both_named() -> None:
     for (amp_mg, period_s), p in zip(truth, found, strict=True):
         assert p["period_s"] == pytest.approx(period_s, rel=0.05)
         assert p["amp_mg"] == pytest.approx(amp_mg, rel=0.25)
+
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
+def test_real_run_keeps_its_findings_when_effects_are_added() -> None:
+    """The bundled real run (z axis) plus a 2.4 mg step and a 0.9 mg, 300 s periodic: every finding of
+    the clean run is still there (same effect, same instant or period) and both additions are named."""
+    from trainer.data.importer import import_foreign, options_with_preset
+
+    rec = import_foreign(REAL, options_with_preset("tofupilot"))
+    clean = diagnose(rec, holdout_fraction=0.0)
+    t = rec.time_s - rec.time_s[0]
+    duration_s = float(t[-1])
+    added = [
+        (STEP, {"t_s": 0.55 * duration_s, "step_mg": 2.4}),
+        (PERIODIC, {"amp_mg": 0.9, "period_s": 300.0, "phase_rad": 0.7}),
+    ]
+    extra = sum((effect_contribution(e, p, t, rec.temp_c, rec.temp_c) for e, p in added), np.zeros(t.size))
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    d = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    block_s = d.data.block_s
+
+    def near(effect: str, a: dict[str, float], b: dict[str, float]) -> bool:
+        if effect == STEP:
+            return abs(a["t_s"] - b["t_s"]) <= 2.0 * block_s
+        return abs(1.0 / a["period_s"] - 1.0 / b["period_s"]) <= 1.0 / d.data.duration_s
+
+    found = [(e.effect, dict(e.params)) for e in d.left_out]
+    assert clean.left_out
+    for e in clean.left_out:
+        assert any(f == e.effect and near(f, dict(e.params), p) for f, p in found), e.effect
+    for effect, truth in added:
+        matches = [p for f, p in found if f == effect and near(effect, truth, p)]
+        assert len(matches) == 1
+        size = "step_mg" if effect == STEP else "amp_mg"
+        assert matches[0][size] == pytest.approx(truth[size], rel=0.25)
