@@ -10,6 +10,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
 * duplicates: two findings of one effect whose parameters coincide within the data's resolution
   (periods within ``1/duration`` in frequency, step times within two blocks);
 * lost: findings of the clean run that are missing from the case's findings;
+* ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
+  plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
 * time per diagnosis.
 
@@ -17,6 +19,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
         --channels all -o /tmp/imu.csv
     python bench/bench_finder_real.py /tmp/imu.csv                       # every case
     python bench/bench_finder_real.py /tmp/imu.csv --cases step,periodic # names containing these
+    python bench/bench_finder_real.py --simulated 3001 --cases step         # a clean generated run
+    python bench/bench_finder_real.py --simulated 3001 --hidden hysteresis  # ... with its own finding
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.result import Diagnosis
+from trainer.diagnose.scenarios import make_scenario
 from trainer.physics.catalogue import bias_step, hysteresis_offset, periodic, temp_rate, warmup
 from trainer.physics.effects import EffectConfig, effect_contribution
 
@@ -62,7 +67,8 @@ class Case:
 def cases(duration_s: float) -> list[Case]:
     """Additive effects the run can identify, at two sizes, and pairs of instances of one effect.
 
-    The larger size is twice the smaller; step times and periods lie away from the bundled run's own
+    The larger size is twice the smaller; the rate term reads the temperature through a 60 s filter
+    (the measured thermometer's first samples jump by 0.5 degC, a raw derivative would be a spike); step times and periods lie away from the bundled run's own
     findings (steps at 1022 s and 4199 s on z, 1446 s on x).
     """
     d = duration_s
@@ -75,7 +81,9 @@ def cases(duration_s: float) -> list[Case]:
                 (EffectConfig(PERIODIC, {"amp_mg": 0.45 * size, "period_s": 300.0, "phase_rad": 0.7}),),
             ),
             Case(f"warmup {label}", (EffectConfig(WARMUP, {"amp_mg": 2.0 * size, "tau_s": 400.0}),)),
-            Case(f"temp_rate {label}", (EffectConfig(RATE, {"k_mg_per_c_per_min": 0.3 * size}),)),
+            Case(
+                f"temp_rate {label}", (EffectConfig(RATE, {"k_mg_per_c_per_min": 0.3 * size, "tau_s": 60.0}),)
+            ),
             Case(f"branch offset {label}", (EffectConfig(BRANCH, {"amp_mg": 0.8 * size, "width_c": 10.0}),)),
         ]
     out += [
@@ -172,7 +180,10 @@ def score(case: Case, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         if k not in used
         and not any(e == effect and same_instance(effect, p, q, d) for e, q in findings(clean))
     ]
+    reported = {x for a in d.ambiguous for x in a.effects} | {n.effect for n in d.not_identifiable}
+    unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
     return {
+        "ambiguous": sorted(unnamed & reported),
         "named": named,
         "added": len(case.added),
         "params_ok": params_ok,
@@ -195,21 +206,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument(
-        "recording", help="an imported multi-channel recording (trainer import --channels all)"
+        "recording", nargs="?", help="an imported multi-channel recording (trainer import --channels all)"
+    )
+    parser.add_argument(
+        "--simulated", type=int, metavar="SEED", help="instead: the clean generated recording of this seed"
+    )
+    parser.add_argument(
+        "--hidden",
+        default="",
+        metavar="EFFECTS",
+        help="with --simulated: effects concealed in the generated 'clean' run (its own findings)",
     )
     parser.add_argument("--channel", default="accel0_z")
     parser.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
     args = parser.parse_args(argv)
-    full = read_recording(args.recording)
-    rec = channel_view(full, select_channels(full, (args.channel,))[0])
+    if args.simulated is not None:
+        hidden = tuple(h for h in args.hidden.split(",") if h)
+        rec = make_scenario(hidden, args.simulated).recording().without_truth()
+        args.channel = f"simulated #{args.simulated} ({'+'.join(hidden) or 'nothing'} concealed)"
+    elif args.recording:
+        full = read_recording(args.recording)
+        rec = channel_view(full, select_channels(full, (args.channel,))[0])
+    else:
+        parser.error("give a recording or --simulated SEED")
     started = time.perf_counter()
     clean = diagnose(rec, holdout_fraction=0.0)
     clean_s = time.perf_counter() - started
     print(f"clean {args.channel}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
     wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
     chosen = [c for c in cases(clean.data.duration_s) if not wanted or any(w in c.name for w in wanted)]
-    print("| case | named | params within 25 % | duplicates | lost clean findings | extra | s | findings |")
-    print("|---|--:|--:|--:|---|---|--:|---|")
+    print(
+        "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous | s | findings |"
+    )
+    print("|---|--:|--:|--:|---|---|---|--:|---|")
     totals = {"named": 0, "added": 0, "params_ok": 0, "duplicates": 0, "lost": 0}
     for case in chosen:
         started = time.perf_counter()
@@ -221,7 +250,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         totals["lost"] += len(s["lost"])  # type: ignore[arg-type]
         print(
             f"| {case.name} | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
-            f"| {', '.join(s['lost']) or '-'} | {', '.join(s['extra']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
+            f"| {', '.join(s['lost']) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
             flush=True,
         )
     print(

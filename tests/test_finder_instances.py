@@ -13,9 +13,10 @@ import pytest
 
 from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
-from trainer.diagnose.blocks import build_blocks
+from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, build_blocks
 from trainer.diagnose.candidates import coincides, has_duplicates, propose
 from trainer.diagnose.model import Term, fit_model
+from trainer.diagnose.scenarios import make_scenario
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS, bias_step, periodic
 from trainer.physics.effects import effect_contribution
 
@@ -50,8 +51,8 @@ def _recording(effects: list[tuple[str, dict[str, float]]], seed: int) -> Record
     return Recording(columns, {"sample_rate_hz": str(FS_HZ)}, f"synthetic#{seed}")
 
 
-def _found(rec: Recording, effect: str) -> list[dict[str, float]]:
-    d = diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
+def _found(rec: Recording, effect: str, max_blocks: int = BLOCKS) -> list[dict[str, float]]:
+    d = diagnose(rec, holdout_fraction=0.0, max_blocks=max_blocks)
     return [dict(e.params) for e in d.left_out if e.effect == effect]
 
 
@@ -110,6 +111,28 @@ def test_two_periods_are_both_named() -> None:
     for (amp_mg, period_s), p in zip(truth, found, strict=True):
         assert p["period_s"] == pytest.approx(period_s, rel=0.05)
         assert p["amp_mg"] == pytest.approx(amp_mg, rel=0.25)
+
+
+def test_a_slow_period_leaves_no_harmonic_for_the_fast_search() -> None:
+    """Periodics at 600 s and 150 s on a generated clean run (seed 3001: 25 s blocks, 150 s is six of
+    them): exactly two periodic findings. The fine-grid residual used to interpolate the 150 s
+    component linearly between block centres, and its fifth harmonic (30 s) was named as a third."""
+    rec = make_scenario((), 3001).recording().without_truth()
+    t = rec.time_s - rec.time_s[0]
+    truth = [(0.9, 600.0, 0.7), (0.6, 150.0, -1.0)]
+    extra = sum(
+        (
+            effect_contribution(
+                PERIODIC, {"amp_mg": a, "period_s": p, "phase_rad": ph}, t, rec.temp_c, rec.temp_c
+            )
+            for a, p, ph in truth
+        ),
+        np.zeros(t.size),
+    )
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    found = _found(Recording(columns, dict(rec.meta), rec.source), PERIODIC, DEFAULT_MAX_BLOCKS)
+    assert sorted(round(p["period_s"]) for p in found) == [150, 600]
 
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"

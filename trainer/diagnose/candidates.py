@@ -28,6 +28,7 @@ from trainer.diagnose.model import (
     search_bounds,
 )
 from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, nonlinear_defaults
+from trainer.physics.catalogue.base import catalogue_params
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
@@ -154,8 +155,27 @@ def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Pr
 
 
 def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
-    """Fine-grid data minus the current model interpolated from the block centres."""
-    return data.fine_accel - np.interp(data.fine_t, data.t, current.prediction)
+    """Fine-grid data minus the current model interpolated from the block centres.
+
+    A term with a fine-grid form (a periodic component fitted on the blocks) is subtracted exactly
+    on the fine grid instead: interpolating a period of a few blocks linearly leaves its harmonics
+    in the residual, where the fast search would name them (a 30 s "component" beside 150 s).
+    """
+    block_model = current.prediction.copy()
+    exact = np.zeros(data.fine_t.size)
+    for index, term in enumerate(current.terms):
+        definition = DEFINITIONS[term.identifier]
+        fine_offset = definition.finder.fine_offset
+        if fine_offset is None or term.offset is not None:
+            continue
+        params = catalogue_params(definition, term, current.linear(index))
+        nonlinear = {name for name, _ in definition.finder.nonlinear}
+        held = replace(
+            term, offset=tuple(params[p.name] for p in definition.params if p.name not in nonlinear)
+        )
+        block_model -= current.term_contribution(index)
+        exact += fine_offset(held, data.fine_t)
+    return data.fine_accel - np.interp(data.fine_t, data.t, block_model) - exact
 
 
 def propose_fast_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
