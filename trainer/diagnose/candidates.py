@@ -11,6 +11,7 @@ for the candidates that look promising.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -27,6 +28,7 @@ from trainer.diagnose.model import (
     search_bounds,
 )
 from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, nonlinear_defaults
+from trainer.physics.catalogue.base import catalogue_params
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
@@ -43,6 +45,26 @@ class Proposal:
     spectral_evidence: float | None = None  # 2 delta logL of a fast periodic on the fine grid
     spectral_n: int = 0
     note: str = ""
+
+
+def coincides(term: Term, others: Sequence[Term], data: BlockData) -> bool:
+    """Whether ``term`` is, within the data's resolution, an instance already in ``others``."""
+    same = DEFINITIONS[term.identifier].finder.same_instance
+    return same is not None and any(
+        o.identifier == term.identifier and o is not term and same(term, o, data) for o in others
+    )
+
+
+def has_duplicates(terms: Sequence[Term], data: BlockData) -> bool:
+    """Whether two instances of one effect in ``terms`` coincide (they would be one instance)."""
+    return any(coincides(term, terms[:k], data) for k, term in enumerate(terms))
+
+
+def _taken(effect: str, values: np.ndarray, current: ModelFit, data: BlockData) -> np.ndarray:
+    """Mask of scanned nonlinear values that coincide with an instance of ``effect`` in the model."""
+    if not any(t.identifier == effect for t in current.terms):
+        return np.zeros(values.size, dtype=bool)
+    return np.array([coincides(Term(effect, (float(v),)), current.terms, data) for v in values])
 
 
 def _log_grid(lo: float, hi: float, n: int) -> np.ndarray:
@@ -110,6 +132,7 @@ def scan_periods(current: ModelFit, data: BlockData, periods: np.ndarray) -> np.
 def propose_step(current: ModelFit, data: BlockData, effect: str) -> Proposal:
     """A step-like ``effect`` (``bias_step``) at the best block boundary, then polished."""
     times, rss = scan_steps(current, data)
+    rss = np.where(_taken(effect, times, current, data), np.inf, rss)
     k = int(np.argmin(rss))
     start = Term(effect, (float(times[k]),))
     fit = polish((*current.terms, start), data, current.gls)
@@ -124,6 +147,7 @@ def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Pr
     f = np.arange(1.0 / hi, 1.0 / lo, 1.0 / (4.0 * data.duration_s))
     periods = 1.0 / f
     rss = scan_periods(current, data, periods)
+    rss = np.where(_taken(effect, periods, current, data), np.inf, rss)
     k = int(np.argmin(rss))
     start = Term(effect, (float(periods[k]),))
     fit = polish((*current.terms, start), data, current.gls)
@@ -131,8 +155,27 @@ def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Pr
 
 
 def fine_residual(current: ModelFit, data: BlockData) -> np.ndarray:
-    """Fine-grid data minus the current model interpolated from the block centres."""
-    return data.fine_accel - np.interp(data.fine_t, data.t, current.prediction)
+    """Fine-grid data minus the current model interpolated from the block centres.
+
+    A term with a fine-grid form (a periodic component fitted on the blocks) is subtracted exactly
+    on the fine grid instead: interpolating a period of a few blocks linearly leaves its harmonics
+    in the residual, where the fast search would name them (a 30 s "component" beside 150 s).
+    """
+    block_model = current.prediction.copy()
+    exact = np.zeros(data.fine_t.size)
+    for index, term in enumerate(current.terms):
+        definition = DEFINITIONS[term.identifier]
+        fine_offset = definition.finder.fine_offset
+        if fine_offset is None or term.offset is not None:
+            continue
+        params = catalogue_params(definition, term, current.linear(index))
+        nonlinear = {name for name, _ in definition.finder.nonlinear}
+        held = replace(
+            term, offset=tuple(params[p.name] for p in definition.params if p.name not in nonlinear)
+        )
+        block_model -= current.term_contribution(index)
+        exact += fine_offset(held, data.fine_t)
+    return data.fine_accel - np.interp(data.fine_t, data.t, block_model) - exact
 
 
 def propose_fast_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
@@ -146,7 +189,8 @@ def propose_fast_periodic(current: ModelFit, data: BlockData, effect: str) -> Pr
         fine_offset = DEFINITIONS[term.identifier].finder.fine_offset
         if fine_offset is not None and term.offset is not None:
             x = x - fine_offset(term, data.fine_t)
-    peaks = spectral_peaks(x, data.fine_step_s, lo, hi, max_peaks=1, alpha=0.5)
+    peaks = spectral_peaks(x, data.fine_step_s, lo, hi, max_peaks=3, alpha=0.5)
+    peaks = [p for p in peaks if not coincides(Term(effect, (p.period_s,)), current.terms, data)]
     if not peaks:
         return None
     peak = peaks[0]
@@ -227,4 +271,5 @@ def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
         return []
     if any(excluded(effect, present) for present in current.identifiers):
         return []
-    return SEARCHES[search](current, data, effect)
+    # a polished instance that lands on one already in the model is that instance, not a new one
+    return [p for p in SEARCHES[search](current, data, effect) if not has_duplicates(p.terms, data)]

@@ -51,6 +51,9 @@ class Profile:
     lattice_lsb_c: float | None
     known_input_varies: bool
     identifiability: dict[str, Identifiability] = field(default_factory=dict)
+    # block centres and (de-quantised) temperatures: what an effect's signature is tested against
+    block_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    block_temp_c: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -167,6 +170,8 @@ def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: b
         duration_s=data.duration_s,
         lattice_lsb_c=data.lattice_lsb_c,
         known_input_varies=known_input_varies,
+        block_t_s=data.t,
+        block_temp_c=temp,
     )
     profile.identifiability = identifiability(profile)
     return profile

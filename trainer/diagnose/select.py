@@ -42,7 +42,7 @@ from trainer.physics import catalogue
 
 THRESHOLD = 12.0
 AMBIGUOUS = 6.0
-MAX_ADDED = 4
+MAX_ADDED = 6  # deterministic terms: several instances (steps, periods) beside the drift effects
 MAX_ROUNDS = 3  # forward/backward passes of the stepwise search
 REPROFILE_GAIN = 0.5  # BIC a re-searched effect must gain to replace its accepted version
 TOP_REFIT = 4

@@ -157,6 +157,8 @@ class Finder:
     bounds: Callable[[Any], Bounds] = _no_bounds
     grid_points: int = 0
     max_terms: int = 1  # how many instances the finder may add
+    # (term, term, block data): two instances coincide within the data's resolution (one instance)
+    same_instance: Callable[[Any, Any, Any], bool] | None = None
     # BIC: parameters the term adds besides its linear columns (None: its free nonlinear ones)
     bic_nonlinear: int | None = None
     columns: Callable[[Any, BlockDesign], list[tuple[str, np.ndarray]]] | None = None

@@ -18,6 +18,18 @@ def polynomial(T_b: np.ndarray, c0: float, c1: float, c2: float, c3: float) -> n
     return c0 + d * (c1 + d * (c2 + d * c3))
 
 
+def absorbed_fraction(T: np.ndarray, signal: np.ndarray) -> float:
+    """Share of ``signal``'s sum of squares (about its mean) that a cubic in ``T`` absorbs by least
+    squares: near 1, the signal is a function of temperature on this profile and cannot be told
+    from the bias polynomial."""
+    u = (np.asarray(T, dtype=np.float64) - T_REF_C) / POLY_SCALE_C
+    X = np.column_stack([u**k for k in range(4)])
+    beta, *_ = np.linalg.lstsq(X, signal, rcond=None)
+    total = float(np.sum((signal - np.mean(signal)) ** 2))
+    left = float(np.sum((signal - X @ beta) ** 2))
+    return 1.0 - left / total if total > 0 else 1.0
+
+
 def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return polynomial(s.T_b, p["c0_mg"], p["c1_mg_per_c"], p["c2_mg_per_c2"], p["c3_mg_per_c3"])
 

@@ -18,6 +18,7 @@ from trainer.physics.catalogue.base import (
 )
 
 STEP_WINDOW_BLOCKS = 10  # blocks either side of a step whose residual is tested
+RESOLUTION_BLOCKS = 2.0  # step times closer than this many blocks are one step
 
 
 def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
@@ -27,6 +28,11 @@ def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
 def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     B = d.data.block_s  # the block mean of a step inside the block is the fraction after it
     return [("step_mg", np.clip((d.data.t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0))]
+
+
+def _same_instance(a: Any, b: Any, data: Any) -> bool:
+    """Two step times within ``RESOLUTION_BLOCKS`` blocks: the block means cannot tell them apart."""
+    return bool(abs(a.nl[0] - b.nl[0]) <= RESOLUTION_BLOCKS * data.block_s)
 
 
 def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
@@ -53,7 +59,8 @@ DEFINITION = Effect(
         search="step",
         nonlinear=(("t_s", False),),
         bounds=lambda data: ((data.starts[2], data.starts[-2]),),
-        max_terms=3,
+        max_terms=5,  # a run can hold several events (shocks, mode hops) at distinct times
+        same_instance=_same_instance,
         # a step time found by an exhaustive scan counts twice (modified BIC for change points,
         # Zhang & Siegmund 2007): its look-elsewhere effect is far larger than a time constant's
         bic_nonlinear=2,

@@ -50,6 +50,11 @@ def _fine_offset(term: Any, t: np.ndarray) -> np.ndarray:
     return amp * np.sin(2 * math.pi * t / term.nl[0] + phase)
 
 
+def _same_instance(a: Any, b: Any, data: Any) -> bool:
+    """Two frequencies within ``1 / duration`` (the Fourier resolution of the run) are one component."""
+    return bool(abs(1.0 / a.nl[0] - 1.0 / b.nl[0]) <= 1.0 / data.duration_s)
+
+
 def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
     """The whole run, with the selection's evidence."""
     note = f"period {p['period_s']:.4g} s, whole run"
@@ -95,6 +100,7 @@ DEFINITION = Effect(
         nonlinear=(("period_s", True),),
         bounds=lambda data: ((max(2.0 * data.fine_step_s * 1.25, 4.0), 0.5 * data.duration_s),),
         max_terms=3,
+        same_instance=_same_instance,
         # a period found by scanning hundreds of positions counts twice (modified BIC, look-elsewhere)
         bic_nonlinear=2,
         columns=_columns,

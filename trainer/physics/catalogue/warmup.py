@@ -17,8 +17,12 @@ from trainer.physics.catalogue.base import (
     Scenario,
     WhereContext,
 )
+from trainer.physics.catalogue.bias_poly import absorbed_fraction
 
 WARMUP_TIME_CONSTANTS = 3.0  # the part of the run a warm-up is located in
+TAU_PLAUSIBLE_S = (60.0, 1800.0)
+ABSORPTION_TAUS = 8  # time constants over the plausible range tested against the bias polynomial
+ABSORBED = 0.95  # share of a warm-up a cubic in temperature absorbs at which it cannot be named
 
 
 def settling(t: np.ndarray, amp_mg: float, tau_s: float) -> np.ndarray:
@@ -31,8 +35,30 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("amp_mg", np.exp(-d.data.t / tau) * (math.sinh(x) / x if x > 1e-8 else 1.0))]
 
 
+def absorbed_taus(t_s: np.ndarray, temp_c: np.ndarray) -> list[float]:
+    """Plausible time constants whose warm-up a cubic in temperature absorbs (>= ``ABSORBED``): on a
+    start the run never returns to, the warm-up is a function of temperature there."""
+    taus = np.geomspace(*TAU_PLAUSIBLE_S, ABSORPTION_TAUS)
+    return [float(tau) for tau in taus if absorbed_fraction(temp_c, np.exp(-t_s / tau)) >= ABSORBED]
+
+
 def _identifiability(p: Any) -> Identifiability:
+    """A soak at power-on shows a warm-up; without one, it must not be a function of temperature:
+    when the bias cubic absorbs it at most plausible time constants it cannot be named."""
     soak = bool(p.segments and p.segments[0].label == "soak")
+    absorbed = [] if soak or p.block_t_s.size < 8 else absorbed_taus(p.block_t_s, p.block_temp_c)
+    test = "power on and soak 30 min before ramping, or return to the starting temperature later"
+    confounded = (
+        f"a cubic in temperature absorbs >= {100 * ABSORBED:g} % of a warm-up with a time constant of "
+        f"{min(absorbed, default=0):.0f}..{max(absorbed, default=0):.0f} s: there it is confounded with "
+        "the bias polynomial"
+    )
+    if 2 * len(absorbed) >= ABSORPTION_TAUS:
+        return Identifiability(False, f"the run starts on a ramp it does not return to; {confounded}", test)
+    if absorbed:
+        return Identifiability(
+            True, f"the recording starts at power-on (no soak); {confounded}", test, weak=True
+        )
     return Identifiability(
         True,
         "the recording starts at power-on" + ("" if soak else " (no soak)"),
@@ -53,7 +79,7 @@ DEFINITION = Effect(
     compensable=True,
     params=(
         Param("amp_mg", unit="mg", plausible=(0.05, 5.0)),
-        Param("tau_s", "positive", unit="s", plausible=(60.0, 1800.0)),
+        Param("tau_s", "positive", unit="s", plausible=TAU_PLAUSIBLE_S),
     ),
     summary="amp * exp(-t / tau_s) (self-heating after power-on)",
     contribution=lambda p, s: settling(s.t, p["amp_mg"], p["tau_s"]),

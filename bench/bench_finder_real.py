@@ -1,0 +1,264 @@
+"""Benchmark of ``trainer diagnose`` on effects concealed in a real recording.
+
+Simulated recordings carry the simulator's physics and noise; a real run carries its own. This
+bench adds known catalogue effects (through the catalogue's own formulas,
+``physics.effects.effect_contribution``) to one channel of an imported real recording, diagnoses
+the clean channel and every clean + effect case without ``--sim``, and scores:
+
+* named: every added instance is matched by a finding of its effect with the checked parameters
+  within 25 % (a step's time within two blocks);
+* duplicates: two findings of one effect whose parameters coincide within the data's resolution
+  (periods within ``1/duration`` in frequency, step times within two blocks);
+* lost: findings of the clean run that are missing from the case's findings;
+* ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
+  plausible alternative) or not identifiable;
+* extra: findings that are neither the clean run's nor an added instance;
+* time per diagnosis.
+
+    trainer import ../shared/data/real/tofupilot_imu_chamber_cycle.tsv --preset tofupilot \\
+        --channels all -o /tmp/imu.csv
+    python bench/bench_finder_real.py /tmp/imu.csv                       # every case
+    python bench/bench_finder_real.py /tmp/imu.csv --cases step,periodic # names containing these
+    python bench/bench_finder_real.py --simulated 3001 --cases step         # a clean generated run
+    python bench/bench_finder_real.py --simulated 3001 --hidden hysteresis  # ... with its own finding
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from trainer.data.channels import channel_view, select_channels
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording
+from trainer.diagnose import diagnose
+from trainer.diagnose.result import Diagnosis
+from trainer.diagnose.scenarios import make_scenario
+from trainer.physics.catalogue import bias_step, hysteresis_offset, periodic, temp_rate, warmup
+from trainer.physics.effects import EffectConfig, effect_contribution
+
+STEP = bias_step.DEFINITION.identifier
+PERIODIC = periodic.DEFINITION.identifier
+WARMUP = warmup.DEFINITION.identifier
+RATE = temp_rate.DEFINITION.identifier
+BRANCH = hysteresis_offset.DEFINITION.identifier
+CHECKED = {
+    STEP: ("step_mg",),
+    PERIODIC: ("amp_mg", "period_s"),
+    WARMUP: ("amp_mg", "tau_s"),
+    RATE: ("k_mg_per_c_per_min",),
+    BRANCH: ("amp_mg",),
+}
+TOLERANCE = 0.25
+STEP_BLOCKS = 2.0  # step times closer than this many blocks are one instant
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    added: tuple[EffectConfig, ...]
+
+
+def cases(duration_s: float) -> list[Case]:
+    """Additive effects the run can identify, at two sizes, and pairs of instances of one effect.
+
+    The larger size is twice the smaller; the rate term reads the temperature through a 60 s filter
+    (the measured thermometer's first samples jump by 0.5 degC, a raw derivative would be a spike); step times and periods lie away from the bundled run's own
+    findings (steps at 1022 s and 4199 s on z, 1446 s on x).
+    """
+    d = duration_s
+    out = []
+    for size, label in ((1.0, "small"), (2.0, "large")):
+        out += [
+            Case(f"step {label}", (EffectConfig(STEP, {"t_s": 0.55 * d, "step_mg": 1.2 * size}),)),
+            Case(
+                f"periodic {label}",
+                (EffectConfig(PERIODIC, {"amp_mg": 0.45 * size, "period_s": 300.0, "phase_rad": 0.7}),),
+            ),
+            Case(f"warmup {label}", (EffectConfig(WARMUP, {"amp_mg": 2.0 * size, "tau_s": 400.0}),)),
+            Case(
+                f"temp_rate {label}", (EffectConfig(RATE, {"k_mg_per_c_per_min": 0.3 * size, "tau_s": 60.0}),)
+            ),
+            Case(f"branch offset {label}", (EffectConfig(BRANCH, {"amp_mg": 0.8 * size, "width_c": 10.0}),)),
+        ]
+    out += [
+        Case(
+            "periodic 600 s",
+            (EffectConfig(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7}),),
+        ),
+        Case(
+            "two steps",
+            (
+                EffectConfig(STEP, {"t_s": 0.4 * d, "step_mg": 1.5}),
+                EffectConfig(STEP, {"t_s": 0.7 * d, "step_mg": -1.2}),
+            ),
+        ),
+        Case(
+            "two periodics",
+            (
+                EffectConfig(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7}),
+                EffectConfig(PERIODIC, {"amp_mg": 0.6, "period_s": 150.0, "phase_rad": -1.0}),
+            ),
+        ),
+    ]
+    return out
+
+
+def add_effects(rec: Recording, added: Sequence[EffectConfig]) -> Recording:
+    """The recording with the catalogue contribution of every ``added`` instance on its channel."""
+    t = rec.time_s - rec.time_s[0]
+    temp = rec.temp_c
+    extra = sum((effect_contribution(e.identifier, e.params, t, temp, temp) for e in added), np.zeros(len(t)))
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    return Recording(columns, dict(rec.meta), rec.source)
+
+
+def key_of(effect: str, params: dict[str, float]) -> float | None:
+    """The parameter that tells instances of one effect apart (step time, frequency)."""
+    if effect == STEP:
+        return params["t_s"]
+    if effect == PERIODIC:
+        return 1.0 / params["period_s"]
+    return None
+
+
+def same_instance(effect: str, a: dict[str, float], b: dict[str, float], d: Diagnosis) -> bool:
+    """Whether two parameter sets of ``effect`` coincide within the data's resolution."""
+    ka, kb = key_of(effect, a), key_of(effect, b)
+    if ka is None or kb is None:
+        return True
+    resolution = STEP_BLOCKS * d.data.block_s if effect == STEP else 1.0 / d.data.duration_s
+    return abs(ka - kb) <= resolution
+
+
+def findings(d: Diagnosis) -> list[tuple[str, dict[str, float]]]:
+    return [(e.effect, dict(e.params)) for e in d.left_out]
+
+
+def within(true: dict[str, float], found: dict[str, float], names: Sequence[str]) -> bool:
+    return all(abs(found[n] - true[n]) <= TOLERANCE * abs(true[n]) for n in names)
+
+
+def score(case: Case, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
+    found = findings(d)
+    used: set[int] = set()
+    named = params_ok = 0
+    for added in case.added:
+        matches = [
+            k
+            for k, (effect, p) in enumerate(found)
+            if effect == added.identifier and k not in used and same_instance(effect, p, added.params, d)
+        ]
+        if effect_near := [
+            k for k in matches if within(added.params, found[k][1], CHECKED[added.identifier])
+        ]:
+            matches = effect_near
+        if matches:
+            used.add(matches[0])
+            named += 1
+            params_ok += within(added.params, found[matches[0]][1], CHECKED[added.identifier])
+    duplicates = sum(
+        1
+        for i, (ei, pi) in enumerate(found)
+        for j, (ej, pj) in enumerate(found)
+        if i < j and ei == ej and same_instance(ei, pi, pj, d) and key_of(ei, pi) is not None
+    )
+    lost = [
+        effect
+        for effect, p in findings(clean)
+        if not any(e == effect and same_instance(effect, p, q, d) for e, q in found)
+    ]
+    extra = [
+        effect
+        for k, (effect, p) in enumerate(found)
+        if k not in used
+        and not any(e == effect and same_instance(effect, p, q, d) for e, q in findings(clean))
+    ]
+    reported = {x for a in d.ambiguous for x in a.effects} | {n.effect for n in d.not_identifiable}
+    unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
+    return {
+        "ambiguous": sorted(unnamed & reported),
+        "named": named,
+        "added": len(case.added),
+        "params_ok": params_ok,
+        "duplicates": duplicates,
+        "lost": lost,
+        "extra": extra,
+    }
+
+
+def describe(d: Diagnosis) -> str:
+    parts = []
+    for effect, p in findings(d):
+        shown = ", ".join(f"{k} {v:.4g}" for k, v in p.items() if k != "phase_rad")
+        parts.append(f"{effect} ({shown})")
+    return "; ".join(parts) or "-"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "recording", nargs="?", help="an imported multi-channel recording (trainer import --channels all)"
+    )
+    parser.add_argument(
+        "--simulated", type=int, metavar="SEED", help="instead: the clean generated recording of this seed"
+    )
+    parser.add_argument(
+        "--hidden",
+        default="",
+        metavar="EFFECTS",
+        help="with --simulated: effects concealed in the generated 'clean' run (its own findings)",
+    )
+    parser.add_argument("--channel", default="accel0_z")
+    parser.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
+    args = parser.parse_args(argv)
+    if args.simulated is not None:
+        hidden = tuple(h for h in args.hidden.split(",") if h)
+        rec = make_scenario(hidden, args.simulated).recording().without_truth()
+        args.channel = f"simulated #{args.simulated} ({'+'.join(hidden) or 'nothing'} concealed)"
+    elif args.recording:
+        full = read_recording(args.recording)
+        rec = channel_view(full, select_channels(full, (args.channel,))[0])
+    else:
+        parser.error("give a recording or --simulated SEED")
+    started = time.perf_counter()
+    clean = diagnose(rec, holdout_fraction=0.0)
+    clean_s = time.perf_counter() - started
+    print(f"clean {args.channel}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
+    wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
+    chosen = [c for c in cases(clean.data.duration_s) if not wanted or any(w in c.name for w in wanted)]
+    print(
+        "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous | s | findings |"
+    )
+    print("|---|--:|--:|--:|---|---|---|--:|---|")
+    totals = {"named": 0, "added": 0, "params_ok": 0, "duplicates": 0, "lost": 0}
+    for case in chosen:
+        started = time.perf_counter()
+        d = diagnose(add_effects(rec, case.added), holdout_fraction=0.0)
+        seconds = time.perf_counter() - started
+        s = score(case, d, clean)
+        for k in ("named", "added", "params_ok", "duplicates"):
+            totals[k] += int(s[k])  # type: ignore[call-overload]
+        totals["lost"] += len(s["lost"])  # type: ignore[arg-type]
+        print(
+            f"| {case.name} | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
+            f"| {', '.join(s['lost']) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
+            flush=True,
+        )
+    print(
+        f"\ntotal: named {totals['named']}/{totals['added']}, params within 25 % {totals['params_ok']}/"
+        f"{totals['added']}, duplicates {totals['duplicates']}, lost clean findings {totals['lost']}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

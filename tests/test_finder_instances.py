@@ -1,0 +1,175 @@
+"""Several instances of one effect: each found once, and never two that coincide (issue 21).
+
+Synthetic recordings: a chamber cycle with a reversal, a cubic bias, white noise and a small random
+walk (seeded), plus catalogue contributions (``physics.effects.effect_contribution``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trainer.data.recording import Recording
+from trainer.diagnose import diagnose
+from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, build_blocks
+from trainer.diagnose.candidates import coincides, has_duplicates, propose
+from trainer.diagnose.model import Term, fit_model
+from trainer.diagnose.scenarios import make_scenario
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, bias_step, periodic
+from trainer.physics.effects import effect_contribution
+
+STEP = bias_step.DEFINITION.identifier
+PERIODIC = periodic.DEFINITION.identifier
+FS_HZ = 2.0
+DURATION_S = 4800.0
+BLOCKS = 300  # 16 s blocks: fast enough for a test, fine enough for the effects below
+
+
+def _temperature(t: np.ndarray) -> np.ndarray:
+    """-10 -> 60 degC -> 20 degC, piecewise linear with holds (a reversal, two rates)."""
+    knots_s = [0.0, 600.0, 2200.0, 2800.0, 4200.0, DURATION_S]
+    knots_c = [-10.0, -10.0, 60.0, 60.0, 20.0, 20.0]
+    return np.interp(t, knots_s, knots_c)
+
+
+def _recording(effects: list[tuple[str, dict[str, float]]], seed: int) -> Recording:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, DURATION_S, 1.0 / FS_HZ)
+    temp = _temperature(t)
+    u = (temp - 25.0) / 50.0
+    bias = 1.0 + 3.0 * u - 0.8 * u**2 + 0.5 * u**3
+    white = 0.3 * rng.standard_normal(t.size)
+    walk = np.cumsum(0.004 * rng.standard_normal(t.size))
+    added = sum((effect_contribution(e, p, t, temp, temp) for e, p in effects), np.zeros(t.size))
+    columns = {
+        "time_s": t,
+        "temp_c": temp + 0.01 * rng.standard_normal(t.size),
+        "accel_mg": bias + white + walk + added,
+    }
+    return Recording(columns, {"sample_rate_hz": str(FS_HZ)}, f"synthetic#{seed}")
+
+
+def _found(rec: Recording, effect: str, max_blocks: int = BLOCKS) -> list[dict[str, float]]:
+    d = diagnose(rec, holdout_fraction=0.0, max_blocks=max_blocks)
+    return [dict(e.params) for e in d.left_out if e.effect == effect]
+
+
+def test_same_instance_is_the_data_resolution() -> None:
+    """Step times within two blocks and frequencies within 1/duration coincide; farther ones do not."""
+    data = build_blocks(_recording([], seed=1), max_blocks=BLOCKS)
+    b = data.block_s
+    assert coincides(Term(STEP, (1000.0 + 1.5 * b,)), [Term(STEP, (1000.0,))], data)
+    assert not coincides(Term(STEP, (1000.0 + 3.0 * b,)), [Term(STEP, (1000.0,))], data)
+    f = 1.0 / 600.0
+    df = 1.0 / data.duration_s
+    assert coincides(Term(PERIODIC, (1.0 / (f + 0.8 * df),)), [Term(PERIODIC, (600.0,))], data)
+    assert not coincides(Term(PERIODIC, (1.0 / (f + 1.5 * df),)), [Term(PERIODIC, (600.0,))], data)
+    assert has_duplicates((Term(STEP, (1000.0,)), Term(PERIODIC, (600.0,)), Term(STEP, (1000.0 + b,))), data)
+    assert DEFINITIONS[STEP].finder.same_instance is not None
+
+
+def test_no_step_is_proposed_on_an_accepted_one() -> None:
+    """With a step in the model at its true time, the next step proposed lies elsewhere."""
+    rec = _recording([(STEP, {"t_s": 3000.0, "step_mg": 2.0})], seed=2)
+    data = build_blocks(rec, max_blocks=BLOCKS)
+    current = fit_model((Term(BACKBONE, ()), Term(STEP, (3000.0,))), (), data)
+    for proposal in propose(current, data, STEP):
+        steps = [t for t in proposal.terms if t.identifier == STEP]
+        assert len(steps) == 2
+        assert abs(steps[1].nl[0] - steps[0].nl[0]) > 2.0 * data.block_s
+
+
+def test_one_periodic_is_named_once() -> None:
+    """A single 0.9 mg, 600 s component: one finding, its amplitude and period within 25 %."""
+    rec = _recording([(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7})], seed=3)
+    found = _found(rec, PERIODIC)
+    assert len(found) == 1
+    assert found[0]["period_s"] == pytest.approx(600.0, rel=0.05)
+    assert found[0]["amp_mg"] == pytest.approx(0.9, rel=0.25)
+
+
+def test_four_steps_are_all_named() -> None:
+    """Four steps of both signs (more than the former cap of three): each named once, at its time,
+    with its size."""
+    truth = [(900.0, -1.5), (1900.0, 1.2), (3100.0, 1.4), (3900.0, -1.2)]
+    rec = _recording([(STEP, {"t_s": t, "step_mg": s}) for t, s in truth], seed=4)
+    found = sorted(_found(rec, STEP), key=lambda p: p["t_s"])
+    assert len(found) == len(truth)
+    for (t_s, step_mg), p in zip(truth, found, strict=True):
+        assert abs(p["t_s"] - t_s) <= 2.0 * DURATION_S / BLOCKS
+        assert p["step_mg"] == pytest.approx(step_mg, rel=0.25)
+
+
+def test_two_periods_are_both_named() -> None:
+    """Components at 600 s and 150 s: two findings, one per period, none repeated."""
+    truth = [(0.9, 600.0), (0.6, 150.0)]
+    effects = [(PERIODIC, {"amp_mg": a, "period_s": p, "phase_rad": 0.3}) for a, p in truth]
+    found = sorted(_found(_recording(effects, seed=5), PERIODIC), key=lambda p: -p["period_s"])
+    assert len(found) == 2
+    for (amp_mg, period_s), p in zip(truth, found, strict=True):
+        assert p["period_s"] == pytest.approx(period_s, rel=0.05)
+        assert p["amp_mg"] == pytest.approx(amp_mg, rel=0.25)
+
+
+def test_a_slow_period_leaves_no_harmonic_for_the_fast_search() -> None:
+    """Periodics at 600 s and 150 s on a generated clean run (seed 3001: 25 s blocks, 150 s is six of
+    them): exactly two periodic findings. The fine-grid residual used to interpolate the 150 s
+    component linearly between block centres, and its fifth harmonic (30 s) was named as a third."""
+    rec = make_scenario((), 3001).recording().without_truth()
+    t = rec.time_s - rec.time_s[0]
+    truth = [(0.9, 600.0, 0.7), (0.6, 150.0, -1.0)]
+    extra = sum(
+        (
+            effect_contribution(
+                PERIODIC, {"amp_mg": a, "period_s": p, "phase_rad": ph}, t, rec.temp_c, rec.temp_c
+            )
+            for a, p, ph in truth
+        ),
+        np.zeros(t.size),
+    )
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    found = _found(Recording(columns, dict(rec.meta), rec.source), PERIODIC, DEFAULT_MAX_BLOCKS)
+    assert sorted(round(p["period_s"]) for p in found) == [150, 600]
+
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
+def test_real_run_keeps_its_findings_when_effects_are_added() -> None:
+    """The bundled real run (z axis) plus a 2.4 mg step and a 0.9 mg, 300 s periodic: every finding of
+    the clean run is still there (same effect, same instant or period) and both additions are named."""
+    from trainer.data.importer import import_foreign, options_with_preset
+
+    rec = import_foreign(REAL, options_with_preset("tofupilot"))
+    clean = diagnose(rec, holdout_fraction=0.0)
+    t = rec.time_s - rec.time_s[0]
+    duration_s = float(t[-1])
+    added = [
+        (STEP, {"t_s": 0.55 * duration_s, "step_mg": 2.4}),
+        (PERIODIC, {"amp_mg": 0.9, "period_s": 300.0, "phase_rad": 0.7}),
+    ]
+    extra = sum((effect_contribution(e, p, t, rec.temp_c, rec.temp_c) for e, p in added), np.zeros(t.size))
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    d = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    block_s = d.data.block_s
+
+    def near(effect: str, a: dict[str, float], b: dict[str, float]) -> bool:
+        if effect == STEP:
+            return abs(a["t_s"] - b["t_s"]) <= 2.0 * block_s
+        return abs(1.0 / a["period_s"] - 1.0 / b["period_s"]) <= 1.0 / d.data.duration_s
+
+    found = [(e.effect, dict(e.params)) for e in d.left_out]
+    assert clean.left_out
+    for e in clean.left_out:
+        assert any(f == e.effect and near(f, dict(e.params), p) for f, p in found), e.effect
+    for effect, truth in added:
+        matches = [p for f, p in found if f == effect and near(effect, truth, p)]
+        assert len(matches) == 1
+        size = "step_mg" if effect == STEP else "amp_mg"
+        assert matches[0][size] == pytest.approx(truth[size], rel=0.25)
