@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from trainer import methods
-from trainer.selection import AUTO
+from trainer.selection import AUTO, record_lines
 
 
 def checked_method(name: str) -> methods.Method:
@@ -16,8 +17,6 @@ def checked_method(name: str) -> methods.Method:
 
 def progress_log(args: argparse.Namespace) -> Any:
     """Progress lines on stderr (a cross-validation fits every candidate once per segment)."""
-    import sys
-
     if getattr(args, "quiet", False):
         return None
     return lambda message: print(message, file=sys.stderr, flush=True)
@@ -25,8 +24,6 @@ def progress_log(args: argparse.Namespace) -> Any:
 
 def print_selection(stats: dict[str, Any]) -> None:
     """The table that chose an auto model (from the checkpoint's record), and the choice in one line."""
-    from trainer.selection import record_lines
-
     record = stats.get("selection")
     if record is not None:
         for line in record_lines(record):

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from trainer import methods as registry
+from trainer.data.holdout import MIN_ROWS
 from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left, thermal_branch
@@ -48,7 +49,6 @@ from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left,
 MIN_SEGMENT_FRACTION = 0.05  # a thermal run shorter than 5 % of the recording joins its neighbour
 MIN_SEGMENT_S = 300.0  # ... and so does one shorter than 5 minutes
 MIN_SEGMENTS = 2
-MIN_PART_ROWS = 16  # each part of a cut ramp holds at least this many samples
 RAMP_PARTS = 3  # a run of one thermal segment (one ramp) is cut into this many parts in time
 UNCOMPENSATED = "uncompensated"
 LABELS = {HEATING: "heating", COOLING: "cooling", NEITHER: "dwell"}
@@ -199,10 +199,10 @@ def folds_of(rec: Recording) -> list[Segment]:
     if len(segments) >= MIN_SEGMENTS:
         return segments
     n = len(rec)
-    if n < RAMP_PARTS * MIN_PART_ROWS:
+    if n < RAMP_PARTS * MIN_ROWS:
         raise UserError(
             f"{rec.source}: cross-validation needs at least {MIN_SEGMENTS} thermal segments or "
-            f"{RAMP_PARTS * MIN_PART_ROWS} rows to cut one into {RAMP_PARTS} parts; this run has {n} rows; score it "
+            f"{RAMP_PARTS * MIN_ROWS} rows to cut one into {RAMP_PARTS} parts; this run has {n} rows; score it "
             "on another recording (VALID) or give --holdout"
         )
     (only,) = segments
