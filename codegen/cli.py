@@ -141,6 +141,11 @@ def _export_params(args: argparse.Namespace) -> int:
     file_name = name + EXTENSIONS[args.format]
     write_files_atomically({file_name: text}, args.out_dir)
     print(f"wrote {args.out_dir}/{file_name}: {', '.join(c.name for c in channels)} ({args.format})")
+    if args.format == "px4-params":
+        from codegen.px4_republish import lag_bound_lines
+
+        for line in lag_bound_lines(channels):
+            print(line)
     return 0
 
 

@@ -37,7 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from codegen.spec import Checkpoint, PlaSpec, Poly3Spec, parse_checkpoint
+from trainer import methods
 from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
+from trainer.data.plausibility import WIDER_RUN_HINT
 from trainer.errors import UserError
 
 EXTENSIONS = {"px4-params": ".params", "ardupilot-parm": ".parm"}  # the --format choices besides c
@@ -54,6 +56,21 @@ ARDUPILOT_PREFIX = {"accel": "ACC", "gyro": "GYR"}
 ARDUPILOT_INSTANCES = 3  # INS_TCAL1..3
 GRAVITY_IN_CONSTANT_MG = 500.0  # a constant term this large holds gravity, not a bias
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+SENSOR_NOUN = {"accel": "an accelerometer", "gyro": "a gyroscope", "baro": "a barometer"}
+INT32_MAX = 2**31 - 1  # PX4's TC_*_ID is an int32 parameter
+# The most a sensor's offset can move with temperature, in the stacks' unit (keyed by our unit, as
+# TO_STACK_UNIT). Generous on purpose: a cubic that moves more than this over its range is fitted to
+# noise (a short temperature span), not to a drift, and is refused whatever --accept-implausible said.
+PHYSICAL_DRIFT_BOUND = {
+    # m/s^2 (~204 mg): a consumer MEMS accelerometer's zero-g offset moves well under 1 m/s^2
+    # (~100 mg) over its whole operating range (-40..85 degC)
+    "mg": 2.0,
+    # rad/s (~29 deg/s): a MEMS gyroscope's zero-rate offset moves a few deg/s over its range
+    # (the worst datasheet figures, of older parts, are about 20 deg/s over -40..85 degC)
+    "dps": 0.5,
+    # Pa (10 hPa, ~80 m of altitude): a barometer's offset moves a few hPa at most over its range
+    "pa": 1000.0,
+}
 
 
 @dataclass(frozen=True)
@@ -167,8 +184,45 @@ def group_by_instance(channels: Sequence[ChannelCubic]) -> list[SensorSet]:
         hi = min(c.t_max_c for c in members)
         if not lo < hi:
             raise UserError(f"{sensor}{instance}: the models' temperature ranges do not overlap")
+        for cubic in members:
+            check_physical(cubic, lo, hi)
         sets.append(SensorSet(sensor, instance, next(iter(ids), None), 0.5 * (lo + hi), lo, hi, axes))
     return sets
+
+
+def cubic_extremes(cubic: ChannelCubic, lo_c: float, hi_c: float, order: int = 0) -> tuple[float, float]:
+    """(min, max) of the cubic's ``order``-th derivative over ``lo_c .. hi_c`` (exact: the ends and
+    the stationary points inside), in the stack unit per degC^order."""
+    poly = np.polynomial.Polynomial(cubic.coefficients).deriv(order)
+    stationary = [float(r.real) + cubic.t_ref_c for r in poly.deriv().roots() if abs(r.imag) < 1e-12]
+    temps = np.array([lo_c, hi_c, *(t for t in stationary if lo_c < t < hi_c)])
+    values = poly(temps - cubic.t_ref_c)
+    return float(values.min()), float(values.max())
+
+
+def check_physical(cubic: ChannelCubic, lo_c: float, hi_c: float) -> None:
+    """Refuse a cubic whose correction over its clamp range moves more than the sensor can drift.
+
+    The range is widened to the span a cubic needs (``trainer fit``'s poly3 minimum, ArduPilot's
+    TEMP_RANGE_MIN): within a tiny range the stacks' clamping hides what the coefficients say, and a
+    cubic fitted to noise over 0.3 degC says the offset would move by kilometres per s^2 within 10 degC.
+    """
+    span_c = max(hi_c - lo_c, methods.get(methods.CUBIC).min_temp_span_c)
+    mid_c = 0.5 * (lo_c + hi_c)
+    low, high = cubic_extremes(cubic, mid_c - 0.5 * span_c, mid_c + 0.5 * span_c)
+    moves = high - low
+    bound = PHYSICAL_DRIFT_BOUND[cubic.channel.unit]
+    if not moves <= bound:  # NaN too
+        unit = STACK_UNIT[cubic.channel.unit]
+        where = f"{lo_c:.2f} .. {hi_c:.2f} degC" + (
+            "" if hi_c - lo_c >= span_c else f" widened to {span_c:g} degC"
+        )
+        raise UserError(
+            f"{cubic.name}: the cubic's correction moves by {moves:.3g} {unit} over {where}, more than "
+            f"{SENSOR_NOUN[cubic.channel.sensor]}'s offset can drift with temperature ({bound:g} {unit}): "
+            f"coefficients fitted to noise, not written (--accept-implausible does not change this); "
+            f"{WIDER_RUN_HINT}"
+        )
 
 
 def _sensor_rank(sensor: str) -> int:
@@ -191,6 +245,13 @@ def px4_values(group: SensorSet, *, keep_constant: bool) -> list[tuple[str, floa
         raise UserError(
             f"{group.sensor}{group.instance}: PX4 applies {prefix}_* to the sensor whose device id is {prefix}_ID, "
             f"and the model does not record it; pass --device-id (trainer import of a ULog records it)"
+        )
+    if not 0 < group.device_id <= INT32_MAX:
+        what = "0 names no sensor" if group.device_id == 0 else f"{group.device_id} is not a sensor's id"
+        raise UserError(
+            f"{group.sensor}{group.instance}: device id {what}: PX4 applies {prefix}_* to the sensor whose "
+            f"device id equals {prefix}_ID (1 .. {INT32_MAX}), so nothing would be compensated; pass the "
+            f"sensor's id with --device-id (trainer import of a ULog records it)"
         )
     rows: list[tuple[str, float | int, int]] = [(f"{prefix}_ID", group.device_id, MAV_PARAM_TYPE_INT32)]
     rows += [
@@ -289,6 +350,9 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
         "# IMU temperature calibration (mems-tdc codegen export --format ardupilot-parm)",
         "# Applied by AP_InertialSensor_tempcal.cpp: P(d) = (C1 + (C2 + C3 d) d) d * 1e-6, d = clamp(T) - 35,",
         "# corrected = raw - P(T - 35) + P(CALTEMP - 35) (m/s^2, rad/s); the constant belongs to INS_ACCn_OFFS.",
+        "# ArduPilot hides INS_TCALn_* while INS_TCALn_ENABLE is 0, so a first load sets ENABLE and skips",
+        "# the rest: refresh the parameters (or reboot), load this file again, reboot (ENABLE needs one),",
+        "# then redo the accelerometer calibration.",
     ]
     lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
     for instance, sensors in sorted(imus.items()):

@@ -25,6 +25,15 @@ TEMP_MAX_C = 150.0  # above any MEMS operating range (-40..125 degC typical)
 KELVIN_RANGE = (200.0, 400.0)  # -73..127 degC written in kelvin
 G_AS_MPS2 = (8.5, 11.0)  # |a| of a static axis carrying gravity when m/s^2 is read as g
 ACCEPT_OPTION = "--accept-implausible"
+# What to record when the temperature did not move enough (PX4: SDLOG_PROFILE bit 2 "Thermal
+# calibration" logs the sensors with their temperatures; ArduPilot: INS_TCALn_ENABLE 2 = LearnCalibration
+# fits the cubic on board from the next boot while the IMU warms up to INS_TCALn_TMAX, as
+# AP_InertialSensor_tempcal.cpp documents the parameter)
+WIDER_RUN_HINT = (
+    "record a chamber cycle, or a cold soak then warm-up (PX4: log with SDLOG_PROFILE bit 2, thermal "
+    "calibration; ArduPilot: a warm-up log, or on-board learning with INS_TCALn_ENABLE=2 and INS_TCALn_TMAX "
+    "the target temperature, then reboot)"
+)
 
 
 class Plausibility:
@@ -97,7 +106,8 @@ class Plausibility:
         if hi - lo < min_span_c:
             self.problem(
                 f"{where}: temperature spans {hi - lo:.3g} degC ({lo:.2f} .. {hi:.2f}), too small for {method} "
-                f"(needs {min_span_c:g} degC): a run without heating or cooling, or the wrong temperature column?"
+                f"(needs {min_span_c:g} degC): a run without heating or cooling, or the wrong temperature column? "
+                f"To calibrate, {WIDER_RUN_HINT}"
             )
 
 
