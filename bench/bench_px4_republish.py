@@ -24,6 +24,7 @@ from codegen.cli import main as codegen_main
 from codegen.flightparams import load_channel_cubic
 from codegen.px4_republish import lag_bound, republish_error
 from codegen.verify import verify
+from trainer.baselines.poly3 import CubicPolynomial
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
 from trainer.data.channels import UNIT_LABELS
@@ -58,6 +59,7 @@ def main() -> int:
         print("| --- | --- | --- | --- |")
         for name in CHANNELS:
             model, _ = load_model(fit_dir / f"{name}.pt")
+            assert isinstance(model, CubicPolynomial)
             cubic = load_channel_cubic(fit_dir / f"{name}.pt")
             unit = UNIT_LABELS[cubic.channel.unit]
             error = republish_error(model.drift_at, rec.temp_c)

@@ -268,3 +268,133 @@ def test_real_run_parameters_match_the_model(tmp_path: Path) -> None:
     at_cal, _ = model_drift(model_path, np.array([25.0]))
     subtracted = ardupilot_correction(ap, 0, "ACC", "Z", temp, 25.0).astype(float) * 1000.0 / G
     np.testing.assert_allclose(subtracted, drift - at_cal[0], atol=1e-6 * drift_range)
+
+
+def ramp_recording(path: Path, temp_c: np.ndarray, drift_mg: np.ndarray, meta: dict[str, str]) -> Path:
+    """A noise-free 1 Hz recording: ``drift_mg`` at ``temp_c``, so poly3 recovers a cubic drift exactly."""
+    rec = Recording(
+        {"time_s": np.arange(temp_c.size, dtype=float), "temp_c": temp_c, "accel_mg": drift_mg},
+        {"sample_rate_hz": "1", **meta},
+    )
+    write_recording(rec, path)
+    return path
+
+
+def refused(tmp_path: Path, *args: str | Path) -> str:
+    """The one-line error of a refused export; nothing written."""
+    out = tmp_path / "refused"
+    with pytest.raises(UserError) as caught:
+        codegen_main(["export", *map(str, args), "-o", str(out)])
+    message = str(caught.value)
+    assert "\n" not in message and not out.exists()
+    return message
+
+
+ACCEL_Z = {"channel": "accel0_z", "device_id_accel0": str(DEVICE_ID)}
+
+
+def test_a_cubic_fitted_to_noise_is_refused_whatever_the_fit_accepted(tmp_path: Path) -> None:
+    # the issue's log: 6 samples over 0.34 degC; trainer fit refuses it and says what to record instead
+    rng = np.random.default_rng(3)
+    temp = np.array([25.0, 25.07, 25.13, 25.2, 25.27, 25.34])
+    tiny = ramp_recording(tmp_path / "tiny.csv", temp, -1000.0 + rng.normal(0, 1, 6), ACCEL_Z)
+    with pytest.raises(UserError) as caught:
+        fit(tiny, tmp_path / "no.pt")
+    assert "spans 0.34 degC" in str(caught.value) and "SDLOG_PROFILE bit 2" in str(caught.value)
+    assert "INS_TCALn_ENABLE=2" in str(caught.value)
+    # accepted at fit, the cubic through noise moves by metres per s^2 within the 10 degC a cubic needs
+    model = fit(tiny, tmp_path / "tiny.pt", "poly3", "--accept-implausible")
+    cubic = np.polynomial.Polynomial(load_model(model)[0].coefficients)  # mg, in T - T_ref
+    t_ref = load_model(model)[0].t_ref_c
+    wide = np.linspace(25.17 - 5.0, 25.17 + 5.0, 20001) - t_ref
+    assert np.ptp(cubic(wide)) * G / 1000.0 > 2.0  # the premise: beyond any accelerometer's drift
+    for fmt in ("px4-params", "ardupilot-parm"):
+        message = refused(tmp_path, model, "--format", fmt)
+        assert (
+            message.startswith("accel0_z: the cubic's correction moves by") and "fitted to noise" in message
+        )
+        assert "widened to 10 degC" in message and "SDLOG_PROFILE" in message
+
+
+def test_the_physical_bound_is_two_metres_per_second_squared(tmp_path: Path) -> None:
+    # noise-free linear drifts over 0..80 degC, fitted without --accept-implausible: 180 mg passes,
+    # 230 mg (2.26 m/s^2) is refused in both formats; as a gyroscope (deg/s) both exceed 0.5 rad/s
+    temp = np.linspace(0.0, 80.0, 801)
+    models = {}
+    for total_mg in (180.0, 230.0):
+        rec = ramp_recording(tmp_path / f"r{total_mg:g}.csv", temp, total_mg * temp / 80.0, ACCEL_Z)
+        models[total_mg] = fit(rec, tmp_path / f"m{total_mg:g}.pt")
+    for fmt in ("px4-params", "ardupilot-parm"):
+        export(tmp_path / f"ok-{fmt}", fmt, models[180.0])
+        message = refused(tmp_path, models[230.0], "--format", fmt)
+        assert "moves by 2.26 m/s^2 over 0.00 .. 80.00 degC" in message and "(2 m/s^2)" in message
+    message = refused(
+        tmp_path, models[180.0], "--channel", "gyro0_z", "--device-id", "7", "--format", "px4-params"
+    )
+    assert f"moves by {np.radians(180.0):.3g} rad/s" in message and "a gyroscope's offset" in message
+
+
+def test_device_id_0_is_refused(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    # PX4 applies TC_A0_* to the sensor whose device id equals TC_A0_ID: 0 matches none
+    for args in (
+        [xyz_models["x"], "--device-id", "0"],
+        [*xyz_models.values(), "--device-id", "accel0=0"],
+        [xyz_models["x"], "--device-id", str(2**31)],  # beyond PX4's int32 parameter
+    ):
+        message = refused(tmp_path, *args, "--format", "px4-params")
+        assert message.startswith("accel0: device id ") and "nothing would be compensated" in message
+    meta = {"channel": "accel0_x", "device_id_accel0": "0"}  # as recorded by an import
+    rec = chamber_recording(tmp_path / "r.csv", axis_offset_mg=0.0, meta=meta, seed=5)
+    assert "device id 0 names no sensor" in refused(
+        tmp_path, fit(rec, tmp_path / "m.pt"), "--format", "px4-params"
+    )
+
+
+def test_parm_header_says_enable_hides_the_rest(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    lines = export(tmp_path / "ap", "ardupilot-parm", xyz_models["x"]).read_text().splitlines()
+    first_parameter = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    header = " ".join(line.lstrip("# ") for line in lines[:first_parameter])
+    assert "hides INS_TCALn_* while INS_TCALn_ENABLE is 0" in header
+    assert "load this file again" in header and "redo the accelerometer calibration" in header
+
+
+def test_px4_republish_rule_on_a_staircase() -> None:
+    from codegen.px4_republish import republish_error, republished_temperature
+
+    # up in 0.5 degC steps, then down: a new offset only once the temperature is more than 1 degC
+    # from the last published one (exactly 1 degC is not enough), in either direction
+    temp = np.array([20.0, 20.0, 20.5, 21.0, 21.5, 21.5, 22.0, 22.5, 23.0, 22.5, 22.0, 21.5, 21.0])
+    applied = [20.0, 20.0, 20.0, 20.0, 21.5, 21.5, 21.5, 21.5, 23.0, 23.0, 23.0, 21.5, 21.5]
+    np.testing.assert_array_equal(republished_temperature(temp), applied)
+    # a slow ramp of 0.25 degC per sample: published every 1.25 degC (5 samples), from the first
+    ramp = 20.0 + 0.25 * np.arange(40)
+    np.testing.assert_array_equal(republished_temperature(ramp), 20.0 + 1.25 * (np.arange(40) // 5))
+    # the error of a linear drift is its slope times the lag
+    error = republish_error(lambda t: 3.0 * t, ramp)
+    np.testing.assert_allclose(error, 3.0 * (republished_temperature(ramp) - ramp))
+
+
+def test_px4_export_prints_the_republish_bound(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from codegen.px4_republish import lag_bound
+
+    # a linear drift of 0.8 mg/degC: a 1 degC-old offset is off by up to 0.8 mg
+    temp = np.linspace(0.0, 40.0, 401)
+    linear = fit(ramp_recording(tmp_path / "l.csv", temp, 0.8 * temp, ACCEL_Z), tmp_path / "l.pt")
+    capsys.readouterr()
+    export(tmp_path / "px4", "px4-params", linear)
+    assert (
+        "accel0_z: PX4 updates the applied offset after > 1 degC of change: up to 0.8 mg"
+        in capsys.readouterr().out
+    )
+    # a cubic: the bound is its steepest slope over the range (numerical derivative on a dense grid)
+    from codegen.flightparams import load_channel_cubic
+
+    cubic_model = fit(
+        chamber_recording(tmp_path / "c.csv", axis_offset_mg=0.0, meta=ACCEL_Z, seed=6), tmp_path / "c.pt"
+    )
+    model, _ = load_model(cubic_model)
+    lo, hi = model.temp_range_c
+    dense = np.linspace(lo, hi, 200001)
+    steepest = float(np.max(np.abs(np.gradient(model.drift_at(dense), dense))))
+    cubic = load_channel_cubic(cubic_model)
+    assert lag_bound(cubic, lo, hi) == pytest.approx(steepest, rel=1e-4)
