@@ -205,12 +205,14 @@ def check_physical(cubic: ChannelCubic, lo_c: float, hi_c: float) -> None:
 
     The range is widened to the span a cubic needs (``trainer fit``'s poly3 minimum, ArduPilot's
     TEMP_RANGE_MIN): within a tiny range the stacks' clamping hides what the coefficients say, and a
-    cubic fitted to noise over 0.3 degC says the offset would move by kilometres per s^2 within 10 degC.
+    cubic fitted to noise over 0.3 degC says the offset would move by tens of m/s^2 within 10 degC.
     """
     span_c = max(hi_c - lo_c, methods.get(methods.CUBIC).min_temp_span_c)
     mid_c = 0.5 * (lo_c + hi_c)
-    low, high = cubic_extremes(cubic, mid_c - 0.5 * span_c, mid_c + 0.5 * span_c)
-    moves = high - low
+    moves = math.nan
+    if np.all(np.isfinite(cubic.coefficients)):
+        low, high = cubic_extremes(cubic, mid_c - 0.5 * span_c, mid_c + 0.5 * span_c)
+        moves = high - low
     bound = PHYSICAL_DRIFT_BOUND[cubic.channel.unit]
     if not moves <= bound:  # NaN too
         unit = STACK_UNIT[cubic.channel.unit]
