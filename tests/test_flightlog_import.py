@@ -424,6 +424,55 @@ def test_older_px4_log_with_sensor_combined_only_says_what_to_log(tmp_path: Path
     )
 
 
+def test_ulog_gyro_recording_gives_px4_tc_g_parameters(tmp_path: Path) -> None:
+    """The point of importing a gyroscope: import -> fit poly3 -> TC_G0_* for PX4, keyed by its device id."""
+    from codegen.cli import main as codegen_main
+
+    n = 200
+    temp_c = np.linspace(10.0, 60.0, n)
+    slope, curve = 1e-4, 2e-6  # rad/s per degC, per degC^2 about 35 degC
+    gyro = np.column_stack([0.002 + slope * (temp_c - 35.0) + curve * (temp_c - 35.0) ** 2] * 3)
+    time_us = (5_000_000 + np.arange(n) * 1e6 / GYRO_RATE_HZ).astype(np.int64)
+    accel = np.column_stack([np.zeros(n), np.zeros(n), np.full(n, -G)])
+    path = write_ulog(
+        tmp_path / "gyro.ulg",
+        [
+            imu_topic("sensor_accel", 0, 111, time_us + 7, accel, temp_c),  # another topic, another recording
+            imu_topic("sensor_gyro", 0, 222, time_us, gyro, temp_c),
+        ],
+    )
+    assert (
+        main(["import", str(path), "--channels", "gyro0_x,gyro0_y,gyro0_z", "-o", str(tmp_path / "g.npz")])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "fit",
+                str(tmp_path / "g.npz"),
+                "--channels",
+                "all",
+                "--method",
+                "poly3",
+                "-o",
+                str(tmp_path / "fit"),
+            ]
+        )
+        == 0
+    )
+    argv = ["export", str(tmp_path / "fit"), "--channels", "all", "-o", str(tmp_path / "params")]
+    assert codegen_main([*argv, "--format", "px4-params"]) == 0
+    rows = [
+        line.split("\t") for line in next((tmp_path / "params").glob("*.params")).read_text().splitlines()
+    ]
+    values = {row[2]: float(row[3]) for row in rows if not row[0].startswith("#")}
+    assert values["TC_G_ENABLE"] == 1 and values["TC_G0_ID"] == 222 and "TC_A0_ID" not in values
+    t_ref = values["TC_G0_TREF"]
+    for axis in (0, 1, 2):  # the drift re-expanded about TREF: X1 = slope + 2 curve (TREF - 35), X2 = curve
+        assert values[f"TC_G0_X1_{axis}"] == pytest.approx(slope + 2 * curve * (t_ref - 35.0), rel=1e-3)
+        assert values[f"TC_G0_X2_{axis}"] == pytest.approx(curve, rel=1e-3)
+
+
 # --------------------------------------------------------------------------- ArduPilot INS_TCAL in the log
 
 TCAL_T_MIN_C, TCAL_T_MAX_C = 15.0, 55.0
