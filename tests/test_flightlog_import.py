@@ -509,12 +509,16 @@ def _tcal_parameters() -> dict[str, float]:
     return {name: float(value) for name, value in lines}
 
 
-def _tcal_log(path: Path, orientation: int = 0) -> tuple[Path, dict[str, np.ndarray]]:
+def _tcal_log(
+    path: Path, orientation: int = 0, changed: dict[str, float] | None = None
+) -> tuple[Path, dict[str, np.ndarray]]:
     params = _tcal_parameters()
     assert params["INS_TCAL1_ENABLE"] == 1.0
     writer = DataFlashWriter()
     for name, value in params.items():
         writer.parm(1000, name, value)
+    for name, value in (changed or {}).items():  # set again later in the log
+        writer.parm(2000, name, value)
     writer.parm(1000, "INS_ACC1_CALTEMP", CALTEMP_C["accel"])
     writer.parm(1000, "INS_GYR1_CALTEMP", CALTEMP_C["gyro"])
     writer.parm(1000, "AHRS_ORIENTATION", float(orientation))
@@ -558,3 +562,17 @@ def test_dataflash_tcal_with_board_orientation_is_refused(tmp_path: Path) -> Non
     path, _ = _tcal_log(tmp_path / "rotated.bin", orientation=2)
     message = import_error(tmp_path / "o.csv", path, "--channel", "accel0_z")
     assert "INS_TCAL1_ENABLE=1" in message and "AHRS_ORIENTATION=2" in message and "sensor frame" in message
+
+
+@pytest.mark.parametrize(
+    ("changed", "expected"),
+    [
+        ({"INS_TCAL1_ACC2_Z": 1.0}, "parameter INS_TCAL1_ACC2_Z changes during the log"),
+        ({"INS_TCAL1_ENABLE": 0.0}, "INS_TCAL1_ENABLE changes during the log"),
+    ],
+)
+def test_dataflash_tcal_changed_during_the_log_is_refused(
+    tmp_path: Path, changed: dict[str, float], expected: str
+) -> None:
+    path, _ = _tcal_log(tmp_path / "changed.bin", changed=changed)
+    assert expected in import_error(tmp_path / "o.csv", path)

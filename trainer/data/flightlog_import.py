@@ -182,6 +182,8 @@ def _group_recording(
         meta["temp_filled"] = fill_note
     mapping = (
         f"{KIND_NAMES[log.kind]} log; time_s<-sample time[us] temp_c<-{main.temp_column} "
-        f"accel_mg<-{main.column}; {len(group)} channels logged with it kept"
+        f"accel_mg<-{main.column}; kept the {len(group)} channel(s) of its time base"
     )
-    return _finish(table, imported, columns, mapping, meta, checks)
+    rec = _finish(table, imported, columns, mapping, meta, checks)
+    rec.meta["source"] = Path(log.source).name  # the file; errors also named the time base
+    return rec
