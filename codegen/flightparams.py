@@ -38,6 +38,10 @@ import numpy as np
 
 from codegen.spec import Checkpoint, PlaSpec, Poly3Spec, parse_checkpoint
 from trainer import methods
+from trainer.data.ardupilot_tcal import INSTANCES as ARDUPILOT_INSTANCES  # INS_TCAL1..3
+from trainer.data.ardupilot_tcal import PREFIX as ARDUPILOT_PREFIX
+from trainer.data.ardupilot_tcal import SCALE as ARDUPILOT_SCALE
+from trainer.data.ardupilot_tcal import TEMP_REF_C as ARDUPILOT_TEMP_REF_C  # (the import undoes it)
 from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
 from trainer.data.plausibility import WIDER_RUN_HINT
 from trainer.errors import UserError
@@ -50,10 +54,6 @@ PX4_PREFIX = {"accel": "TC_A", "gyro": "TC_G", "baro": "TC_B"}
 PX4_BARO_ORDER = 5  # TC_Bn_X0..X5
 PX4_INSTANCES = 4  # ACCEL_COUNT_MAX etc. in TemperatureCompensation.h
 MAV_PARAM_TYPE_INT32, MAV_PARAM_TYPE_REAL32 = 6, 9
-ARDUPILOT_TEMP_REF_C = 35.0  # TEMP_REFERENCE in AP_InertialSensor_tempcal.cpp
-ARDUPILOT_SCALE = 1.0e6  # SCALE_FACTOR
-ARDUPILOT_PREFIX = {"accel": "ACC", "gyro": "GYR"}
-ARDUPILOT_INSTANCES = 3  # INS_TCAL1..3
 GRAVITY_IN_CONSTANT_MG = 500.0  # a constant term this large holds gravity, not a bias
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 SENSOR_NOUN = {"accel": "an accelerometer", "gyro": "a gyroscope", "baro": "a barometer"}

@@ -13,6 +13,7 @@ messages first, then ``PARM``, ``IMU`` and ``BARO`` with ArduPilot's field layou
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ import numpy as np
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 ULOG_TYPES = {"uint64_t": "Q", "uint32_t": "I", "float": "f", "uint8_t": "B", "int32_t": "i"}
+ULOG_ARRAY = re.compile(r"(\w+)\[([0-9]+)\]")  # float[3]: a fixed-size array field
 
 ACCEL_FIELDS = [
     ("uint64_t", "timestamp"),
@@ -30,6 +32,15 @@ ACCEL_FIELDS = [
     ("float", "y"),
     ("float", "z"),
     ("float", "temperature"),
+]
+# sensor_combined as older PX4 versions and the default logging profile write it: no temperature.
+COMBINED_FIELDS = [
+    ("uint64_t", "timestamp"),
+    ("float[3]", "gyro_rad"),
+    ("uint32_t", "gyro_integral_dt"),
+    ("int32_t", "accelerometer_timestamp_relative"),
+    ("float[3]", "accelerometer_m_s2"),
+    ("uint32_t", "accelerometer_integral_dt"),
 ]
 BARO_FIELDS = [
     ("uint64_t", "timestamp"),
@@ -47,7 +58,7 @@ class Topic:
     name: str
     multi_id: int
     fields: list[tuple[str, str]]
-    rows: list[tuple[float | int, ...]]
+    rows: list[tuple[float | int | tuple[float, ...], ...]]  # a tuple for an array field
 
 
 def _message(kind: bytes, payload: bytes) -> bytes:
@@ -66,13 +77,29 @@ def write_ulog(path: Path, topics: list[Topic], start_us: int = 1_000_000) -> Pa
     items: list[tuple[int, int, bytes]] = []
     for msg_id, topic in enumerate(topics):
         out += _message(b"A", struct.pack("<BH", topic.multi_id, msg_id) + topic.name.encode())
-        codes = "<" + "".join(ULOG_TYPES[t] for t, _ in topic.fields)
+        codes = "<" + "".join(_struct_code(t) for t, _ in topic.fields)
         for row in topic.rows:
-            items.append((int(row[0]), msg_id, struct.pack("<H", msg_id) + struct.pack(codes, *row)))
+            flat = [item for value in row for item in (value if isinstance(value, tuple) else (value,))]
+            items.append((int(row[0]), msg_id, struct.pack("<H", msg_id) + struct.pack(codes, *flat)))
     for _, _, payload in sorted(items, key=lambda item: (item[0], item[1])):
         out += _message(b"D", payload)
     path.write_bytes(bytes(out))
     return path
+
+
+def _struct_code(ulog_type: str) -> str:
+    """``float`` -> ``f``; ``float[3]`` -> ``3f`` (an array row value is a tuple)."""
+    array = ULOG_ARRAY.fullmatch(ulog_type)
+    return f"{array.group(2)}{ULOG_TYPES[array.group(1)]}" if array else ULOG_TYPES[ulog_type]
+
+
+def combined_topic(time_us: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> Topic:
+    """sensor_combined rows (rad/s, m/s^2), no temperature field."""
+    rows: list[tuple[float | int | tuple[float, ...], ...]] = [
+        (int(t), tuple(map(float, g)), 4000, 0, tuple(map(float, a)), 4000)
+        for t, g, a in zip(time_us, gyro, accel, strict=True)
+    ]
+    return Topic("sensor_combined", 0, COMBINED_FIELDS, rows)
 
 
 def imu_topic(

@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.flightlogs import DataFlashWriter, baro_topic, imu_topic, write_ulog
+from tests.flightlogs import DataFlashWriter, baro_topic, combined_topic, imu_topic, write_ulog
 from trainer.cli import main
+from trainer.data.channels import recording_channels
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import ImportOptions, import_foreign
 from trainer.data.recording import Recording
@@ -157,8 +158,6 @@ def test_ulog_wrong_channel_lists_the_available_ones(tmp_path: Path, ulog_path: 
     assert "accel0_x, accel0_y, accel0_z, accel1_x" in message and "baro0" in message
     message = import_error(tmp_path / "o.csv", ulog_path, "--channel", "acc0z")
     assert "not a channel name" in message
-    message = import_error(tmp_path / "o.csv", ulog_path, "--channel", "gyro1_x")
-    assert "accelerometer axis" in message and "accel1_z" in message
 
 
 def test_ulog_list_channels(ulog_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -263,3 +262,317 @@ def test_dataflash_each_imu_imports_with_its_temperatures(
     np.testing.assert_array_equal(rec.columns[f"gyro{instance}_temp_c"], data[f"T{instance}"])
     assert rec.meta[f"device_id_accel{instance}"] == str([2753028, 2883604][instance])
     assert rec.meta["sensor"] == f"dataflash-accel{instance}_z"
+
+
+# --------------------------------------------------------------------------- one recording per sensor instance
+
+GYRO_RATE_HZ = 40.0  # the gyroscopes run on their own clock, at another rate than the accelerometers
+THREE_IMU_IDS = {"accel": 1000, "gyro": 2000}  # + instance
+
+
+def _three_imu_log(path: Path, *, gyro2_temp_zero: bool = False) -> tuple[Path, dict[str, np.ndarray]]:
+    """Three IMUs, each accelerometer and gyroscope its own topic instance with its own clock and temperature."""
+    data: dict[str, np.ndarray] = {}
+    topics = []
+    for i in (0, 1, 2):
+        data[f"accel{i}_time"] = _time_us(100 * i)
+        data[f"gyro{i}_time"] = (5_000_053 + 100 * i + np.arange(N) * 1e6 / GYRO_RATE_HZ).astype(np.int64)
+        data[f"accel{i}"], data[f"accel{i}_temp"] = _accel(i), _ramp(i)
+        data[f"gyro{i}"], data[f"gyro{i}_temp"] = _gyro(i), _ramp(i) + 0.5
+        if gyro2_temp_zero and i == 2:
+            data["gyro2_temp"] = np.zeros(N)  # a driver that does not report its temperature
+        for sensor in ("accel", "gyro"):
+            topics.append(
+                imu_topic(
+                    f"sensor_{sensor}",
+                    i,
+                    THREE_IMU_IDS[sensor] + i,
+                    data[f"{sensor}{i}_time"],
+                    data[f"{sensor}{i}"],
+                    data[f"{sensor}{i}_temp"],
+                )
+            )
+    return write_ulog(path, topics), data
+
+
+@pytest.fixture(scope="module")
+def three_imu(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np.ndarray]]:
+    return _three_imu_log(tmp_path_factory.mktemp("imu3") / "three.ulg")
+
+
+def _expected(data: dict[str, np.ndarray], sensor: str, instance: int, k: int) -> np.ndarray:
+    values = data[f"{sensor}{instance}"][:, k]
+    return values * 1000.0 / G if sensor == "accel" else np.degrees(values)
+
+
+def test_ulog_gyro_channel_alone_is_its_own_recording(tmp_path: Path, three_imu: tuple[Path, dict]) -> None:
+    path, data = three_imu
+    rec = run_import(path, "--channel", "gyro0_x", "-o", tmp_path / "g.csv")
+    np.testing.assert_allclose(rec.accel_mg, _expected(data, "gyro", 0, 0), rtol=1e-9)  # deg/s, in accel_mg
+    np.testing.assert_allclose(rec.temp_c, data["gyro0_temp"], rtol=1e-9)  # the gyroscope's own temperature
+    np.testing.assert_allclose(rec.time_s, np.arange(N) / GYRO_RATE_HZ, atol=1e-9)  # its own clock
+    assert float(rec.meta["sample_rate_hz"]) == pytest.approx(GYRO_RATE_HZ)
+    assert (rec.meta["channel"], rec.meta["unit"]) == ("gyro0_x", "dps")
+    assert rec.meta["device_id_gyro0"] == str(THREE_IMU_IDS["gyro"])
+    assert list(recording_channels(rec)) == ["gyro0_x", "gyro0_y", "gyro0_z"]
+    for k, axis in enumerate("xyz"):
+        np.testing.assert_allclose(rec.columns[f"gyro0_{axis}_dps"], _expected(data, "gyro", 0, k), rtol=1e-9)
+
+
+def test_ulog_gyro_only_channel_set(tmp_path: Path, three_imu: tuple[Path, dict]) -> None:
+    path, data = three_imu
+    out = tmp_path / "g1.npz"
+    rec = run_import(path, "--channels", "gyro1_x,gyro1_y,gyro1_z", "-o", out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g1.npz"]  # one time base: OUT itself
+    assert list(recording_channels(rec)) == ["gyro1_x", "gyro1_y", "gyro1_z"]
+    np.testing.assert_array_equal(rec.columns["gyro1_temp_c"], data["gyro1_temp"])
+    np.testing.assert_allclose(rec.columns["gyro1_z_dps"], _expected(data, "gyro", 1, 2), rtol=1e-12)
+    assert rec.meta["channel"] == "gyro1_x" and rec.meta["unit"] == "dps"
+
+
+def test_ulog_mixed_channels_one_recording_per_sensor_resampled(
+    tmp_path: Path, three_imu: tuple[Path, dict], capsys: pytest.CaptureFixture[str]
+) -> None:
+    path, data = three_imu
+    rate_hz = 20.0
+    assert (
+        main(
+            [
+                "import",
+                str(path),
+                "--channels",
+                "accel0_z,gyro0_x",
+                "--resample",
+                "20",
+                "-o",
+                str(tmp_path / "m.npz"),
+            ]
+        )
+        == 0
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m_accel0.npz", "m_gyro0.npz"]
+    out = capsys.readouterr().out
+    assert "m_accel0.npz: 24 rows at 20 Hz (resampled)" in out and "m_gyro0.npz: 30 rows at 20 Hz" in out
+    for sensor, k in (("accel", 2), ("gyro", 0)):
+        rec = read_recording(tmp_path / f"m_{sensor}0.npz")
+        time_s = (data[f"{sensor}0_time"] - data[f"{sensor}0_time"][0]) * 1e-6  # its own clock
+        grid = np.arange(int(np.floor(time_s[-1] * rate_hz + 1e-9)) + 1) / rate_hz
+        np.testing.assert_allclose(rec.time_s, grid, atol=1e-12)
+        np.testing.assert_allclose(
+            rec.accel_mg, np.interp(grid, time_s, _expected(data, sensor, 0, k)), rtol=1e-9
+        )
+        np.testing.assert_allclose(rec.temp_c, np.interp(grid, time_s, data[f"{sensor}0_temp"]), rtol=1e-9)
+        assert list(recording_channels(rec)) == [f"{sensor}0_{'xyz'[k]}"]
+
+
+def test_ulog_channels_all_brings_every_imu_instance(tmp_path: Path, three_imu: tuple[Path, dict]) -> None:
+    path, data = three_imu
+    assert main(["import", str(path), "--channels", "all", "-o", str(tmp_path / "a.csv")]) == 0
+    groups = [f"{s}{i}" for s in ("accel", "gyro") for i in (0, 1, 2)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"a_{g}.csv" for g in groups)
+    for sensor in ("accel", "gyro"):
+        for i in (0, 1, 2):
+            rec = read_recording(tmp_path / f"a_{sensor}{i}.csv")
+            assert list(recording_channels(rec)) == [f"{sensor}{i}_{a}" for a in "xyz"]
+            np.testing.assert_allclose(
+                rec.columns[f"{sensor}{i}_temp_c"], data[f"{sensor}{i}_temp"], rtol=1e-9
+            )
+            for k, axis in enumerate("xyz"):
+                unit = "mg" if sensor == "accel" else "dps"
+                np.testing.assert_allclose(
+                    rec.columns[f"{sensor}{i}_{axis}_{unit}"],
+                    _expected(data, sensor, i, k),
+                    rtol=1e-9,
+                    atol=1e-9,
+                )
+            assert rec.meta["channel"] == (f"accel{i}_z" if sensor == "accel" else f"gyro{i}_x")
+            assert rec.meta[f"device_id_{sensor}{i}"] == str(THREE_IMU_IDS[sensor] + i)
+
+
+def test_instance_without_temperature_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path, _ = _three_imu_log(tmp_path / "zero.ulg", gyro2_temp_zero=True)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    assert main(["import", str(path), "--channels", "all", "-o", str(out_dir / "a.npz")]) == 0
+    names = sorted(p.name for p in out_dir.iterdir())
+    assert "a_gyro2.npz" not in names and len(names) == 5
+    out = capsys.readouterr().out
+    assert f"note: {path}: left out gyro2 (no temperature logged (0.00 degC in all {N} samples))" in out
+    message = import_error(out_dir / "g2.csv", path, "--channel", "gyro2_x")
+    assert f"gyro2: no temperature logged (0.00 degC in all {N} samples)" in message
+    assert main(["import", str(path), "--list-channels"]) == 0
+    assert "gyro2_x [dps]: 60 samples at 40 Hz, no temperature logged" in capsys.readouterr().out
+
+
+def test_older_px4_log_with_sensor_combined_only_says_what_to_log(tmp_path: Path) -> None:
+    time_us = _time_us()
+    combined = combined_topic(time_us, _gyro(0), _accel(0))
+    old = write_ulog(tmp_path / "sample.ulg", [combined])
+    message = import_error(tmp_path / "o.csv", old)
+    assert "without accelerometer, gyroscope or barometer channels" in message
+    assert f"only in sensor_combined ({N} samples), which carries no sensor temperature" in message
+    assert "sensor_accel and sensor_gyro with their temperature" in message
+    assert "thermal calibration profile" in message and "SDLOG_PROFILE" in message
+    with pytest.raises(UserError, match="only in sensor_combined"):
+        main(["import", str(old), "--list-channels"])
+    # with a barometer logged, the IMU channels asked for are missing for the same reason
+    baro = baro_topic(0, 1, time_us[::5], np.full(N // 5, 101325.0), np.linspace(25.0, 30.0, N // 5))
+    with_baro = write_ulog(tmp_path / "baro.ulg", [combined, baro])
+    message = import_error(tmp_path / "o.csv", with_baro)
+    assert (
+        "'accel0_z' is not in this log; available: baro0; its IMU data is only in sensor_combined" in message
+    )
+
+
+def test_ulog_gyro_recording_gives_px4_tc_g_parameters(tmp_path: Path) -> None:
+    """The point of importing a gyroscope: import -> fit poly3 -> TC_G0_* for PX4, keyed by its device id."""
+    from codegen.cli import main as codegen_main
+
+    n = 200
+    temp_c = np.linspace(10.0, 60.0, n)
+    slope, curve = 1e-4, 2e-6  # rad/s per degC, per degC^2 about 35 degC
+    gyro = np.column_stack([0.002 + slope * (temp_c - 35.0) + curve * (temp_c - 35.0) ** 2] * 3)
+    time_us = (5_000_000 + np.arange(n) * 1e6 / GYRO_RATE_HZ).astype(np.int64)
+    accel = np.column_stack([np.zeros(n), np.zeros(n), np.full(n, -G)])
+    path = write_ulog(
+        tmp_path / "gyro.ulg",
+        [
+            imu_topic("sensor_accel", 0, 111, time_us + 7, accel, temp_c),  # another topic, another recording
+            imu_topic("sensor_gyro", 0, 222, time_us, gyro, temp_c),
+        ],
+    )
+    assert (
+        main(["import", str(path), "--channels", "gyro0_x,gyro0_y,gyro0_z", "-o", str(tmp_path / "g.npz")])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "fit",
+                str(tmp_path / "g.npz"),
+                "--channels",
+                "all",
+                "--method",
+                "poly3",
+                "-o",
+                str(tmp_path / "fit"),
+            ]
+        )
+        == 0
+    )
+    argv = ["export", str(tmp_path / "fit"), "--channels", "all", "-o", str(tmp_path / "params")]
+    assert codegen_main([*argv, "--format", "px4-params"]) == 0
+    rows = [
+        line.split("\t") for line in next((tmp_path / "params").glob("*.params")).read_text().splitlines()
+    ]
+    values = {row[2]: float(row[3]) for row in rows if not row[0].startswith("#")}
+    assert values["TC_G_ENABLE"] == 1 and values["TC_G0_ID"] == 222 and "TC_A0_ID" not in values
+    t_ref = values["TC_G0_TREF"]
+    for axis in (0, 1, 2):  # the drift re-expanded about TREF: X1 = slope + 2 curve (TREF - 35), X2 = curve
+        assert values[f"TC_G0_X1_{axis}"] == pytest.approx(slope + 2 * curve * (t_ref - 35.0), rel=1e-3)
+        assert values[f"TC_G0_X2_{axis}"] == pytest.approx(curve, rel=1e-3)
+
+
+# --------------------------------------------------------------------------- ArduPilot INS_TCAL in the log
+
+TCAL_T_MIN_C, TCAL_T_MAX_C = 15.0, 55.0
+CALTEMP_C = {"accel": 24.0, "gyro": 31.0}
+
+
+def _drift(sensor: str, temp_c: np.ndarray) -> np.ndarray:
+    """The raw drift (m/s^2, rad/s) per axis: a cubic of the temperature, shape (n, 3)."""
+    d = (temp_c[:, None] - 30.0) / 20.0
+    scale = 0.2 if sensor == "accel" else 0.01
+    return scale * (
+        np.array([0.3, -0.5, 0.8]) * d + np.array([0.2, 0.1, -0.4]) * d**2 + np.array([-0.1, 0.3, 0.2]) * d**3
+    )
+
+
+def _tcal_parameters() -> dict[str, float]:
+    """The drift as INS_TCAL1_* written by codegen's own ArduPilot exporter (the convention to invert)."""
+    from codegen.flightparams import ChannelCubic, render_ardupilot
+    from trainer.data.flightlog import parse_channel
+
+    cubics = []
+    temps = np.linspace(0.0, 80.0, 9)
+    for sensor in ("accel", "gyro"):
+        drift = _drift(sensor, temps)
+        for k, axis in enumerate("xyz"):
+            coefficients = np.polynomial.polynomial.polyfit(temps - 30.0, drift[:, k], 3)  # exact: a cubic
+            name = f"{sensor}0_{axis}"
+            channel = parse_channel(name)
+            assert channel is not None
+            cubics.append(
+                ChannelCubic(channel, name, None, coefficients, 30.0, TCAL_T_MIN_C, TCAL_T_MAX_C, "0")
+            )
+    lines = [line.split() for line in render_ardupilot(cubics).splitlines() if not line.startswith("#")]
+    return {name: float(value) for name, value in lines}
+
+
+def _tcal_log(
+    path: Path, orientation: int = 0, changed: dict[str, float] | None = None
+) -> tuple[Path, dict[str, np.ndarray]]:
+    params = _tcal_parameters()
+    assert params["INS_TCAL1_ENABLE"] == 1.0
+    writer = DataFlashWriter()
+    for name, value in params.items():
+        writer.parm(1000, name, value)
+    for name, value in (changed or {}).items():  # set again later in the log
+        writer.parm(2000, name, value)
+    writer.parm(1000, "INS_ACC1_CALTEMP", CALTEMP_C["accel"])
+    writer.parm(1000, "INS_GYR1_CALTEMP", CALTEMP_C["gyro"])
+    writer.parm(1000, "AHRS_ORIENTATION", float(orientation))
+    temp_c = np.linspace(5.0, 65.0, N).astype(np.float32).astype(np.float64)  # beyond TMIN..TMAX: clamped
+    clamped = np.clip(temp_c, TCAL_T_MIN_C, TCAL_T_MAX_C)
+    data = {"T": temp_c}
+    for sensor, base in (("accel", np.array([0.05, -0.02, -G])), ("gyro", np.array([0.001, 0.002, -0.003]))):
+        data[f"raw_{sensor}"] = base + _drift(sensor, temp_c)
+        # what ArduPilot logs: raw - (drift(T') - drift(CALTEMP')), written independently of the parameters
+        cal = np.clip(np.array([CALTEMP_C[sensor]]), TCAL_T_MIN_C, TCAL_T_MAX_C)
+        data[f"logged_{sensor}"] = data[f"raw_{sensor}"] - (_drift(sensor, clamped) - _drift(sensor, cal))
+    for row, t in enumerate(_time_us()):
+        writer.imu(int(t), 0, data["logged_gyro"][row], data["logged_accel"][row], temp_c[row])
+        writer.imu(int(t), 1, data["raw_gyro"][row], data["raw_accel"][row], temp_c[row])  # INS_TCAL2 off
+    return writer.write(path), data
+
+
+def test_dataflash_tcal_correction_is_removed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path, data = _tcal_log(tmp_path / "tcal.bin")
+    out = tmp_path / "imus.npz"  # ArduPilot logs every IMU at the same TimeUS: one time base, one file
+    assert main(["import", str(path), "--channels", "all", "-o", str(out)]) == 0
+    assert "IMU 0 was logged with INS_TCAL1_ENABLE=1 (already compensated)" in capsys.readouterr().out
+    rec = read_recording(out)
+    assert rec.meta["tcal_removed_imu0"] and "tcal_removed_imu1" not in rec.meta
+    for instance in (0, 1):
+        for sensor, unit, to_unit, tol in (
+            ("accel", "mg", 1000.0 / G, 2e-3),
+            ("gyro", "dps", 180 / np.pi, 1e-5),
+        ):
+            raw = data[f"raw_{sensor}"] * to_unit
+            logged = data[f"logged_{sensor}"] * to_unit
+            for k, axis in enumerate("xyz"):
+                restored = rec.columns[f"{sensor}{instance}_{axis}_{unit}"]
+                # float32 logging and parameters: within tol of the raw reading, far from the logged one
+                np.testing.assert_allclose(restored, raw[:, k], atol=tol, rtol=0)
+                if instance == 0:  # corrected before logging: the restored data are not the logged ones
+                    assert np.max(np.abs(restored - logged[:, k])) > 100 * tol
+
+
+def test_dataflash_tcal_with_board_orientation_is_refused(tmp_path: Path) -> None:
+    path, _ = _tcal_log(tmp_path / "rotated.bin", orientation=2)
+    message = import_error(tmp_path / "o.csv", path, "--channel", "accel0_z")
+    assert "INS_TCAL1_ENABLE=1" in message and "AHRS_ORIENTATION=2" in message and "sensor frame" in message
+
+
+@pytest.mark.parametrize(
+    ("changed", "expected"),
+    [
+        ({"INS_TCAL1_ACC2_Z": 1.0}, "parameter INS_TCAL1_ACC2_Z changes during the log"),
+        ({"INS_TCAL1_ENABLE": 0.0}, "INS_TCAL1_ENABLE changes during the log"),
+    ],
+)
+def test_dataflash_tcal_changed_during_the_log_is_refused(
+    tmp_path: Path, changed: dict[str, float], expected: str
+) -> None:
+    path, _ = _tcal_log(tmp_path / "changed.bin", changed=changed)
+    assert expected in import_error(tmp_path / "o.csv", path)

@@ -1,21 +1,30 @@
 """``trainer import FOREIGN -o OUT.csv|.npz``: convert a foreign logger's file or a flight log into a recording.
 
-A PX4 ULog or ArduPilot DataFlash log (recognised by its magic bytes) takes ``--channel``; any
-other file is delimited text mapped by the column options.
+A PX4 ULog or ArduPilot DataFlash log (recognised by its magic bytes) takes ``--channel`` and
+``--channels``; each of its time bases (sensor instances) becomes its own recording, written to
+``OUT`` or, when there are several, to ``OUT_<instance>.ext``. Any other file is delimited text
+mapped by the column options.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from trainer.commands.channel_options import add_channels_option
 from trainer.data.flightlog import KIND_NAMES, log_kind
+from trainer.data.flightlog_import import (
+    DEFAULT_CHANNEL,
+    LogImport,
+    LogImportOptions,
+    import_flight_log,
+    log_output,
+)
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
     BARO_UNIT_TO_PA,
-    DEFAULT_CHANNEL,
     DELIMITER_NAMES,
     FILL_TEMP_MODES,
     GRAVITY_MODES,
@@ -24,15 +33,13 @@ from trainer.data.importer import (
     TEMP_UNIT_OFFSET_C,
     TIME_UNIT_SECONDS,
     ImportOptions,
-    LogImportOptions,
-    import_flight_log,
     import_foreign,
     options_with_preset,
 )
 from trainer.data.plausibility import ACCEPT_OPTION, Plausibility
 from trainer.data.recording import Recording
 from trainer.data.recording_io import recording_format, write_recording
-from trainer.errors import UserError
+from trainer.errors import UserError, check_output_path
 
 # Options that map the columns of a delimited file; a flight log names its channels itself.
 TEXT_ONLY_OPTIONS = (
@@ -116,7 +123,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--channel",
         metavar="NAME",
-        help=f"flight logs: the accelerometer axis that becomes the recording (default {DEFAULT_CHANNEL})",
+        help=f"flight logs: the channel that becomes accel_mg, in its own unit (default {DEFAULT_CHANNEL}); "
+        "each sensor instance is its own recording, several go to OUT_<instance>.ext",
     )
     add_channels_option(
         parser,
@@ -189,26 +197,52 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.foreign}: {KIND_NAMES[log.kind]} log, {len(log.channels)} channels")
         for channel in log.channels.values():
             print(f"  {channel.summary()}")
+        for notice in log.notices:
+            print(f"note: {notice}")
         return 0
     if args.output is None:
         raise UserError("trainer import: -o/--output OUT is required")
     recording_format(args.output)  # reject a bad extension before any work
     checks = Plausibility(accept=args.accept_implausible)
-    rec = _import_log(args, kind, checks) if kind is not None else _import_text(args, checks)
-    write_recording(rec, args.output)
+    if kind is not None:
+        imported = _import_log(args, kind, checks)
+        several = len(imported.recordings) > 1
+        outputs = {log_output(args.output, name, several): rec for name, rec in imported.recordings.items()}
+    else:
+        imported = LogImport({})
+        outputs = {Path(args.output): _import_text(args, checks)}
+    _write_all(outputs)
+    for notice in imported.notices:
+        print(f"note: {notice}")
     checks.print_warnings()
-    how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
-    rate_hz = float(rec.meta["sample_rate_hz"])
-    picked = f" ({rec.meta['channel']})" if kind is not None else ""
-    if args.channels is not None:
-        from trainer.data.channels import recording_channels
+    for path, rec in outputs.items():
+        how = next((word for word in ("resampled", "retimed") if f"{word}_from" in rec.meta), "as sampled")
+        rate_hz = float(rec.meta["sample_rate_hz"])
+        picked = f" ({rec.meta['channel']})" if kind is not None else ""
+        if args.channels is not None:
+            from trainer.data.channels import recording_channels
 
-        picked = f" (channels {', '.join(recording_channels(rec))})"
-    print(f"{args.output}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}{picked}")
+            picked = f" (channels {', '.join(recording_channels(rec))})"
+        print(f"{path}: {len(rec)} rows at {rate_hz:.6g} Hz ({how}) from {args.foreign}{picked}")
     return 0
 
 
-def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Recording:
+def _write_all(outputs: dict[Path, Recording]) -> None:
+    """Write every recording or none: a failure removes the ones already written."""
+    for path in outputs:
+        check_output_path(path)
+    written: list[Path] = []
+    try:
+        for path, rec in outputs.items():
+            write_recording(rec, path)
+            written.append(path)
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+
+
+def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> LogImport:
     for name in TEXT_ONLY_OPTIONS:
         if getattr(args, name) not in (None, False):
             option = "--" + name.replace("_", "-")
@@ -218,7 +252,7 @@ def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Re
             )
     resample = None if args.resample == "none" else args.resample
     options = LogImportOptions(
-        channel=args.channel or DEFAULT_CHANNEL,
+        channel=args.channel,
         remove_gravity=args.remove_gravity or "none",
         sensor=args.sensor,
         resample=resample,

@@ -8,6 +8,10 @@ Messages read (ArduPilot's ``LogStructure.h`` of AP_InertialSensor and AP_Baro):
 - ``PARM``: the device ids ``INS_ACC_ID``, ``INS_ACC2_ID``, ..., ``INS_GYR_ID``, ..., ``BARO1_DEVID``,
   ... and ``AHRS_ORIENTATION``: ``IMU`` values are in the vehicle frame (after the board rotation),
   while ``INS_TCALn_*`` corrections apply in the sensor frame, so a non-zero orientation is noted.
+
+An IMU whose ``INS_TCALn_ENABLE`` is 1 in the log was corrected before logging: the correction is
+added back from the log's own parameters (:mod:`trainer.data.ardupilot_tcal`), so the channels
+hold the raw drift that a calibration is fitted to.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from trainer.data.ardupilot_tcal import logged_tcal
 from trainer.data.flightlog import (
     AXES,
     DPS_PER_RADPS,
@@ -38,6 +43,7 @@ def read_dataflash(path: str | Path) -> FlightLog:
     source = str(path)
     rows: dict[tuple[str, int], list[tuple[float, ...]]] = defaultdict(list)
     params: dict[str, float] = {}
+    changed: set[str] = set()  # parameters set to another value during the log
 
     def collect() -> None:
         from pymavlink.DFReader import DFReader_binary
@@ -47,7 +53,10 @@ def read_dataflash(path: str | Path) -> FlightLog:
         while (msg := reader.recv_match(type=wanted)) is not None:
             kind = msg.get_type()
             if kind == "PARM":
-                params[str(msg.Name)] = float(msg.Value)
+                name, value = str(msg.Name), float(msg.Value)
+                if params.get(name, value) != value:
+                    changed.add(name)
+                params[name] = value
             elif kind == "BARO":
                 rows["baro", int(getattr(msg, "I", 0))].append((msg.TimeUS, msg.Press, msg.Temp))
             else:
@@ -59,7 +68,10 @@ def read_dataflash(path: str | Path) -> FlightLog:
 
     quiet_library_call(source, "dataflash", collect)
     ids = _device_ids(params)
+    orientation = int(params.get("AHRS_ORIENTATION", 0))
     channels: list[LogChannel] = []
+    notices: list[str] = []
+    notes: dict[str, str] = {}
     for (kind, instance), samples in rows.items():
         table = np.array(samples, dtype=np.float64)
         time_us = table[:, 0].astype(np.int64)
@@ -71,20 +83,27 @@ def read_dataflash(path: str | Path) -> FlightLog:
             )
             continue
         temp_c = table[:, 7]
+        accel_mps2, gyro_rads = table[:, 1:4], table[:, 4:7]
+        tcal = logged_tcal(params, changed, instance, orientation, source)
+        if tcal is not None:
+            accel_mps2 = accel_mps2 + tcal.correction("accel", temp_c)
+            gyro_rads = gyro_rads + tcal.correction("gyro", temp_c)
+            notices.append(f"{source}: {tcal.describe()}")
+            notes[f"tcal_removed_imu{instance}"] = (
+                "the logged INS_TCAL correction was added back (raw reading)"
+            )
         for k, axis in enumerate(AXES):
-            accel = table[:, 1 + k] * MG_PER_MPS2
-            gyro = table[:, 4 + k] * DPS_PER_RADPS
+            accel = accel_mps2[:, k] * MG_PER_MPS2
+            gyro = gyro_rads[:, k] * DPS_PER_RADPS
             channels.append(
                 LogChannel("accel", instance, axis, time_us, accel, temp_c, ids.get(("accel", instance)))
             )
             channels.append(
                 LogChannel("gyro", instance, axis, time_us, gyro, temp_c, ids.get(("gyro", instance)))
             )
-    notes: dict[str, str] = {}
-    orientation = int(params.get("AHRS_ORIENTATION", 0))
     if orientation:
         notes["ahrs_orientation"] = f"{orientation} (IMU axes are vehicle axes, not sensor axes)"
-    return FlightLog(source, "dataflash", sorted_channels(channels), notes)
+    return FlightLog(source, "dataflash", sorted_channels(channels), notes, notices)
 
 
 def _device_ids(params: dict[str, float]) -> dict[tuple[str, int], int]:

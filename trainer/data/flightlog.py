@@ -80,8 +80,7 @@ class LogChannel:
     @property
     def name(self) -> str:
         """``accel0_z``: the data column name of the recording format without its unit."""
-        base = f"{self.sensor}{self.instance}"
-        return f"{base}_{self.axis}" if self.axis else base
+        return f"{self.sensor_instance}_{self.axis}" if self.axis else self.sensor_instance
 
     @property
     def unit(self) -> str:
@@ -94,7 +93,25 @@ class LogChannel:
 
     @property
     def temp_column(self) -> str:
-        return f"{self.sensor}{self.instance}_temp_c"
+        return f"{self.sensor_instance}_temp_c"
+
+    @property
+    def sensor_instance(self) -> str:
+        """``accel0``: the sensor instance, whose channels share one temperature."""
+        return f"{self.sensor}{self.instance}"
+
+    def temperature_missing(self) -> str | None:
+        """Why the log holds no temperature for this channel, or None when it does.
+
+        Some drivers fill the field with 0 (or NaN) instead of a reading; a drift calibration
+        against it would fit nothing, so the import refuses it by name.
+        """
+        finite = self.temp_c[np.isfinite(self.temp_c)]
+        if finite.size == 0:
+            return "no temperature logged (the field is empty in every sample)"
+        if finite.size == self.temp_c.size and not np.any(finite):
+            return f"no temperature logged (0.00 degC in all {finite.size} samples)"
+        return None
 
     def summary(self) -> str:
         """One line for ``trainer import --list-channels``."""
@@ -102,7 +119,7 @@ class LogChannel:
         span_s = (int(self.time_us[-1]) - int(self.time_us[0])) * 1e-6 if n > 1 else 0.0
         rate = f"{(n - 1) / span_s:.4g} Hz" if span_s > 0 else "-"
         finite = self.temp_c[np.isfinite(self.temp_c)]
-        temp = f"{finite.min():.2f} .. {finite.max():.2f} degC" if finite.size else "no temperature"
+        temp = self.temperature_missing() or f"{finite.min():.2f} .. {finite.max():.2f} degC"
         device = f", device id {self.device_id}" if self.device_id is not None else ""
         return f"{self.name} [{self.unit}]: {n} samples at {rate}, {temp}{device}"
 
@@ -115,6 +132,8 @@ class FlightLog:
     kind: str  # a key of MAGIC
     channels: dict[str, LogChannel]
     notes: dict[str, str] = field(default_factory=dict)  # metadata worth keeping (``key=value``)
+    notices: list[str] = field(default_factory=list)  # what the reader changed, printed at import
+    missing: str = ""  # why expected sensor data is not among the channels (e.g. sensor_combined only)
 
     def channel(self, name: str) -> LogChannel:
         """The channel ``name``; a one-line error listing the available ones otherwise."""
@@ -123,7 +142,8 @@ class FlightLog:
                 problem = "is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
             else:
                 problem = "is not in this log"
-            raise UserError(f"{self.source}: --channel {name!r} {problem}; available: {self.names()}")
+            hint = f"; {self.missing}" if self.missing else ""
+            raise UserError(f"{self.source}: --channel {name!r} {problem}; available: {self.names()}{hint}")
         return self.channels[name]
 
     def names(self) -> str:
@@ -134,6 +154,27 @@ class FlightLog:
         for other in self.channels.values():
             if len(other.time_us) == len(chosen.time_us) and np.array_equal(other.time_us, chosen.time_us):
                 yield other
+
+
+def time_bases(channels: list[LogChannel]) -> list[list[LogChannel]]:
+    """``channels`` grouped by time base (identical timestamps: one topic instance or message).
+
+    A recording has one time column, so each group becomes its own recording; the order of
+    ``channels`` is kept within and across groups.
+    """
+    groups: list[list[LogChannel]] = []
+    for channel in channels:
+        home = next((g for g in groups if np.array_equal(g[0].time_us, channel.time_us)), None)
+        if home is None:
+            groups.append([channel])
+        else:
+            home.append(channel)
+    return groups
+
+
+def group_name(group: list[LogChannel]) -> str:
+    """``gyro0``, or ``accel0-gyro0`` for a DataFlash IMU message: the sensor instances of a time base."""
+    return "-".join(dict.fromkeys(channel.sensor_instance for channel in group))
 
 
 def sorted_channels(channels: list[LogChannel]) -> dict[str, LogChannel]:

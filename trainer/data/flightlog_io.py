@@ -9,6 +9,8 @@ from trainer.data.flightlog import KIND_NAMES, FlightLog, log_kind
 from trainer.data.ulog_reader import read_ulog
 from trainer.errors import UserError
 
+READ = {"ulog": "no sensor_accel, sensor_gyro or sensor_baro topic", "dataflash": "no IMU or BARO message"}
+
 
 def read_flight_log(path: str | Path) -> FlightLog:
     """Read a ULog or DataFlash log (decided by magic bytes) into channels."""
@@ -17,7 +19,8 @@ def read_flight_log(path: str | Path) -> FlightLog:
         raise UserError(f"{path}: not a PX4 ULog or ArduPilot DataFlash log (magic bytes do not match)")
     log = read_ulog(path) if kind == "ulog" else read_dataflash(path)
     if not log.channels:
+        missing = log.missing or f"it has {READ[kind]}"
         raise UserError(
-            f"{path}: a {KIND_NAMES[kind]} log without accelerometer, gyroscope or barometer data"
+            f"{path}: a {KIND_NAMES[kind]} log without accelerometer, gyroscope or barometer channels: {missing}"
         )
     return log

@@ -30,13 +30,10 @@ from trainer.data.flightlog import (
     KIND_NAMES,
     MG_PER_MPS2,
     SENSOR_UNITS,
-    FlightLog,
-    LogChannel,
     log_kind,
     parse_channel,
 )
 from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
-from trainer.data.flightlog_io import read_flight_log
 from trainer.data.plausibility import Plausibility
 from trainer.data.recording import Recording
 from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
@@ -48,7 +45,6 @@ TEMP_UNIT_OFFSET_C: dict[str, float] = {"degC": 0.0, "K": -273.15}  # added to t
 GYRO_UNIT_TO_DPS: dict[str, float] = {"rad/s": DPS_PER_RADPS, "dps": 1.0}
 BARO_UNIT_TO_PA: dict[str, float] = {"Pa": 1.0, "hPa": 100.0}
 FILL_TEMP_MODES = ("previous",)
-DEFAULT_CHANNEL = "accel0_z"  # a level board's vertical axis: the one PX4's thermal run sees gravity on
 GRAVITY_MODES = ("none", "nominal", "mean")
 DELIMITER_NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
 EXTRA_AXIS_COLUMNS = ("accel_x_mg", "accel_y_mg", "accel_z_mg")
@@ -90,21 +86,6 @@ class ImportOptions:
     channels: tuple[str, ...] | None = None  # None: the one-axis import; ("all",) or names
     gyro_unit: str = "dps"
     baro_unit: str = "Pa"
-
-
-@dataclass(frozen=True)
-class LogImportOptions:
-    """How to turn a flight log into a one-axis recording; mirrors ``trainer import LOG``."""
-
-    channel: str = DEFAULT_CHANNEL
-    remove_gravity: str = "none"
-    sensor: str | None = None
-    resample: Resample = None
-    retime: bool = False
-    fill_temp: str | None = None
-    channels: tuple[str, ...] | None = (
-        None  # several channels: ("all",) or names; None: ``channel`` and its siblings
-    )
 
 
 # Known loggers: the option values that make their files import with no other flag.
@@ -301,103 +282,6 @@ def _channel_target(channel: str, options: ImportOptions) -> tuple[str, float]:
         "baro": BARO_UNIT_TO_PA[options.baro_unit],
     }[parsed.sensor]
     return f"{channel}_{SENSOR_UNITS[parsed.sensor]}", scale
-
-
-class _LogTable(Table):
-    """A flight log channel and its siblings as a table whose rows are named "sample N"."""
-
-    def row_label(self, row: int) -> str:
-        return f"sample {row + 1}"
-
-
-def import_flight_log(
-    path: str | Path, options: LogImportOptions, checks: Plausibility | None = None
-) -> Recording:
-    """One accelerometer channel of a ULog or DataFlash log as a recording.
-
-    The chosen channel becomes ``accel_mg`` with its own temperature as ``temp_c``; every channel
-    logged at exactly its timestamps (the other axes, and with DataFlash the gyroscope of the same
-    IMU) is kept under its recording-format name (``accel0_x_mg``, ``gyro0_x_dps``, ...).
-    """
-    checks = checks or Plausibility()
-    log = read_flight_log(path)
-    chosen = log.channel(options.channel)
-    accels = ", ".join(name for name, c in log.channels.items() if c.sensor == "accel") or "(none)"
-    if chosen.sensor != "accel":
-        raise UserError(
-            f"{log.source}: --channel {chosen.name!r}: a one-axis recording compensates an accelerometer "
-            f"axis (column accel_mg); choose one of {accels}"
-        )
-    siblings = list(log.siblings(chosen))
-    if options.channels is not None:
-        chosen, siblings = _log_channels(log, options.channels, chosen, accels)
-    raw: dict[str, np.ndarray] = {"timestamp": chosen.time_us.astype(np.float64)}
-    for channel in siblings:
-        raw[channel.column] = channel.values
-        raw[channel.temp_column] = channel.temp_c
-    temp_columns = [name for name in raw if name.endswith("_temp_c")]
-    n = len(chosen.time_us)
-    table: Table = _LogTable(log.source, list(raw), 0, raw, np.arange(1, n + 1), {}, {})
-    table, fill_note = _fill_temperature(table, temp_columns, options.fill_temp)
-    for name, values in table.columns.items():
-        bad = np.flatnonzero(~np.isfinite(values))
-        if bad.size:
-            raise UserError(
-                f"{log.source}: {table.row_label(int(bad[0]))}, channel column {name!r}: value is not finite"
-            )
-    imported = ImportOptions(
-        temp=chosen.temp_column,
-        accel=chosen.column,
-        time="timestamp",
-        time_unit="us",
-        remove_gravity=options.remove_gravity,
-        sensor=options.sensor or f"{log.kind}-{chosen.name}",
-        resample=options.resample,
-        retime=options.retime,
-    )
-    _check_options(imported)
-    columns = {"temp_c": table.columns[chosen.temp_column], "accel_mg": table.columns[chosen.column]}
-    columns.update((name, values) for name, values in table.columns.items() if name != "timestamp")
-    meta = {"channel": chosen.name}
-    for channel in siblings:
-        if channel.device_id is not None:
-            meta[f"device_id_{channel.sensor}{channel.instance}"] = str(channel.device_id)
-    meta.update(log.notes)
-    if fill_note:
-        meta["temp_filled"] = fill_note
-    mapping = (
-        f"{KIND_NAMES[log.kind]} log; time_s<-sample time[us] temp_c<-{chosen.temp_column} "
-        f"accel_mg<-{chosen.column}; {len(siblings)} channels logged with it kept"
-    )
-    return _finish(table, imported, columns, mapping, meta, checks)
-
-
-def _log_channels(
-    log: FlightLog, wanted: tuple[str, ...], default: LogChannel, accels: str
-) -> tuple[LogChannel, list[LogChannel]]:
-    """``--channels`` of a flight log: (the accelerometer axis for ``accel_mg``, the channels kept).
-
-    A recording has one time base, so the channels must be logged together (one ULog topic
-    instance, one DataFlash IMU message); ``all`` is every channel logged with the first
-    accelerometer axis (``--channel`` picks another).
-    """
-    if wanted == (ALL,):
-        return default, list(log.siblings(default))
-    picked = [log.channel(name) for name in wanted]
-    chosen = next((c for c in picked if c.sensor == "accel"), None)
-    if chosen is None:
-        raise UserError(
-            f"{log.source}: --channels: a recording needs an accelerometer axis for its accel_mg column; "
-            f"add one of {accels}"
-        )
-    together = {c.name for c in log.siblings(chosen)}
-    apart = next((c for c in picked if c.name not in together), None)
-    if apart is not None:
-        raise UserError(
-            f"{log.source}: --channels {apart.name!r} is logged at other timestamps than {chosen.name!r} "
-            f"(another topic or message); channels logged with it: {names_text(sorted(together))}"
-        )
-    return chosen, picked
 
 
 def _fill_temperature(table: Table, names: list[str], mode: str | None) -> tuple[Table, str | None]:

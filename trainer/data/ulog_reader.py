@@ -10,6 +10,10 @@ Topics read, every instance (``multi_id``) of each (uORB message definitions in 
 Time is ``timestamp_sample`` (when the sensor sampled) when the topic has it, else ``timestamp``,
 both microseconds of the autopilot's clock. The instance number of a channel is the topic's
 ``multi_id``; the device id (what PX4's ``TC_*_ID`` parameters match) goes with it.
+
+``sensor_combined`` (what older PX4 versions and the default logging profile write) holds the
+IMU data without any sensor temperature, so it is not read as channels; a log whose IMU data is
+only there says so, and what to log instead (:data:`COMBINED_ONLY`).
 """
 
 from __future__ import annotations
@@ -32,6 +36,12 @@ from trainer.errors import UserError
 
 TOPICS = {"sensor_accel": "accel", "sensor_gyro": "gyro", "sensor_baro": "baro"}
 SCALE = {"accel": MG_PER_MPS2, "gyro": DPS_PER_RADPS}
+COMBINED = "sensor_combined"
+COMBINED_ONLY = (
+    "its IMU data is only in {topic} ({samples} samples), which carries no sensor temperature; a thermal "
+    "calibration needs the per-sensor topics sensor_accel and sensor_gyro with their temperature: log "
+    "with the thermal calibration profile selected in SDLOG_PROFILE (PX4 parameter) and record again"
+)
 HPA_BELOW = 2000.0  # a pressure median below this is hPa (sea level is 1013 hPa = 101325 Pa)
 
 
@@ -40,10 +50,13 @@ def read_ulog(path: str | Path) -> FlightLog:
     from pyulog import ULog
 
     source = str(path)
-    ulog: Any = quiet_library_call(source, "ulog", lambda: ULog(source, list(TOPICS)))
+    ulog: Any = quiet_library_call(source, "ulog", lambda: ULog(source, [*TOPICS, COMBINED]))
     channels: list[LogChannel] = []
     notes: dict[str, str] = {}
+    combined_samples = 0
     for dataset in ulog.data_list:
+        if dataset.name == COMBINED:
+            combined_samples += len(dataset.data["timestamp"])
         sensor = TOPICS.get(dataset.name)
         if sensor is None:
             continue
@@ -52,7 +65,11 @@ def read_ulog(path: str | Path) -> FlightLog:
         )
     if ulog.file_corruption:
         notes["log_corruption"] = "pyulog detected file corruption; damaged messages were skipped"
-    return FlightLog(source, "ulog", sorted_channels(channels), notes)
+    imu = any(channel.sensor != "baro" for channel in channels)
+    missing = (
+        COMBINED_ONLY.format(topic=COMBINED, samples=combined_samples) if combined_samples and not imu else ""
+    )
+    return FlightLog(source, "ulog", sorted_channels(channels), notes, missing=missing)
 
 
 def _topic_channels(
