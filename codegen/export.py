@@ -1,15 +1,14 @@
 """``codegen export``: model.pt -> NAME.h, NAME.c, NAME.manifest.json, all or nothing.
 
 Everything is computed in memory first; the files are then written into a staging directory and
-moved into place, so a failure (bad model, unwritable directory) leaves no half-written output.
+swapped in as one set (trainer/atomic_dir.py), so a failure or a kill leaves no half-written output
+and never a mix of two exports.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-import shutil
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from codegen.rate import retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods as registry
+from trainer.atomic_dir import atomic_directory
 from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
 from trainer.fitting import removes_sustained_input
@@ -137,42 +137,15 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
 
 
 def write_files_atomically(files: Mapping[str, str | bytes], out_dir: str | os.PathLike[str]) -> None:
-    """Write ``files`` into ``out_dir`` (created if absent, parent must exist), all or nothing."""
-    target = Path(out_dir)
-    parent = target.parent if str(target.parent) else Path(".")
-    if target.exists() and not target.is_dir():
-        raise UserError(f"{target}: exists and is not a directory")
-    if not parent.is_dir():
-        raise UserError(f"{target}: parent directory {parent} does not exist")
-    base = target if target.is_dir() else parent
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise UserError(
-            f"{target}: {'output' if base == target else 'parent'} directory {base} is not writable"
-        )
-    try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
-    except OSError as exc:
-        raise UserError(f"{target}: cannot write ({exc.strerror})") from None
-    try:
+    """Write ``files`` into ``out_dir`` (created if absent, parent must exist) as one set: a reader
+    (or a kill) sees the old files or the new ones, never a mix (trainer/atomic_dir.py)."""
+    with atomic_directory(out_dir) as staging:
         for file_name, text in files.items():
             if isinstance(text, bytes):  # a calibration blob (codegen/imu.py)
                 (staging / file_name).write_bytes(text)
             else:
                 (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
             os.chmod(staging / file_name, 0o644)
-        if base == target:
-            for file_name in files:
-                os.replace(staging / file_name, target / file_name)
-            staging.rmdir()
-        else:
-            os.chmod(staging, 0o755)
-            os.rename(staging, target)
-    except OSError as exc:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise UserError(f"{target}: cannot write ({exc.strerror})") from None
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
 
 
 def export(

@@ -11,11 +11,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import os
-import shutil
 import tempfile
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 
 from trainer.data.channels import Channel, parse_channels_option, sort_key
@@ -68,41 +65,6 @@ def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
             f"{', '.join(available)}"
         )
     return [root / f"{name}{MODEL_SUFFIX}" for name in names]
-
-
-def check_output_directory(out: str | Path) -> Path:
-    """Fail early when ``out`` cannot become a directory of outputs; returns where files are staged."""
-    target = Path(out)
-    if target.exists() and not target.is_dir():
-        raise UserError(f"{target}: exists and is not a directory (per-channel outputs go into a directory)")
-    parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise UserError(f"{target}: parent directory {parent} does not exist")
-    base = target if target.is_dir() else parent
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise UserError(f"{target}: directory {base} is not writable")
-    return base
-
-
-@contextmanager
-def staged_directory(out: str | Path) -> Iterator[Path]:
-    """Yield an empty staging folder; its files move into ``out`` (created if absent) only on success,
-    so a failure on the fifth channel leaves no partial set of models."""
-    target = Path(out)
-    base = check_output_directory(target)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=base))
-    try:
-        yield staging
-        if base == target:
-            for item in sorted(staging.iterdir()):
-                os.replace(item, target / item.name)
-            staging.rmdir()
-        else:
-            os.chmod(staging, 0o755)
-            os.rename(staging, target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
 
 
 def run_per_channel(

@@ -3,7 +3,8 @@
 Layout (docs/channels.md): ``OUT/<channel>.pt`` is an ordinary checkpoint of the channel's
 one-channel view (its ``train_stats`` name the channel and unit), so ``evaluate``, ``codegen
 export`` and the flight-stack parameter files read it like any model; ``OUT/channels.json`` lists
-the channels with their units and fit figures. All models are fitted before anything is written.
+the channels with their units and fit figures. All models are fitted before anything is written,
+and the set is swapped in as one (trainer/atomic_dir.py): an interrupted run leaves the old set.
 """
 
 from __future__ import annotations
@@ -13,12 +14,8 @@ import json
 from typing import Any
 
 from trainer import methods
-from trainer.commands.channel_options import (
-    INDEX_FILE,
-    MODEL_SUFFIX,
-    check_output_directory,
-    staged_directory,
-)
+from trainer.atomic_dir import atomic_directory, check_output_directory
+from trainer.commands.channel_options import INDEX_FILE, MODEL_SUFFIX
 from trainer.data.channels import channel_view, method_refusal, select_channels
 from trainer.errors import UserError
 from trainer.reference import OffsetPolicy
@@ -47,7 +44,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         model, stats = fit_with_selection(args.method, view, options, policy, log=progress_log(args))
         fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
-    with staged_directory(args.output) as staging:
+    with atomic_directory(args.output) as staging:  # old set or new set, never a mix
         for channel, model, stats, _ in fitted:
             save_model(
                 model,
