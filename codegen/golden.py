@@ -134,7 +134,7 @@ class GoldenPoly3(_Golden):
 
     def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
         m = self.model
-        u = np.clip(temp, m.clip_lo_mdegc, m.clip_hi_mdegc) - m.t_ref_mdegc
+        u = self._clamp(temp, m.clip_lo_mdegc, m.clip_hi_mdegc) - m.t_ref_mdegc
         d0, d1, d2, d3 = m.coefficients_q
         acc = np.full(u.shape, d3, dtype=np.int64)
         for coefficient in (d2, d1, d0):
@@ -394,6 +394,8 @@ class GoldenPhysics(_Golden):
         d0, d1, d2, d3 = m.coefficients_q
         for n, raw in enumerate(temp.tolist()):
             t = min(max(raw, m.clip_lo_mdegc), m.clip_hi_mdegc)
+            if t != raw:
+                self.flags |= FLAG_INPUT_CLAMPED
             x = (t - m.centre_mdegc) << tf
             if not self.started:
                 self.started, self.temp_prev = 1, t
