@@ -83,7 +83,9 @@ def _export_imu(args: argparse.Namespace) -> int:
     if args.format not in ("c", "calibration-blob"):
         raise UserError(f"--blob applies to --format c, not {args.format}")
     if args.schedule != "step":
-        raise UserError("--schedule applies to a DLSTM's own module, not to the IMU module")
+        raise UserError(
+            "--schedule applies to a DLSTM's own module; the IMU module runs its DLSTM channels with step"
+        )
     blob_only = args.format == "calibration-blob"
     imu, written = export_imu(
         [Path(p) for p in args.model],

@@ -10,8 +10,10 @@ recompiling. The arithmetic is the kernel library's (``tdc_kernels.h``, included
 the order of the one-channel templates, so each channel is bit-exact against the golden model of
 its own checkpoint (:func:`imu_golden`). Methods: poly3, pla and physics (the grey-box model: its
 filter and branch state per channel in the one state struct, its step the one-channel physics
-module's, rendered from the same template macro, ``_physics_step.c.j2``); a recursive channel
-(DLSTMs) is refused with one line.
+module's, rendered from the same template macro, ``_physics_step.c.j2``), and the DLSTMs: a DLSTM
+channel keeps the one-channel module of its checkpoint, named ``NAME_<channel>`` and embedded
+verbatim in ``NAME.h``/``NAME.c`` (one translation unit still), its state a member of the
+caller-owned ``NAME_state_t``; it has no calibration-blob record.
 
 Channel units: raw and compensated values are int32 in 1/16000 of the channel's unit (mg -> the
 one-channel modules' 1/16 ug; deg/s; Pa), so the one-channel quantiser applies unchanged.
@@ -39,6 +41,7 @@ from codegen.quantize import (
     QPhysics,
     QPla,
     QPoly3,
+    QStream,
 )
 from codegen.rate import declared_rate_millihz
 from codegen.render import (
@@ -49,13 +52,14 @@ from codegen.render import (
     _environment,
     kernel_header,
     manifest_json,
+    render_sources,
     validate_name,
 )
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
 
-KIND_CUBIC, KIND_PLA, KIND_PHYSICS = 1, 2, 3
+KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
 # a physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these)
 PHYS_TERMS = {"LAG": 1, "BRANCH": 2, "RATE": 4, "CREEP": 8, "READS_PLAY": 16}
 BLOB_MAGIC = b"TDCC"
@@ -85,7 +89,8 @@ class ImuChannel:
     @property
     def kind(self) -> int:
         q = self.model.quantised
-        return KIND_CUBIC if isinstance(q, QPoly3) else KIND_PHYSICS if isinstance(q, QPhysics) else KIND_PLA
+        kinds = ((QPoly3, KIND_CUBIC), (QPhysics, KIND_PHYSICS), (QStream, KIND_STREAM), (QPla, KIND_PLA))
+        return next(kind for cls, kind in kinds if isinstance(q, cls))
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,11 @@ class ImuModel:
         return tuple(c for c in self.channels if c.kind == KIND_PHYSICS)
 
     @property
+    def streams(self) -> tuple[ImuChannel, ...]:
+        """The DLSTM channels (each runs its own one-channel module, its state in state->stream)."""
+        return tuple(c for c in self.channels if c.kind == KIND_STREAM)
+
+    @property
     def sha256(self) -> str:
         """The calibration's id: sha256 over the channel names and their model files' hashes."""
         text = "\n".join(f"{c.name} {c.model.sha256}" for c in self.channels)
@@ -114,6 +124,8 @@ class ImuModel:
         text += f";S={','.join(self.sensors)};I={self.max_intervals}"
         if self.physics:  # the state holds their filters: a blob must put them on the same channels
             text += f";P={','.join(c.name for c in self.physics)};R={self.rate_millihz}"
+        if self.streams:
+            text += f";D={','.join(c.name for c in self.streams)};R={self.rate_millihz}"
         return zlib.crc32(text.encode())
 
 
@@ -139,11 +151,9 @@ def load_imu(
     for path in paths:
         name = _channel_of(load_checkpoint(path), path)
         model = load_for_codegen(path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
-        if not isinstance(model.quantised, QPoly3 | QPla | QPhysics):
+        if not isinstance(model.quantised, QPoly3 | QPla | QPhysics | QStream):
             raise UserError(
-                f"{path}: channel {name}: method {model.checkpoint.method!r} is recursive; the IMU module "
-                f"holds poly3, pla and physics channels (export a {model.checkpoint.method} channel as its "
-                f"own module)"
+                f"{path}: channel {name}: method {model.checkpoint.method!r} has no IMU-module form"
             )
         parsed = parse_channel(name)
         assert parsed is not None
@@ -175,7 +185,7 @@ def load_imu(
     rates = {declared_rate_millihz(c.model.quantised) for c in channels} - {0}
     if len(rates) > 1:
         raise UserError(
-            f"the physics channels are for different sample rates ({', '.join(f'{r / 1000:g} Hz' for r in sorted(rates))}); "
+            f"the timed channels (physics, DLSTM) are for different sample rates ({', '.join(f'{r / 1000:g} Hz' for r in sorted(rates))}); "
             f"one step call runs them all: export with --rate HZ"
         )
     return ImuModel(tuple(channels), sensors, tuple(valid), capacity, rates.pop() if rates else 0)
@@ -248,6 +258,8 @@ class ChannelTables:
 def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
     q = channel.model.quantised
     sensor = imu.sensors.index(channel.sensor)
+    if isinstance(q, QStream):  # its numbers are in its own module; the record names its kind and sensor
+        return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
     if isinstance(q, QPhysics):
         return ChannelTables(
             KIND_PHYSICS, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, 0,
@@ -267,11 +279,12 @@ def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
 
 def encode_blob(imu: ImuModel) -> bytes:
     """The calibration blob (docs/imu-module.md): header, sensors, channels, CRC32 of all before it."""
-    if imu.physics:
-        raise UserError(
-            f"channel {imu.physics[0].name}: a physics channel has no calibration-blob record yet; export "
-            f"the module with built-in tables (without --blob / --format calibration-blob)"
-        )
+    for channels, what in ((imu.physics, "a physics"), (imu.streams, "a DLSTM")):
+        if channels:
+            raise UserError(
+                f"channel {channels[0].name}: {what} channel has no calibration-blob record yet; export "
+                f"the module with built-in tables (without --blob / --format calibration-blob)"
+            )
     parts = [
         BLOB_HEADER.pack(
             BLOB_MAGIC,
@@ -321,6 +334,40 @@ def imu_golden(imu: ImuModel, raw: np.ndarray, temp: np.ndarray) -> tuple[np.nda
 # ------------------------------------------------------------------------------ rendering
 
 
+def stream_module_name(name: str, channel: ImuChannel) -> str:
+    """The C name of a DLSTM channel's own module inside the IMU module ``name``."""
+    sub = f"{name}_{channel.name}"
+    try:
+        return validate_name(sub)
+    except UserError as exc:
+        raise UserError(
+            f"--name {name}: the DLSTM channel {channel.name} is the embedded module {sub}, which is not a "
+            f"valid module name ({exc}); choose a shorter --name"
+        ) from None
+
+
+def _stream_modules(imu: ImuModel, name: str) -> list[dict[str, object]]:
+    """Each DLSTM channel's one-channel header and source (codegen/render.py, unchanged), to embed."""
+    modules: list[dict[str, object]] = []
+    for channel in imu.streams:
+        sub = stream_module_name(name, channel)
+        files = render_sources(channel.model.quantised, sub, channel.model.sha256, notes=channel.model.notes)
+        own_include = f'#include "{sub}.h"\n'
+        assert files[f"{sub}.c"].count(own_include) == 1
+        modules.append(
+            {
+                "name": channel.name,
+                "sub": sub,
+                "index": imu.channels.index(channel),
+                "header": files[f"{sub}.h"].rstrip("\n"),
+                "source": files[f"{sub}.c"]
+                .replace(own_include, f"/* {sub}.h: embedded in {name}.h */\n")
+                .rstrip("\n"),
+            }
+        )
+    return modules
+
+
 def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
     tables = [channel_tables(imu, c) for c in imu.channels]
     max_splits = max(imu.max_intervals - 1, 1)
@@ -346,6 +393,8 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "kind_cubic": KIND_CUBIC,
         "kind_pla": KIND_PLA,
         "kind_physics": KIND_PHYSICS,
+        "kind_stream": KIND_STREAM,
+        "stream_channels": _stream_modules(imu, name),
         "phys_terms": PHYS_TERMS,
         "rate_millihz": imu.rate_millihz,
         "rate_hz": f"{imu.rate_millihz / 1000:g}",
@@ -406,7 +455,12 @@ def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "calibration": {"sha256": imu.sha256, "builtin": builtin},
         "module_id": f"0x{imu.module_id:08x}",
         "blob": {"layout_version": BLOB_VERSION, "max_intervals": imu.max_intervals},
-        "rates": {"sample_rate_millihz": imu.rate_millihz, "memoryless": not imu.physics},
+        "rates": {"sample_rate_millihz": imu.rate_millihz, "memoryless": imu.rate_millihz == 0},
+        **(
+            {"embedded_modules": {c.name: stream_module_name(name, c) for c in imu.streams}}
+            if imu.streams
+            else {}
+        ),
         "sensors": [
             {"name": s, "valid_temp_range_mdegc": [lo, hi]}
             for s, (lo, hi) in zip(imu.sensors, imu.valid_mdegc, strict=True)

@@ -220,7 +220,7 @@ def verify_imu(
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
-    imu = load_imu(models, rate_millihz=module_rate)  # physics filters as exported (--rate)
+    imu = load_imu(models, rate_millihz=module_rate)  # physics filters, DLSTM windows as exported (--rate)
     module_channels = [c["name"] for c in manifest["channels"]]
     if [c.name for c in imu.channels] != module_channels:
         raise UserError(
@@ -231,8 +231,9 @@ def verify_imu(
         raise UserError(f"{out_dir / name}.c was generated from other models (calibration sha256 differs)")
     rate_hz = imu.rate_millihz / 1000
     if rate_hz and abs(rec.sample_rate_hz - rate_hz) > 0.01 * rate_hz:
+        timed = "physics channels' filters" if imu.physics else "DLSTM channels' windows"
         raise UserError(
-            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the physics channels' filters are for "
+            f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the {timed} are for "
             f"{rate_hz:g} Hz (export the module with --rate {rec.sample_rate_hz:g})"
         )
     raw, temp = step_inputs(imu, rec)
