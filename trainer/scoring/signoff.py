@@ -30,7 +30,7 @@ from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 from trainer.scoring.static import COOLING, HEATING, DriftLeft, thermal_branch
 from trainer.scoring.thresholds import THRESHOLDS, passes
-from trainer.scoring.unit_scores import PartScores, UnitScores
+from trainer.scoring.unit_scores import PartScores, UnitScores, coverage
 from trainer.scoring.verdict import NO_VERDICT, Figures, Verdict, verdict, worse_than_uncompensated
 
 NOT_MEASURED = "not measured"
@@ -97,11 +97,7 @@ class ChannelReport:
     @property
     def coverage(self) -> float:
         """Share of the recording's temperature span inside the trained range (1: all of it)."""
-        lo, hi = self.recording_range_c
-        t_lo, t_hi = self.trained_range_c
-        if hi <= lo:
-            return 1.0 if t_lo <= lo <= t_hi else 0.0
-        return max(0.0, min(hi, t_hi) - max(lo, t_lo)) / (hi - lo)
+        return coverage(self.recording_range_c, self.trained_range_c)
 
     @property
     def figures_for_verdict(self) -> Figures:
