@@ -273,11 +273,9 @@ def test_csv_manifest_with_import_options(tmp_path: Path) -> None:
     manifest = load_manifest(tmp_path / "fleet.csv")
     one, two = manifest.units
     assert one.recordings == (tmp_path / "a.tsv", tmp_path / "b.npz") and one.methods == ("poly3",)
-    assert one.export_name == "tdc_SN_1" and one.import_options is not None
-    assert one.import_options.accel_unit == "g" and one.import_options.temp == "T"
-    assert (
-        set(two.methods) == {"pla", "poly3"} and two.export_name == "tdc_two" and two.import_options is None
-    )
+    assert one.export_name == "tdc_SN_1" and one.importer is not None
+    assert one.importer.text_options().accel_unit == "g" and one.importer.text_options().temp == "T"
+    assert set(two.methods) == {"pla", "poly3"} and two.export_name == "tdc_two" and two.import_text == ""
 
 
 @pytest.mark.parametrize(

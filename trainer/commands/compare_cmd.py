@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         return run_crossval(args, requested, policy)
 
     from trainer.checkpoint import save_model
+    from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.recording_io import read_recording
     from trainer.fitting import data_fingerprint, training_stats
@@ -179,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
         lead_in=lead_in,
     )
     comparison.notes += notes
+    signal = signal_of(valid)
+    table1 = relabel_units(f"{signal.heading}\n{comparison.evaluation.table.to_text()}", signal.unit)
     # Everything is written into a fresh directory first and moved into place at the end, so a
     # failure never leaves a half-written report.
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -198,16 +201,16 @@ def run(args: argparse.Namespace) -> int:
             name = f"fig_input_survival_{index + 1}_{Path(rec.source).stem}.png"
             write_survival_figure(comparison, rec, staging, name)
             figures.append(name)
-        report = render_report(comparison, settings, frontend, args, figures)
-        (staging / "report.md").write_text(report, encoding="utf-8")
-        (staging / "table1.txt").write_text(comparison.evaluation.table.to_text() + "\n", encoding="utf-8")
+        report = render_report(comparison, settings, frontend, args, figures, signal.heading)
+        (staging / "report.md").write_text(relabel_units(report, signal.unit), encoding="utf-8")
+        (staging / "table1.txt").write_text(table1 + "\n", encoding="utf-8")
         publish(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    print(comparison.evaluation.table.to_text())
+    print(table1)
     print()
-    print(headline_table(comparison))
+    print(relabel_units(headline_table(comparison), signal.unit))
     print(f"\nreport, figures and models written to {out_dir}/")
     return 0
 
@@ -217,7 +220,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     (:mod:`trainer.scoring.crossval`); recursive methods cannot be trained on a run with a hole."""
     import json
 
-    from trainer.data.channels import UNIT_LABELS, channel_unit
+    from trainer.data.channels import signal_of
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_compensator
     from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
@@ -230,7 +233,8 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
     rec = read_recording(args.train)
-    unit = UNIT_LABELS[channel_unit(rec)]
+    signal = signal_of(rec)
+    unit = signal.label
     settings, _ = settings_from_args(args)
     chosen = [m for m in requested if cross_validatable(m)]
     skipped = {
@@ -261,7 +265,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     )
     cv.skipped.update(skipped)
     lines = [
-        f"# Cross-validated comparison: {rec.source}",
+        f"# Cross-validated comparison: {rec.source}, channel {signal.heading}",
         "",
         f"No validation recording and no --holdout: every thermal segment of the run is held out in turn, "
         f"each method trained on the rest (docs/real-data.md). Drift left: RMS of the compensated output about "

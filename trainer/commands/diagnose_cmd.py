@@ -125,14 +125,15 @@ def summary(result: Diagnosis) -> str:
                 f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}{result.label}', 1)}"
             )
     lines.append(
-        f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} mg, "
+        f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"
     )
     if result.holdout:
         hb, ha = result.holdout.before, result.holdout.after
         # One figure: the least-squares refit extrapolated bare (see holdout.HEADLINE).
         lines.append(
-            f"held-out tail: block RMS {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} mg"
+            f"held-out tail: block RMS {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} "
+            f"{result.signal.label}"
             " (refitted on the rest, extrapolated as a compensator would)"
         )
     lines += terminal_lines(next_steps(result))

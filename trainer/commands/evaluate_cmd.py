@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
     from trainer.checkpoint import load_model
+    from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.recording_io import read_recording
     from trainer.fitting import data_fingerprint
@@ -110,9 +111,11 @@ def run(args: argparse.Namespace) -> int:
         references=references,
     )
 
+    stats = checkpoint["train_stats"] if isinstance(checkpoint.get("train_stats"), dict) else {}
+    signal = signal_of(rec, stats.get("channel"))
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    text = result.table.to_text()
+    text = f"{signal.heading}\n{result.table.to_text()}"
     extra = drift_lines(result)
     if args.inject is not None:
         kept = input_kept(model, rec, injected_input(rec, args.inject))
@@ -123,13 +126,15 @@ def run(args: argparse.Namespace) -> int:
     warning = overlap_warning(checkpoint["train_stats"], rec, data_fingerprint(rec))
     if warning:
         extra.append(warning)
-    print(text)
+    print(relabel_units(text, signal.unit))
     for line in extra:
-        print(line)
+        print(relabel_units(line, signal.unit))
     report = [
-        f"# Evaluation of {Path(args.model).name} on {Path(args.recording).name}",
+        f"# Evaluation of {Path(args.model).name} on {Path(args.recording).name}: channel {signal.heading}",
         "",
         f"Validation smoothing: {result.smoothing_s} s trailing moving average before the Allan analysis.",
+        "",
+        f"Table 1 of channel {signal.heading}:",
         "",
         result.table.to_markdown(),
         "",
@@ -137,13 +142,16 @@ def run(args: argparse.Namespace) -> int:
         "",
     ]
     with atomic_output(out_dir / "report.md") as tmp:
-        tmp.write_text("\n".join(report))
+        tmp.write_text(relabel_units("\n".join(report), signal.unit))
     plot_series(
         rec.time_s,
         result.smoothed,
         out_dir / "fig12_compensated.png",
         title=f"Compensation on validation data ({result.smoothing_s} s smoothing)",
+        signal=signal,
     )
-    plot_allan(result.curves, out_dir / "fig13_allan.png", title="Allan deviation after compensation")
+    plot_allan(
+        result.curves, out_dir / "fig13_allan.png", title="Allan deviation after compensation", signal=signal
+    )
     print(f"report and figures written to {out_dir}/")
     return 0

@@ -243,6 +243,12 @@ def _write_all(outputs: dict[Path, Recording]) -> None:
 
 
 def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> LogImport:
+    return import_flight_log(args.foreign, log_import_options(args, kind), checks)
+
+
+def log_import_options(args: argparse.Namespace, kind: str) -> LogImportOptions:
+    """The parsed ``trainer import`` options of a flight log (``trainer fleet`` reuses it); a
+    delimited file's column option is refused in one line."""
     for name in TEXT_ONLY_OPTIONS:
         if getattr(args, name) not in (None, False):
             option = "--" + name.replace("_", "-")
@@ -251,7 +257,7 @@ def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Lo
                 f"their units and temperatures); choose the axis with --channel"
             )
     resample = None if args.resample == "none" else args.resample
-    options = LogImportOptions(
+    return LogImportOptions(
         channel=args.channel,
         remove_gravity=args.remove_gravity or "none",
         sensor=args.sensor,
@@ -260,7 +266,6 @@ def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> Lo
         fill_temp=args.fill_temp,
         channels=args.channels,
     )
-    return import_flight_log(args.foreign, options, checks)
 
 
 def _import_text(args: argparse.Namespace, checks: Plausibility) -> Recording:

@@ -269,8 +269,9 @@ def run(args: argparse.Namespace) -> int:
             scores = score_unit(rec, compensated, args.smoothing, (lo, hi), holdout)
             notes = []
             held_text = None
+            held_rows = None
             if holdout is not None:
-                held, _ = held_out_rows(rec, holdout)
+                held, held_rows = held_out_rows(rec, holdout)
                 held_text = (
                     f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
                 )
@@ -310,7 +311,7 @@ def run(args: argparse.Namespace) -> int:
                 notes=notes,
             )
             report.figures = signoff.write_figures(
-                report, rec, model, compensated, args.smoothing, staging, thresholds
+                report, rec, model, compensated, args.smoothing, staging, thresholds, held_rows
             )
             reports.append(report)
         text = signoff.render(

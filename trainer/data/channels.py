@@ -22,8 +22,12 @@ from trainer.data.recording import Recording
 from trainer.errors import UserError
 
 ALL = "all"
-UNIT_LABELS = {"mg": "mg", "dps": "deg/s", "pa": "Pa"}  # column unit suffix -> what reports print
+# Column unit suffix -> (the unit as reports print it, the quantity it measures): the one place
+# figures and tables take a channel's unit and axis wording from.
+UNITS = {"mg": ("mg", "acceleration"), "dps": ("deg/s", "angular rate"), "pa": ("Pa", "pressure")}
+UNIT_LABELS = {suffix: label for suffix, (label, _) in UNITS.items()}  # what reports print
 DEFAULT_UNIT = "mg"  # a one-axis recording's accel_mg
+ONE_AXIS_CHANNEL = "accel_mg"  # what figures call the channel of a one-axis recording (its column)
 _DATA_COLUMN = re.compile(r"(accel|gyro)([0-9])_([xyz])_(mg|dps)|(baro)([0-9])_(pa)")
 _LEGACY_AXIS = re.compile(r"accel_([xyz])_mg")  # the older spelling of accel0_<axis>_mg
 # Columns a view keeps besides the channel (other channels are dropped: a view is one channel).
@@ -163,6 +167,46 @@ def channel_view(rec: Recording, channel: Channel) -> Recording:
 def channel_unit(rec: Recording) -> str:
     """The unit suffix of a (view) recording's ``accel_mg`` column: ``mg`` unless a view says so."""
     return rec.meta.get("unit", DEFAULT_UNIT)
+
+
+@dataclass(frozen=True)
+class Signal:
+    """What a one-channel view's ``accel_mg`` holds, as figures and tables name it.
+
+    Every figure title and data axis, and every table heading, is built from this, so a
+    gyroscope's figure says "gyro0_z" and "angular rate (deg/s)" rather than the accelerometer's mg.
+    """
+
+    channel: str  # accel0_z, gyro1_x, baro0; ONE_AXIS_CHANNEL for a one-axis recording
+    unit: str  # column unit suffix: mg | dps | pa
+
+    @property
+    def label(self) -> str:
+        """The unit as printed (mg, deg/s, Pa)."""
+        return UNIT_LABELS[self.unit]
+
+    @property
+    def quantity(self) -> str:
+        """What the channel measures (acceleration, angular rate, pressure)."""
+        return UNITS[self.unit][1]
+
+    def axis(self, what: str | None = None) -> str:
+        """A data axis label: ``acceleration (mg)``, or ``drift left (deg/s)`` for ``what``."""
+        return f"{what or self.quantity} ({self.label})"
+
+    def title(self, text: str) -> str:
+        """A figure or table title naming the channel: ``gyro0_z (deg/s): text``."""
+        return f"{self.heading}: {text}"
+
+    @property
+    def heading(self) -> str:
+        """``gyro0_z (deg/s)``."""
+        return f"{self.channel} ({self.label})"
+
+
+def signal_of(rec: Recording, channel: str | None = None) -> Signal:
+    """The :class:`Signal` of a (view) recording; ``channel`` (e.g. a model's) wins over its metadata."""
+    return Signal(channel or rec.meta.get("channel") or ONE_AXIS_CHANNEL, channel_unit(rec))
 
 
 def unit_of_channel_name(name: str | None) -> str:

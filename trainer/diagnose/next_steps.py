@@ -36,6 +36,7 @@ class NextSteps:
     not_compensated: list[str]  # named events and set-up effects: to check, not to compensate
     branches: list[BranchResidual]
     profile: list[str]  # tests, most specific first; the generic profile last
+    unit: str = "mg"  # the diagnosed channel's unit as printed (the residuals are in it)
 
 
 def next_steps(d: Diagnosis) -> NextSteps:
@@ -82,7 +83,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
             profile.append(f"{effect}: {info.test}")
     profile.append(GENERIC_PROFILE)
     not_compensated = list(dict.fromkeys(e for e in named if not EFFECTS[e].compensable))
-    return NextSteps(structure, not_compensated, branches, list(dict.fromkeys(profile)))
+    return NextSteps(structure, not_compensated, branches, list(dict.fromkeys(profile)), d.signal.label)
 
 
 def markdown_lines(steps: NextSteps) -> list[str]:
@@ -95,7 +96,7 @@ def markdown_lines(steps: NextSteps) -> list[str]:
         ]
     if steps.branches:
         lines += [
-            "Residual per branch (block RMS, mg), starting model -> after the fit (what the compensator "
+            f"Residual per branch (block RMS, {steps.unit}), starting model -> after the fit (what the compensator "
             "would leave):",
             "",
             markdown_table(
@@ -123,6 +124,6 @@ def terminal_lines(steps: NextSteps) -> list[str]:
     return [
         f"next: {steps.structure}",
         *check,
-        f"next: residual per branch (block RMS, mg) {per_branch}; next profile: {steps.profile[0]}"
+        f"next: residual per branch (block RMS, {steps.unit}) {per_branch}; next profile: {steps.profile[0]}"
         + (f" (+{len(steps.profile) - 1} more in the report)" if len(steps.profile) > 1 else ""),
     ]

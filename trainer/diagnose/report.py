@@ -119,19 +119,20 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += ["", "## In the simulation but not supported by the data", ""]
         lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]
     before, after = d.before, d.after
+    u = d.signal.label
     lines += [
         "",
-        "## Fit before and after",
+        f"## Fit before and after: {d.signal.heading}",
         "",
     ]
     rows = [
-        ["residual RMS, full rate (mg)", f"{before.rms_mg:.5f}", f"{after.rms_mg:.5f}"],
-        ["residual RMS, block means (mg)", f"{before.rms_block_mg:.5f}", f"{after.rms_block_mg:.5f}"],
+        [f"residual RMS, full rate ({u})", f"{before.rms_mg:.5f}", f"{after.rms_mg:.5f}"],
+        [f"residual RMS, block means ({u})", f"{before.rms_block_mg:.5f}", f"{after.rms_block_mg:.5f}"],
         ["BIC", f"{before.bic:.1f}", f"{after.bic:.1f}"],
     ]
     rows += [
         [
-            f"{b_seg.segment} {b_seg.t_start_s:.0f}..{b_seg.t_end_s:.0f} s, block RMS (mg)",
+            f"{b_seg.segment} {b_seg.t_start_s:.0f}..{b_seg.t_end_s:.0f} s, block RMS ({u})",
             f"{b_seg.rms_block_mg:.5f}",
             f"{a_seg.rms_block_mg:.5f}",
         ]
@@ -145,7 +146,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
             "",
             f"Held-out check (both models fitted on 0..{h.train_t_end_s:.0f} s, scored on "
             f"{h.test_t_start_s:.0f}..{h.test_t_end_s:.0f} s): block RMS {hb.test_rms_block_mg_ols:.5f} -> "
-            f"{ha.test_rms_block_mg_ols:.5f} mg ({_percent(h.improvement_percent_ols)} % better), both "
+            f"{ha.test_rms_block_mg_ols:.5f} {u} ({_percent(h.improvement_percent_ols)} % better), both "
             "refitted by least squares and extrapolated bare, as a compensator would be (the JSON also "
             "has the GLS forecast, which includes the noise model's prediction of the tail).",
         ]
@@ -186,6 +187,7 @@ def _scatter_by_branch(ax: Any, x: np.ndarray, y: np.ndarray, branch: np.ndarray
 def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     """Residual over time and over temperature, before and after, branches coloured."""
     data, profile = diagnosis.data, diagnosis.profile
+    signal = diagnosis.signal
     t_min = data.t / 60.0
     temp = data.temperature(True)
     pairs = (("before", diagnosis.before.residual_block), ("after", diagnosis.after.residual_block))
@@ -199,12 +201,12 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
                 if isinstance(w, Region) and name == "before":
                     ax.axvspan(w.t_start_s / 60.0, w.t_end_s / 60.0, color="gold", alpha=0.15)
         ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_ylabel(f"residual {name} (mg)")
+        ax.set_ylabel(signal.axis(f"residual {name}"))
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=7, markerscale=3)
     axes[-1].set_xlabel("time (min)")
     found = ", ".join(e.effect for e in diagnosis.left_out) or "nothing"
-    axes[0].set_title(f"Block-mean residual ({data.block_s:.3g} s blocks); added: {found}")
+    axes[0].set_title(signal.title(f"block-mean residual ({data.block_s:.3g} s blocks); added: {found}"))
     fig.tight_layout()
     save_figure(fig, directory / "residual_time.png")
     files["residual_time.png"] = "block-mean residual over time, before and after (found regions shaded)"
@@ -217,7 +219,8 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
         ax.set_title(f"residual {name}")
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=7, markerscale=3)
-    axes[0].set_ylabel("block-mean residual (mg)")
+    axes[0].set_ylabel(signal.axis("block-mean residual"))
+    fig.suptitle(signal.title("residual over temperature"))
     fig.tight_layout()
     save_figure(fig, directory / "residual_temperature.png")
     files["residual_temperature.png"] = "residual over temperature, heating red, cooling blue, holds grey"
@@ -235,7 +238,8 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("tau (s)")
-    ax.set_ylabel("Allan deviation (mg)")
+    ax.set_ylabel(signal.axis("Allan deviation"))
+    ax.set_title(signal.title("Allan deviation of the residual"))
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from trainer.data.channels import UNIT_LABELS
+from trainer.data.channels import ONE_AXIS_CHANNEL, UNIT_LABELS, Signal
 from trainer.diagnose.baseline import Baseline
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.fit_summary import FitSummary
@@ -121,6 +121,11 @@ class Diagnosis:
     def params(self, values: Mapping[str, float]) -> dict[str, float]:
         """Catalogue-named parameters as this channel names them (``amp_mg`` -> ``amp_dps``)."""
         return channel_params(values, self.unit)
+
+    @property
+    def signal(self) -> Signal:
+        """The diagnosed channel and its unit, as figures and tables name them."""
+        return Signal(self.channel or ONE_AXIS_CHANNEL, self.unit)
 
     @property
     def label(self) -> str:

@@ -19,7 +19,6 @@ from typing import Any
 from codegen.render import validate_name
 from trainer import methods as registry
 from trainer.data.holdout import parse_holdout
-from trainer.data.importer import ImportOptions
 from trainer.errors import UserError
 from trainer.fields import TableFields, show
 from trainer.fleet import options
@@ -62,9 +61,9 @@ class UnitSpec:
     recordings: tuple[Path, ...]
     methods: tuple[str, ...]
     export_name: str
-    import_text: str  # '' = the files are recordings (.csv/.npz) already
+    import_text: str  # '' = the files are recordings (.csv/.npz) or flight logs with default options
     fit_kwargs: dict[str, dict[str, Any]] = field(default_factory=dict, compare=False)
-    import_options: ImportOptions | None = field(default=None, compare=False)
+    importer: options.UnitImport | None = field(default=None, compare=False)  # how its files are read
 
 
 @dataclass(frozen=True)
@@ -135,7 +134,7 @@ def _settings(table: TableFields, base: Path) -> FleetSettings:
             options.fit_kwargs(name, method_options[name], f"{where} method_options.{name}")  # check now
     import_text = options.canonical(table.string("import", default=""), f"{where} import")
     if import_text:
-        options.import_options(import_text, f"{where} import")
+        options.UnitImport.parse(import_text, f"{where} import")  # syntax; each unit's files in _unit
     sim = base / table.string("sim") if table.has("sim") else None
     if sim is not None and not sim.is_file():
         raise UserError(f"{where}: sim {sim}: no such file")
@@ -182,9 +181,11 @@ def _unit(raw: dict[str, Any], where: str, base: Path, settings: FleetSettings) 
             f"{where}: import must be a string of 'trainer import' options, got {show(import_text)}"
         )
     import_text = options.canonical(import_text, f"{where} import")
-    parsed = options.import_options(import_text, f"{where} import") if import_text else None
+    importer = options.UnitImport.parse(import_text, f"{where} import")
+    for path in recordings:  # options that cannot apply to a file's kind: one line, nothing run
+        importer.check(path)
     kwargs = {m: options.fit_kwargs(m, settings.method_options.get(m, ""), where) for m in methods}
-    return UnitSpec(unit_id, recordings, methods, export_name, import_text, kwargs, parsed)
+    return UnitSpec(unit_id, recordings, methods, export_name, import_text, kwargs, importer)
 
 
 def _read_toml(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any]]]]:

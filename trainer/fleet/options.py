@@ -11,11 +11,19 @@ from __future__ import annotations
 
 import argparse
 import shlex
-from typing import Any
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from trainer import methods
-from trainer.data.importer import ImportOptions
+from trainer.data.flightlog import log_kind
+from trainer.data.plausibility import Plausibility
+from trainer.data.recording import Recording
 from trainer.errors import OneLineArgumentParser, UserError
+
+if TYPE_CHECKING:
+    from trainer.data.flightlog_import import LogImportOptions
+    from trainer.data.importer import ImportOptions
 
 
 def split(text: str, where: str) -> list[str]:
@@ -31,14 +39,93 @@ def canonical(text: str, where: str) -> str:
     return shlex.join(split(text, where))
 
 
-def import_options(text: str, where: str) -> ImportOptions:
-    """``trainer import`` options (``FOREIGN`` and ``-o`` are implied) as :class:`ImportOptions`."""
+def _import_args(text: str, where: str) -> argparse.Namespace:
+    """``trainer import`` options (``FOREIGN`` and ``-o`` are implied), parsed by its own parser."""
     from trainer.commands import import_cmd
 
     parser = OneLineArgumentParser(prog=where)
     import_cmd.add_parser(parser.add_subparsers(dest="command", parser_class=OneLineArgumentParser))
-    args = parser.parse_args(["import", "FOREIGN", "-o", "unused.npz", *split(text, where)])
-    return import_cmd.import_options(args)
+    return parser.parse_args(["import", "FOREIGN", "-o", "unused.npz", *split(text, where)])
+
+
+@dataclass(frozen=True)
+class UnitImport:
+    """A unit's ``import`` option text, parsed once by ``trainer import``'s parser and applied to a
+    file of either kind, exactly as ``trainer import FILE OPTIONS`` would: a PX4 ULog or ArduPilot
+    DataFlash log (recognised by its first bytes) with the flight-log options, any other file
+    with the column options. Without options a file must be a recording (.csv/.npz) or a flight log.
+    ``where`` names the manifest, the unit and the field in every error.
+    """
+
+    text: str
+    where: str
+    args: argparse.Namespace = field(compare=False, repr=False)
+
+    @classmethod
+    def parse(cls, text: str, where: str) -> UnitImport:
+        return cls(text, where, _import_args(text, where))
+
+    def _fail(self, path: Path, exc: UserError) -> UserError:
+        return UserError(f"{self.where} {self.text!r} for {path}: {exc}")
+
+    def text_options(self) -> ImportOptions:
+        """The options of a delimited file (a UserError naming the unit's field when incomplete)."""
+        from trainer.commands import import_cmd
+
+        return import_cmd.import_options(self.args)
+
+    def _log_options(self, path: Path, kind: str) -> LogImportOptions:
+        from trainer.commands import import_cmd
+
+        args = argparse.Namespace(**{**vars(self.args), "foreign": str(path)})
+        try:
+            return import_cmd.log_import_options(args, kind)
+        except UserError as exc:
+            raise self._fail(path, exc) from None
+
+    def check(self, path: Path) -> None:
+        """Refuse, before any work, options that cannot apply to ``path`` (when it exists)."""
+        if not path.is_file():
+            return  # a missing file fails its unit when it is read
+        kind = log_kind(path)
+        if kind is not None:
+            self._log_options(path, kind)
+        elif self.text:
+            try:
+                self.text_options()
+            except UserError as exc:
+                raise self._fail(path, exc) from None
+
+    def read(self, path: Path) -> tuple[Recording, list[str]]:
+        """The recording of ``path`` and the import's notes (corrections undone, warnings accepted)."""
+        from trainer.data.flightlog_import import import_flight_log
+        from trainer.data.importer import import_foreign
+        from trainer.data.recording_io import read_recording
+
+        checks = Plausibility(accept=bool(self.args.accept_implausible))
+        kind = log_kind(path)
+        if kind is not None:
+            imported = import_flight_log(path, self._log_options(path, kind), checks)
+            if len(imported.recordings) != 1:
+                raise UserError(
+                    f"{self.where} {self.text!r} for {path}: makes {len(imported.recordings)} recordings "
+                    f"({', '.join(imported.recordings)}: one per sensor instance) and a unit fits one channel; "
+                    "give --channel NAME instead of --channels"
+                )
+            (rec,) = imported.recordings.values()
+            return rec, [*imported.notices, *checks.warnings]
+        if self.text:
+            try:
+                options = self.text_options()
+            except UserError as exc:
+                raise self._fail(path, exc) from None
+            return import_foreign(path, options, checks), list(checks.warnings)
+        if path.suffix.lower() not in (".csv", ".npz"):
+            raise UserError(
+                f"{path}: not a recording (.csv/.npz) or a flight log; give the unit 'import' options for a "
+                "foreign file"
+            )
+        return read_recording(path), []
 
 
 def fit_methods() -> tuple[str, ...]:

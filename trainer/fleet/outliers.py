@@ -41,8 +41,17 @@ class Finding:
     z: float | None = None
 
 
-def drift_feature(method: str) -> str:
-    return f"drift left {method} (mg)"
+DRIFT_PREFIX = "drift left "
+
+
+def drift_feature(method: str, unit: str) -> str:
+    """The feature name of a method's drift left, in the unit's channel unit (mg, deg/s, Pa)."""
+    return f"{DRIFT_PREFIX}{method} ({unit})"
+
+
+def unit_label(result: dict[str, Any]) -> str:
+    """The unit a unit's figures are in (``result.json`` ``unit``; results written before it: mg)."""
+    return str(result.get("unit") or "mg")
 
 
 def _params(features: dict[str, float], effect: str, params: Any, seen: Counter[str]) -> None:
@@ -69,7 +78,7 @@ def unit_features(result: dict[str, Any]) -> dict[str, float]:
     for method, summary in (result.get("methods") or {}).items():
         drift = summary.get("drift_left_mg")
         if isinstance(drift, int | float) and np.isfinite(drift):
-            features[drift_feature(method)] = float(drift)
+            features[drift_feature(method, unit_label(result))] = float(drift)
     return features
 
 

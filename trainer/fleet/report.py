@@ -19,11 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from trainer.data.channels import ONE_AXIS_CHANNEL
 from trainer.errors import atomic_output
 from trainer.fleet.cache import json_bytes
 from trainer.fleet.manifest import Manifest
 from trainer.fleet.outliers import (
     COMMON_SHARE,
+    DRIFT_PREFIX,
     MIN_UNITS,
     RARE_SHARE,
     Z_LIMIT,
@@ -32,6 +34,7 @@ from trainer.fleet.outliers import (
     find_out_of_family,
     named_effects,
     unit_features,
+    unit_label,
 )
 from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
@@ -89,39 +92,91 @@ def unit_verdict(uid: str, result: dict[str, Any] | None, findings: list[Finding
     return verdict(figures, checks, [f.reason for f in findings])
 
 
-def _mg(value: Any) -> str:
-    return f"{value:.4g}" if isinstance(value, int | float) else "-"
+def _mg(value: Any, unit: str = "") -> str:
+    return f"{value:.4g}{unit}" if isinstance(value, int | float) else "-"
+
+
+def _channel(result: dict[str, Any] | None) -> str:
+    """``gyro0_z (deg/s)``: the unit's channel and unit (results written before they were kept: mg)."""
+    if not result or (not result.get("channel") and result.get("status") != "ok"):
+        return "-"  # failed before its recording was read
+    return f"{result.get('channel') or ONE_AXIS_CHANNEL} ({unit_label(result)})"
+
+
+def unit_coverage(result: dict[str, Any] | None) -> tuple[float, list[float], list[float]] | None:
+    """(coverage, scored range, trained range) of a unit's scored part: the smallest coverage of its
+    methods (all are fitted on the same run), or None when no method was scored."""
+    found = [
+        (float(s["coverage"]), list(s["scored_range_c"]), list(s["trained_range_c"]))
+        for s in ((result or {}).get("methods") or {}).values()
+        if isinstance(s, dict) and isinstance(s.get("coverage"), int | float)
+    ]
+    return min(found, key=lambda item: item[0]) if found else None
+
+
+def _coverage_cell(result: dict[str, Any] | None) -> str:
+    covered = unit_coverage(result)
+    return "-" if covered is None else f"{100 * covered[0]:.0f} %"
+
+
+def _coverage_lines(units: list[str], results: dict[str, dict[str, Any]]) -> list[str]:
+    """The units scored partly outside their trained range: a PASS there includes extrapolation."""
+    lines = ["## Coverage", ""]
+    partial = []
+    for u in units:
+        covered = unit_coverage(results.get(u))
+        if covered is not None and covered[0] < 1.0:
+            share, (s_lo, s_hi), (t_lo, t_hi) = covered
+            partial.append(
+                f"- **{u}**: scored {s_lo:.2f} .. {s_hi:.2f} degC, trained {t_lo:.2f} .. {t_hi:.2f} degC: "
+                f"{100 * share:.1f} % of the scored span inside the trained range; outside it the model "
+                "extrapolates (or holds its end value), which its drift left includes"
+            )
+    lines += [
+        "`scored in trained range`: the share of the scored part's temperature span inside the range the "
+        "unit was trained on (`trainer report`'s coverage). A sign-off is only as good as that share: "
+        "outside it, nothing was calibrated.",
+        "",
+        *(partial or ["Every scored part lies inside its unit's trained range."]),
+        "",
+    ]
+    return lines
 
 
 def _strip_plot(
-    path: Path, columns: list[tuple[str, dict[str, float]]], flagged: set[str], title: str
+    path: Path, columns: list[tuple[str, dict[str, float]]], flagged: set[str], title: str, units: list[str]
 ) -> Path:
-    """One panel per column (a feature): every unit a dot, out-of-family units in red, median line."""
+    """One panel per column (a feature): every unit a dot at its own x position, labelled with its id
+    on the x axis (manifest order), out-of-family units in red and named beside their dot, median line."""
     count = max(1, len(columns))
     per_row = min(4, count)
     rows = (count + per_row - 1) // per_row
-    figure = new_figure((3.2 * per_row, 2.6 * rows), dpi=100)
+    width = max(3.2, 0.14 * len(units) + 0.8)  # room for one id label per unit
+    figure = new_figure((width * per_row, 3.2 * rows), dpi=100)
     axes = figure.subplots(rows, per_row, squeeze=False)
-    jitter = np.random.default_rng(0)  # fixed: identical runs draw identical figures
+    label_size = 7 if len(units) <= 30 else 5
     for index, ax in enumerate(axes.flat):
         if index >= len(columns):
             ax.set_visible(False)
             continue
         name, values = columns[index]
-        units = sorted(values)
-        x = jitter.uniform(-0.15, 0.15, len(units))
-        y = np.array([values[u] for u in units])
-        colours = ["tab:red" if u in flagged else "tab:blue" for u in units]
+        shown = [u for u in units if u in values]
+        x = np.array([units.index(u) for u in shown], dtype=float)
+        y = np.array([values[u] for u in shown])
+        colours = ["tab:red" if u in flagged else "tab:blue" for u in shown]
         ax.scatter(x, y, c=colours, s=14)
-        ax.axhline(float(np.median(y)), color="grey", lw=0.8)
-        for xi, yi, u in zip(x, y, units, strict=True):
+        ax.axhline(float(np.median(y)), color="grey", lw=0.8, label="fleet median")
+        for xi, yi, u in zip(x, y, shown, strict=True):
             if u in flagged:
-                ax.annotate(u, (xi, yi), fontsize=7, xytext=(4, 0), textcoords="offset points")
-        ax.set_xlim(-0.6, 0.6)
-        ax.set_xticks([])
+                ax.annotate(
+                    u, (xi, yi), fontsize=7, color="tab:red", xytext=(4, 0), textcoords="offset points"
+                )
+        ax.set_xlim(-0.8, len(units) - 0.2)
+        ax.set_xticks(range(len(units)), units, rotation=90, fontsize=label_size)
+        ax.set_xlabel("unit", fontsize=7)
         ax.set_title(name, fontsize=8)
-        ax.tick_params(labelsize=7)
-    figure.suptitle(title, fontsize=10)
+        ax.tick_params(axis="y", labelsize=7)
+    figure.suptitle(f"{title} (red: out of family)", fontsize=10)
     figure.tight_layout()
     return save_figure(figure, path)
 
@@ -160,12 +215,11 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     flagged = {f.unit for f in findings}
 
     features = {u: unit_features(results[u]) for u in ok}
-    drift_columns = [
-        (drift_feature(m), {u: features[u][drift_feature(m)] for u in ok if drift_feature(m) in features[u]})
-        for m in methods
-    ]
+    labels = list(dict.fromkeys(unit_label(results[u]) for u in ok)) or ["mg"]
+    drift_names = [drift_feature(m, label) for m in methods for label in labels]
+    drift_columns = [(n, {u: features[u][n] for u in ok if n in features[u]}) for n in drift_names]
     drift_columns = [(n, v) for n, v in drift_columns if v]
-    parameter_names = sorted({n for f in features.values() for n in f if not n.startswith("drift left ")})
+    parameter_names = sorted({n for f in features.values() for n in f if not n.startswith(DRIFT_PREFIX)})
     parameter_columns = [(n, {u: features[u][n] for u in ok if n in features[u]}) for n in parameter_names]
     counts: Counter[str] = Counter(e for u in ok for e in named_effects(results[u]))
 
@@ -174,12 +228,16 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     figures = []
     if drift_columns:
         figures.append(
-            _strip_plot(figures_dir / "drift_left.png", drift_columns, flagged, "Drift left per method")
+            _strip_plot(figures_dir / "drift_left.png", drift_columns, flagged, "Drift left per method", ok)
         )
     if parameter_columns:
         figures.append(
             _strip_plot(
-                figures_dir / "parameters.png", parameter_columns, flagged, "Fitted physical parameters"
+                figures_dir / "parameters.png",
+                parameter_columns,
+                flagged,
+                "Fitted physical parameters",
+                ok,
             )
         )
     if counts:
@@ -200,22 +258,27 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
         "## Sign-off",
         "",
     ]
-    header = ["unit", "sign-off", "effects named"]
-    header += [f"drift left {m} (mg)" for m in methods] + ["drift left uncompensated (mg)"]
+    # one unit for every figure of the table when the fleet is of one kind of channel, else per cell
+    common = f" ({labels[0]})" if len(labels) == 1 else ""
+    header = ["unit", "sign-off", "channel", "scored in trained range", "effects named"]
+    header += [f"drift left {m}{common}" for m in methods] + [f"drift left uncompensated{common}"]
     header += [f"C verified {m}" for m in methods] + ["failed", "out of family"]
     rows = []
     for u in units:
         result = results.get(u)
         summaries = result["methods"] if result else {}
-        row = [u, verdicts[u], ", ".join(named_effects(result)) if result else "-"]
-        row += [_mg(summaries.get(m, {}).get("drift_left_mg")) for m in methods]
+        cell_unit = "" if common or not result else f" {unit_label(result)}"
+        row = [u, verdicts[u], _channel(result), _coverage_cell(result)]
+        row.append(", ".join(named_effects(result)) if result else "-")
+        row += [_mg(summaries.get(m, {}).get("drift_left_mg"), cell_unit) for m in methods]
         raw = [s.get("drift_left_uncompensated_mg") for s in summaries.values() if isinstance(s, dict)]
-        row.append(_mg(next((v for v in raw if v is not None), None)))
+        row.append(_mg(next((v for v in raw if v is not None), None), cell_unit))
         row += [verify_state(summaries.get(m, {})) for m in methods]
         row.append("; ".join(decided[u].failed) or "-")
         row.append("; ".join(f.reason for f in by_unit[u]) or ("-" if u in ok else "n/a (failed)"))
         rows.append(row)
     lines += [markdown_table(header, rows), ""]
+    lines += _coverage_lines(units, results)
 
     failed = [u for u in units if results.get(u, {}).get("status") != "ok"]
     lines += ["## Failed units", ""]
@@ -299,6 +362,9 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
                 "status": results.get(u, {}).get("status", "missing"),
                 "out_of_family": [f.reason for f in by_unit[u]],
                 "failed": list(decided[u].failed),
+                "channel": results.get(u, {}).get("channel"),
+                "unit": results.get(u, {}).get("unit"),
+                "coverage": None if (covered := unit_coverage(results.get(u))) is None else covered[0],
                 "errors": [e["error"] for e in results.get(u, {}).get("errors", [])],
             }
             for u in units

@@ -7,15 +7,27 @@ disk of every unit in the manifest (computed now or by an earlier run).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from trainer.errors import UserError
 from trainer.fleet import stages
-from trainer.fleet.cache import clean_staging, is_done, json_bytes, publish_unit, read_result, unit_key
+from trainer.fleet.cache import (
+    UNITS_DIR,
+    clean_staging,
+    is_done,
+    json_bytes,
+    publish_unit,
+    read_result,
+    unit_key,
+)
 from trainer.fleet.manifest import FleetSettings, Manifest, UnitSpec, load_manifest
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -41,13 +53,14 @@ def _submit(client: Any, unit: UnitSpec, key: str, settings: FleetSettings, sim_
 
 def _failed(unit: UnitSpec, key: str | None, stage: str, exc: BaseException) -> stages.UnitOutcome:
     """A unit that never reached ``assemble`` (unreadable input, lost worker): its result only."""
-    message, internal = stages.one_line(exc)
+    message, retry = stages.one_line(exc)
+    retry = retry or key is None  # no key: an unreadable recording, read again next run
     result = {
         "id": unit.id,
         "key": key,
         "status": "failed",
-        "retry": internal or key is None,
-        "errors": [{"stage": stage, "error": message}],
+        "retry": retry,
+        "errors": [{"stage": stage, "error": message, "retry": retry}],
         "recordings": [str(p) for p in unit.recordings],
         "evaluated_on": None,
         "export_name": unit.export_name,
@@ -55,6 +68,19 @@ def _failed(unit: UnitSpec, key: str | None, stage: str, exc: BaseException) -> 
         "diagnosis": None,
     }
     return stages.UnitOutcome(unit.id, {"result.json": json_bytes(result)}, result)
+
+
+def _written(what: Path, write: Callable[[], T]) -> T:
+    """Run a client-side write; a failed one (a full disk, a read-only OUTDIR) is one line naming the
+    path. Units already written stay whole and a restart computes the rest (none is cached as done)."""
+    try:
+        return write()
+    except OSError as exc:
+        where = exc.filename or what
+        raise UserError(
+            f"{where}: cannot write ({exc.strerror or exc}); the units finished so far are kept, run the same "
+            "command again when it is fixed"
+        ) from None
 
 
 def run_fleet(
@@ -95,7 +121,8 @@ def run_fleet(
         try:
             key = unit_key(unit, settings)
         except UserError as exc:  # a missing or unreadable recording: this unit fails, the fleet goes on
-            publish_unit(out, unit.id, _failed(unit, None, "load", exc).files)
+            files = _failed(unit, None, "load", exc).files
+            _written(out / UNITS_DIR, partial(publish_unit, out, unit.id, files))
             run.computed.append(unit.id)
             continue
         if is_done(out, unit.id, key):
@@ -117,7 +144,7 @@ def run_fleet(
                     outcome = future.result()
                 except Exception as exc:  # the task itself was lost (e.g. its worker died)
                     outcome = _failed(unit, key, "cluster", exc)
-                publish_unit(out, unit.id, outcome.files)
+                _written(out / UNITS_DIR, partial(publish_unit, out, unit.id, outcome.files))
                 run.computed.append(unit.id)
                 bar.update()
             bar.close()
@@ -126,6 +153,6 @@ def run_fleet(
         result = read_result(out, unit.id)
         if result is not None:
             run.results[unit.id] = result
-    out.mkdir(exist_ok=True)
-    run.report = write_report(manifest, out, run.results)
+    _written(out, lambda: out.mkdir(exist_ok=True))
+    run.report = _written(out, lambda: write_report(manifest, out, run.results))
     return run

@@ -9,12 +9,14 @@ finished unit atomically (:mod:`.cache`), so workers only need to see the record
 
 No task raises for a unit's own problem: a bad file, a failed fit or a failed export becomes a
 :class:`Failure` carrying the one-line error, the unit's result records it, and the fleet goes on.
-Anything that is not a :class:`~trainer.errors.UserError` (a bug, a lost worker) is recorded the
-same way but marked ``internal``, and a restarted run computes that unit again.
+A failure that is not the unit's (a bug, a lost worker, or the environment: a full disk, a file
+too large, a denied or read-only write, :func:`environment_failure`) is recorded the same way but
+marked ``retry``, and a restarted run computes that unit again.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import tempfile
@@ -26,6 +28,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from trainer.data.channels import signal_of
 from trainer.data.holdout import Holdout, parse_holdout
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
@@ -39,13 +42,21 @@ SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the scoring smoothing, `trainer report --
 TIMING_FILE = "timing.json"  # wall times: the one file of a unit that differs between identical runs
 
 
+# OSError numbers of a failure of the machine rather than of the unit: a full disk or quota, a file
+# over the size limit, a denied or read-only write. They pass when the environment is fixed.
+ENVIRONMENT_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EACCES, errno.EPERM, errno.EROFS}
+)
+
+
 @dataclass(frozen=True)
 class Failure:
-    """A stage that failed: the one-line error, and whether it is the unit's fault (not ``internal``)."""
+    """A stage that failed: the one-line error, and whether a restart should compute it again
+    (``retry``: not the unit's fault but a bug, a lost worker or the environment)."""
 
     stage: str
     error: str
-    internal: bool = False
+    retry: bool = False
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,7 @@ class UnitData:
     holdout: Holdout | None
     evaluated_on: str
     seconds: float
+    notes: tuple[str, ...] = ()  # what the import said (corrections undone, implausible values accepted)
 
     def valid_rows(self) -> tuple[Recording, slice]:
         """The samples the figures are of (the held-out part, or the whole second run), and their rows
@@ -81,6 +93,7 @@ class StageOutput:
     files: dict[str, bytes]
     summary: dict[str, Any]
     seconds: float
+    failures: tuple[Failure, ...] = ()  # retryable failures of a part of the stage (an export)
 
 
 @dataclass(frozen=True)
@@ -92,10 +105,26 @@ class UnitOutcome:
     result: dict[str, Any]
 
 
+def environment_failure(exc: BaseException) -> bool:
+    """Whether ``exc``, or an exception it was raised from or while handling (a one-line UserError
+    keeps its OSError as context), is an OSError of :data:`ENVIRONMENT_ERRNOS`."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, OSError) and current.errno in ENVIRONMENT_ERRNOS:
+            return True
+        current = current.__cause__ or current.__context__
+    return False
+
+
 def one_line(exc: BaseException) -> tuple[str, bool]:
-    """``(message, internal)``: a UserError's own line, anything else prefixed with its type."""
+    """``(message, retry)``: a UserError's own line, anything else prefixed with its type; ``retry``
+    unless the unit itself is at fault (a UserError not caused by the environment)."""
     if isinstance(exc, UserError):
-        return " ".join(str(exc).split()), False
+        return " ".join(str(exc).split()), environment_failure(exc)
+    if environment_failure(exc):
+        return " ".join(f"environment: {exc}".split()), True
     return " ".join(f"internal error: {type(exc).__name__}: {exc}".split()), True
 
 
@@ -103,24 +132,18 @@ def _guarded(stage: str, work: Callable[[], T]) -> T | Failure:
     try:
         return work()
     except Exception as exc:  # one unit's failure must not stop the fleet
-        message, internal = one_line(exc)
-        return Failure(stage, message, internal)
+        message, retry = one_line(exc)
+        return Failure(stage, message, retry)
 
 
 # ------------------------------------------------------------------------------------- load
 
 
-def _read(path: Path, unit: UnitSpec) -> Recording:
-    from trainer.data.importer import import_foreign
-    from trainer.data.recording_io import read_recording
+def _read(path: Path, unit: UnitSpec) -> tuple[Recording, list[str]]:
+    from trainer.fleet.options import UnitImport
 
-    if unit.import_options is not None:
-        return import_foreign(path, unit.import_options)
-    if path.suffix.lower() not in (".csv", ".npz"):
-        raise UserError(
-            f"{path}: not a recording (.csv/.npz); give the unit 'import' options for a foreign file"
-        )
-    return read_recording(path)
+    importer = unit.importer or UnitImport.parse(unit.import_text, f"unit {unit.id}: import")
+    return importer.read(path)
 
 
 @pinned
@@ -131,15 +154,27 @@ def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
         started = time.perf_counter()
         from trainer.data.holdout import split
 
-        recordings = [_read(path, unit) for path in unit.recordings]
+        read = [_read(path, unit) for path in unit.recordings]
+        recordings = [rec for rec, _ in read]
+        notes = tuple(
+            f"{path.name}: {note}"
+            for path, (_, said) in zip(unit.recordings, read, strict=True)
+            for note in said
+        )
         if len(recordings) == 2:
             train, second = recordings
+            first, other = signal_of(train), signal_of(second)
+            if other != first:
+                raise UserError(
+                    f"{unit.recordings[1]}: channel {other.heading}, but the unit's first run "
+                    f"{unit.recordings[0].name} is {first.heading}: both runs must be of one channel"
+                )
             where = f"second run {unit.recordings[1].name}"
-            return UnitData(train, second, None, where, time.perf_counter() - started)
+            return UnitData(train, second, None, where, time.perf_counter() - started, notes)
         holdout = parse_holdout(settings.holdout)
         train, _ = split(recordings[0], holdout)
         where = f"{unit.recordings[0].name}, {holdout.describe()} (--holdout {settings.holdout})"
-        return UnitData(train, recordings[0], holdout, where, time.perf_counter() - started)
+        return UnitData(train, recordings[0], holdout, where, time.perf_counter() - started, notes)
 
     return _guarded("load", work)
 
@@ -148,7 +183,11 @@ def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
 
 
 def _diagnosis_summary(doc: dict[str, Any]) -> dict[str, Any]:
-    """What the fleet report reads: the calibrated baseline, the effects named, the fit."""
+    """What the fleet report reads: the calibrated baseline, the effects named, the fit (its block
+    RMS under the channel's own name, ``rms_block_dps`` on a gyroscope: the diagnosis' naming)."""
+    from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
+
+    rms_key = channel_param_name("rms_block_mg", (doc.get("channel") or {}).get("unit", CATALOGUE_UNIT))
     return {
         "baseline_calibrated": doc["baseline_calibrated"],
         "left_out": [
@@ -156,10 +195,7 @@ def _diagnosis_summary(doc: dict[str, Any]) -> dict[str, Any]:
             for e in doc["left_out"]
         ],
         "ambiguous": [a["effects"] for a in doc["ambiguous"]],
-        "rms_block_mg": {
-            "before": doc["fit"]["before"]["rms_block_mg"],
-            "after": doc["fit"]["after"]["rms_block_mg"],
-        },
+        rms_key: {"before": doc["fit"]["before"][rms_key], "after": doc["fit"]["after"][rms_key]},
     }
 
 
@@ -210,6 +246,9 @@ DRIFT_LEFT_KEYS = (  # the figures the verdict takes (trainer.scoring.verdict.Fi
 )
 
 
+COVERAGE_KEYS = ("trained_range_c", "scored_range_c", "coverage")  # result.json: the scored part's coverage
+
+
 def drift_left_summary(scores: Any) -> dict[str, float]:
     """What ``result.json`` keeps of a method's :class:`~trainer.scoring.unit_scores.UnitScores`:
     the headline part's drift left RMS (mg), the model's and the uncompensated output's, whole and
@@ -221,7 +260,7 @@ def drift_left_summary(scores: Any) -> dict[str, float]:
 
 def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> dict[str, Any]:
     from trainer.scoring.evaluate import drift_score, evaluate
-    from trainer.scoring.unit_scores import score_unit
+    from trainer.scoring.unit_scores import coverage, score_unit
 
     trained = (float(stats["temp_min_c"]), float(stats["temp_max_c"]))
     whole_run = model.compensate(data.scored.without_truth())
@@ -233,10 +272,15 @@ def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> d
     truth = drift_score(valid, compensated)
     left = scores.headline.model
     coefficients = table.compensated[method]
+    scored = (float(np.min(valid.temp_c)), float(np.max(valid.temp_c)))
     return {
         "method": method,
         "evaluated_on": data.evaluated_on,
         "samples": len(valid),
+        # how far the scored part lies inside the trained range (trainer report's coverage)
+        "trained_range_c": list(trained),
+        "scored_range_c": list(scored),
+        "coverage": coverage(scored, trained),
         **drift_left_summary(scores),
         "drift_left_max_mg": left.max_abs_mg,
         "drift_left_heating_mg": left.heating_rms_mg,
@@ -296,6 +340,7 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
         model, stats = fit_with_stats(name, data.train, unit.fit_kwargs.get(name, {}))
         scores = _scores(name, data, model, stats)
         files: dict[str, bytes] = {}
+        failures: tuple[Failure, ...] = ()
         with tempfile.TemporaryDirectory(prefix="fleet-") as tmp_name:
             tmp = Path(tmp_name)
             save_model(
@@ -313,17 +358,19 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
                 )
                 if isinstance(outcome, Failure):
                     verified = {"passed": False, "error": outcome.error}
+                    if outcome.retry:  # not the model's fault: the unit is computed again next run
+                        failures = (Failure(f"export {name}", outcome.error, True),)
                 else:
                     c_files, verified = outcome
                     files.update(c_files)
         files["scores.json"] = json_bytes(_finite(scores))
         files["verify.json"] = json_bytes(_finite(verified))
         summary = {
-            **{k: scores[k] for k in (*DRIFT_LEFT_KEYS, "residual_vs_truth_mg")},
+            **{k: scores[k] for k in (*DRIFT_LEFT_KEYS, *COVERAGE_KEYS, "residual_vs_truth_mg")},
             "verify": verified,
         }
         return StageOutput(
-            {f"{name}/{k}": v for k, v in files.items()}, summary, time.perf_counter() - started
+            {f"{name}/{k}": v for k, v in files.items()}, summary, time.perf_counter() - started, failures
         )
 
     return _guarded(f"method {name}", work)
@@ -370,6 +417,7 @@ def assemble(
             files.update(output.files)
             method_results[name] = output.summary
             timing[name] = output.seconds
+            errors.extend(output.failures)
         else:
             method_results[name] = {"error": output.error}
             if output is not data:
@@ -379,10 +427,13 @@ def assemble(
             "id": unit.id,
             "key": key,
             "status": "failed" if errors else "ok",
-            "retry": any(e.internal for e in errors),
-            "errors": [{"stage": e.stage, "error": e.error} for e in errors],
+            "retry": any(e.retry for e in errors),
+            "errors": [{"stage": e.stage, "error": e.error, "retry": e.retry} for e in errors],
             "recordings": [str(p) for p in unit.recordings],
             "evaluated_on": None if isinstance(data, Failure) else data.evaluated_on,
+            "channel": None if isinstance(data, Failure) else signal_of(data.train).channel,
+            "unit": None if isinstance(data, Failure) else signal_of(data.train).label,
+            "import_notes": [] if isinstance(data, Failure) else list(data.notes),
             "export_name": unit.export_name,
             "methods": method_results,
             "diagnosis": diagnosis.summary if isinstance(diagnosis, StageOutput) else None,

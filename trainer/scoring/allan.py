@@ -21,6 +21,7 @@ import allantools
 import numpy as np
 from scipy.optimize import nnls
 
+from trainer.data.channels import DEFAULT_UNIT, ONE_AXIS_CHANNEL, Signal
 from trainer.scoring.markdown import markdown_table
 
 __all__ = [
@@ -673,8 +674,12 @@ def plot_allan(
     title: str = "Allan deviation",
     *,
     error_bars: bool = False,
+    signal: Signal | None = None,
 ) -> Path:
     """Log-log PNG of ADEV curves, one line each (the paper's Figure 13); returns the path.
+
+    ``signal``: the channel the curves are of, named in the title and the axis (None: in mg,
+    a one-axis recording's accelerometer).
 
     Follows the plotting convention of :mod:`trainer.scoring.plots` (object API on an Agg
     canvas, no global backend switch, no display needed); the file is written atomically.
@@ -699,8 +704,9 @@ def plot_allan(
                 linewidth=0,
             )
     axes.set_xlabel("averaging time τ (s)")
-    axes.set_ylabel("Allan deviation σ(τ) (mg)")
-    axes.set_title(title)
+    shown = signal or Signal(ONE_AXIS_CHANNEL, DEFAULT_UNIT)
+    axes.set_ylabel(shown.axis("Allan deviation σ(τ)"))
+    axes.set_title(shown.title(title))
     axes.grid(True, which="both", alpha=0.3)
     axes.legend()
     figure.tight_layout()

@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from trainer.data.channels import Signal
 from trainer.errors import atomic_output
 
 MAX_PLOT_POINTS = 20_000
@@ -47,17 +48,18 @@ def plot_series(
     path: str | os.PathLike[str],
     *,
     title: str,
-    ylabel: str = "acceleration (mg)",
+    signal: Signal,
 ) -> None:
-    """Several signals against time on one axis (Figures 10-12: fitted or compensated outputs)."""
+    """Several signals against time on one axis (Figures 10-12: fitted or compensated outputs), the
+    axis and title naming ``signal``'s channel and unit."""
     step = _thin(len(time_s))
     fig = new_figure((10, 5), 110)
     ax = fig.add_subplot()
     for label, values in series.items():
         ax.plot(time_s[step] / 60.0, values[step], label=label, linewidth=0.8)
     ax.set_xlabel("time (min)")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
+    ax.set_ylabel(signal.axis())
+    ax.set_title(signal.title(title))
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
@@ -72,6 +74,7 @@ def plot_fit(
     path: str | os.PathLike[str],
     *,
     title: str,
+    signal: Signal,
 ) -> None:
     """Figures 10-11: estimates over the reference (top) and their differences from it (bottom).
 
@@ -85,10 +88,10 @@ def plot_fit(
     for label, values in estimates.items():
         top.plot(minutes, values[step], label=label, linewidth=0.8)
         bottom.plot(minutes, (values - reference)[step], label=label, linewidth=0.7)
-    top.set_ylabel("acceleration (mg)")
-    top.set_title(title)
+    top.set_ylabel(signal.axis())
+    top.set_title(signal.title(title))
     top.legend(loc="best", fontsize=8)
-    bottom.set_ylabel("estimate - reference (mg)")
+    bottom.set_ylabel(signal.axis("estimate - reference"))
     bottom.set_xlabel("time (min)")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)

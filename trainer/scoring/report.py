@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from trainer import methods as registry
+from trainer.data.channels import signal_of
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_TRAIN_SMOOTHING_S
@@ -149,6 +150,7 @@ def write_figures(comparison: Comparison, train: Recording, valid: Recording, ou
     names = []
     # a reference predictor (persistence) would hide the data
     shown = [m for m in comparison.models if not registry.REGISTRY[m].reference]
+    signal = signal_of(valid)
     for rec, name, title in (
         (train, "fig10_training_fit.png", "Fit on training data (drift estimate vs 5 s smoothed output)"),
         (valid, "fig11_validation_fit.png", "Fit on validation data (drift estimate vs 5 s smoothed output)"),
@@ -156,7 +158,15 @@ def write_figures(comparison: Comparison, train: Recording, valid: Recording, ou
         blind = rec.without_truth()
         reference = _smooth(rec.accel_mg, rec.sample_rate_hz, PAPER_TRAIN_SMOOTHING_S)
         estimates = {m: comparison.models[m].predict_drift(blind) for m in shown}
-        plot_fit(rec.time_s, "output (5 s smoothing)", reference, estimates, out_dir / name, title=title)
+        plot_fit(
+            rec.time_s,
+            "output (5 s smoothing)",
+            reference,
+            estimates,
+            out_dir / name,
+            title=title,
+            signal=signal,
+        )
         names.append(name)
     evaluation = comparison.evaluation
     smoothed = {
@@ -169,9 +179,13 @@ def write_figures(comparison: Comparison, train: Recording, valid: Recording, ou
         smoothed,
         out_dir / "fig12_compensated.png",
         title=f"Compensated validation output ({evaluation.smoothing_s} s smoothing)",
+        signal=signal,
     )
     plot_allan(
-        dict(evaluation.curves), out_dir / "fig13_allan.png", title="Allan deviation after compensation"
+        dict(evaluation.curves),
+        out_dir / "fig13_allan.png",
+        title="Allan deviation after compensation",
+        signal=signal,
     )
     names += ["fig12_compensated.png", "fig13_allan.png"]
     return names
@@ -191,7 +205,11 @@ def write_survival_figure(comparison: Comparison, rec: Recording, out_dir: Path,
         }
     )
     plot_series(
-        rec.time_s, series, out_dir / name, title=f"True input after compensation ({Path(rec.source).name})"
+        rec.time_s,
+        series,
+        out_dir / name,
+        title=f"True input after compensation ({Path(rec.source).name})",
+        signal=signal_of(rec),
     )
 
 
@@ -229,12 +247,19 @@ def fusion_lines(comparison: Comparison) -> list[str]:
 
 
 def render_report(
-    comparison: Comparison, settings: object, frontend: dict, args: object, figures: list[str]
+    comparison: Comparison,
+    settings: object,
+    frontend: dict,
+    args: object,
+    figures: list[str],
+    channel: str = "",
 ) -> str:
-    """The Markdown report a reviewer reads: setup, headline table, Table 1, the paper's numbers."""
+    """The Markdown report a reviewer reads: setup, headline table, Table 1, the paper's numbers.
+
+    ``channel``: the compared channel with its unit (``gyro0_z (deg/s)``), named in the title."""
     evaluation = comparison.evaluation
     lines = [
-        "# mems-tdc comparison report",
+        f"# mems-tdc comparison report{f': channel {channel}' if channel else ''}",
         "",
         f"- training recording: `{getattr(args, 'train', '?')}`",
         f"- validation recording: `{getattr(args, 'valid', None) or 'the held-out part of the training recording'}`",

@@ -17,7 +17,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -30,7 +30,7 @@ from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 from trainer.scoring.static import COOLING, HEATING, DriftLeft, thermal_branch
 from trainer.scoring.thresholds import THRESHOLDS, passes
-from trainer.scoring.unit_scores import PartScores, UnitScores
+from trainer.scoring.unit_scores import PartScores, UnitScores, coverage
 from trainer.scoring.verdict import NO_VERDICT, Figures, Verdict, verdict, worse_than_uncompensated
 
 NOT_MEASURED = "not measured"
@@ -97,11 +97,7 @@ class ChannelReport:
     @property
     def coverage(self) -> float:
         """Share of the recording's temperature span inside the trained range (1: all of it)."""
-        lo, hi = self.recording_range_c
-        t_lo, t_hi = self.trained_range_c
-        if hi <= lo:
-            return 1.0 if t_lo <= lo <= t_hi else 0.0
-        return max(0.0, min(hi, t_hi) - max(lo, t_lo)) / (hi - lo)
+        return coverage(self.recording_range_c, self.trained_range_c)
 
     @property
     def figures_for_verdict(self) -> Figures:
@@ -219,6 +215,16 @@ def _verify_count(report: ChannelReport) -> float | None:
 # -- figures -----------------------------------------------------------------------------------
 
 
+# Limit lines drawn on the drift-left figure: threshold key -> line style. The branch and whole-run
+# limits hold everywhere; the held-out one only over the held-out part.
+LIMIT_STYLES: dict[str, Literal["--", ":", "-."]] = {
+    "residual_max_mg": "--",
+    "branch_max_mg": ":",
+    "holdout_max_mg": "-.",
+}
+HELD_OUT_COLOUR = "tab:orange"
+
+
 def write_figures(
     report: ChannelReport,
     rec: Recording,
@@ -227,9 +233,13 @@ def write_figures(
     smoothing_s: float,
     out_dir: Path,
     thresholds: dict[str, float],
+    held_out: slice | None = None,
 ) -> list[str]:
     """``CHANNEL_drift.png`` (the drift and the model's fit against temperature) and
-    ``CHANNEL_residual.png`` (the drift left against temperature by branch)."""
+    ``CHANNEL_residual.png`` (the drift left against temperature by branch, and against time).
+
+    ``held_out``: the rows of the held-out part, shaded with a label (its span of time, and of
+    temperature on the temperature axes); every limit line of ``thresholds`` is in the legend."""
     temp = np.asarray(rec.temp_c, dtype=np.float64)
     branch = thermal_branch(temp, rec.sample_rate_hz)
     predicted = model.predict_drift(rec.without_truth())
@@ -237,6 +247,8 @@ def write_figures(
     constant = float(np.mean(measured - predicted))
     lo, hi = report.trained_range_c
     names = [f"{report.stem}_drift.png", f"{report.stem}_residual.png"]
+    held_time = None if held_out is None else rec.time_s[held_out]
+    held_temp = None if held_out is None else temp[held_out]
 
     fig = new_figure((8, 5), 110)
     ax = fig.add_subplot()
@@ -246,23 +258,65 @@ def write_figures(
         ax.plot(temp[order], predicted[order], color="black", linewidth=1.0, label=f"{report.method} fit")
     else:  # a function of the temperature history: one point per sample
         ax.scatter(temp, predicted, s=1, color="black", label=f"{report.method} fit")
+    _shade_held_out(ax, held_temp, held_time, "temperature")
     _finish(
         ax, lo, hi, f"drift ({report.unit}, measured minus its constant)", f"{report.label}: drift and fit"
     )
     fig.tight_layout()
     save_figure(fig, out_dir / names[0])
 
-    fig = new_figure((8, 5), 110)
-    ax = fig.add_subplot()
-    _by_branch(ax, temp, drift_left(rec, compensated, smoothing_s), branch, "drift left")
-    for key, style in (("residual_max_mg", "--"), ("branch_max_mg", ":")):
-        if key in thresholds:
-            for sign in (1, -1):
-                ax.axhline(sign * thresholds[key], color="gray", linestyle=style, linewidth=0.8)
+    left = drift_left(rec, compensated, smoothing_s)
+    fig = new_figure((8, 8), 110)
+    ax, over_time = fig.subplots(2, 1, height_ratios=(3, 2))
+    _by_branch(ax, temp, left, branch, "drift left")
+    _limit_lines(ax, thresholds, report.unit, held_out=False)
+    _shade_held_out(ax, held_temp, held_time, "temperature")
     _finish(ax, lo, hi, f"drift left ({report.unit})", f"{report.label}: drift left by branch")
+    over_time.plot(rec.time_s / 60.0, left, color="0.3", linewidth=0.6, label="drift left")
+    _limit_lines(over_time, thresholds, report.unit, held_out=False)
+    if held_time is not None:
+        _limit_lines(over_time, thresholds, report.unit, held_out=True, span_min=held_time / 60.0)
+    _shade_held_out(over_time, held_temp, held_time, "time")
+    over_time.set_xlabel("time (min)")
+    over_time.set_ylabel(f"drift left ({report.unit})")
+    over_time.set_title(f"{report.label}: drift left over time")
+    over_time.grid(True, alpha=0.3)
+    over_time.legend(loc="best", fontsize=8)
     fig.tight_layout()
     save_figure(fig, out_dir / names[1])
     return names
+
+
+def _limit_lines(
+    ax: Axes, thresholds: dict[str, float], unit: str, *, held_out: bool, span_min: np.ndarray | None = None
+) -> None:
+    """The configured |drift left| limits as +-lines, labelled once each in the legend; the held-out
+    limit (``held_out``) only over the held-out part's time span (``span_min``, minutes)."""
+    for key, style in LIMIT_STYLES.items():
+        if key not in thresholds or (key == "holdout_max_mg") != held_out:
+            continue
+        label = f"limit {key}: +-{_num(thresholds[key])} {unit}"
+        for sign in (1, -1):
+            value, shown = sign * thresholds[key], label if sign > 0 else "_nolegend_"
+            if span_min is None:
+                ax.axhline(value, color="gray", linestyle=style, linewidth=0.8, label=shown)
+            else:
+                ax.hlines(
+                    value, float(span_min[0]), float(span_min[-1]), "gray", style, linewidth=0.8, label=shown
+                )
+
+
+def _shade_held_out(ax: Axes, temp: np.ndarray | None, time_s: np.ndarray | None, axis: str) -> None:
+    """Shade the held-out part: its time span on a time axis, its temperatures on a temperature axis."""
+    if temp is None or time_s is None or len(time_s) == 0:
+        return
+    when = f"t = {time_s[0]:g} .. {time_s[-1]:g} s"
+    if axis == "time":
+        lo, hi, label = time_s[0] / 60.0, time_s[-1] / 60.0, f"held-out part ({when})"
+    else:
+        lo, hi = float(np.min(temp)), float(np.max(temp))
+        label = f"held-out part's temperatures ({lo:.1f} .. {hi:.1f} degC, {when})"
+    ax.axvspan(lo, hi, color=HELD_OUT_COLOUR, alpha=0.15, linewidth=0, label=label)
 
 
 def _by_branch(ax: Axes, temp: np.ndarray, values: np.ndarray, branch: np.ndarray, what: str) -> None:
@@ -274,8 +328,10 @@ def _by_branch(ax: Axes, temp: np.ndarray, values: np.ndarray, branch: np.ndarra
 
 
 def _finish(ax: Axes, lo: float, hi: float, ylabel: str, title: str) -> None:
-    for edge in (lo, hi):
-        ax.axvline(edge, color="green", linestyle="--", linewidth=0.8)
+    for index, edge in enumerate((lo, hi)):
+        ax.axvline(
+            edge, color="green", linestyle="--", linewidth=0.8, label=None if index else "trained range"
+        )
     ax.set_xlabel("temperature (degC); dashed green: trained range")
     ax.set_ylabel(ylabel)
     ax.set_title(title)

@@ -72,6 +72,16 @@ def score_part(
     )
 
 
+def coverage(scored_range_c: tuple[float, float], trained_range_c: tuple[float, float]) -> float:
+    """Share of the scored temperature span inside the trained range (1: all of it; a single scored
+    temperature counts 1 inside the range, 0 outside). Outside it a model extrapolates or holds."""
+    lo, hi = scored_range_c
+    t_lo, t_hi = trained_range_c
+    if hi <= lo:
+        return 1.0 if t_lo <= lo <= t_hi else 0.0
+    return max(0.0, min(hi, t_hi) - max(lo, t_lo)) / (hi - lo)
+
+
 def held_out_rows(rec: Recording, holdout: Holdout) -> tuple[Recording, slice]:
     """The held-out part of ``rec`` and its rows in ``rec`` (the split of ``compare --holdout``)."""
     _, held = split(rec, holdout)

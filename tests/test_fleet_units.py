@@ -1,0 +1,210 @@
+"""``trainer fleet`` on flight-log units, coverage per unit, and failures of the environment.
+
+A small PX4 ULog written by the test (tests/flightlogs.py: one accelerometer and one gyroscope
+instance on a monotone 10 -> 50 degC ramp) is the units' recording; the fleet runs on an
+in-process Dask cluster (one worker thread) so that a write can be made to fail in the first run.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.flightlogs import imu_topic, write_ulog
+from trainer.checkpoint import load_checkpoint
+from trainer.errors import UserError
+from trainer.fleet import stages
+from trainer.fleet.manifest import load_manifest
+from trainer.fleet.run import run_fleet
+
+N = 3000
+RATE_HZ = 10.0
+TEMP_C = np.linspace(10.0, 50.0, N)  # strictly increasing: the held-out last quarter lies above the rest
+GYRO_TEMP_OFFSET_C = 0.5
+
+
+@pytest.fixture(scope="module")
+def ulog(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    rng = np.random.default_rng(5)
+    time_us = (1_000_000 + np.arange(N) * 1e6 / RATE_HZ).astype(np.int64)
+    u = (TEMP_C - 30.0) / 20.0
+    noise = 0.001 * rng.normal(size=(N, 3))
+    accel = np.column_stack([0.02 + 0.01 * u, 0.01 * u**2, -9.80665 + 0.05 * u + 0.02 * u**3]) + noise
+    gyro = np.column_stack([0.002 * u, 0.001 * u**2, 0.003 * u]) + 0.2 * noise
+    topics = [
+        imu_topic("sensor_accel", 0, 2490378, time_us, accel, TEMP_C),
+        imu_topic("sensor_gyro", 0, 2490634, time_us + 37, gyro, TEMP_C + GYRO_TEMP_OFFSET_C),
+    ]
+    return write_ulog(tmp_path_factory.mktemp("log") / "flight.ulg", topics)
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[Any]:
+    """One in-process worker: its tasks see the test's monkeypatches."""
+    from distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=False,
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
+        ) as cluster,
+        Client(cluster) as active,
+    ):
+        yield active
+
+
+def _manifest(directory: Path, ulog: Path, units: str, fleet: str = "") -> Path:
+    path = directory / "fleet.toml"
+    path.write_text(
+        f'[fleet]\nmethods = ["poly3"]\ndiagnose_blocks = 50\n{fleet}\n'
+        + units.replace("LOG", str(ulog)).replace("\\", "/")
+    )
+    return path
+
+
+FLIGHT_UNITS = """
+[[unit]]
+id = "A1"
+recordings = ["LOG"]
+[[unit]]
+id = "G1"
+recordings = ["LOG"]
+import = "--retime --channel gyro0_z"
+[[unit]]
+id = "ALL"
+recordings = ["LOG"]
+import = "--channels all"
+"""
+
+
+def test_flight_log_units_are_fitted_and_scored_with_their_coverage(
+    tmp_path: Path, ulog: Path, client: Any
+) -> None:
+    manifest = _manifest(tmp_path, ulog, FLIGHT_UNITS, 'import = "--retime"')
+    run = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    fitted_rows = int(0.75 * N)  # holdout last:0.25: fitted on the first three quarters
+    for uid, channel, unit, offset in (("A1", "accel0_z", "mg", 0.0), ("G1", "gyro0_z", "deg/s", 0.5)):
+        result = run.results[uid]
+        assert result["status"] == "ok", result["errors"]
+        assert (result["channel"], result["unit"]) == (channel, unit)
+        stats = load_checkpoint(run.out_dir / "units" / uid / "poly3" / "model.pt")["train_stats"]
+        assert stats["channel"] == channel
+        assert stats["temp_min_c"] == pytest.approx(TEMP_C[0] + offset, abs=1e-4)
+        assert stats["temp_max_c"] == pytest.approx(TEMP_C[fitted_rows - 1] + offset, abs=1e-4)
+        # the scored quarter lies above everything trained on: none of its span is covered
+        summary = result["methods"]["poly3"]
+        assert summary["coverage"] == 0.0
+        assert summary["scored_range_c"][0] > summary["trained_range_c"][1]
+    failed = run.results["ALL"]
+    assert failed["status"] == "failed" and not failed["retry"]
+    (error,) = failed["errors"]
+    for part in ("unit 3 (ALL)", "import '--channels all'", str(ulog), "--channel NAME"):
+        assert part in error["error"]
+    report = (run.out_dir / "report.md").read_text()
+    assert "| A1 | PASS | accel0_z (mg) | 0 % |" in report
+    assert "| G1 | PASS | gyro0_z (deg/s) | 0 % |" in report and " deg/s |" in report
+    assert "- **A1**: scored" in report and "- **G1**: scored" in report
+    fleet = {u["id"]: u for u in json.loads((run.out_dir / "fleet.json").read_text())["units"]}
+    assert fleet["A1"]["coverage"] == 0.0 and fleet["G1"]["unit"] == "deg/s"
+
+
+@pytest.mark.parametrize(
+    ("import_text", "log", "expected"),
+    [
+        ("--temp T", True, "--temp does not apply to a PX4 ULog log"),
+        ("--retime", False, "--temp COLUMN is required"),
+    ],
+)
+def test_import_options_that_cannot_apply_name_unit_file_and_field(
+    tmp_path: Path, ulog: Path, import_text: str, log: bool, expected: str
+) -> None:
+    target = ulog
+    if not log:
+        target = tmp_path / "run.tsv"
+        target.write_text("t\tT\tacc\n0\t20\t1\n")
+    manifest = _manifest(
+        tmp_path, target, f'[[unit]]\nid = "X1"\nrecordings = ["LOG"]\nimport = "{import_text}"\n'
+    )
+    with pytest.raises(UserError) as caught:
+        load_manifest(manifest)
+    message = str(caught.value)
+    assert "\n" not in message
+    for part in (str(manifest), "unit 1 (X1) import", str(target), expected):
+        assert part in message
+
+
+def test_one_line_retries_failures_of_the_environment_only() -> None:
+    def raised(exc: BaseException) -> BaseException:
+        try:
+            try:
+                raise exc
+            except OSError as inner:
+                raise UserError(f"out: cannot write ({inner.strerror})") from None
+        except BaseException as outer:
+            return outer
+        raise AssertionError("unreachable")
+
+    assert stages.one_line(UserError("run.csv: line 3, column 'accel_mg': not a number")) == (
+        "run.csv: line 3, column 'accel_mg': not a number",
+        False,
+    )
+    for number in (errno.ENOSPC, errno.EFBIG, errno.EACCES, errno.EROFS):
+        message, retry = stages.one_line(raised(OSError(number, "fails")))
+        assert retry and message == "out: cannot write (fails)"
+    assert stages.one_line(raised(OSError(errno.ENOENT, "gone")))[1] is False  # the unit's own file
+    assert stages.one_line(KeyError("x"))[1] is True  # a bug: computed again after the fix
+
+
+def test_a_full_disk_during_export_is_retried_on_the_next_run(
+    tmp_path: Path, ulog: Path, client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    manifest = _manifest(tmp_path, ulog, '[[unit]]\nid = "A1"\nrecordings = ["LOG"]\n', 'import = "--retime"')
+    original = Path.write_text
+
+    def disk_full(self: Path, *args: Any, **kwargs: Any) -> int:
+        if self.suffix in (".c", ".h"):  # the generated module: only the export writes these
+            raise OSError(errno.ENOSPC, "No space left on device", str(self))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "write_text", disk_full)
+    first = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    result = first.results["A1"]
+    assert result["status"] == "failed" and result["retry"]
+    (error,) = result["errors"]
+    assert error["stage"] == "export poly3" and "No space left on device" in error["error"]
+    assert json.loads((tmp_path / "out" / "fleet.json").read_text())["units"][0]["sign_off"] == "FAIL"
+
+    monkeypatch.setattr(Path, "write_text", original)  # the disk is fixed
+    second = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    assert second.computed == ["A1"] and second.skipped == []
+    again = second.results["A1"]
+    assert again["status"] == "ok" and again["errors"] == [] and again["methods"]["poly3"]["verify"]["passed"]
+    third = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    assert third.computed == [] and third.skipped == ["A1"]  # a finished unit stays cached
+
+
+def test_a_failed_write_of_the_client_is_one_line_naming_the_path(
+    tmp_path: Path, ulog: Path, client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    manifest = _manifest(tmp_path, ulog, '[[unit]]\nid = "A1"\nrecordings = ["missing.ulg"]\n')
+    units = tmp_path / "out" / "units"
+
+    def full(*_: Any) -> Path:
+        raise OSError(errno.ENOSPC, "No space left on device", str(units / "A1"))
+
+    monkeypatch.setattr("trainer.fleet.run.publish_unit", full)
+    with pytest.raises(UserError) as caught:
+        run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    message = str(caught.value)
+    assert "\n" not in message and message.startswith(
+        f"{units / 'A1'}: cannot write (No space left on device)"
+    )
