@@ -11,7 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trainer.errors import UserError
+
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")
+MIN_ROWS = 2  # one time step: the least that defines a sample rate (and a drift)
 TRUTH_PREFIX = "true_"
 
 
@@ -52,8 +55,10 @@ class Recording:
         """The ``sample_rate_hz`` metadata when present, else derived from the median step."""
         if "sample_rate_hz" in self.meta:
             return float(self.meta["sample_rate_hz"])
-        if len(self.time_s) < 2:
-            raise ValueError(f"{self.source}: cannot derive a sample rate from fewer than 2 rows")
+        if len(self.time_s) < MIN_ROWS:  # user data (a recording, a part of one): one line, not a traceback
+            raise UserError(
+                f"{self.source}: {len(self.time_s)} data row(s): a sample rate needs at least {MIN_ROWS}"
+            )
         return float(1.0 / np.median(np.diff(self.time_s)))
 
     def has(self, name: str) -> bool:
