@@ -197,6 +197,38 @@ def _parse_npz_meta(source: str, array: np.ndarray) -> dict[str, str]:
     return meta
 
 
+def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.ndarray:
+    """One member as an array; a member that is not a ``.npy`` array, holds Python objects, or whose
+    header promises more data than it holds is a one-line UserError (checked before allocating)."""
+    member = f"{name}.npy" if f"{name}.npy" in archive.zip.namelist() else name
+    where = f"{source}: column {name!r}"
+    try:
+        with archive.zip.open(member) as handle:
+            version = np.lib.format.read_magic(handle)
+            read_header = (
+                np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read_header(handle)
+        size = archive.zip.getinfo(member).file_size
+        if math.prod(shape) * dtype.itemsize > size:
+            raise UserError(
+                f"{where}: its header declares {math.prod(shape)} values of {dtype} but the member holds "
+                f"{size} bytes (truncated or forged)"
+            )
+        array = archive[name]
+    except UserError:
+        raise
+    except ValueError as exc:
+        if "pickle" in str(exc):
+            raise UserError(f"{where}: holds Python objects, not numbers") from None
+        raise UserError(f"{where}: not a NumPy array (.npy) member ({exc})") from None
+    except Exception as exc:  # zip, I/O and header-parsing errors of a damaged member all mean the same
+        raise UserError(f"{where}: unreadable ({type(exc).__name__})") from None
+    if not isinstance(array, np.ndarray):
+        raise UserError(f"{where}: not a NumPy array (.npy) member")
+    return array
+
+
 def _read_npz(path: str | Path) -> Recording:
     source = str(path)
     if not Path(path).is_file():
@@ -211,12 +243,7 @@ def _read_npz(path: str | Path) -> Recording:
     meta: dict[str, str] = {}
     with archive:
         for name in archive.files:
-            try:
-                array = archive[name]
-            except ValueError:
-                raise UserError(f"{source}: column {name!r}: holds Python objects, not numbers") from None
-            except (OSError, zipfile.BadZipFile, EOFError) as exc:
-                raise UserError(f"{source}: column {name!r}: unreadable ({type(exc).__name__})") from None
+            array = _npz_member(archive, name, source)
             if name == NPZ_META:
                 meta = _parse_npz_meta(source, array)
                 continue
