@@ -7,6 +7,7 @@ shares (required columns, ground-truth columns that fitting must never see).
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -76,3 +77,14 @@ class Recording:
     def slice(self, start: int, stop: int) -> Recording:
         """Rows ``start:stop`` (views, not copies)."""
         return Recording({k: v[start:stop] for k, v in self.columns.items()}, dict(self.meta), self.source)
+
+
+def data_fingerprint(rec: Recording) -> str:
+    """sha256 of the time, temperature and acceleration columns: the same data, whatever the file.
+
+    ``train_stats.data_sha256`` of a model; :func:`trainer.data.holdout.overlap_warning` compares it
+    with the scored data's."""
+    digest = hashlib.sha256()
+    for name in REQUIRED_COLUMNS:
+        digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
+    return digest.hexdigest()
