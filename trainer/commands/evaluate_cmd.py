@@ -78,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
     from trainer.checkpoint import load_model
     from trainer.data.holdout import overlap_warning, parse_holdout, split
-    from trainer.data.recording_io import read_recording
     from trainer.data.recording import data_fingerprint
+    from trainer.data.recording_io import read_recording
     from trainer.scoring.allan import plot_allan
     from trainer.scoring.compare import compensate_after
     from trainer.scoring.evaluate import evaluate

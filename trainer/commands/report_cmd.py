@@ -300,8 +300,8 @@ def run(args: argparse.Namespace) -> int:
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit
     from trainer.data.holdout import overlap_warning, parse_holdout
-    from trainer.data.recording_io import read_recording
     from trainer.data.recording import data_fingerprint
+    from trainer.data.recording_io import read_recording
     from trainer.scoring import signoff
     from trainer.scoring.thresholds import load_thresholds
     from trainer.scoring.unit_scores import held_out_rows, score_unit

@@ -56,10 +56,7 @@ class Recording:
         """The ``sample_rate_hz`` metadata when present, else derived from the median step."""
         if "sample_rate_hz" in self.meta:
             return float(self.meta["sample_rate_hz"])
-        if len(self.time_s) < MIN_ROWS:  # user data (a recording, a part of one): one line, not a traceback
-            raise UserError(
-                f"{self.source}: {len(self.time_s)} data row(s): a sample rate needs at least {MIN_ROWS}"
-            )
+        require_rows(len(self.time_s), self.source)  # user data: one line, not a traceback
         return float(1.0 / np.median(np.diff(self.time_s)))
 
     def has(self, name: str) -> bool:
@@ -77,6 +74,15 @@ class Recording:
     def slice(self, start: int, stop: int) -> Recording:
         """Rows ``start:stop`` (views, not copies)."""
         return Recording({k: v[start:stop] for k, v in self.columns.items()}, dict(self.meta), self.source)
+
+
+def require_rows(n: int, source: str) -> None:
+    """Refuse fewer than :data:`MIN_ROWS` rows (``n`` >= 1; zero rows has its own message)."""
+    if n < MIN_ROWS:
+        raise UserError(
+            f"{source}: {n} data row; a recording needs at least {MIN_ROWS} (its time step is its sample "
+            "rate): the file is truncated or the logger stopped at once"
+        )
 
 
 def data_fingerprint(rec: Recording) -> str:

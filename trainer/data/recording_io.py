@@ -23,7 +23,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
-from trainer.data.recording import MIN_ROWS, REQUIRED_COLUMNS, Recording
+from trainer.data.recording import REQUIRED_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
@@ -97,11 +97,7 @@ def check_recording(
     source = rec.source
     if len(rec.time_s) == 0:
         raise UserError(f"{source}: no data rows")
-    if len(rec.time_s) < MIN_ROWS:
-        raise UserError(
-            f"{source}: {len(rec.time_s)} data row; a recording needs at least {MIN_ROWS} (its time step is "
-            "its sample rate): the file is truncated or the logger stopped at once"
-        )
+    require_rows(len(rec.time_s), source)
     bad = first_non_finite(rec.columns)
     if bad is not None:
         name, row = bad
