@@ -37,7 +37,8 @@ def _valid_lines() -> list[str]:
     temp = np.concatenate([np.linspace(40, -10, N_ROWS // 2), np.linspace(-10, 40, N_ROWS - N_ROWS // 2)])
     accel = 0.0002 * (temp - 15) ** 3 + 0.1 * (temp - 15) + rng.normal(0, 0.05, N_ROWS)
     return ["# sample_rate_hz=1", "time_s,temp_c,accel_mg"] + [
-        f"{t:.3f},{c:.4f},{a:.5f}" for t, c, a in zip(np.arange(N_ROWS, dtype=float), temp, accel, strict=True)
+        f"{t:.3f},{c:.4f},{a:.5f}"
+        for t, c, a in zip(np.arange(N_ROWS, dtype=float), temp, accel, strict=True)
     ]
 
 
@@ -103,7 +104,10 @@ def _models(good: dict) -> dict[str, dict | bytes]:
     return {
         "nan_coefficients.pt": payload(coefficients_mg=torch.full((4,), float("nan"), dtype=torch.float64)),
         "two_coefficients.pt": payload(coefficients_mg=[1.0, 2.0]),
-        "payload_key_missing.pt": {**good, "payload": {k: v for k, v in good["payload"].items() if k != "t_ref_c"}},
+        "payload_key_missing.pt": {
+            **good,
+            "payload": {k: v for k, v in good["payload"].items() if k != "t_ref_c"},
+        },
         "train_stats_none.pt": changed(train_stats=None),
         "train_stats_wrong_types.pt": changed(train_stats={"source": 5, "time_range_s": "all"}),
         "method_missing.pt": without_method,
@@ -155,16 +159,17 @@ def _flight_logs(root: Path) -> dict[str, Path]:
     time_us = (1_000_000 + np.arange(n) * 5000).astype(np.int64)
     xyz = np.random.default_rng(6).normal(0, 0.1, (n, 3))
     temp = np.linspace(20.0, 40.0, n)
+    gravity = np.array([0.0, 0.0, -9.8])  # m/s^2, a level board
     ulog = write_ulog(
         root / "valid.ulg",
         [
-            imu_topic("sensor_accel", 0, 1, time_us, xyz + [0.0, 0.0, -9.8], temp),
+            imu_topic("sensor_accel", 0, 1, time_us, xyz + gravity, temp),
             imu_topic("sensor_gyro", 0, 2, time_us + 37, xyz, temp),
         ],
     ).read_bytes()
     writer = DataFlashWriter()
     for k in range(n):
-        writer.imu(int(time_us[k]), 0, xyz[k], xyz[k] + [0.0, 0.0, -9.8], temp[k])
+        writer.imu(int(time_us[k]), 0, xyz[k], xyz[k] + gravity, temp[k])
     dataflash = writer.write(root / "valid.bin").read_bytes()
     logs = {}
     for suffix, data in ((".ulg", ulog), (".bin", dataflash)):
@@ -183,7 +188,10 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     files = {"root": root, "good.csv": good, "good.pt": root / "good.pt", "module": root / "module"}
     bad = root / "bad"
     bad.mkdir()
-    for name, content in {**_recordings(_valid_lines()), **_models(load_checkpoint(root / "good.pt"))}.items():
+    for name, content in {
+        **_recordings(_valid_lines()),
+        **_models(load_checkpoint(root / "good.pt")),
+    }.items():
         files[name] = _write(bad / name, content)
     for name, content in BAD_TOML.items():
         files[f"toml:{name}"] = _write(bad / f"cfg_{name}", content)
@@ -303,8 +311,12 @@ def test_a_malformed_input_is_one_line_exit_2_and_nothing_written(
     code = run_cli(main, argv(corpus, corpus[name], out))  # a traceback fails the test here
     err = capfd.readouterr().err
     assert code == EXIT_USER_ERROR, f"{label}: exit {code}, stderr {err!r}"
-    assert err.startswith("error: ") and err.count("\n") == 1, f"{label}: stderr is not one line: {err[:500]!r}"
-    assert str(corpus[name]) in err or name.split(":")[-1] in err or "--" in err, f"{label}: names no file: {err!r}"
+    assert err.startswith("error: ") and err.count("\n") == 1, (
+        f"{label}: stderr is not one line: {err[:500]!r}"
+    )
+    assert str(corpus[name]) in err or name.split(":")[-1] in err or "--" in err, (
+        f"{label}: names no file: {err!r}"
+    )
     assert list(out.iterdir()) == [], f"{label}: left {sorted(p.name for p in out.iterdir())}"
     assert _hidden_files(corpus["root"]) == before, f"{label}: left temporary files beside the inputs"
 
@@ -312,13 +324,37 @@ def test_a_malformed_input_is_one_line_exit_2_and_nothing_written(
 def test_the_valid_inputs_pass(corpus: dict[str, Path], tmp_path: Path) -> None:
     """The corpus' mutations are what fails: the same commands accept the file they were made from."""
     good = corpus["good.csv"]
-    assert run_cli(trainer_main, ["evaluate", str(corpus["good.pt"]), str(good), "--out-dir", str(tmp_path / "e")]) == 0
-    assert run_cli(codegen_main, ["verify", str(corpus["good.pt"]), str(corpus["module"]), str(good), "--no-table"]) == 0
+    assert (
+        run_cli(
+            trainer_main, ["evaluate", str(corpus["good.pt"]), str(good), "--out-dir", str(tmp_path / "e")]
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            codegen_main, ["verify", str(corpus["good.pt"]), str(corpus["module"]), str(good), "--no-table"]
+        )
+        == 0
+    )
     shutil.copy(good, tmp_path / "copy.csv")
-    argv = ["import", str(tmp_path / "copy.csv"), "--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg"]
+    argv = [
+        "import",
+        str(tmp_path / "copy.csv"),
+        "--time",
+        "time_s",
+        "--temp",
+        "temp_c",
+        "--accel",
+        "accel_mg",
+    ]
     assert run_cli(trainer_main, [*argv, "-o", str(tmp_path / "r.csv")]) == 0
     for log in ("valid.ulg", "valid.bin"):
-        assert run_cli(trainer_main, ["import", str(corpus["root"] / "bad" / log), "-o", str(tmp_path / "l.csv")]) == 0
+        assert (
+            run_cli(
+                trainer_main, ["import", str(corpus["root"] / "bad" / log), "-o", str(tmp_path / "l.csv")]
+            )
+            == 0
+        )
 
 
 def test_damaged_flight_log_warnings_are_summarised_in_one_line(
