@@ -119,6 +119,12 @@ def _imu_result(out_dir: Path, recording: str, whole: Any, model: Path, runs: di
                     f"{file!r}, not found beside {model}: give the models of the 'trainer fit --channels' "
                     "directory the module was exported from"
                 )
+            if _model_id(candidate) != f"sha256:{entry.get('sha256')}":
+                raise UserError(
+                    f"--verify {out_dir}: the IMU module's channel {channel.get('name')!r} was exported from "
+                    f"another model than {candidate} (sha256 differs): export the module again, or give "
+                    "the models it was exported from"
+                )
             models.append(candidate)
         runs[key] = verify_imu(models, out_dir, whole, name=name)
     return runs[key]
