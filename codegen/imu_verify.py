@@ -61,7 +61,8 @@ class ImuVerifyResult:
         return sum(run.mismatches[index] for run in self.runs)
 
 
-IMU_VERIFY_FORMAT = "mems-tdc-imu-verify"  # codegen verify --channels --json; trainer report --verify reads it
+# codegen verify --channels --json writes it; trainer report --verify reads it
+IMU_VERIFY_FORMAT = "mems-tdc-imu-verify"
 
 
 def imu_verify_json(result: ImuVerifyResult) -> dict[str, Any]:

@@ -141,7 +141,8 @@ BAD_MANIFESTS = {
 }
 
 
-def _write(path: Path, content: bytes | str | dict) -> Path:
+def _write(path: Path, content: object) -> Path:
+    """``content`` as the file: a dict saved with torch.save, bytes or text as they are."""
     if isinstance(content, dict):
         buffer = io.BytesIO()
         torch.save(content, buffer)
@@ -149,7 +150,7 @@ def _write(path: Path, content: bytes | str | dict) -> Path:
     if isinstance(content, bytes):
         path.write_bytes(content)
     else:
-        path.write_text(content)
+        path.write_text(str(content))
     return path
 
 
@@ -193,12 +194,9 @@ def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         **_models(load_checkpoint(root / "good.pt")),
     }.items():
         files[name] = _write(bad / name, content)
-    for name, content in BAD_TOML.items():
-        files[f"toml:{name}"] = _write(bad / f"cfg_{name}", content)
-    for name, content in BAD_JSON.items():
-        files[f"json:{name}"] = _write(bad / name, content)
-    for name, content in BAD_MANIFESTS.items():
-        files[f"manifest:{name}"] = _write(bad / f"fleet_{name}", content)
+    for prefix, table in (("toml", BAD_TOML), ("json", BAD_JSON), ("manifest", BAD_MANIFESTS)):
+        for file_name, text in table.items():
+            files[f"{prefix}:{file_name}"] = _write(bad / f"{prefix}_{file_name}", text)
     files.update(_flight_logs(bad))
     return files
 

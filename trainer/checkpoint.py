@@ -121,7 +121,10 @@ def _is_rate(value: Any) -> bool:
 
 def _is_time_range(value: Any) -> bool:
     return (
-        isinstance(value, list | tuple) and len(value) == 2 and all(map(_is_finite, value)) and value[0] <= value[1]
+        isinstance(value, list | tuple)
+        and len(value) == 2
+        and all(map(_is_finite, value))
+        and value[0] <= value[1]
     )
 
 

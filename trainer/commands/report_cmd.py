@@ -111,7 +111,8 @@ def _imu_result(out_dir: Path, recording: str, whole: Any, model: Path, runs: di
         models = []
         for channel in manifest.get("channels", []):
             entry = channel.get("model") if isinstance(channel, dict) else None
-            file = entry.get("file") if isinstance(entry, dict) else None
+            entry = entry if isinstance(entry, dict) else {}
+            file = entry.get("file")
             candidate = model.parent / str(file)
             if not isinstance(file, str) or not candidate.is_file():
                 raise UserError(
@@ -173,7 +174,13 @@ def _imu_json_summary(data: dict[str, Any], model: Path, path: Path) -> Any:
 
 
 def _verify(
-    model: Path, target: str, recording: str, rec: Any, whole: Any, smoothing_s: float, imu_runs: dict[Any, Any]
+    model: Path,
+    target: str,
+    recording: str,
+    rec: Any,
+    whole: Any,
+    smoothing_s: float,
+    imu_runs: dict[Any, Any],
 ) -> tuple[Any, dict[str, Any] | None]:
     """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON; an IMU
     module (docs/imu-module.md) or its JSON gives the model's channel. A spread module run now is also
@@ -363,7 +370,9 @@ def run(args: argparse.Namespace) -> int:
                 held_text = (
                     f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
                 )
-                held_warning = overlap_warning(stats, held, data_fingerprint(held), whole=rec, what="held-out")
+                held_warning = overlap_warning(
+                    stats, held, data_fingerprint(held), whole=rec, what="held-out"
+                )
                 if held_warning:
                     notes.append(f"held-out part: {held_warning}")
             warning = overlap_warning(stats, rec, data_fingerprint(rec))

@@ -223,10 +223,10 @@ def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: l
         except (MemoryError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the parsers raise many types on damaged files; all mean the same
-            failure = type(exc).__name__
+            failure: str | None = type(exc).__name__
         else:
             failure = None
-    summary = library_output_summary(out.getvalue() + native.read(), caught)
+    summary = library_output_summary(out.getvalue() + "".join(native), caught)
     if failure is not None:
         raise UserError(
             f"{source}: not a readable {KIND_NAMES[kind]} log (truncated or corrupted: {failure})"
@@ -237,36 +237,28 @@ def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: l
     return result
 
 
-class _Captured:
-    """What compiled code wrote to the process's stdout and stderr (file descriptors 1 and 2)."""
-
-    def __init__(self) -> None:
-        self.file = tempfile.TemporaryFile()
-
-    def read(self) -> str:
-        self.file.seek(0)
-        return self.file.read().decode("utf-8", errors="replace")
-
-
 @contextlib.contextmanager
-def _captured_fds() -> Iterator[_Captured]:
-    """Point file descriptors 1 and 2 at a temporary file: pymavlink's Cython indexer prints its
-    "bad header" lines with C stdio, below ``sys.stderr``."""
-    captured = _Captured()
-    saved = []
-    sys.stdout.flush()
-    sys.stderr.flush()
-    try:
-        for fd in (1, 2):
-            saved.append((fd, os.dup(fd)))
-            os.dup2(captured.file.fileno(), fd)
-        yield captured
-    finally:
-        ctypes.CDLL(None).fflush(None)  # C stdio buffers, before the descriptors go back
-        for fd, copy in saved:
-            os.dup2(copy, fd)
-            os.close(copy)
-    # the file stays open for read() and closes with the object
+def _captured_fds() -> Iterator[list[str]]:
+    """Point file descriptors 1 and 2 at a temporary file; its text is in the yielded list on exit.
+
+    pymavlink's Cython indexer prints its "bad header" lines with C stdio, below ``sys.stderr``."""
+    text: list[str] = []
+    with tempfile.TemporaryFile() as file:
+        saved = []
+        sys.stdout.flush()
+        sys.stderr.flush()
+        try:
+            for fd in (1, 2):
+                saved.append((fd, os.dup(fd)))
+                os.dup2(file.fileno(), fd)
+            yield text
+        finally:
+            ctypes.CDLL(None).fflush(None)  # C stdio buffers, before the descriptors go back
+            for fd, copy in saved:
+                os.dup2(copy, fd)
+                os.close(copy)
+            file.seek(0)
+            text.append(file.read().decode("utf-8", errors="replace"))
 
 
 SHOWN_CHARS = 80  # of the first captured line, in the summary

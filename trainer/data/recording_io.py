@@ -196,16 +196,20 @@ def _parse_npz_meta(source: str, array: np.ndarray) -> dict[str, str]:
 def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.ndarray:
     """One member as an array; a member that is not a ``.npy`` array, holds Python objects, or whose
     header promises more data than it holds is a one-line UserError (checked before allocating)."""
-    member = f"{name}.npy" if f"{name}.npy" in archive.zip.namelist() else name
     where = f"{source}: column {name!r}"
+    zipped = archive.zip
+    assert zipped is not None, "an open NpzFile has its zip"
+    member = f"{name}.npy" if f"{name}.npy" in zipped.namelist() else name
     try:
-        with archive.zip.open(member) as handle:
+        with zipped.open(member) as handle:
             version = np.lib.format.read_magic(handle)
             read_header = (
-                np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
             )
             shape, _, dtype = read_header(handle)
-        size = archive.zip.getinfo(member).file_size
+        size = zipped.getinfo(member).file_size
         if math.prod(shape) * dtype.itemsize > size:
             raise UserError(
                 f"{where}: its header declares {math.prod(shape)} values of {dtype} but the member holds "
