@@ -54,7 +54,7 @@ def add_parser(subparsers: Any) -> None:
         action="append",
         metavar="DIR|JSON",
         help="repeated once per model, in order: a directory written by 'codegen export' (verified now on "
-        "the recording) or the JSON of 'codegen verify --json'",
+        "the recording) or the JSON of 'codegen verify --json'; an IMU module (or its JSON) once for all models",
     )
     parser.add_argument(
         "--bench",
