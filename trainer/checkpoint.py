@@ -12,7 +12,7 @@ The file is a ``torch.save`` of a plain dict::
 and is always read with ``torch.load(weights_only=True)``, which refuses pickled code.
 
 :func:`load_checkpoint` is the one validation of these fields for every command that loads a model
-(``evaluate``, ``report``, ``fleet``, ``codegen export/verify``): a hand-edited or damaged file
+(``evaluate``, ``report``, ``codegen export/verify``, ``--format px4-params``): a hand-edited or damaged file
 (NaN coefficients, ``train_stats = None``, a one-number valid range) is a one-line UserError naming
 the field, never a traceback inside a command nor a report scored with NaN.
 """
