@@ -26,7 +26,7 @@ from codegen.render import _environment
 from codegen.verify import to_step_units
 from trainer.data.channels import channel_view, recording_channels
 from trainer.data.recording import Recording
-from trainer.errors import UserError
+from trainer.errors import UserError, atomic_output
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,10 +49,55 @@ class ImuVerifyResult:
     channels: list[str]
     units: list[str]
     runs: list[ImuRun] = field(default_factory=list)
+    model_ids: list[str] = field(default_factory=list)  # per channel: "sha256:" of its model.pt
+    rate_millihz: int = 0  # the module's rate contract (0: memoryless, any rate)
 
     @property
     def ok(self) -> bool:
         return all(sum(run.mismatches) == 0 and run.state_equal for run in self.runs)
+
+    def channel_mismatches(self, index: int) -> int:
+        """Mismatches of one channel over every run (targets and calibration sources)."""
+        return sum(run.mismatches[index] for run in self.runs)
+
+
+# codegen verify --channels --json writes it; trainer report --verify reads it
+IMU_VERIFY_FORMAT = "mems-tdc-imu-verify"
+
+
+def imu_verify_json(result: ImuVerifyResult) -> dict[str, Any]:
+    """The result as plain JSON data: per channel (name, unit, model id, mismatches) and per run, so
+    that ``trainer report --verify F.json`` can sign off any channel of the module."""
+    return {
+        "format": IMU_VERIFY_FORMAT,
+        "name": result.name,
+        "samples": result.samples,
+        "mismatches": sum(sum(run.mismatches) for run in result.runs),
+        "state_equal": all(run.state_equal for run in result.runs),
+        "rate_millihz": result.rate_millihz,
+        "channels": [
+            {"name": name, "unit": unit, "model_id": model_id, "mismatches": result.channel_mismatches(k)}
+            for k, (name, unit, model_id) in enumerate(
+                zip(result.channels, result.units, result.model_ids, strict=True)
+            )
+        ],
+        "runs": [
+            {
+                "target": run.target,
+                "calibration": run.calibration,
+                "mismatches": run.mismatches,
+                "state_equal": run.state_equal,
+                "instructions_per_step": run.instructions_per_step,
+            }
+            for run in result.runs
+        ],
+    }
+
+
+def write_imu_json(result: ImuVerifyResult, path: str | Path) -> None:
+    """``codegen verify --channels ... --json PATH``, written atomically."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(imu_verify_json(result), indent=2, sort_keys=True) + "\n", encoding="utf-8")
 
 
 def imu_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]] | None:
@@ -238,7 +283,14 @@ def verify_imu(
         )
     raw, temp = step_inputs(imu, rec)
     g_out, g_flags, g_samples = imu_golden(imu, raw, temp)
-    result = ImuVerifyResult(name, len(rec), [c.name for c in imu.channels], [c.unit for c in imu.channels])
+    result = ImuVerifyResult(
+        name,
+        len(rec),
+        [c.name for c in imu.channels],
+        [c.unit for c in imu.channels],
+        model_ids=[f"sha256:{c.model.sha256}" for c in imu.channels],
+        rate_millihz=imu.rate_millihz,
+    )
     sources: list[tuple[str, bytes | None]] = []
     if manifest["calibration"]["builtin"]:
         sources.append(("builtin", None))

@@ -193,3 +193,28 @@ def test_dlstm_normalisation_is_written_once_and_old_checkpoints_still_load(
         spec = parse_checkpoint(checkpoint, str(path)).model
         assert spec.frontend.inputs_mean == model.inputs_norm.mean, layout
         assert spec.frontend.output_std == model.output_norm.std[0], layout
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda c: c["payload"].update(slopes_mg_per_c=c["payload"]["slopes_mg_per_c"] * float("nan")),
+         "payload.slopes_mg_per_c"),
+        (lambda c: c.update(train_stats=None), "train_stats"),
+        (lambda c: c["train_stats"].update(time_range_s=[5.0]), "train_stats.time_range_s"),
+        (lambda c: c["train_stats"].update(sample_rate_hz=-1.0), "train_stats.sample_rate_hz"),
+        (lambda c: c.update(valid_temp_range_c=[1.0]), "valid_temp_range_c"),
+        (lambda c: c.update(valid_temp_range_c=[9.0, 1.0]), "valid_temp_range_c"),
+        (lambda c: c.update(method=["pla"]), "method"),
+        (lambda c: c.update(offset={"mode": "relative"}), "offset"),
+    ],
+)  # fmt: skip
+def test_every_field_is_checked_at_load_naming_it(tmp_path: Path, change: Any, field: str) -> None:
+    """One validation (load_checkpoint) for every command that loads a model: the field is named."""
+    path = _save_then(tmp_path)
+    checkpoint = torch.load(path, weights_only=True)
+    checkpoint["train_stats"] = {"time_range_s": [0.0, 9.0], "sample_rate_hz": 2.0}
+    change(checkpoint)
+    torch.save(checkpoint, path)
+    with pytest.raises(UserError, match=rf"model\.pt: field '{field}'"):
+        load_model(path)

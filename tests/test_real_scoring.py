@@ -12,10 +12,10 @@ import pytest
 
 from trainer.cli import main
 from trainer.data.holdout import Holdout, overlap_warning, parse_holdout, split
-from trainer.data.recording import Recording
+from trainer.data.recording import Recording, data_fingerprint
 from trainer.data.recording_io import write_recording
 from trainer.errors import UserError, run_cli
-from trainer.fitting import data_fingerprint, fit_compensator, training_stats
+from trainer.fitting import fit_compensator, training_stats
 from trainer.scoring.inject import injected_input, input_kept
 from trainer.scoring.static import (
     COOLING,

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trainer.data import csv_table, recording_io
-from trainer.data.recording import Recording
+from trainer.data.recording import MIN_ROWS, Recording
 from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import UserError
 
@@ -178,7 +178,7 @@ def test_fast_and_slow_parsers_agree_bit_for_bit(tmp_path: Path, monkeypatch: py
 @st.composite
 def messy_files(draw: st.DrawFn) -> tuple[list[str], np.ndarray, int | None]:
     """Valid rows with comments and blank lines sprinkled in, maybe one bad cell; its line if any."""
-    n = draw(st.integers(1, 40))
+    n = draw(st.integers(MIN_ROWS, 40))  # fewer is refused (test_malformed_corpus.py)
     values = np.array(draw(st.lists(st.integers(-999, 999), min_size=2 * n, max_size=2 * n)), float).reshape(
         n, 2
     )

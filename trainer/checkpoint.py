@@ -10,22 +10,31 @@ The file is a ``torch.save`` of a plain dict::
 :class:`trainer.reference.OffsetRecord` of a temperature-driven model.
 
 and is always read with ``torch.load(weights_only=True)``, which refuses pickled code.
+
+:func:`load_checkpoint` is the one validation of these fields for every command that loads a model
+(``evaluate``, ``report``, ``codegen export/verify``, ``--format px4-params``): a hand-edited or damaged file
+(NaN coefficients, ``train_stats = None``, a one-number valid range) is a one-line UserError naming
+the field, never a traceback inside a command nor a report scored with NaN.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import os
 import pickle
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from trainer import __version__, methods
 from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
+from trainer.fields import DottedFields, show
 from trainer.reference import OffsetRecord
 
 FORMAT_NAME = "mems-tdc-model"
@@ -90,14 +99,99 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise UserError(
             f"{p}: field 'format_version' is {version!r}; this tool reads version {FORMAT_VERSION}"
         )
-    for key in ("method", "payload", "train_stats", "valid_temp_range_c"):
-        if key not in checkpoint:
-            raise UserError(f"{p}: field '{key}' is missing")
-    if checkpoint["method"] not in methods.REGISTRY:
-        raise UserError(
-            f"{p}: field 'method' is {checkpoint['method']!r}, not one of {', '.join(sorted(methods.REGISTRY))}"
-        )
+    _check_fields(checkpoint, str(p))
     return checkpoint
+
+
+def _is_text(value: Any) -> bool:
+    return isinstance(value, str)
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _is_finite(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_rate(value: Any) -> bool:
+    return _is_finite(value) and value > 0
+
+
+def _is_time_range(value: Any) -> bool:
+    return (
+        isinstance(value, list | tuple)
+        and len(value) == 2
+        and all(map(_is_finite, value))
+        and value[0] <= value[1]
+    )
+
+
+# The train_stats fields that commands read (trainer/fitting.py training_stats writes them): each is
+# optional (hand-made and older files carry few), and when present it must be what its readers expect.
+TRAIN_STATS_FIELDS: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "source": (_is_text, "a string"),
+    "data_sha256": (_is_text, "a string"),
+    "channel": (_is_text, "a string"),
+    "unit": (_is_text, "a string"),
+    "n_samples": (_is_count, "a whole number >= 0"),
+    "device_id": (_is_count, "a whole number >= 0"),
+    "sample_rate_hz": (_is_rate, "a finite number > 0"),
+    "temp_min_c": (_is_finite, "a finite number"),
+    "temp_max_c": (_is_finite, "a finite number"),
+    "time_range_s": (_is_time_range, "[start, end], finite and increasing"),
+    "selection": (lambda v: isinstance(v, dict), "a dict"),
+}
+
+
+def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
+    """Every field a command reads, typed and finite: one place for every command."""
+    root = DottedFields(source, checkpoint, "")
+    for key in ("method", "payload", "train_stats", "valid_temp_range_c"):
+        root.raw(key)
+    method = checkpoint["method"]
+    if not isinstance(method, str) or method not in methods.REGISTRY:
+        raise UserError(
+            f"{source}: field 'method' is {show(method)}, not one of {', '.join(sorted(methods.REGISTRY))}"
+        )
+    root.sub("payload")  # a dict
+    stats = root.sub("train_stats")
+    for key, (valid, what) in TRAIN_STATS_FIELDS.items():
+        if stats.has(key) and not valid(stats.data[key]):
+            stats.fail(f"field 'train_stats.{key}' must be {what}, got {show(stats.data[key])}")
+    lo, hi = root.numbers("valid_temp_range_c", 2)
+    if not lo <= hi:
+        root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
+    if "offset" in checkpoint:
+        try:
+            OffsetRecord.from_dict(checkpoint["offset"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{source}: field 'offset' is malformed ({exc})") from None
+    bad = _first_non_finite(checkpoint["payload"], "payload")
+    if bad is not None:
+        raise UserError(f"{source}: field {bad!r} holds NaN or inf (a damaged or hand-edited model file)")
+
+
+def _first_non_finite(value: Any, name: str) -> str | None:
+    """Dotted name of the first number (float, tensor, array) in ``value`` that is NaN or inf."""
+    if isinstance(value, dict):
+        items: Any = ((f"{name}.{k}", v) for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        items = ((f"{name}[{i}]", v) for i, v in enumerate(value))
+    elif isinstance(value, torch.Tensor):
+        return name if value.is_floating_point() and not bool(torch.isfinite(value).all()) else None
+    elif isinstance(value, np.ndarray):
+        return name if value.dtype.kind == "f" and not bool(np.isfinite(value).all()) else None
+    elif isinstance(value, float):
+        return None if math.isfinite(value) else name
+    else:
+        return None
+    for child, item in items:
+        found = _first_non_finite(item, child)
+        if found is not None:
+            return found
+    return None
 
 
 def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any]]:
@@ -106,13 +200,14 @@ def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any
     cls = methods.REGISTRY[checkpoint["method"]].cls
     try:
         model = cls.from_payload(checkpoint["payload"])
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except KeyError as exc:
+        raise UserError(
+            f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} (key {exc} is missing)"
+        ) from None
+    except (TypeError, ValueError, IndexError, AttributeError) as exc:  # wrong types or shapes
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None
     if "offset" in checkpoint:
-        try:
-            model.offset = OffsetRecord.from_dict(checkpoint["offset"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise UserError(f"{path}: field 'offset' is malformed ({exc})") from None
+        model.offset = OffsetRecord.from_dict(checkpoint["offset"])
     return model, checkpoint

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import hashlib
 from typing import Any
 
 import numpy as np
 
 from trainer import methods
 from trainer.compensator import Compensator
-from trainer.data.recording import Recording
+from trainer.data.recording import Recording, data_fingerprint
 from trainer.errors import UserError
 from trainer.reference import (
     OFFSET_OPTION,
@@ -64,14 +63,6 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
     if device_id.isdigit():
         stats["device_id"] = int(device_id)
     return stats
-
-
-def data_fingerprint(rec: Recording) -> str:
-    """sha256 of the time, temperature and acceleration columns: the same data, whatever the file."""
-    digest = hashlib.sha256()
-    for name in ("time_s", "temp_c", "accel_mg"):
-        digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
-    return digest.hexdigest()
 
 
 def fit_compensator(

@@ -128,8 +128,9 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
-    from trainer.fitting import data_fingerprint, training_stats
+    from trainer.fitting import training_stats
     from trainer.scoring.compare import compare
     from trainer.scoring.report import headline_table, render_report, write_figures, write_survival_figure
 

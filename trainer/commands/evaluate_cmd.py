@@ -79,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import load_model
     from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
-    from trainer.fitting import data_fingerprint
     from trainer.scoring.allan import plot_allan
     from trainer.scoring.compare import compensate_after
     from trainer.scoring.evaluate import evaluate
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)
-    rec = read_recording(args.recording)
+    rec = whole = read_recording(args.recording)
     lead_in = None
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
@@ -123,7 +123,14 @@ def run(args: argparse.Namespace) -> int:
             f"input kept [{name}]: {100 * kept.gain:.1f} % of the injected '{args.inject}' input "
             f"(RMS {kept.input_rms_mg:.4g} mg; removed or distorted RMS {kept.error_rms_mg:.4g} mg)"
         )
-    warning = overlap_warning(checkpoint["train_stats"], rec, data_fingerprint(rec))
+    # a held-out part the model was trained on is not held out: said in the output and the report
+    warning = overlap_warning(
+        checkpoint["train_stats"],
+        rec,
+        data_fingerprint(rec),
+        whole=whole,
+        what="validation" if args.holdout is None else "held-out",
+    )
     if warning:
         extra.append(warning)
     print(relabel_units(text, signal.unit))

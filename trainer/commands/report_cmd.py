@@ -17,6 +17,9 @@ from trainer.errors import UserError
 
 EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
 ANY_RANGE_C = (-math.inf, math.inf)  # scores that need no in-range part
+# options that may be given once for every model: one recording of the unit; one IMU module (or its
+# verify JSON) holding every model's channel (a one-channel module refuses the other models in one line)
+ONCE_FOR_ALL = ("--recording", "--verify")
 
 # Heavy modules (torch, matplotlib, cffi) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -51,7 +54,7 @@ def add_parser(subparsers: Any) -> None:
         action="append",
         metavar="DIR|JSON",
         help="repeated once per model, in order: a directory written by 'codegen export' (verified now on "
-        "the recording) or the JSON of 'codegen verify --json'",
+        "the recording) or the JSON of 'codegen verify --json'; an IMU module (or its JSON) once for all models",
     )
     parser.add_argument(
         "--bench",
@@ -67,7 +70,7 @@ def add_parser(subparsers: Any) -> None:
 def _per_model(values: list[str] | None, models: list[str], option: str) -> list[str | None]:
     if values is None:
         return [None] * len(models)
-    if len(values) == 1 and len(models) > 1 and option == "--recording":
+    if len(values) == 1 and len(models) > 1 and option in ONCE_FOR_ALL:
         return [values[0]] * len(models)
     if len(values) != len(models):
         raise UserError(f"{option}: {len(values)} given for {len(models)} models; give one per model")
@@ -90,16 +93,106 @@ def _field(data: Any, key: str, kind: type | tuple[type, ...], path: Path) -> An
     return value
 
 
+def _model_id(path: Path) -> str:
+    return f"sha256:{hashlib.sha256(path.read_bytes()).hexdigest()}"
+
+
+def _imu_result(out_dir: Path, recording: str, whole: Any, model: Path, runs: dict[Any, Any]) -> Any:
+    """``codegen verify --channels`` of the IMU module in ``out_dir`` on the whole recording, run once
+    per (module, recording) of this report (``runs``); the module's channel models are found beside
+    ``model`` (the 'trainer fit --channels' directory); the report then checks the model's sha256."""
+    from codegen.imu_verify import imu_manifest, verify_imu
+
+    key = (out_dir.resolve(), recording)
+    if key not in runs:
+        found = imu_manifest(out_dir, None)
+        assert found is not None
+        name, manifest = found
+        models = []
+        for channel in manifest.get("channels", []):
+            entry = channel.get("model") if isinstance(channel, dict) else None
+            entry = entry if isinstance(entry, dict) else {}
+            file = entry.get("file")
+            candidate = model.parent / str(file)
+            if not isinstance(file, str) or not candidate.is_file():
+                raise UserError(
+                    f"--verify {out_dir}: the IMU module's channel {channel.get('name')!r} was exported from "
+                    f"{file!r}, not found beside {model}: give the models of the 'trainer fit --channels' "
+                    "directory the module was exported from"
+                )
+            if _model_id(candidate) != f"sha256:{entry.get('sha256')}":
+                raise UserError(
+                    f"--verify {out_dir}: the IMU module's channel {channel.get('name')!r} was exported from "
+                    f"another model than {candidate} (sha256 differs): export the module again, or give "
+                    "the models it was exported from"
+                )
+            models.append(candidate)
+        runs[key] = verify_imu(models, out_dir, whole, name=name)
+    return runs[key]
+
+
+def _imu_summary(result: Any, model: Path, source: str) -> Any:
+    """The VerifySummary of ``model``'s channel in an IMU module's verify result."""
+    from trainer.scoring.signoff import VerifySummary
+
+    model_id = _model_id(model)
+    if model_id not in result.model_ids:
+        raise UserError(
+            f"--verify {source}: the IMU module holds no channel exported from {model} ({model_id[:23]}...); "
+            f"its channels: {', '.join(result.channels)}"
+        )
+    k = result.model_ids.index(model_id)
+    return VerifySummary(
+        result.channel_mismatches(k),
+        result.samples,
+        all(run.state_equal for run in result.runs),
+        model_id,
+        source,
+        result.rate_millihz,
+    )
+
+
+def _imu_json_summary(data: dict[str, Any], model: Path, path: Path) -> Any:
+    """The VerifySummary of ``model``'s channel from ``codegen verify --channels --json``."""
+    from trainer.scoring.signoff import VerifySummary
+
+    model_id = _model_id(model)
+    channels = data.get("channels")
+    if not isinstance(channels, list):
+        raise UserError(f"{path}: field 'channels' is missing or not a list")
+    entry = next((c for c in channels if isinstance(c, dict) and c.get("model_id") == model_id), None)
+    if entry is None:
+        raise UserError(f"{path}: no channel of model {model} ({model_id[:23]}...) in this IMU verify result")
+    return VerifySummary(
+        int(_field(entry, "mismatches", int, path)),
+        int(_field(data, "samples", int, path)),
+        bool(_field(data, "state_equal", bool, path)),
+        model_id,
+        str(path),
+        int(data.get("rate_millihz") or 0),
+    )
+
+
 def _verify(
-    model: Path, target: str, recording: str, rec: Any, smoothing_s: float
+    model: Path,
+    target: str,
+    recording: str,
+    rec: Any,
+    whole: Any,
+    smoothing_s: float,
+    imu_runs: dict[Any, Any],
 ) -> tuple[Any, dict[str, Any] | None]:
-    """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON. A spread
-    module run now is also scored under both schedules on the recording (when it was not resampled)."""
+    """(VerifySummary, manifest sizes or None) from a module directory (run now) or a JSON; an IMU
+    module (docs/imu-module.md) or its JSON gives the model's channel. A spread module run now is also
+    scored under both schedules on the recording (when it was not resampled)."""
+    from codegen.imu_verify import IMU_VERIFY_FORMAT, imu_manifest
     from codegen.verify import find_manifest, schedule_parts, verify
     from trainer.scoring.signoff import VerifySummary
     from trainer.scoring.unit_scores import score_part
 
     path = Path(target)
+    if path.is_dir() and imu_manifest(path, None) is not None:
+        return _imu_summary(_imu_result(path, recording, whole, model, imu_runs), model, str(path)), None
     if path.is_dir():
         result = verify(model, path, recording, table1=False, resample=True)
         _, manifest = find_manifest(path, result.name)
@@ -116,7 +209,7 @@ def _verify(
             result.mismatches,
             result.samples,
             result.state_equal,
-            f"sha256:{hashlib.sha256(model.read_bytes()).hexdigest()}",
+            _model_id(model),
             str(path),
             result.rate_millihz,
             result.resampled_from_hz,
@@ -124,6 +217,8 @@ def _verify(
         )
         return summary, manifest.get("sizes")
     data = _read_json(path, "verify result")
+    if isinstance(data, dict) and data.get("format") == IMU_VERIFY_FORMAT:
+        return _imu_json_summary(data, model, path), None
     summary = VerifySummary(
         int(_field(data, "mismatches", int, path)),
         int(_field(data, "samples", int, path)),
@@ -218,8 +313,8 @@ def run(args: argparse.Namespace) -> int:
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit
     from trainer.data.holdout import overlap_warning, parse_holdout
+    from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
-    from trainer.fitting import data_fingerprint
     from trainer.scoring import signoff
     from trainer.scoring.thresholds import load_thresholds
     from trainer.scoring.unit_scores import held_out_rows, score_unit
@@ -247,11 +342,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         reports = []
         seen: set[str] = set()
+        imu_runs: dict[Any, Any] = {}  # an IMU module given for several models is verified once
         for model_arg, rec_path, target in zip(args.models, recordings, verifies, strict=True):
             assert rec_path is not None
             model_path = Path(model_arg)
             model, ckpt = load_model(model_path)
-            stats = ckpt.get("train_stats", {}) if isinstance(ckpt.get("train_stats"), dict) else {}
+            stats = ckpt["train_stats"]  # a dict: trainer/checkpoint.py validated it
             rec = model_view(loaded[rec_path], str(stats.get("channel") or ""), model_path)
             channel = str(stats.get("channel") or model_path.stem)
             label = f"{channel} / {ckpt['method']}"
@@ -262,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
                 )
             seen.add(label)
             lo, hi = (float(v) for v in ckpt["valid_temp_range_c"])
-            model_id = f"sha256:{hashlib.sha256(model_path.read_bytes()).hexdigest()}"
+            model_id = _model_id(model_path)
             compensated = model.compensate(rec.without_truth())
             # the held-out part is cut from the whole run's output (unit_scores): the state has run
             # through what precedes it, as in firmware running since power-on (as trainer compare)
@@ -275,7 +371,9 @@ def run(args: argparse.Namespace) -> int:
                 held_text = (
                     f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
                 )
-                held_warning = overlap_warning(stats, held, data_fingerprint(held))
+                held_warning = overlap_warning(
+                    stats, held, data_fingerprint(held), whole=rec, what="held-out"
+                )
                 if held_warning:
                     notes.append(f"held-out part: {held_warning}")
             warning = overlap_warning(stats, rec, data_fingerprint(rec))
@@ -290,7 +388,9 @@ def run(args: argparse.Namespace) -> int:
                 else None
             )
             verify, sizes = (
-                (None, None) if target is None else _verify(model_path, target, rec_path, rec, args.smoothing)
+                (None, None)
+                if target is None
+                else _verify(model_path, target, rec_path, rec, loaded[rec_path], args.smoothing, imu_runs)
             )
             entry = _bench_entry(bench, model_id, bench_path) if bench_path else None
             if bench_path is not None and entry is None:

@@ -66,11 +66,11 @@ def read_dataflash(path: str | Path) -> FlightLog:
                     (msg.TimeUS, msg.AccX, msg.AccY, msg.AccZ, msg.GyrX, msg.GyrY, msg.GyrZ, msg.T)
                 )
 
-    quiet_library_call(source, "dataflash", collect)
+    notices: list[str] = []  # printed at import: the reader's summarised warnings, corrections undone
+    quiet_library_call(source, "dataflash", collect, notices)
     ids = _device_ids(params)
     orientation = int(params.get("AHRS_ORIENTATION", 0))
     channels: list[LogChannel] = []
-    notices: list[str] = []
     notes: dict[str, str] = {}
     for (kind, instance), samples in rows.items():
         table = np.array(samples, dtype=np.float64)

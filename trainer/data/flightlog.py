@@ -15,8 +15,13 @@ reaches the delimiter sniffer of the CSV importer. The readers live in ``ulog_re
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import io
+import os
 import re
+import sys
+import tempfile
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -197,18 +202,73 @@ def log_kind(path: str | Path) -> str | None:
     return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
 
 
-def quiet_library_call(source: str, kind: str, call: Callable[[], T]) -> T:
-    """Run a parser that prints to stdout and raises its own exception types.
+def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: list[str] | None = None) -> T:
+    """Run a parser that prints and warns, and raises its own exception types.
 
-    Its console chatter is swallowed and any exception becomes one line naming the file; the
-    library's own message is not forwarded (it may be long, coloured or give unsafe advice).
+    What it prints (stdout, stderr) or warns is captured, never forwarded: a damaged log makes the
+    readers print thousands of lines. It is summarised in one line, appended to ``notices`` (printed
+    once by ``trainer import``) or, when the parser fails, added to the one-line error naming the file;
+    the library's exception message is not forwarded either (long, coloured or unsafe advice).
     """
-    with contextlib.redirect_stdout(io.StringIO()):
+    out = io.StringIO()
+    with (
+        _captured_fds() as native,
+        contextlib.redirect_stdout(out),
+        contextlib.redirect_stderr(out),
+        warnings.catch_warnings(record=True) as caught,
+    ):
+        warnings.simplefilter("always")
         try:
-            return call()
+            result = call()
         except (MemoryError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the parsers raise many types on damaged files; all mean the same
-            raise UserError(
-                f"{source}: not a readable {KIND_NAMES[kind]} log (truncated or corrupted: {type(exc).__name__})"
-            ) from None
+            failure: str | None = type(exc).__name__
+        else:
+            failure = None
+    summary = library_output_summary(out.getvalue() + "".join(native), caught)
+    if failure is not None:
+        raise UserError(
+            f"{source}: not a readable {KIND_NAMES[kind]} log (truncated or corrupted: {failure})"
+            + (f"; {summary}" if summary else "")
+        )
+    if summary and notices is not None:
+        notices.append(f"{source}: {summary}; the damaged parts were skipped")
+    return result
+
+
+@contextlib.contextmanager
+def _captured_fds() -> Iterator[list[str]]:
+    """Point file descriptors 1 and 2 at a temporary file; its text is in the yielded list on exit.
+
+    pymavlink's Cython indexer prints its "bad header" lines with C stdio, below ``sys.stderr``."""
+    text: list[str] = []
+    with tempfile.TemporaryFile() as file:
+        saved = []
+        sys.stdout.flush()
+        sys.stderr.flush()
+        try:
+            for fd in (1, 2):
+                saved.append((fd, os.dup(fd)))
+                os.dup2(file.fileno(), fd)
+            yield text
+        finally:
+            ctypes.CDLL(None).fflush(None)  # C stdio buffers, before the descriptors go back
+            for fd, copy in saved:
+                os.dup2(copy, fd)
+                os.close(copy)
+            file.seek(0)
+            text.append(file.read().decode("utf-8", errors="replace"))
+
+
+SHOWN_CHARS = 80  # of the first captured line, in the summary
+
+
+def library_output_summary(text: str, caught: list[warnings.WarningMessage]) -> str | None:
+    """``the reader printed N lines (first: ...)`` for captured library output, None when silent."""
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    lines += [f"{w.category.__name__}: {w.message}" for w in caught]
+    if not lines:
+        return None
+    first = " ".join(lines[0].split())[:SHOWN_CHARS]  # shown with repr: control codes stay escaped
+    return f"the log reader printed {len(lines):,} warning line{'s' if len(lines) != 1 else ''} (first: {first!r})"

@@ -20,7 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from trainer.data.recording import Recording
+from trainer.data.recording import Recording, data_fingerprint
 from trainer.errors import UserError
 
 MIN_ROWS = 16  # each part must hold at least this many samples
@@ -102,25 +102,50 @@ def _same_file(a: str, b: str) -> bool:
         return a == b
 
 
-def overlap_warning(train_stats: dict[str, Any], valid: Recording, fingerprint: str) -> str | None:
-    """A warning when ``valid`` is the training data or overlaps it (same file, overlapping times).
+def _trained_on(train_stats: dict[str, Any], rec: Recording, lo: float, hi: float) -> bool:
+    """Whether the rows of ``rec`` in ``[lo, hi]`` s are the training data, by content
+    (``data_sha256``): whatever the path, the working directory or a copy of the file."""
+    start = int(np.searchsorted(rec.time_s, lo, side="left"))
+    stop = int(np.searchsorted(rec.time_s, hi, side="right"))
+    part = rec.slice(start, stop)
+    if len(part) != train_stats.get("n_samples", len(part)):  # cheap first test
+        return False
+    return data_fingerprint(part) == train_stats.get("data_sha256")
+
+
+def overlap_warning(
+    train_stats: dict[str, Any],
+    valid: Recording,
+    fingerprint: str,
+    *,
+    whole: Recording | None = None,
+    what: str = "validation",
+) -> str | None:
+    """A warning when ``valid`` is the training data or overlaps it, one line.
 
     ``train_stats`` is :func:`trainer.fitting.training_stats` of the training data (also stored in
-    ``model.pt``); ``fingerprint`` is :func:`trainer.fitting.data_fingerprint` of ``valid``.
+    ``model.pt``); ``fingerprint`` is :func:`trainer.data.recording.data_fingerprint` of ``valid``;
+    ``whole`` the recording ``valid`` was cut from (``--holdout``) and ``what`` names ``valid`` in the
+    message. Overlap is proved by content (the training rows' fingerprint found in ``whole``) or by
+    the same file and overlapping times.
     """
     if train_stats.get("data_sha256") == fingerprint:
         return (
-            "warning: the validation data is the training data: every score is in-sample and says "
+            f"warning: the {what} data is the training data: every score is in-sample and says "
             "nothing about a new run (use another recording or --holdout)"
         )
     time_range = train_stats.get("time_range_s")
+    if not time_range:
+        return None
+    lo, hi = float(time_range[0]), float(time_range[1])
+    inside = (valid.time_s >= lo) & (valid.time_s <= hi)
+    if not np.any(inside):
+        return None
     source = str(train_stats.get("source", ""))
-    if time_range and source and _same_file(source, valid.source):
-        lo, hi = float(time_range[0]), float(time_range[1])
-        inside = (valid.time_s >= lo) & (valid.time_s <= hi)
-        if np.any(inside):
-            return (
-                f"warning: {100 * float(np.mean(inside)):.1f} % of the validation rows are training rows "
-                f"({source}, t = {lo:g} .. {hi:g} s): those scores are in-sample"
-            )
+    if (source and _same_file(source, valid.source)) or _trained_on(train_stats, whole or valid, lo, hi):
+        return (
+            f"warning: {100 * float(np.mean(inside)):.1f} % of the {what} rows are training rows (the "
+            f"model was trained on t = {lo:g} .. {hi:g} s of this recording, {source or 'source unnamed'}): "
+            "those scores are in-sample"
+        )
     return None

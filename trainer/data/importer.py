@@ -35,7 +35,7 @@ from trainer.data.flightlog import (
 )
 from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
 from trainer.data.plausibility import Plausibility
-from trainer.data.recording import Recording
+from trainer.data.recording import Recording, require_rows
 from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
 from trainer.errors import UserError
 
@@ -331,6 +331,7 @@ def _finish(
     """Time base (jitter rule, retime or resample), gravity, plausibility and metadata."""
     source = table.source
     n = len(table)
+    require_rows(n, source)  # every time base below (median step, retime, resample) needs a step
     time = _time_seconds(table, options)
     columns = {"time_s": time, **columns}
     checks.temperature(columns["temp_c"], f"{source}: column {options.temp!r}", at_import=True)
@@ -427,15 +428,11 @@ def _time_seconds(table: Table, options: ImportOptions) -> np.ndarray:
 
 
 def _median_rate(time: np.ndarray) -> float:
-    if len(time) < 2:
-        raise UserError("cannot derive a sample rate from a single row; use --time-unit index --rate HZ")
     return float(1.0 / np.median(np.diff(time)))
 
 
 def _retime_rate(time: np.ndarray, table: Table, time_column: str) -> float:
     """Rate of the uniform grid with the same row count and span, after checking no sample is lost."""
-    if len(time) < 2:
-        raise UserError(f"{table.source}: cannot retime a single row")
     steps = np.diff(time)
     median = float(np.median(steps))
     off = np.flatnonzero(np.abs(steps - median) > RETIME_MAX_JITTER * median)
@@ -451,8 +448,6 @@ def _retime_rate(time: np.ndarray, table: Table, time_column: str) -> float:
 
 
 def _resample_rate(resample: float | str, time: np.ndarray, source: str) -> float:
-    if len(time) < 2:
-        raise UserError(f"{source}: cannot resample a single row")
     if resample == "auto":
         return (len(time) - 1) / float(time[-1])
     return float(resample)

@@ -7,11 +7,15 @@ shares (required columns, ground-truth columns that fitting must never see).
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from trainer.errors import UserError
+
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")
+MIN_ROWS = 2  # one time step: the least that defines a sample rate (and a drift)
 TRUTH_PREFIX = "true_"
 
 
@@ -52,8 +56,7 @@ class Recording:
         """The ``sample_rate_hz`` metadata when present, else derived from the median step."""
         if "sample_rate_hz" in self.meta:
             return float(self.meta["sample_rate_hz"])
-        if len(self.time_s) < 2:
-            raise ValueError(f"{self.source}: cannot derive a sample rate from fewer than 2 rows")
+        require_rows(len(self.time_s), self.source)  # user data: one line, not a traceback
         return float(1.0 / np.median(np.diff(self.time_s)))
 
     def has(self, name: str) -> bool:
@@ -71,3 +74,23 @@ class Recording:
     def slice(self, start: int, stop: int) -> Recording:
         """Rows ``start:stop`` (views, not copies)."""
         return Recording({k: v[start:stop] for k, v in self.columns.items()}, dict(self.meta), self.source)
+
+
+def require_rows(n: int, source: str) -> None:
+    """Refuse fewer than :data:`MIN_ROWS` rows (``n`` >= 1; zero rows has its own message)."""
+    if n < MIN_ROWS:
+        raise UserError(
+            f"{source}: {n} data row; a recording needs at least {MIN_ROWS} (its time step is its sample "
+            "rate): the file is truncated or the logger stopped at once"
+        )
+
+
+def data_fingerprint(rec: Recording) -> str:
+    """sha256 of the time, temperature and acceleration columns: the same data, whatever the file.
+
+    ``train_stats.data_sha256`` of a model; :func:`trainer.data.holdout.overlap_warning` compares it
+    with the scored data's."""
+    digest = hashlib.sha256()
+    for name in REQUIRED_COLUMNS:
+        digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
+    return digest.hexdigest()

@@ -23,7 +23,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
-from trainer.data.recording import REQUIRED_COLUMNS, Recording
+from trainer.data.recording import REQUIRED_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
@@ -97,6 +97,7 @@ def check_recording(
     source = rec.source
     if len(rec.time_s) == 0:
         raise UserError(f"{source}: no data rows")
+    require_rows(len(rec.time_s), source)
     bad = first_non_finite(rec.columns)
     if bad is not None:
         name, row = bad
@@ -192,6 +193,42 @@ def _parse_npz_meta(source: str, array: np.ndarray) -> dict[str, str]:
     return meta
 
 
+def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.ndarray:
+    """One member as an array; a member that is not a ``.npy`` array, holds Python objects, or whose
+    header promises more data than it holds is a one-line UserError (checked before allocating)."""
+    where = f"{source}: column {name!r}"
+    zipped = archive.zip
+    assert zipped is not None, "an open NpzFile has its zip"
+    member = f"{name}.npy" if f"{name}.npy" in zipped.namelist() else name
+    try:
+        with zipped.open(member) as handle:
+            version = np.lib.format.read_magic(handle)
+            read_header = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read_header(handle)
+        size = zipped.getinfo(member).file_size
+        if math.prod(shape) * dtype.itemsize > size:
+            raise UserError(
+                f"{where}: its header declares {math.prod(shape)} values of {dtype} but the member holds "
+                f"{size} bytes (truncated or forged)"
+            )
+        array = archive[name]
+    except UserError:
+        raise
+    except ValueError as exc:
+        if "pickle" in str(exc):
+            raise UserError(f"{where}: holds Python objects, not numbers") from None
+        raise UserError(f"{where}: not a NumPy array (.npy) member ({exc})") from None
+    except Exception as exc:  # zip, I/O and header-parsing errors of a damaged member all mean the same
+        raise UserError(f"{where}: unreadable ({type(exc).__name__})") from None
+    if not isinstance(array, np.ndarray):
+        raise UserError(f"{where}: not a NumPy array (.npy) member")
+    return array
+
+
 def _read_npz(path: str | Path) -> Recording:
     source = str(path)
     if not Path(path).is_file():
@@ -206,12 +243,7 @@ def _read_npz(path: str | Path) -> Recording:
     meta: dict[str, str] = {}
     with archive:
         for name in archive.files:
-            try:
-                array = archive[name]
-            except ValueError:
-                raise UserError(f"{source}: column {name!r}: holds Python objects, not numbers") from None
-            except (OSError, zipfile.BadZipFile, EOFError) as exc:
-                raise UserError(f"{source}: column {name!r}: unreadable ({type(exc).__name__})") from None
+            array = _npz_member(archive, name, source)
             if name == NPZ_META:
                 meta = _parse_npz_meta(source, array)
                 continue

@@ -50,7 +50,8 @@ def read_ulog(path: str | Path) -> FlightLog:
     from pyulog import ULog
 
     source = str(path)
-    ulog: Any = quiet_library_call(source, "ulog", lambda: ULog(source, [*TOPICS, COMBINED]))
+    reader_notices: list[str] = []
+    ulog: Any = quiet_library_call(source, "ulog", lambda: ULog(source, [*TOPICS, COMBINED]), reader_notices)
     channels: list[LogChannel] = []
     notes: dict[str, str] = {}
     combined_samples = 0
@@ -69,7 +70,7 @@ def read_ulog(path: str | Path) -> FlightLog:
     missing = (
         COMBINED_ONLY.format(topic=COMBINED, samples=combined_samples) if combined_samples and not imu else ""
     )
-    return FlightLog(source, "ulog", sorted_channels(channels), notes, missing=missing)
+    return FlightLog(source, "ulog", sorted_channels(channels), notes, reader_notices, missing=missing)
 
 
 def _topic_channels(

@@ -10,6 +10,7 @@ a bad manifest is one line naming the file, the unit and the field.
 from __future__ import annotations
 
 import csv
+import io
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -190,7 +191,7 @@ def _unit(raw: dict[str, Any], where: str, base: Path, settings: FleetSettings) 
 
 def _read_toml(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any]]]]:
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(_text(path))
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{path}: not valid TOML ({exc})") from None
     top = TableFields(str(path), data, "")
@@ -202,13 +203,28 @@ def _read_toml(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any
     return settings, [(f"{path}: unit {i + 1}", u) for i, u in enumerate(units)]
 
 
+def _text(path: Path) -> str:
+    """The manifest's text; a file that is not UTF-8 text is the user's, in one line."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{path}: not UTF-8 text (byte {exc.start}): a binary file, not a manifest") from None
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read the manifest ({exc.strerror})") from None
+
+
 def _read_csv(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any]]]]:
-    with open(path, encoding="utf-8", newline="") as handle:
+    with io.StringIO(_text(path), newline="") as handle:
         reader = csv.DictReader(row for row in handle if not row.lstrip().startswith("#"))
         header = reader.fieldnames or []
-        for name in header:
+        for index, name in enumerate(header):
             if name not in CSV_COLUMNS:
                 raise UserError(f"{path}: unknown column {name!r} (expected: {', '.join(CSV_COLUMNS)})")
+            if name in header[:index]:  # DictReader would keep the last one silently
+                raise UserError(
+                    f"{path}: column {name!r} appears twice in the header (columns {header.index(name) + 1} "
+                    f"and {index + 1})"
+                )
         for required in ("id", "recordings"):
             if required not in header:
                 raise UserError(f"{path}: column {required!r} is missing")

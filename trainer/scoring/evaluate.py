@@ -21,6 +21,7 @@ import numpy as np
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
+from trainer.errors import UserError
 from trainer.reference import value_at_temperature
 from trainer.scoring.allan import AllanCurve, AllanTable, allan_table, default_taus
 from trainer.scoring.static import (
@@ -115,6 +116,24 @@ def drift_score(
     )
 
 
+def scoring_taus(rec: Recording, smoothing_s: float) -> np.ndarray:
+    """The Allan analysis' averaging times (s) for ``rec``; a recording too short to give one is the
+    user's (a short or truncated file), so it is a one-line UserError, not a traceback."""
+    rate = rec.sample_rate_hz
+    try:
+        taus = default_taus(len(rec), rate)
+    except ValueError:  # not one averaging time up to the cap
+        taus = np.empty(0)
+    taus = taus[taus >= MIN_TAU_IN_SMOOTHING_WINDOWS * smoothing_s]
+    if taus.size == 0:
+        raise UserError(
+            f"{rec.source}: {len(rec)} rows at {rate:.6g} Hz are too short to score: the Allan analysis "
+            f"needs averaging times from {MIN_TAU_IN_SMOOTHING_WINDOWS * smoothing_s:g} s (after the "
+            f"{smoothing_s:g} s smoothing) up to a tenth of the run; score a longer recording"
+        )
+    return taus
+
+
 def evaluate(
     rec: Recording,
     compensated: dict[str, np.ndarray],
@@ -128,10 +147,9 @@ def evaluate(
     ``references``: name -> ``T_ref`` of the methods that model the drift relative to it.
     """
     rate = rec.sample_rate_hz
+    taus = scoring_taus(rec, smoothing_s)
     smoothed = {"raw": smooth_for_scoring(rec.accel_mg, rate, smoothing_s)}
     smoothed.update({name: smooth_for_scoring(x, rate, smoothing_s) for name, x in compensated.items()})
-    taus = default_taus(len(rec), rate)
-    taus = taus[taus >= MIN_TAU_IN_SMOOTHING_WINDOWS * smoothing_s]
     table = allan_table(smoothed["raw"], {k: v for k, v in smoothed.items() if k != "raw"}, rate, taus=taus)
     branch = thermal_branch(rec.temp_c, rate)
     refs = references or {}
