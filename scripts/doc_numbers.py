@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="change nothing; exit 1 when a number differs")
     parser.add_argument("--slow", action="store_true", help="include the physics fits (about a minute)")
     args = parser.parse_args(argv)
-    paths = args.files or list(DOCS)
+    paths = [p.resolve() for p in args.files] or list(DOCS)
     if bad := unknown_keys(paths):
         print("error: markers without a measurement: " + ", ".join(bad), file=sys.stderr)
         return 2
