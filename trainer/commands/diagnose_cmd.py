@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
+    from trainer.diagnose.verdict import ambiguity_line
 
     before, after = result.before, result.after
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
@@ -106,17 +107,7 @@ def summary(result: Diagnosis) -> str:
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
         lines.append("left out: nothing found beyond the simulation")
-    for a in result.ambiguous:
-        if a.implausible is not None:
-            shown = [
-                f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags
-            ]
-            lines.append(
-                f"ambiguous (not named): {a.effects[0]}{result.label} fits best but implausibly "
-                f"({'; '.join(a.implausible.flags)}); plausible in its place, BIC: {', '.join(shown[:3]) or 'none'}"
-            )
-        else:
-            lines.append(f"ambiguous: {' vs '.join(a.effects)}{result.label} (BIC {a.delta_bic:+.1f})")
+    lines += [ambiguity_line(a, result.label) for a in result.ambiguous]
     for n in result.not_identifiable:
         lines.append(f"not identifiable: {n.effect}{result.label} ({n.recommended_test or n.reason})")
     for t in result.tested:

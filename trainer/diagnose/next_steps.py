@@ -15,7 +15,7 @@ from trainer.diagnose.select import THRESHOLD
 from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
 from trainer.scoring.markdown import markdown_table
 
-COMPENSATOR = "physics compensator (`trainer fit --method physics`, coming in the next release)"
+COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"
 GENERIC_PROFILE = (
     "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a 180 degree flip "
     "(+1 g / -1 g) at two temperatures"

@@ -15,7 +15,7 @@ from typing import cast
 import numpy as np
 from tqdm import tqdm
 
-from trainer.data.channels import UNIT_LABELS, channel_unit
+from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
 from trainer.diagnose.augmented import augmented_config
 from trainer.diagnose.baseline import build_baseline
@@ -59,33 +59,17 @@ from trainer.physics.catalogue import (  # the finder's order and advice, per ef
     CANDIDATE_ORDER,
     DEFINITIONS,
     EFFECTS,
-    PARAMETERS,
-    flagged_range,
 )
 from trainer.physics.catalogue.base import catalogue_params
-from trainer.physics.catalogue.units import ChannelScale, channel_param_name
+from trainer.physics.catalogue.plausibility import implausible
+from trainer.physics.catalogue.units import ChannelScale
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
 
 
 def _param_flags(effect: EffectConfig, scale: ChannelScale | None = None) -> list[str]:
-    """One line per parameter outside its plausible range, named as the channel names it."""
-    flags = []
-    for name, value in effect.params.items():
-        bounds = flagged_range(effect.identifier, name, scale)
-        if bounds and not (bounds[0] <= abs(value) <= bounds[1]):
-            if scale is None or bounds == PARAMETERS[(effect.identifier, name)].plausible:
-                flags.append(
-                    f"{channel_param_name(name, scale.unit if scale else 'mg')} = {value:.4g} is outside "
-                    f"the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}"
-                )
-            else:
-                flags.append(
-                    f"{channel_param_name(name, scale.unit)} = {value:.4g} is outside the plausible "
-                    f"0..{bounds[1]:.4g} (its contribution would exceed the channel's cubic drift "
-                    f"span of {scale.drift_span:.4g} {UNIT_LABELS[scale.unit]} over the run)"
-                )
-    return flags
+    """One line per parameter outside its plausible range (the rule the physics fit applies too)."""
+    return list(implausible(effect.identifier, effect.params, scale).values())
 
 
 def channel_scale(rec: Recording, data: BlockData) -> ChannelScale | None:

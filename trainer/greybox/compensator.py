@@ -133,37 +133,53 @@ class PhysicsCompensator(Compensator):
         return model
 
 
-def _undetermined(fitted: FittedPhysics) -> set[str]:
-    """Compensated effects (not the bias polynomial) with a parameter at the end of its search range or
-    outside the plausible range: the run does not determine them."""
-    flagged = {name.partition(".")[0] for name in (*fitted.at_bound, *fitted.implausible)}
-    return {e.identifier for e in fitted.structure.compensated if e.identifier in flagged}
+def _undetermined(fitted: FittedPhysics, rejected: dict[str, str]) -> dict[str, str]:
+    """``{effect: why}`` for compensated effects (not the bias polynomial) that the run does not
+    determine: a parameter at the end of its search range or outside the plausible range (the
+    finder's rule, on the values the compensator would carry), or one the finder itself fitted
+    implausibly (its verdict is final: `trainer diagnose` on the same run says the same)."""
+    out: dict[str, str] = {}
+    for e in fitted.structure.compensated:
+        own = "; ".join(fitted.why.get(e.identifier, ()))
+        finder = rejected.get(e.identifier, "")
+        if finder and finder != own:
+            own += ("; " if own else "") + f"the finder's fit: {finder}"
+        elif finder:
+            own += " (the finder's fit too)"
+        if own:
+            out[e.identifier] = own
+    return out
 
 
 def _only_determined(rec: Recording, fitted: FittedPhysics) -> FittedPhysics:
     """An automatic structure keeps only what the run determines: an undetermined effect is dropped and
     the rest refitted (until none is left). Such a term extrapolates wildly wherever its state is not
     the training run's: a 1500 s lag at its bound gave -7 deg/s of "drift" from a cold start on the
-    bundled run's gyro x, where the cubic left 0.16 deg/s."""
-    dropped: list[str] = []
-    while drop := _undetermined(fitted):
-        dropped += sorted(drop)
+    bundled run's gyro x, where the cubic left 0.16 deg/s. The first fit's structure and notes (what
+    the cross-validated stage added, and why) stay in the summary."""
+    rejected = dict(fitted.structure.rejected)
+    first = fitted
+    dropped: dict[str, str] = {}
+    while drop := _undetermined(fitted, rejected):
+        dropped |= drop
         final = fitted.structure
         kept = tuple(e for e in final.compensated if e.identifier not in drop)
         fitted = fit_physics(rec, replace(final, compensated=kept, candidates=()))
     if not dropped:
         return fitted
-    note = (
-        f"dropped {', '.join(dropped)}: a parameter at the end of its search range or outside the plausible "
-        "range (not determined by this run); a compensator carries only determined physics"
+    return replace(
+        fitted, structure=replace(fitted.structure, dropped=tuple(dropped.items())), notes=first.notes
     )
-    return replace(fitted, notes=(*fitted.notes, note))
 
 
 def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, Any]:
-    """Plain values for the checkpoint and the fit summary: structure, parameters, flags, notes."""
+    """Plain values for the checkpoint and the fit summary: structure, parameters, flags, notes, and
+    each effect dropped with its reason."""
     final = fitted.structure
-    added = [e.identifier for e in final.compensated if e not in chosen.compensated]
+    dropped = dict(final.dropped)
+    added = [e.identifier for e in final.compensated if e not in chosen.compensated] + [
+        name for name in dropped if name not in {e.identifier for e in chosen.compensated}
+    ]
     how = chosen.how + (f"; cross-validation added {', '.join(added)}" if added else "")
     unit = fitted.unit  # parameters as the channel names them (amp_dps on a gyroscope)
     report: dict[str, Any] = {} if unit == CATALOGUE_UNIT else {"unit": unit}
@@ -176,6 +192,7 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
         "at_bound": list(fitted.at_bound),
         "implausible": list(fitted.implausible),
         "notes": [*chosen.notes, *fitted.notes],
+        "dropped": dropped,
     }
 
 
@@ -199,4 +216,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     for name in report["implausible"]:
         lines.append(f"  warning: {name} is outside the catalogue's plausible range")
     lines += [f"  note: {n}" for n in report["notes"]]
+    dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
+    lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
+    if dropped:
+        kept = " + ".join(report["effects"])
+        lines.append(f"  compensates: {kept} (a compensator carries only physics this run determines)")
     return lines

@@ -15,7 +15,7 @@ specific to a compensator:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,14 +25,16 @@ from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import BlockData, build_blocks
 from trainer.diagnose.candidates import propose
 from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
+from trainer.diagnose.run import channel_scale
 from trainer.diagnose.threads import single_blas_thread
 from trainer.errors import UserError
 from trainer.greybox.select import extend
 from trainer.greybox.structure import Structure
 from trainer.greybox.terms import RATE
-from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS, flagged_range
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS
 from trainer.physics.catalogue.base import catalogue_params
-from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name
+from trainer.physics.catalogue.plausibility import implausible
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import EffectConfig
 
 # The shortest rate filter (s): the derivative of a thermometer with 0.01-0.04 degC noise and a
@@ -49,13 +51,15 @@ class FittedPhysics:
     effects: tuple[EffectConfig, ...]
     nuisance: tuple[EffectConfig, ...]
     std: dict[str, dict[str, float]]  # one standard deviation per parameter (same units)
+    # of the compensated effects only (a nuisance term is not judged: it is fitted, never carried)
     at_bound: tuple[str, ...]  # "effect.param" at an end of the finder's search range
-    implausible: tuple[str, ...]  # "effect.param" outside the catalogue's plausible range
+    implausible: tuple[str, ...]  # "effect.param" outside the plausible range (the finder's rule)
     blocks: int
     block_s: float
     structure: Structure  # as finally chosen (auto: after the cross-validated stage)
     notes: tuple[str, ...] = ()
     unit: str = CATALOGUE_UNIT  # the channel's unit suffix: how its parameters are named when shown
+    why: dict[str, tuple[str, ...]] = field(default_factory=dict)  # effect -> why it is undetermined
 
 
 def _start_term(effect: EffectConfig) -> Term | None:
@@ -129,11 +133,7 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     rec = rec.without_truth()
     data = build_blocks(rec)
     unit = channel_unit(rec)
-    scale = (
-        None
-        if unit == CATALOGUE_UNIT
-        else ChannelScale.measure(unit, data.temperature(True), data.accel, data.rate(True))
-    )
+    scale = channel_scale(rec, data)
     baseline = build_baseline(None, np.asarray(rec.time_s) - float(rec.time_s[0]), data.lattice_lsb_c)
     noise_terms = baseline.noise_terms
     current = fit_model(baseline.terms, noise_terms, data)
@@ -159,7 +159,8 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     nuisance: list[EffectConfig] = []
     std: dict[str, dict[str, float]] = {}
     at_bound: list[str] = []
-    implausible: list[str] = []
+    flagged: list[str] = []
+    why: dict[str, tuple[str, ...]] = {}
     for index, term in enumerate(fit.terms):
         definition = DEFINITIONS[term.identifier]
         if term.identifier not in EFFECTS:
@@ -174,6 +175,8 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         nonlinear = [name for name, _ in definition.finder.nonlinear]
         sd = {k: abs(v) for k, v in catalogue_params(definition, term, sd_lin).items() if k not in nonlinear}
         bounds = search_bounds(term.identifier, data) if nonlinear else ()
+        judged = term.identifier in keep
+        reasons: list[str] = []
         for j, name in enumerate(nonlinear[: len(term.nl)]):
             if name not in params:
                 continue
@@ -181,14 +184,21 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
                 sd[name] = _nonlinear_std(fit, data, index, j)
             lo, hi = bounds[j]
             span = hi - lo
-            if not term.fixed and (
-                term.nl[j] - lo < BOUND_MARGIN * span or hi - term.nl[j] < BOUND_MARGIN * span
+            if (
+                judged
+                and not term.fixed
+                and (term.nl[j] - lo < BOUND_MARGIN * span or hi - term.nl[j] < BOUND_MARGIN * span)
             ):
-                at_bound.append(f"{term.identifier}.{channel_param_name(name, unit)}")
-        for name, value in params.items():
-            rng = flagged_range(term.identifier, name, scale)
-            if rng is not None and not (rng[0] <= abs(value) <= rng[1]):
-                implausible.append(f"{term.identifier}.{channel_param_name(name, unit)}")
+                shown = channel_param_name(name, unit)
+                at_bound.append(f"{term.identifier}.{shown}")
+                reasons.append(
+                    f"{shown} = {params[name]:.4g} sits at the end of its search range {lo:g}..{hi:g}"
+                )
+        outside = implausible(term.identifier, params, scale) if judged else {}
+        flagged += [f"{term.identifier}.{channel_param_name(name, unit)}" for name in outside]
+        reasons += outside.values()
+        if reasons:
+            why[term.identifier] = tuple(reasons)
         config = EffectConfig(term.identifier, params)
         (effects if term.identifier in keep else nuisance).append(config)
         std[term.identifier] = sd
@@ -199,10 +209,11 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         tuple(nuisance),
         std,
         tuple(at_bound),
-        tuple(implausible),
+        tuple(flagged),
         data.n,
         data.block_s,
         structure,
         tuple(notes),
         unit,
+        why,
     )

@@ -38,6 +38,10 @@ class Structure:
     # compensable effects the profile identifies but the finder did not name (auto only): the
     # cross-validated stage (:mod:`trainer.greybox.select`) may still add them
     candidates: tuple[str, ...] = ()
+    # effects the finder fitted implausibly (auto only), with its reason: never compensated
+    rejected: tuple[tuple[str, str], ...] = ()
+    # effects the fit dropped as undetermined by the run (auto only), with the reason
+    dropped: tuple[tuple[str, str], ...] = ()
 
 
 def forced(names: tuple[str, ...]) -> Structure:
@@ -64,16 +68,20 @@ def from_sim(path: Path, rec: Recording, *, warmup_allowed: bool) -> Structure:
 def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Structure:
     """What the mismatch finder names on the training recording itself (no user simulation)."""
     from trainer.diagnose import diagnose  # the finder is heavy; import it only when used
+    from trainer.diagnose.verdict import ambiguity_line, implausible_effects
 
     diagnosis = diagnose(rec, None, holdout_fraction=0.0, progress=progress)
-    found = [EffectConfig(e.effect, dict(e.params)) for e in diagnosis.left_out if e.effect in EFFECTS]
-    comp, nuisance = _split(found, warmup_allowed)
-    notes = [
-        f"ambiguous: {' / '.join(a.effects)} ({a.reason}); the fit keeps {a.preferred}"
-        for a in diagnosis.ambiguous
+    rejected = implausible_effects(diagnosis)
+    found = [
+        EffectConfig(e.effect, dict(e.params))
+        for e in diagnosis.left_out
+        if e.effect in EFFECTS and not (e.flags and compensated(e.effect, warmup_allowed=warmup_allowed))
     ]
+    comp, nuisance = _split(found, warmup_allowed)
+    # the finder's own lines (as `trainer diagnose` prints them): the fit adds its decisions after them
+    notes = [f"finder: {ambiguity_line(a, diagnosis.label)}" for a in diagnosis.ambiguous]
     notes += [
-        f"not identifiable from this profile: {n.effect} ({n.reason}); to identify it: {n.recommended_test}"
+        f"finder: not identifiable from this profile: {n.effect} ({n.reason}); to identify it: {n.recommended_test}"
         for n in diagnosis.not_identifiable
         if compensated(n.effect, warmup_allowed=True)
     ]
@@ -85,7 +93,12 @@ def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Str
         if info.identifiable and name not in present and compensated(name, warmup_allowed=warmup_allowed)
     )
     return Structure(
-        comp, nuisance, how=f"auto: the finder named {named}", notes=tuple(notes), candidates=candidates
+        comp,
+        nuisance,
+        how=f"auto: the finder named {named}",
+        notes=tuple(notes),
+        candidates=candidates,
+        rejected=tuple(rejected.items()),
     )
 
 

@@ -1,0 +1,33 @@
+"""The finder's verdict per effect, in the words both ``trainer diagnose`` and ``trainer fit
+--method physics`` print: which fitted effects it does not accept as physics (a parameter outside
+the plausible range, :mod:`trainer.physics.catalogue.plausibility`), and its ambiguities.
+
+The physics fit takes this verdict over unchanged (it never compensates an effect the finder
+calls implausible), so the two commands tell one story on the same recording.
+"""
+
+from __future__ import annotations
+
+from trainer.diagnose.result import Ambiguity, Diagnosis
+
+SHOWN_ALTERNATIVES = 3  # plausible stand-ins printed per implausible best fit
+
+
+def implausible_effects(d: Diagnosis) -> dict[str, str]:
+    """``{effect: why}`` for every effect the finder fitted with a parameter outside its plausible
+    range: an implausible best fit (reported as ambiguous) or a named effect with its flags."""
+    out = {a.effects[0]: "; ".join(a.implausible.flags) for a in d.ambiguous if a.implausible is not None}
+    out.update({e.effect: "; ".join(e.flags) for e in d.left_out if e.flags})
+    return out
+
+
+def ambiguity_line(a: Ambiguity, label: str = "") -> str:
+    """One line for an ambiguity (``label``: the channel and unit on a non-mg channel)."""
+    if a.implausible is None:
+        return f"ambiguous: {' vs '.join(a.effects)}{label} (BIC {a.delta_bic:+.1f})"
+    shown = [f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags]
+    return (
+        f"ambiguous (not named): {a.effects[0]}{label} fits best but implausibly "
+        f"({'; '.join(a.implausible.flags)}); plausible in its place, BIC: "
+        f"{', '.join(shown[:SHOWN_ALTERNATIVES]) or 'none'}"
+    )
