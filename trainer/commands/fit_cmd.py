@@ -50,6 +50,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
+    from trainer.data.channels import channel_unit, relabel_units
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import UserError, check_output_path
@@ -78,12 +79,16 @@ def run(args: argparse.Namespace) -> int:
         model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
     )
     name = methods.name_of(model)
+    unit = channel_unit(train)  # a gyro or baro recording holds its own unit in the accel_mg column
     print(
-        f"{name}: fitted on {stats['n_samples']} samples "
-        f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
-        f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}"
+        relabel_units(
+            f"{name}: fitted on {stats['n_samples']} samples "
+            f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
+            f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}",
+            unit,
+        )
     )
     for line in model.describe():
-        print(line)
-    print(f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}")
+        print(relabel_units(line, unit))
+    print(relabel_units(f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}", unit))
     return 0
