@@ -26,9 +26,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from trainer.budget import check_memory
 from trainer.errors import UserError
 
 CHUNK_BYTES = 8 << 20  # text handed to numpy's parser at once
+# Peak memory of read_table per byte of the file (the text, its chunks, the parsed float64 blocks
+# and their concatenation): 3.2 measured with tracemalloc on a 120 000-row simulated CSV.
+READ_BYTES_PER_FILE_BYTE = 4
 WRITE_CHUNK_ROWS = 10_000  # rows formatted per string operation when writing
 
 META_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")  # the key of a ``# key=value`` comment
@@ -78,6 +82,10 @@ class _Preamble(NamedTuple):
 
 def _read_bytes(path: Path) -> bytes:
     try:
+        if path.is_file():
+            check_memory(
+                path.stat().st_size * READ_BYTES_PER_FILE_BYTE, f"{path}: reading", "split the recording"
+            )
         return path.read_bytes()
     except FileNotFoundError:
         raise UserError(f"{path}: no such file") from None

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ from trainer import methods as registry
 from trainer.data.holdout import parse_holdout
 from trainer.data.importer import ImportOptions
 from trainer.errors import UserError
-from trainer.fields import TableFields, show
+from trainer.fields import TableFields, parse_toml, show
 from trainer.fleet import options
 
 DEFAULT_HOLDOUT = "last:0.25"  # a `--holdout` spec (trainer/data/holdout.py), as `trainer report` takes
@@ -188,10 +187,7 @@ def _unit(raw: dict[str, Any], where: str, base: Path, settings: FleetSettings) 
 
 
 def _read_toml(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any]]]]:
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    data = parse_toml(path.read_text(encoding="utf-8"), str(path))
     top = TableFields(str(path), data, "")
     top.only(("fleet", "unit"))
     settings = _settings(top.sub("fleet"), path.parent) if top.has("fleet") else FleetSettings()
