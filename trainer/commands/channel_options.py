@@ -20,7 +20,7 @@ from pathlib import Path
 
 from trainer.data.channels import Channel, parse_channels_option, sort_key
 from trainer.data.recording import Recording
-from trainer.errors import UserError
+from trainer.errors import UserError, raise_write_error
 
 CHANNELS_OPTION = "--channels"
 MODEL_SUFFIX = ".pt"  # trainer fit --channels writes OUT/<channel>.pt
@@ -100,8 +100,9 @@ def staged_directory(out: str | Path) -> Iterator[Path]:
         else:
             os.chmod(staging, 0o755)
             os.rename(staging, target)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, target)
         raise
 
 
