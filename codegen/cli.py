@@ -11,6 +11,7 @@ from codegen.flightparams import EXTENSIONS
 from codegen.quantize import SCHEDULES
 from trainer.commands.channel_options import add_channels_option
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
+from trainer.output_lock import command_outputs_locked
 
 EXIT_MISMATCH = 1
 
@@ -323,7 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    with command_outputs_locked(args):  # one writer per output
+        return int(args.func(args) or 0)
 
 
 def entry() -> None:

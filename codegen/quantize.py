@@ -551,6 +551,13 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
     if not (math.isfinite(accel_limit_g) and 0 < accel_limit_g <= MAX_ACCEL_LIMIT_G):
         raise UserError(f"--accel-limit-g must be in (0, {MAX_ACCEL_LIMIT_G:g}] g, got {accel_limit_g!r}")
     lo, hi = ckpt.valid_temp_range_c
+    clamp_c = [limit / 1000 for limit in TEMP_LIMITS_MDEGC]
+    if not clamp_c[0] <= lo <= hi <= clamp_c[1]:
+        raise UserError(
+            f"checkpoint field 'valid_temp_range_c' {lo:g} .. {hi:g} degC is outside the {clamp_c[0]:g} .. "
+            f"{clamp_c[1]:g} degC the module clamps its temperature to, so its out-of-range flag could never "
+            f"fire: a model fitted on impossible temperatures; re-fit on a recording without them"
+        )
     clip = (-(1 << 31) + 1, INT32_MAX)
     valid_lo = min(max(math.ceil(Fraction(lo) * 1000), clip[0]), clip[1])
     valid_hi = min(max(math.floor(Fraction(hi) * 1000), clip[0]), clip[1])

@@ -62,7 +62,8 @@ def one_axis(rec: Recording, channel: str, temp_column: str = "temp_c") -> Recor
     column = f"{channel}_{unit}"
     return Recording(
         {"time_s": rec.time_s, "temp_c": rec.columns[temp_column], "accel_mg": rec.columns[column]},
-        {"sample_rate_hz": rec.meta["sample_rate_hz"]},
+        # the unit of accel_mg said, as a one-channel view says it: Pa in an accel column is implausible
+        {"sample_rate_hz": rec.meta["sample_rate_hz"], **({"unit": unit} if unit != "mg" else {})},
         f"{channel}.npz",
     )
 

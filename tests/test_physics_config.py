@@ -427,7 +427,7 @@ BAD = [
         "[input]\nkind = 'constant'\nvalue_mg = 1\n[effects.scale_factor_tc]\nsf_ppm_per_c = 1\ng_in_mg = 9",
         "cfg.toml: [effects.scale_factor_tc] g_in_mg and [input] both set the true input; give only one",
     ),
-    ("[effects.warmup\namp_mg = 1", "cfg.toml: invalid TOML:"),
+    ("[effects.warmup\namp_mg = 1", "cfg.toml: invalid TOML ("),
 ]
 
 

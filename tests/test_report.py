@@ -90,7 +90,7 @@ def test_a_threshold_without_its_measurement_fails_as_not_measured(
         ("[thresholds]\nresidual_rms = 1.0\n", "unknown key 'residual_rms'"),
         ("[thresholds]\nresidual_rms_mg = 'small'\n", "residual_rms_mg must be a number"),
         ("[limits]\nresidual_rms_mg = 1.0\n", "unknown table or key 'limits'"),
-        ("[thresholds\n", "not valid TOML"),
+        ("[thresholds\n", "invalid TOML"),
     ],
 )
 def test_a_bad_thresholds_file_is_one_line_and_writes_nothing(

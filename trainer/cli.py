@@ -8,6 +8,7 @@ import sys
 
 from trainer import __version__
 from trainer.errors import OneLineArgumentParser, run_cli
+from trainer.output_lock import command_outputs_locked
 
 # Sub-command name -> module in trainer.commands that defines add_parser() and run().
 COMMANDS: dict[str, str] = {
@@ -36,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    with command_outputs_locked(args):  # one writer per output
+        return int(args.func(args) or 0)
 
 
 def entry() -> None:

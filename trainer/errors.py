@@ -8,15 +8,23 @@ stderr and exit with status 2. Anything else is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import re
+import signal
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
 EXIT_USER_ERROR = 2
+# Write failures the user can fix (disk full, file-size or quota limit, permissions, read-only
+# file system): one line naming the path, never a traceback.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EPERM, errno.EROFS})
+# A temporary file or staging folder beside an output (tempfile's 8 random characters between the
+# output's name and an optional ``.part``/``.old`` suffix): messages name the output instead.
+_STAGED_NAME = re.compile(r"\.(?P<name>.+)\.[A-Za-z0-9_]{8}(?:\.part.*|\.old)?")
 _TERMINAL_CODES = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|[\x00-\x08\x0b-\x1f\x7f]")  # colours, cursor moves
 
 
@@ -31,14 +39,62 @@ class OneLineArgumentParser(argparse.ArgumentParser):
         raise UserError(f"{self.prog}: {message}")
 
 
+def output_name(path: str | os.PathLike[str] | None) -> str | None:
+    """``path`` as the user knows it: staging folders and ``.part`` files replaced by their outputs."""
+    if path is None:
+        return None
+    parts = [(m.group("name") if (m := _STAGED_NAME.fullmatch(part)) else part) for part in Path(path).parts]
+    return str(Path(*parts)) if parts else str(path)
+
+
+def write_error(exc: OSError, path: str | os.PathLike[str] | None = None) -> UserError | None:
+    """The one-line UserError for a write failure of :data:`WRITE_ERRNOS` (None for other errors)."""
+    if exc.errno not in WRITE_ERRNOS:
+        return None
+    where = output_name(path if path is not None else exc.filename)
+    reason = os.strerror(exc.errno)
+    if where is None:
+        return UserError(f"cannot write an output ({reason}): free space or raise the limit, then run again")
+    return UserError(f"{where}: cannot write ({reason}); nothing was written there")
+
+
+def raise_write_error(exc: BaseException, path: str | os.PathLike[str]) -> None:
+    """Raise the one-line UserError naming output ``path`` if ``exc`` is a failed write of a
+    staging folder for ``path`` (a write through an open file names no path); else return."""
+    if isinstance(exc, OSError):
+        converted = write_error(exc, path if exc.filename is None else None)
+        if converted is not None:
+            raise converted from None
+
+
+def _ignore_file_size_signal() -> None:
+    """A file-size limit (RLIMIT_FSIZE) sends SIGXFSZ, which kills the process without a word;
+    ignored, the write fails with EFBIG instead and is reported like a full disk."""
+    xfsz = getattr(signal, "SIGXFSZ", None)
+    if xfsz is not None:
+        with suppress(ValueError):  # not the main thread: leave the process's handlers alone
+            signal.signal(xfsz, signal.SIG_IGN)
+
+
+def _print_error(exc: UserError) -> int:
+    message = " ".join(_TERMINAL_CODES.sub("", str(exc)).split())  # one line, no terminal codes
+    print(f"error: {message}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
-    """Run a CLI ``main`` and turn :class:`UserError` into a one-line message and exit code 2."""
+    """Run a CLI ``main`` and turn :class:`UserError` (and a failed write) into a one-line message
+    and exit code 2."""
+    _ignore_file_size_signal()
     try:
         return main(argv)
     except UserError as exc:
-        message = " ".join(_TERMINAL_CODES.sub("", str(exc)).split())  # one line, no terminal codes
-        print(f"error: {message}", file=sys.stderr)
-        return EXIT_USER_ERROR
+        return _print_error(exc)
+    except OSError as exc:
+        converted = write_error(exc)
+        if converted is None:
+            raise
+        return _print_error(converted)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
@@ -64,18 +120,38 @@ def _current_umask() -> int:
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
 
-    Guarantees that a failed command leaves no partial output file behind.
+    Guarantees that a failed command leaves no partial output file behind. A write failure of :data:`WRITE_ERRNOS` on the output becomes a one-line UserError naming
+    ``path`` (an error of another file, say an input read in the body, passes unchanged).
     """
     target = Path(path)
     check_output_path(target)
     parent = target.parent if str(target.parent) else Path(".")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
+    except OSError as exc:
+        raise write_error(exc, target) or exc from None
     os.close(fd)
     tmp = Path(tmp_name)
-    os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; outputs get the usual mode
     try:
+        os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; outputs get the usual mode
         yield tmp
         os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        ours = exc.filename is None or Path(exc.filename) in (tmp, target)
+        converted = write_error(exc, target) if ours else None
+        if converted is None:
+            raise
+        raise converted from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextmanager
+def atomic_outputs(paths: Sequence[str | os.PathLike[str]]) -> Iterator[list[Path]]:
+    """:func:`atomic_output` for a set of files (a report and its figures): one temporary path per
+    output; all are renamed onto their outputs only when the body succeeded, so a failure leaves
+    none of them new."""
+    with ExitStack() as stack:
+        yield [stack.enter_context(atomic_output(path)) for path in paths]

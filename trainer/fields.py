@@ -15,6 +15,8 @@ tests, so the subclasses only say how a field is named and how its value is chec
 from __future__ import annotations
 
 import math
+import sys
+import tomllib
 from typing import Any, NoReturn, Self
 
 import numpy as np
@@ -22,6 +24,18 @@ import numpy as np
 from trainer.errors import UserError
 
 NUMBER_RULES = ("finite", "positive", "nonnegative")
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """A TOML document; invalid TOML or nesting too deep for the parser is a one-line UserError."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{source}: invalid TOML ({exc})") from None
+    except RecursionError:
+        raise UserError(
+            f"{source}: invalid TOML (arrays or tables nested deeper than about {sys.getrecursionlimit()} levels)"
+        ) from None
 
 
 def show(value: Any, limit: int = 40) -> str:

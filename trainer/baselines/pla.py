@@ -22,16 +22,29 @@ import numpy as np
 import torch
 
 from trainer.baselines.base import TemperatureCompensator
+from trainer.budget import FLOAT_BYTES, check_memory, check_time
 from trainer.errors import UserError
+
+TABLES = 4  # float64 tables of one entry per interval while fitting (edges, slopes, intercepts, splits)
+# Fitting masks every row once per interval: 5.7 ns per interval and row (1000 intervals on
+# 1.44 M rows took 8.2 s), the time budget's estimate.
+SECONDS_PER_INTERVAL_ROW = 5e-9
+_FEWER = "use fewer --intervals (the paper uses 10)"
+
+
+def check_intervals(n_intervals: int) -> int:
+    """``n_intervals`` if it is >= 1 and its tables fit the memory budget (one line otherwise)."""
+    if n_intervals < 1:
+        raise UserError(f"pla: --intervals must be >= 1, got {n_intervals}")
+    check_memory(float(n_intervals) * TABLES * FLOAT_BYTES, f"pla: --intervals {n_intervals}", _FEWER)
+    return n_intervals
 
 
 class PiecewiseLinear(TemperatureCompensator):
     """The paper's PLA baseline: temperature in, drift out, one line per temperature interval."""
 
     def __init__(self, n_intervals: int = 10) -> None:
-        if n_intervals < 1:
-            raise UserError(f"pla: n_intervals must be >= 1, got {n_intervals}")
-        self.n_intervals = n_intervals
+        self.n_intervals = check_intervals(n_intervals)
         self.split_points_c = np.empty(0)
         self.slopes_mg_per_c = np.empty(0)
         self.intercepts_mg = np.empty(0)
@@ -39,6 +52,16 @@ class PiecewiseLinear(TemperatureCompensator):
 
     def fit_arrays(self, temp_c: np.ndarray, drift_mg: np.ndarray) -> Self:
         """Fit from plain arrays (temperature, drift); used by :meth:`fit` and the tests."""
+        if self.n_intervals > temp_c.size // 2:
+            raise UserError(
+                f"pla: --intervals {self.n_intervals} is more than half the {temp_c.size} training rows: "
+                f"an interval needs two samples for a line; {_FEWER}"
+            )
+        check_time(
+            float(self.n_intervals) * temp_c.size * SECONDS_PER_INTERVAL_ROW,
+            f"pla: --intervals {self.n_intervals} on {temp_c.size} rows",
+            _FEWER,
+        )
         t_min, t_max = float(np.min(temp_c)), float(np.max(temp_c))
         if not t_max > t_min:
             raise UserError(f"pla: the training temperature does not vary (constant {t_min} degC)")

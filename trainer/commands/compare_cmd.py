@@ -16,7 +16,7 @@ from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
 from trainer.commands.offset_options import add_offset_options, policy_from_args
 from trainer.data.channels import Channel, method_refusal
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.errors import UserError
+from trainer.errors import UserError, raise_write_error
 from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
@@ -206,8 +206,9 @@ def run(args: argparse.Namespace) -> int:
         (staging / "report.md").write_text(relabel_units(report, signal.unit), encoding="utf-8")
         (staging / "table1.txt").write_text(table1 + "\n", encoding="utf-8")
         publish(staging, out_dir)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, out_dir)
         raise
     print(table1)
     print()
@@ -284,8 +285,9 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
         (staging / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
         (staging / "crossval.json").write_text(json.dumps(cv.to_dict(), indent=2) + "\n", encoding="utf-8")
         publish(staging, out_dir)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, out_dir)
         raise
     print("\n".join([*segment_lines(cv.segments), *table_lines(cv)]))
     print(f"\nreport and crossval.json written to {out_dir}/")

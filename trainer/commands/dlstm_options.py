@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from trainer.budget import FLOAT_BYTES, check_memory, check_time
 from trainer.dlstm.realtime import (
     DEFAULT_STEP_S,
     DEFAULT_TEMP_SMOOTHING_S,
@@ -12,6 +13,15 @@ from trainer.dlstm.realtime import (
     PAPER_TRAIN_SMOOTHING_S,
 )
 from trainer.errors import UserError
+
+# Size estimates for the budget, at the size of the paper's run (2 h at the 1 s network step):
+# a longer recording only costs more, so a refusal here is never wrong.
+REFERENCE_STEPS = 7200
+# One network, one iteration at hidden 10 and 2 layers: 55 s for 10 networks x 500 iterations.
+SECONDS_PER_NETWORK_ITERATION = 0.011
+VALUES_PER_UNIT_STEP = 10  # kept for back-propagation per LSTM unit and step (gates, states)
+VALUES_PER_WEIGHT = 4  # the weight, its gradient and Adam's two moments
+_SMALLER = "use a smaller --population, --hidden, --layers, --iterations or --cycles"
 
 
 def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
@@ -65,6 +75,7 @@ def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]
     for name in ("lr", "train_smoothing", "run_smoothing", "temp_smoothing", "step"):
         if not getattr(args, name) > 0:
             raise UserError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    check_dlstm_size(args.population, args.hidden, args.layers, args.iterations, args.cycles)
     import torch
 
     torch.set_num_threads(args.threads)
@@ -85,3 +96,15 @@ def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]
         "train_smoothing_s": args.train_smoothing,
     }
     return settings, frontend
+
+
+def check_dlstm_size(population: int, hidden: int, layers: int, iterations: int, cycles: int) -> None:
+    """Refuse a population whose memory or run time (at the paper's run size) is above the budget."""
+    what = f"DLSTM --population {population} --hidden {hidden} --layers {layers}"
+    networks = float(population) * layers
+    weights = networks * 8.0 * hidden * (hidden + 1)  # four gates, input and recurrent weights
+    activations = networks * hidden * REFERENCE_STEPS * VALUES_PER_UNIT_STEP
+    check_memory((weights * VALUES_PER_WEIGHT + activations) * FLOAT_BYTES, what, _SMALLER)
+    scale = max(hidden / 10.0, 1.0) ** 2 * layers / 2.0
+    seconds = float(population) * (iterations + cycles) * scale * SECONDS_PER_NETWORK_ITERATION
+    check_time(seconds, f"{what} --iterations {iterations} --cycles {cycles}", _SMALLER)

@@ -8,7 +8,7 @@ from typing import Any
 
 from trainer.commands.channel_options import add_channels_option, run_per_channel
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.errors import UserError, atomic_output
+from trainer.errors import UserError, atomic_outputs
 from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
@@ -148,17 +148,16 @@ def run(args: argparse.Namespace) -> int:
         *[f"- {line}" for line in extra],
         "",
     ]
-    with atomic_output(out_dir / "report.md") as tmp:
-        tmp.write_text(relabel_units("\n".join(report), signal.unit))
-    plot_series(
-        rec.time_s,
-        result.smoothed,
-        out_dir / "fig12_compensated.png",
-        title=f"Compensation on validation data ({result.smoothing_s} s smoothing)",
-        signal=signal,
-    )
-    plot_allan(
-        result.curves, out_dir / "fig13_allan.png", title="Allan deviation after compensation", signal=signal
-    )
+    outputs = [out_dir / name for name in ("report.md", "fig12_compensated.png", "fig13_allan.png")]
+    with atomic_outputs(outputs) as (report_tmp, fig12_tmp, fig13_tmp):  # all three or none
+        report_tmp.write_text(relabel_units("\n".join(report), signal.unit))
+        plot_series(
+            rec.time_s,
+            result.smoothed,
+            fig12_tmp,
+            title=f"Compensation on validation data ({result.smoothing_s} s smoothing)",
+            signal=signal,
+        )
+        plot_allan(result.curves, fig13_tmp, title="Allan deviation after compensation", signal=signal)
     print(f"report and figures written to {out_dir}/")
     return 0

@@ -59,7 +59,13 @@ def _dlstm_fit_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return {"settings": settings, "frontend_seconds": frontend, "progress": not args.quiet}
 
 
-PLA_OPTIONS = OptionGroup(_add_intervals, lambda args: {"n_intervals": args.intervals})
+def _pla_fit_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    from trainer.baselines.pla import check_intervals  # imports torch: only when used
+
+    return {"n_intervals": check_intervals(args.intervals)}
+
+
+PLA_OPTIONS = OptionGroup(_add_intervals, _pla_fit_kwargs)
 POLY3_OPTIONS = OptionGroup(_add_remove_median, lambda args: {"remove_median": args.remove_median})
 DLSTM_OPTIONS = OptionGroup(
     add_dlstm_options,

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.errors import UserError
+from trainer.errors import UserError, raise_write_error
 
 EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
 ANY_RANGE_C = (-math.inf, math.inf)  # scores that need no in-range part
@@ -425,8 +425,9 @@ def run(args: argparse.Namespace) -> int:
         )
         (staging / "report.md").write_text(text, encoding="utf-8")
         publish(staging, out_dir)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, out_dir)
         raise
     line = signoff.summary_line(unit, reports, thresholds)
     print(f"{line}; report written to {out_dir}/report.md")

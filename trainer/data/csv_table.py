@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 import math
 import re
+import unicodedata
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,17 +27,22 @@ from typing import NamedTuple
 
 import numpy as np
 
+from trainer.budget import check_memory
 from trainer.errors import UserError
 
 CHUNK_BYTES = 8 << 20  # text handed to numpy's parser at once
+# Peak memory of read_table per byte of the file (the text, its chunks, the parsed float64 blocks
+# and their concatenation): 3.2 measured with tracemalloc on a 120 000-row simulated CSV.
+READ_BYTES_PER_FILE_BYTE = 4
 WRITE_CHUNK_ROWS = 10_000  # rows formatted per string operation when writing
 
 META_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")  # the key of a ``# key=value`` comment
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _META_COMMENT = re.compile(r"#\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*=(.*)")
 _NUMERIC_BYTES = b"0123456789.eE+- \t\r\n"  # all a chunk of plain numbers can contain
 _NON_FINITE_WORDS = {"nan", "inf", "infinity"}
-_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?", re.ASCII)
+_FIELD_SPACE = " \t"  # the spaces a field may carry around its number (ASCII only, like numpy's parser)
 
 
 def quote(text: str, limit: int = 40) -> str:
@@ -78,6 +84,10 @@ class _Preamble(NamedTuple):
 
 def _read_bytes(path: Path) -> bytes:
     try:
+        if path.is_file():
+            check_memory(
+                path.stat().st_size * READ_BYTES_PER_FILE_BYTE, f"{path}: reading", "split the recording"
+            )
         return path.read_bytes()
     except FileNotFoundError:
         raise UserError(f"{path}: no such file") from None
@@ -144,10 +154,16 @@ def _select_columns(source: str, preamble: _Preamble, wanted: Sequence[str] | No
 
 def _parse_cell(cell: str, source: str, line: int, column: str) -> float:
     """One field by the format's rules; the message names line and column."""
-    text = cell.strip()
+    text = cell.strip(_FIELD_SPACE)
     where = f"{source}: line {line}, column {column!r}"
     if not text:
         raise UserError(f"{where}: empty field")
+    if not text.isascii():
+        odd = next(c for c in text if not c.isascii())
+        raise UserError(
+            f"{where}: {quote(text)} holds {unicodedata.name(odd, 'a non-ASCII character')} (U+{ord(odd):04X}); "
+            f"numbers must be plain ASCII digits: replace it or re-export the file"
+        )
     if _NUMBER.fullmatch(text):
         value = float(text)
         if not math.isfinite(value):

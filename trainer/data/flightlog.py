@@ -43,6 +43,10 @@ MAGIC: dict[str, bytes] = {"ulog": b"ULog\x01\x12\x35", "dataflash": b"\xa3\x95\
 KIND_NAMES = {"ulog": "PX4 ULog", "dataflash": "ArduPilot DataFlash"}
 
 SENSOR_UNITS = {"accel": "mg", "gyro": "dps", "baro": "pa"}  # column unit suffix per sensor
+# What a sensor can output, in its unit: beyond it a sample is a fault or a unit mistake, not data
+# (the widest full scales of common MEMS IMUs, ICM-42686: +-32 g, +-4000 deg/s; barometers such as
+# the MS5611 measure 10 .. 1200 mbar). --accept-implausible takes a sensor beyond them.
+SENSOR_RANGES = {"accel": (-32_000.0, 32_000.0), "gyro": (-4000.0, 4000.0), "baro": (1000.0, 120_000.0)}
 AXES = ("x", "y", "z")
 CHANNEL_NAME = re.compile(r"(accel|gyro)([0-9])_([xyz])|(baro)([0-9])")
 

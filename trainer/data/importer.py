@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from trainer.data.channels import ALL, names_text
+from trainer.data.channels import ALL, DEFAULT_UNIT, names_text
 from trainer.data.csv_table import Table, read_table
 from trainer.data.flightlog import (
     DPS_PER_RADPS,
@@ -240,13 +240,14 @@ def import_foreign(path: str | Path, options: ImportOptions, checks: Plausibilit
         table.columns[options.accel], options.accel_unit, f"{source}: column {options.accel!r}"
     )
     to_mg = ACCEL_UNIT_TO_MG[options.accel_unit]
-    columns = {"temp_c": table.columns[options.temp] + TEMP_UNIT_OFFSET_C[options.temp_unit]}
-    columns["accel_mg"] = table.columns[options.accel] * to_mg
-    for target, name in zip(EXTRA_AXIS_COLUMNS[: len(extra)], extra, strict=True):
-        columns[target] = table.columns[name] * to_mg
-    for channel, column in selected:
-        target, scale = _channel_target(channel, options)
-        columns[target] = table.columns[column] * scale
+    with np.errstate(over="ignore"):  # 1e308 m/s^2 becomes inf: refused by the sensor-range check
+        columns = {"temp_c": table.columns[options.temp] + TEMP_UNIT_OFFSET_C[options.temp_unit]}
+        columns["accel_mg"] = table.columns[options.accel] * to_mg
+        for target, name in zip(EXTRA_AXIS_COLUMNS[: len(extra)], extra, strict=True):
+            columns[target] = table.columns[name] * to_mg
+        for channel, column in selected:
+            target, scale = _channel_target(channel, options)
+            columns[target] = table.columns[column] * scale
     meta = {"temp_filled": fill_note} if fill_note else {}
     if options.decimal_comma:
         meta["decimal_comma"] = "yes"
@@ -335,6 +336,7 @@ def _finish(
     time = _time_seconds(table, options)
     columns = {"time_s": time, **columns}
     checks.temperature(columns["temp_c"], f"{source}: column {options.temp!r}", at_import=True)
+    checks.recording_ranges(columns, extra_meta.get("unit", DEFAULT_UNIT), source, skip=("temp_c",))
     meta: dict[str, str] = {}
     time_column = repr(options.time) if options.time else "(row number)"
     if options.retime:

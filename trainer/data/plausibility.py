@@ -8,11 +8,13 @@ genuine case (a centrifuge run, a sensor in an oven above 150 degC).
 
 from __future__ import annotations
 
+import re
 import sys
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trainer.data.flightlog import SENSOR_RANGES, SENSOR_UNITS
 from trainer.errors import UserError
 
 if TYPE_CHECKING:
@@ -22,6 +24,11 @@ if TYPE_CHECKING:
 RATE_MIN_HZ = 0.1  # slower than one sample per 10 s: a time column in ms read as s
 RATE_MAX_HZ = 100e3  # faster than any MEMS output data rate: s read as ms/us, or an index
 TEMP_MAX_C = 150.0  # above any MEMS operating range (-40..125 degC typical)
+TEMP_MIN_C = -60.0  # below any MEMS operating range and any thermal chamber's test: an error code
+_SENSOR_OF_UNIT = {unit: sensor for sensor, unit in SENSOR_UNITS.items()}
+_SENSOR_NOUNS = {"accel": "an accelerometer", "gyro": "a gyroscope", "baro": "a barometer"}
+_DATA_COLUMN = re.compile(r"(?!true_).*_(mg|dps|pa)")  # a measured column by its unit suffix
+_TEMP_COLUMN = re.compile(r"(?!true_).*_temp_c")  # a channel's own temperature column
 KELVIN_RANGE = (200.0, 400.0)  # -73..127 degC written in kelvin
 G_AS_MPS2 = (8.5, 11.0)  # |a| of a static axis carrying gravity when m/s^2 is read as g
 ACCEPT_OPTION = "--accept-implausible"
@@ -68,7 +75,12 @@ class Plausibility:
 
     def temperature(self, temp_c: np.ndarray, where: str, *, at_import: bool) -> None:
         """Temperatures above 150 degC; all of them within 200..400 suggests kelvin."""
-        hottest = float(np.max(temp_c))
+        hottest, coldest = float(np.max(temp_c)), float(np.min(temp_c))
+        if not coldest >= TEMP_MIN_C:
+            self.problem(
+                f"{where}: temperature down to {coldest:.4g} degC is below {TEMP_MIN_C:g} degC: not a temperature "
+                f"in degC? (a sensor's error value, a raw count or the wrong column)"
+            )
         if hottest <= TEMP_MAX_C:
             return
         coldest = float(np.min(temp_c))
@@ -78,6 +90,36 @@ class Plausibility:
         else:
             cause = "not a temperature in degC? (kelvin, a raw sensor count or the wrong column)"
         self.problem(f"{where}: temperature up to {hottest:.4g} degC is above {TEMP_MAX_C:g} degC: {cause}")
+
+    def sensor_range(self, values: np.ndarray, unit: str, where: str) -> None:
+        """Samples beyond what the sensor of ``unit`` can output (flightlog.SENSOR_RANGES)."""
+        sensor = _SENSOR_OF_UNIT[unit]
+        lo, hi = SENSOR_RANGES[sensor]
+        low, high = float(np.min(values)), float(np.max(values))
+        if lo <= low and high <= hi:
+            return
+        worst = low if low < lo else high
+        row = int(np.argmax(values == worst)) + 1
+        self.problem(
+            f"{where}, data row {row}: {worst:.4g} {unit} is outside the {lo:g} .. {hi:g} {unit} "
+            f"{_SENSOR_NOUNS[sensor]} outputs: a "
+            f"fault value, a unit mistake (check the declared unit) or the wrong column?"
+        )
+
+    def recording_ranges(
+        self, columns: dict[str, np.ndarray], accel_unit: str, source: str, skip: tuple[str, ...] = ()
+    ) -> None:
+        """Every measured column against its sensor's range, every temperature column against
+        the plausible temperatures (``accel_mg`` holds ``accel_unit``: a one-channel view)."""
+        for name, values in columns.items():
+            if not values.size or name in skip:
+                continue
+            data = _DATA_COLUMN.fullmatch(name)
+            if name == "accel_mg" or data is not None:
+                unit = accel_unit if name == "accel_mg" else data.group(1) if data else accel_unit
+                self.sensor_range(values, unit, f"{source}: column {name!r}")
+            elif name == "temp_c" or _TEMP_COLUMN.fullmatch(name):
+                self.temperature(values, f"{source}: column {name!r}", at_import=False)
 
     def accel_declared_g(self, raw: np.ndarray, unit: str, where: str) -> None:
         """A static axis near 9.8 declared in g is m/s^2."""
@@ -116,7 +158,7 @@ def check_training(rec: Recording, method: Method, *, accept: bool = False) -> P
     checks = Plausibility(accept)
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
-    checks.temperature(rec.temp_c, f"{where}: column 'temp_c'", at_import=False)
+    checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), where)
     if rec.meta.get("unit", "mg") == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
     checks.temperature_span(rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column 'temp_c'")

@@ -22,6 +22,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
+from trainer.budget import FLOAT_BYTES, check_memory
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
 from trainer.data.recording import REQUIRED_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
@@ -229,6 +230,29 @@ def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.nda
     return array
 
 
+def _npz_bytes(archive: np.lib.npyio.NpzFile) -> float:
+    """Memory the members take once loaded and converted to float64, from their headers alone
+    (a compressed member of 1e10 zeros is a few MB on disk); an unreadable header counts 0 and
+    is reported when the member is loaded."""
+    total = 0.0
+    if archive.zip is None:
+        return total
+    for name in archive.files:
+        try:
+            with archive.zip.open(f"{name}.npy") as member:
+                version = np.lib.format.read_magic(member)
+                read_header = (
+                    np.lib.format.read_array_header_1_0
+                    if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0
+                )
+                shape, _, dtype = read_header(member)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            continue
+        total += math.prod(float(n) for n in shape) * (dtype.itemsize + FLOAT_BYTES)
+    return total
+
+
 def _read_npz(path: str | Path) -> Recording:
     source = str(path)
     if not Path(path).is_file():
@@ -242,6 +266,7 @@ def _read_npz(path: str | Path) -> Recording:
     columns: dict[str, np.ndarray] = {}
     meta: dict[str, str] = {}
     with archive:
+        check_memory(_npz_bytes(archive), f"{source}: loading", "split the recording")
         for name in archive.files:
             array = _npz_member(archive, name, source)
             if name == NPZ_META:

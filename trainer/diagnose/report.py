@@ -23,7 +23,7 @@ from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut
 from trainer.diagnose.select import THRESHOLD
 from trainer.diagnose.where import AllanWhere
-from trainer.errors import UserError, atomic_output
+from trainer.errors import UserError, atomic_output, raise_write_error
 from trainer.physics.catalogue.units import channel_param_name
 from trainer.physics.config import config_to_toml
 from trainer.scoring.markdown import markdown_table
@@ -285,6 +285,7 @@ def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> Non
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.rename(staging, target)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, target)
         raise

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from trainer import __version__
-from trainer.errors import UserError
+from trainer.errors import UserError, raise_write_error
 from trainer.fleet.manifest import FleetSettings, UnitSpec
 
 RESULT_FILE = "result.json"
@@ -112,7 +112,8 @@ def publish_unit(out_dir: Path, unit_id: str, files: dict[str, bytes]) -> Path:
         os.replace(staging, target)
         if retired is not None:
             shutil.rmtree(retired, ignore_errors=True)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
+        raise_write_error(exc, target)
         raise
     return target

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import wraps
@@ -80,15 +81,21 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     count = default_workers() if workers is None else workers
     if count < 1:
         raise UserError(f"--workers must be >= 1, got {count}")
-    cluster = LocalCluster(
-        n_workers=count,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        # no dashboard, and the scheduler's HTTP endpoints on a free port rather than on a busy 8787
-        scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-        silence_logs=logging.ERROR,
-        env=ONE_THREAD_ENV,
-    )
+    try:
+        cluster = LocalCluster(
+            n_workers=count,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            # no dashboard, and the scheduler's HTTP endpoints on a free port rather than on a busy 8787
+            scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
+            silence_logs=logging.ERROR,
+            env=ONE_THREAD_ENV,
+        )
+    except (RuntimeError, OSError) as exc:  # the workers' own failure stays in their processes
+        raise UserError(
+            f"cannot start the local Dask cluster ({' '.join(str(exc).split())}): a full disk or a file-size "
+            f"limit on {tempfile.gettempdir()}, where its workers write? (or give --scheduler ADDRESS)"
+        ) from None
     with cluster, Client(cluster) as client:
         yield client

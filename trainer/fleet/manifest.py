@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import io
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ from codegen.render import validate_name
 from trainer import methods as registry
 from trainer.data.holdout import parse_holdout
 from trainer.errors import UserError
-from trainer.fields import TableFields, show
+from trainer.fields import TableFields, parse_toml, show
 from trainer.fleet import options
 
 DEFAULT_HOLDOUT = "last:0.25"  # a `--holdout` spec (trainer/data/holdout.py), as `trainer report` takes
@@ -190,10 +189,7 @@ def _unit(raw: dict[str, Any], where: str, base: Path, settings: FleetSettings) 
 
 
 def _read_toml(path: Path) -> tuple[FleetSettings, list[tuple[str, dict[str, Any]]]]:
-    try:
-        data = tomllib.loads(_text(path))
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML ({exc})") from None
+    data = parse_toml(_text(path), str(path))
     top = TableFields(str(path), data, "")
     top.only(("fleet", "unit"))
     settings = _settings(top.sub("fleet"), path.parent) if top.has("fleet") else FleetSettings()

@@ -9,7 +9,6 @@ silently would simulate different physics from the one the user wrote down. ``lo
 from __future__ import annotations
 
 import hashlib
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -21,7 +20,7 @@ import tomli_w
 from trainer.data.channels import sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError, atomic_output
-from trainer.fields import TableFields, show
+from trainer.fields import TableFields, parse_toml, show
 from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS, excluded
 from trainer.physics.catalogue.base import Param
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
@@ -465,11 +464,7 @@ def parse_config(data: dict[str, Any], source: str) -> PhysicsConfig:
 
 
 def parse_config_text(text: str, source: str = "<string>") -> PhysicsConfig:
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{source}: invalid TOML: {exc}") from None
-    return parse_config(data, source)
+    return parse_config(parse_toml(text, source), source)
 
 
 def default_config_text() -> str:

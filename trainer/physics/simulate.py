@@ -13,6 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from trainer import __version__
+from trainer.budget import check_rows
 from trainer.data.channels import truth_columns
 from trainer.data.recording import Recording
 from trainer.errors import UserError
@@ -28,6 +29,19 @@ from trainer.physics.thermal import lowpass
 # one per noise term in catalogue order. Indices are permanent: new streams (new noise terms) are
 # appended, so switching one term on or adding a new one never changes the others.
 STREAMS: tuple[str, ...] = ("thermometer", "input", *NOISE)
+# The columns of every simulated recording; a further channel adds its data column and its truth.
+SIMULATED_COLUMNS = (
+    "time_s",
+    "temp_c",
+    "accel_mg",
+    "chamber_c",
+    "true_temp_c",
+    "true_pm_temp_c",
+    "true_accel_mg",
+    "true_drift_mg",
+    "true_noise_mg",
+)
+CHANNEL_COLUMNS = 1 + len(truth_columns("accel0_x", "mg"))
 
 
 def stream_rngs(seed: int) -> dict[str, np.random.Generator]:
@@ -90,6 +104,7 @@ def _channel_columns(
     }
 
 
+@np.errstate(over="ignore", invalid="ignore")  # an overflow is refused by _check_finite
 def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Recording:
     """Simulate one recording; same ``cfg`` and ``seed`` give bit-identical columns.
 
@@ -98,6 +113,7 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     fs = cfg.recording.sample_rate_hz
     dt = 1.0 / fs
     start_c, specs = cfg.protocol.resolved()
+    nominal_rows(cfg)  # within the memory budget before anything is allocated
     profile = build_profile(cfg.protocol.name, start_c, specs, cfg.recording.duration_s)
     n = round(profile.duration_s * fs)
     _check(cfg, seed, n, fs)
@@ -133,17 +149,18 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     stages.close()
 
     total_drift = np.ascontiguousarray(breakdown.total, dtype=np.float64)
-    columns = {
-        "time_s": t,
-        "temp_c": temp_c,
-        "accel_mg": g_in + total_drift + noise,
-        "chamber_c": setpoint,
-        "true_temp_c": T_die,
-        "true_pm_temp_c": np.array(breakdown.T_pm, dtype=np.float64),
-        "true_accel_mg": g_in,
-        "true_drift_mg": total_drift,
-        "true_noise_mg": noise,
-    }
+    values = (
+        t,
+        temp_c,
+        g_in + total_drift + noise,
+        setpoint,
+        T_die,
+        np.array(breakdown.T_pm, dtype=np.float64),
+        g_in,
+        total_drift,
+        noise,
+    )
+    columns = dict(zip(SIMULATED_COLUMNS, values, strict=True))
     for channel in cfg.channels:
         columns.update(_channel_columns(channel, int(seed), t, T_die, rate))
     meta = {
@@ -160,11 +177,30 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     }
     if cfg.recording.duration_s is not None:
         meta["time_scale"] = f"{cfg.recording.duration_s / sum(s.duration_s for s in specs):.12g}"
+    _check_finite(cfg, columns)
     return Recording(columns, meta, source=f"simulate(seed={seed})")
 
 
+def _check_finite(cfg: PhysicsConfig, columns: dict[str, np.ndarray]) -> None:
+    """A parameter such as ``c0_mg = 1e308`` overflows to inf: refuse the configuration, naming it."""
+    for name, values in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise UserError(
+                f"{cfg.source}: column {name!r} is not finite from row {bad[0]} (t = {columns['time_s'][bad[0]]:g} s): "
+                f"a parameter too large for float64 (|value| near 1e308?) in [effects], [noise] or [input]"
+            )
+
+
 def nominal_rows(cfg: PhysicsConfig) -> int:
-    """Row count ``simulate`` will produce (for size checks before running)."""
+    """Row count ``simulate`` will produce, refused (one line) when above the memory budget."""
     _, specs = cfg.protocol.resolved()
     duration = cfg.recording.duration_s or sum(s.duration_s for s in specs)
-    return round(duration * cfg.recording.sample_rate_hz)
+    rate = cfg.recording.sample_rate_hz
+    return check_rows(
+        duration * rate,
+        len(SIMULATED_COLUMNS) + len(cfg.channels) * CHANNEL_COLUMNS,
+        f"{cfg.source}: {duration:.4g} s at {rate:.4g} Hz",
+        "a shorter protocol or duration (--duration, [recording] duration_s, segment duration_s) or a lower "
+        "rate (--rate, [recording] sample_rate_hz)",
+    )

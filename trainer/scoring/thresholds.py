@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 from trainer.errors import UserError
+from trainer.fields import parse_toml
 
 Bound = Literal["max", "min"]
 
@@ -60,11 +60,12 @@ def load_thresholds(path: str | os.PathLike[str]) -> dict[str, float]:
     """The ``[thresholds]`` of a TOML file; a bad file, table, key or value is a one-line UserError."""
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise UserError(f"{p}: cannot read the thresholds ({exc.strerror})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"{p}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{p}: invalid TOML ({exc})") from None
+    data = parse_toml(text, str(p))
     extra = sorted(set(data) - {TABLE})
     if extra:
         raise UserError(f"{p}: unknown table or key {extra[0]!r}; the thresholds go in [{TABLE}]")
