@@ -25,6 +25,7 @@ from trainer.atomic_dir import atomic_directory, remove_leftovers
 from trainer.cli import main as trainer_main
 from trainer.data.recording_io import write_recording
 from trainer.errors import UserError
+from trainer.output_lock import lock_path
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -36,7 +37,12 @@ def _dead_pid() -> int:
 
 
 def _siblings(target: Path) -> list[str]:
-    return sorted(p.name for p in target.parent.iterdir() if p.name.startswith(f".{target.name}."))
+    """Hidden staging entries beside ``target``; the writer's lock file (kept after a kill by
+    design, trainer/output_lock.py) is not one."""
+    lock = lock_path(target).name
+    return sorted(
+        p.name for p in target.parent.iterdir() if p.name.startswith(f".{target.name}.") and p.name != lock
+    )
 
 
 def _contents(directory: Path) -> dict[str, bytes]:
