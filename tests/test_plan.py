@@ -159,7 +159,10 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
         (["--effects", "thermal_lag:tau_s=150..90"], "thermal_lag.tau_s range 150..90"),
         (["--effects", "thermal_lag:tau_s=-5..3"], "tau_s must be positive"),
         (["--effects", "thermal_lag:tua_s=3"], "has no parameter 'tua_s'"),
-        (["--effects", "hysteresis:amp_mg=1:width_c=3,hysteresis_offset:amp_mg=1:width_c=3"], "same physics twice"),
+        (
+            ["--effects", "hysteresis:amp_mg=1:width_c=3,hysteresis_offset:amp_mg=1:width_c=3"],
+            "same physics twice",
+        ),
         (["--range", "70", "-20"], "--range: high -20 must be above low 70"),
         (["--max-hours", "1"], "no candidate program fits"),
         (["--targets", "missing.toml"], "no such file"),
