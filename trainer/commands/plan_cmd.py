@@ -160,6 +160,12 @@ def _with_noise(cfg: PhysicsConfig, path: str) -> PhysicsConfig:
     return replace(cfg, noise=noise)
 
 
+def _stderr(line: str) -> None:
+    import sys
+
+    print(line, file=sys.stderr, flush=True)
+
+
 def _check(args: argparse.Namespace) -> None:
     from trainer.errors import UserError
 
@@ -203,7 +209,9 @@ def run(args: argparse.Namespace) -> int:
         return [DrawTask(base, targets, program, validation, args.seed, i, args.rate) for i in indices]
 
     with runner(args.workers, args.scheduler, not args.no_progress) as pool:
-        choice = choose(options, make, pool, targets, target, draws=args.draws, screen=args.screen_draws)
+        choice = choose(
+            options, make, pool, targets, target, draws=args.draws, screen=args.screen_draws, log=_stderr
+        )
         others = () if args.no_standard else standard(limits)
         rows = [
             summarise(p.name, p.duration_s, pool.map(make(p, range(args.draws)), p.name), targets, target)

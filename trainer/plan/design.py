@@ -20,6 +20,18 @@ from trainer.plan.summary import Summary, Target, identified, summarise
 MakeTasks = Callable[[Program, range], list[DrawTask]]
 
 
+class _Tried(list[tuple[Program, str]]):
+    """The candidates looked at, each decision logged as it is taken (a search can take hours)."""
+
+    def __init__(self, log: Callable[[str], None]) -> None:
+        super().__init__()
+        self.log = log
+
+    def append(self, item: tuple[Program, str]) -> None:
+        super().append(item)
+        self.log(f"candidate {item[0].name} ({item[0].duration_s / 3600:.2f} h): {item[1]}")
+
+
 @dataclass(frozen=True)
 class Choice:
     program: Program
@@ -52,8 +64,9 @@ def choose(
     *,
     draws: int,
     screen: int,
+    log: Callable[[str], None] = print,
 ) -> Choice:
-    tried: list[tuple[Program, str]] = []
+    tried = _Tried(log)
     screened: list[tuple[Program, list[DrawResult]]] = []
     for program in candidates:
         results = _screen(program, make, runner, min(screen, draws), target)
