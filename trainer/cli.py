@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "diagnose": "diagnose_cmd",
     "fleet": "fleet_cmd",
     "report": "report_cmd",
+    "plan": "plan_cmd",
 }
 
 

@@ -1,0 +1,50 @@
+"""`trainer plan` bench: the planned program against the standard profiles (docs/plan.md's table).
+
+Runs ``trainer plan`` with the default targets (lag, rate and branch offset of the bundled run's
+sizes) and chamber (-20..70 degC, 2 degC/min, 20 min settling) for a 6 h limit, with the standard
+profiles' rows, then for a 3 h limit: when the 6 h design already lasts at most 3 h, the 3 h search
+tries the same candidates in the same order with the same seeded draws, so its answer is the same
+and is not recomputed. Each report lands in OUT/plan-<hours>h/report.md.
+
+    python bench/bench_plan.py [OUT] [--draws N] [--workers N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from trainer.cli import main
+from trainer.plan import outputs
+
+SEED = 1
+
+
+def plan(out: Path, hours: float, draws: int, workers: int, standard: bool) -> str:
+    argv = ["plan", "-o", str(out), "--max-hours", str(hours), "--draws", str(draws)]
+    argv += ["--workers", str(workers), "--seed", str(SEED)] + ([] if standard else ["--no-standard"])
+    start = time.perf_counter()
+    main(argv)
+    print(f"({hours:g} h limit: {time.perf_counter() - start:.0f} s)")
+    return (out / outputs.REPORT_MD).read_text(encoding="utf-8")
+
+
+def main_bench() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", nargs="?", default="out/bench_plan")
+    parser.add_argument("--draws", type=int, default=20)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    root = Path(args.out)
+    root.mkdir(parents=True, exist_ok=True)
+    six = plan(root / "plan-6h", 6.0, args.draws, args.workers, standard=True)
+    chosen_hours = float(six.split("**Planned: ", 1)[1].split(" h**", 1)[0].rsplit(", ", 1)[1])
+    if chosen_hours <= 3.0:
+        print(f"3 h limit: the 6 h design lasts {chosen_hours:.2f} h, so the 3 h search chooses the same")
+    else:
+        plan(root / "plan-3h", 3.0, args.draws, args.workers, standard=False)
+
+
+if __name__ == "__main__":
+    main_bench()

@@ -1,0 +1,239 @@
+"""``trainer plan``: design the chamber program that identifies the target physics (docs/plan.md)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from trainer.plan.chamber import ChamberLimits
+from trainer.plan.summary import Target
+
+if TYPE_CHECKING:
+    from trainer.physics.config import PhysicsConfig
+
+LIMITS, TARGET = ChamberLimits(), Target()
+SENSOR_CONFIG = "realistic.toml"  # the packaged sensor of the sizes measured on the bundled run
+DEFAULT_DRAWS, DEFAULT_SCREEN, DEFAULT_RATE_HZ = 20, 3, 1.0
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``trainer plan``."""
+    p = subparsers.add_parser(
+        "plan",
+        help="design the chamber program that identifies lag, rate and branch offset (Monte Carlo proof)",
+        description=(
+            "Choose the shortest chamber program within the chamber's limits on which the physics compensator "
+            "identifies the target effects and beats the cubic, proved by a seeded Monte Carlo against the "
+            "standard profiles. See docs/plan.md."
+        ),
+    )
+    p.add_argument(
+        "-o",
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory (program.toml, setpoints.csv, program.png, report.md)",
+    )
+    what = p.add_argument_group("targets (default: lag, rate and branch offset of the bundled run's sizes)")
+    what.add_argument(
+        "--targets", metavar="FILE", help="a TOML of prior ranges, or a trainer diagnose --json document"
+    )
+    what.add_argument(
+        "--effects",
+        metavar="SPEC",
+        help="e.g. thermal_lag:tau_s=90..150,temp_rate (an effect alone: the bundled prior)",
+    )
+    sensor = p.add_argument_group("sensor")
+    sensor.add_argument(
+        "--sim",
+        metavar="CONFIG.toml",
+        help=f"the sensor's physics besides the targets (default: the packaged {SENSOR_CONFIG})",
+    )
+    sensor.add_argument(
+        "--noise-from",
+        metavar="RECORDING",
+        help="measure the white noise on a recording (slow noise scaled with it)",
+    )
+    chamber = p.add_argument_group("chamber limits")
+    chamber.add_argument(
+        "--range",
+        nargs=2,
+        type=float,
+        default=(LIMITS.low_c, LIMITS.high_c),
+        metavar=("LOW_C", "HIGH_C"),
+        help="set-point range (default %(default)s)",
+    )
+    chamber.add_argument(
+        "--max-rate",
+        type=float,
+        default=LIMITS.max_rate_c_per_min,
+        metavar="C_PER_MIN",
+        help="fastest ramp (default %(default)s)",
+    )
+    chamber.add_argument(
+        "--settling",
+        type=float,
+        default=LIMITS.settling_s,
+        metavar="S",
+        help="hold after every ramp, and soak before the first (default %(default)s)",
+    )
+    chamber.add_argument(
+        "--max-hours",
+        type=float,
+        default=LIMITS.max_duration_s / 3600,
+        metavar="H",
+        help="longest program (default %(default)s)",
+    )
+    proof = p.add_argument_group("Monte Carlo")
+    proof.add_argument(
+        "--draws", type=int, default=DEFAULT_DRAWS, help="draws per profile (default %(default)s)"
+    )
+    proof.add_argument(
+        "--screen-draws",
+        type=int,
+        default=DEFAULT_SCREEN,
+        help="draws that screen a candidate (default %(default)s)",
+    )
+    proof.add_argument("--seed", type=int, default=0, help="seed of the draws (default %(default)s)")
+    proof.add_argument(
+        "--rate",
+        type=float,
+        default=DEFAULT_RATE_HZ,
+        metavar="HZ",
+        help="simulated sample rate (default %(default)s)",
+    )
+    proof.add_argument(
+        "--workers", type=int, default=1, help="Dask LocalCluster workers (default 1: in this process)"
+    )
+    proof.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
+    proof.add_argument("--no-standard", action="store_true", help="skip the standard profiles' rows")
+    goal = p.add_argument_group("target")
+    goal.add_argument(
+        "--identify-rate",
+        type=float,
+        default=TARGET.identify_rate,
+        help="share of draws (default %(default)s)",
+    )
+    goal.add_argument(
+        "--tolerance",
+        type=float,
+        default=TARGET.tolerance,
+        help="relative parameter error (default %(default)s)",
+    )
+    goal.add_argument(
+        "--vs-cubic",
+        type=float,
+        default=TARGET.vs_cubic,
+        help="physics' drift left over the cubic's (default %(default)s)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def _base(args: argparse.Namespace) -> PhysicsConfig:
+    from importlib import resources
+
+    from trainer.physics.config import load_config
+
+    path = args.sim or str(resources.files("trainer.physics").joinpath(SENSOR_CONFIG))
+    cfg = replace(load_config(path), channels=())
+    return cfg if args.noise_from is None else _with_noise(cfg, args.noise_from)
+
+
+def _with_noise(cfg: PhysicsConfig, path: str) -> PhysicsConfig:
+    """The recording's white-noise density; the slow terms scaled by the same factor (their shares kept)."""
+    from trainer.data.recording_io import read_recording
+    from trainer.diagnose.blocks import white_noise_density
+    from trainer.errors import UserError
+    from trainer.physics.config import NoiseConfig
+
+    rec = read_recording(path)
+    measured = white_noise_density(rec.accel_mg, rec.sample_rate_hz)
+    white = cfg.noise_term("white_noise")
+    if white is None or not white.params["n_mg_rt_s"] > 0:
+        raise UserError(
+            f"--noise-from {path}: the --sim has no white noise to scale from; add [noise.white_noise]"
+        )
+    factor = measured / white.params["n_mg_rt_s"]
+    noise = tuple(NoiseConfig(n.identifier, {k: v * factor for k, v in n.params.items()}) for n in cfg.noise)
+    return replace(cfg, noise=noise)
+
+
+def _stderr(line: str) -> None:
+    import sys
+
+    print(line, file=sys.stderr, flush=True)
+
+
+def _check(args: argparse.Namespace) -> None:
+    from trainer.errors import UserError
+
+    for name, value, low in (
+        ("--draws", args.draws, 1),
+        ("--screen-draws", args.screen_draws, 1),
+        ("--workers", args.workers, 1),
+    ):
+        if value < low:
+            raise UserError(f"{name} must be >= {low}, got {value}")
+    if not args.rate > 0:
+        raise UserError(f"--rate must be > 0 Hz, got {args.rate:g}")
+    if not 0 < args.identify_rate <= 1 or not args.tolerance > 0 or not args.vs_cubic > 0:
+        raise UserError("--identify-rate must be in (0, 1], --tolerance and --vs-cubic > 0")
+
+
+def run(args: argparse.Namespace) -> int:
+    from trainer.atomic_dir import atomic_directory, check_output_directory
+    from trainer.errors import UserError
+    from trainer.plan import outputs, priors
+    from trainer.plan.chamber import validation_program, violations
+    from trainer.plan.design import choose
+    from trainer.plan.montecarlo import DrawTask, runner
+    from trainer.plan.programs import Program, candidates, standard
+    from trainer.plan.summary import summarise
+
+    _check(args)
+    check_output_directory(args.out)
+    targets = priors.load(args.targets, args.effects)
+    limits = ChamberLimits(args.range[0], args.range[1], args.max_rate, args.settling, args.max_hours * 3600)
+    target = Target(args.identify_rate, args.tolerance, args.vs_cubic)
+    base = _base(args)
+    validation = validation_program(limits)
+    options = candidates(limits)
+    if not options:
+        raise UserError(
+            f"--max-hours {args.max_hours:g}: no candidate program fits (one cycle with settling needs more)"
+        )
+
+    def make(program: Program, indices: range) -> list[DrawTask]:
+        return [DrawTask(base, targets, program, validation, args.seed, i, args.rate) for i in indices]
+
+    with runner(args.workers, args.scheduler, not args.no_progress) as pool:
+        choice = choose(
+            options, make, pool, targets, target, draws=args.draws, screen=args.screen_draws, log=_stderr
+        )
+        others = () if args.no_standard else standard(limits)
+        rows = [
+            summarise(p.name, p.duration_s, pool.map(make(p, range(args.draws)), p.name), targets, target)
+            for p in others
+        ]
+    assert not violations(choice.program, limits), "a candidate is built within the limits"
+    with atomic_directory(args.out) as staging:
+        (staging / outputs.PROGRAM_TOML).write_text(
+            outputs.program_toml(base, targets, choice.program, args.rate), encoding="utf-8"
+        )
+        (staging / outputs.SETPOINTS_CSV).write_text(outputs.setpoints_csv(choice.program), encoding="utf-8")
+        outputs.plot(staging / outputs.PLOT_PNG, choice.program, others, validation)
+        text = outputs.report(
+            choice, rows, targets, limits, target, validation, seed=args.seed, rate_hz=args.rate
+        )
+        (staging / outputs.REPORT_MD).write_text(text, encoding="utf-8")
+    verdict = (
+        "meets the target"
+        if choice.met(target)
+        else "short of the target: " + "; ".join(choice.summary.short_of(target))
+    )
+    print(f"planned: {choice.program.name}, {choice.program.duration_s / 3600:.2f} h: {verdict}")
+    print(outputs.table([choice.summary, *rows], targets, target))
+    print(f"wrote {args.out}/{outputs.REPORT_MD}")
+    return 0

@@ -1,0 +1,160 @@
+"""One seeded draw (simulate the planned and the validation run, fit, score) and many of them.
+
+A draw takes the target effects from their priors, simulates the training profile and the
+independent validation profile with the same sensor (other noise), fits ``poly3`` and ``physics``
+(automatic structure: the finder diagnoses the run, cross-validation completes it) on the training
+run exactly as ``trainer compare`` does, and scores both on the validation run against the true
+drift. The same draw index gives the same sensor on every profile (common random numbers).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from trainer.physics.catalogue import EFFECTS, excluded
+from trainer.physics.config import PhysicsConfig, RecordingConfig
+from trainer.physics.effects import EffectConfig
+from trainer.plan.priors import Prior, draw_effects
+from trainer.plan.programs import Program
+
+CUBIC, PHYSICS = "poly3", "physics"
+
+
+@dataclass(frozen=True)
+class DrawTask:
+    base: PhysicsConfig  # the sensor without the targets (bias polynomial, temperature chain, noise)
+    priors: tuple[Prior, ...]
+    train: Program
+    valid: Program
+    seed: int
+    index: int
+    rate_hz: float
+
+
+@dataclass(frozen=True)
+class DrawResult:
+    index: int
+    truth: dict[str, dict[str, float]]
+    fitted: dict[str, dict[str, float]]  # the physics compensator's effects (bias polynomial left out)
+    error: dict[str, float]  # largest relative error of the checked parameters (inf: not found)
+    drift_left_mg: dict[str, float]  # method -> RMS against the true drift on the validation run
+
+    @property
+    def ratio(self) -> float:
+        return self.drift_left_mg[PHYSICS] / self.drift_left_mg[CUBIC]
+
+
+def sensor(
+    base: PhysicsConfig, effects: Sequence[EffectConfig], program: Program, rate_hz: float
+) -> PhysicsConfig:
+    """``base`` with ``effects`` in place of the same identifiers (and of those they exclude), on ``program``."""
+    names = {e.identifier for e in effects}
+    kept = tuple(
+        e for e in base.effects if not any(e.identifier == n or excluded(e.identifier, n) for n in names)
+    )
+    order = list(EFFECTS)
+    merged = tuple(sorted((*kept, *effects), key=lambda e: order.index(e.identifier)))
+    recording = RecordingConfig(rate_hz, base.recording.sensor)
+    return replace(base, recording=recording, protocol=program.protocol, effects=merged, channels=())
+
+
+def draw_seeds(seed: int, index: int) -> tuple[np.random.Generator, int, int]:
+    """The priors' generator and the training and validation simulation seeds of draw ``index``."""
+    sequence = np.random.SeedSequence([seed, index])
+    priors_seq, train_seq, valid_seq = sequence.spawn(3)
+    return (
+        np.random.default_rng(priors_seq),
+        int(train_seq.generate_state(1)[0]),
+        int(valid_seq.generate_state(1)[0]),
+    )
+
+
+def _relative_error(prior: Prior, truth: EffectConfig, fitted: dict[str, dict[str, float]]) -> float:
+    found = fitted.get(prior.identifier)
+    if found is None:
+        return math.inf
+    return max(abs(found[name] - truth.params[name]) / abs(truth.params[name]) for name in prior.checked)
+
+
+def run_draw(task: DrawTask) -> DrawResult:
+    """Simulate, fit and score one draw (see the module docstring)."""
+    from trainer.dlstm.fusion import FusionSettings
+    from trainer.physics.simulate import simulate
+    from trainer.scoring.compare import fit_all
+    from trainer.scoring.evaluate import drift_score
+
+    rng, train_seed, valid_seed = draw_seeds(task.seed, task.index)
+    effects = draw_effects(task.priors, rng)
+    train = simulate(sensor(task.base, effects, task.train, task.rate_hz), train_seed)
+    valid = simulate(sensor(task.base, effects, task.valid, task.rate_hz), valid_seed)
+    models, _ = fit_all(train, FusionSettings(), methods=(CUBIC, PHYSICS), progress=False, log=lambda _: None)
+    blind = valid.without_truth()
+    left = {}
+    for name, model in models.items():
+        t_ref = model.offset.t_ref_c if model.offset is not None and model.offset.relative else None
+        score = drift_score(valid, model.compensate(blind), t_ref)
+        assert score is not None, "a simulated recording carries its true drift"
+        left[name] = score.residual_rms_mg
+    fitted = {e.identifier: dict(e.params) for e in models[PHYSICS].effects}  # type: ignore[attr-defined]
+    return DrawResult(
+        task.index,
+        {e.identifier: dict(e.params) for e in effects},
+        fitted,
+        {p.identifier: _relative_error(p, e, fitted) for p, e in zip(task.priors, effects, strict=True)},
+        left,
+    )
+
+
+class Runner:
+    """Maps draws in this process, on a process pool of Dask workers (LocalCluster) or an existing
+    Dask cluster, with a progress bar; results come back in task order."""
+
+    def __init__(self, client: Any = None, progress: bool = True, width: int = 1) -> None:
+        self.client = client
+        self.progress = progress
+        self.width = width  # how many draws run at once
+
+    def map(self, tasks: Sequence[DrawTask], desc: str) -> list[DrawResult]:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=len(tasks), desc=desc, unit="draw", disable=None if self.progress else True, leave=False
+        )
+        with bar:
+            if self.client is None:
+                results = []
+                for task in tasks:
+                    results.append(_pinned_draw(task))
+                    bar.update()
+                return results
+            from distributed import as_completed
+
+            futures = self.client.map(_pinned_draw, list(tasks), pure=False)
+            for _ in as_completed(futures):
+                bar.update()
+            return [f.result() for f in futures]
+
+
+def _pinned_draw(task: DrawTask) -> DrawResult:
+    from trainer.fleet.cluster import one_thread
+
+    with one_thread():
+        return run_draw(task)
+
+
+@contextmanager
+def runner(workers: int, scheduler: str | None, progress: bool) -> Iterator[Runner]:
+    """In this process for one worker, else on the project's Dask cluster (:mod:`trainer.fleet.cluster`)."""
+    if workers == 1 and scheduler is None:
+        yield Runner(None, progress)
+        return
+    from trainer.fleet.cluster import open_client
+
+    with open_client(scheduler, None if scheduler is not None else workers) as client:
+        yield Runner(client, progress, max(1, len(client.scheduler_info().get("workers", {})) or workers))
