@@ -10,8 +10,8 @@ torch thread count, and a DLSTM population trains in parts that are exact
 - every other method's fit (the recording goes to the worker);
 - once a population is whole, the refinements of each method on it (best network, SSA, ISSA).
 
-The workers are forked from a server that has imported torch once; they ignore Ctrl-C, which the
-caller handles by terminating them (nothing partial is written: the caller saves at the end).
+The workers ignore Ctrl-C, which the caller handles by terminating them (nothing partial is
+written: the caller saves at the end).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from __future__ import annotations
 import multiprocessing
 import queue
 import signal
+import sys
 import time
 from collections.abc import Callable
 from types import TracebackType
@@ -40,7 +41,6 @@ from trainer.dlstm.fusion import (
     train_part,
 )
 
-PRELOAD = ["torch", "trainer.dlstm.fusion", "trainer.greybox.compensator"]
 SHARED = "shared population"  # the key of the population the paper's methods share
 
 
@@ -70,10 +70,9 @@ class Workers:
     """A pool of worker processes; :meth:`next` returns results in the order they complete."""
 
     def __init__(self, jobs: int, threads: int) -> None:
-        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        context = multiprocessing.get_context(method)
-        if method == "forkserver":
-            context.set_forkserver_preload(PRELOAD)
+        # Forked on Linux (as torch's DataLoader does): nothing to import again, and the workers are
+        # this process's children, so their CPU time is counted in its own (bench/bench_pipeline.py).
+        context = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
         self._pool = context.Pool(jobs, initializer=_worker_init, initargs=(threads,))
         self._done: queue.Queue[tuple[Any, Any, BaseException | None]] = queue.Queue()
         self.pending = 0
