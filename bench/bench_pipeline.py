@@ -50,7 +50,11 @@ def run(out: Path, jobs: int, extra: list[str]) -> tuple[float, float]:
     cpu, start = children_cpu_s(), time.perf_counter()
     with open(out.with_suffix(".log"), "w", encoding="utf-8") as log:
         subprocess.run(
-            ["bash", str(ROOT / "scripts" / "main_job.sh"), *extra], env=env, stdout=log, stderr=log, check=True
+            ["bash", str(ROOT / "scripts" / "main_job.sh"), *extra],
+            env=env,
+            stdout=log,
+            stderr=log,
+            check=True,
         )
     return time.perf_counter() - start, children_cpu_s() - cpu
 
@@ -94,7 +98,9 @@ def main() -> int:
         after = without_time_column((args.out / "after" / f"{name}.txt").read_text(encoding="utf-8"))
         if before != after:
             same = False
-            print(f"tables : {name}: DIFFERENT (diff {args.out}/before/{name}.txt {args.out}/after/{name}.txt)")
+            print(
+                f"tables : {name}: DIFFERENT (diff {args.out}/before/{name}.txt {args.out}/after/{name}.txt)"
+            )
     if same:
         print(f"tables : the same to the printed digit ({', '.join(TABLES)}; fit times apart)")
     return 0 if same else 1
