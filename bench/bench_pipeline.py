@@ -59,9 +59,11 @@ def run(out: Path, jobs: int, extra: list[str]) -> tuple[float, float]:
     return time.perf_counter() - start, children_cpu_s() - cpu
 
 
-def without_time_column(text: str) -> list[str]:
-    """The table lines with the fit-time cell of every table that has one removed."""
+def without_time_column(text: str, out: Path) -> list[str]:
+    """The printed lines with the fit-time cell of every table that has one removed and the
+    output folder ``out`` named OUT."""
     lines, drop = [], None
+    text = text.replace(str(out), "OUT")
     for line in text.splitlines():
         cells = line.split("|")
         if line.startswith("|") and TIME_COLUMN in cells[-2]:
@@ -94,8 +96,12 @@ def main() -> int:
     print(f"ratio  : wall before/after {wall_b / wall_a:.2f}x, CPU after/before {cpu_a / cpu_b:.2f}")
     same = True
     for name in TABLES:
-        before = without_time_column((args.out / "before" / f"{name}.txt").read_text(encoding="utf-8"))
-        after = without_time_column((args.out / "after" / f"{name}.txt").read_text(encoding="utf-8"))
+        before, after = (
+            without_time_column(
+                (args.out / label / f"{name}.txt").read_text(encoding="utf-8"), args.out / label
+            )
+            for label in ("before", "after")
+        )
         if before != after:
             same = False
             print(
