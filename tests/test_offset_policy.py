@@ -87,8 +87,10 @@ def test_absolute_fit_removes_the_constant_and_refuses_gravity() -> None:
     assert small.offset is not None
     assert small.offset.removed_mg == pytest.approx(cubic_drift(np.array(20.0)), abs=0.3)
     np.testing.assert_allclose(
-        small.drift_at(np.array([0.0, 40.0])), cubic_drift(np.array([0.0, 40.0])), atol=0.4
-    )  # type: ignore[attr-defined]
+        small.drift_at(np.array([0.0, 40.0])),  # type: ignore[attr-defined]
+        cubic_drift(np.array([0.0, 40.0])),
+        atol=0.4,
+    )
     with pytest.raises(UserError, match="--offset") as info:
         fit_compensator("poly3", static_run(GRAVITY_MG), policy=OffsetPolicy("absolute"))
     assert f"above {OFFSET_LIMIT_MG:g} mg" in str(info.value)
@@ -110,12 +112,33 @@ def test_temperature_dlstm_shift_moves_every_estimate_by_the_constant() -> None:
     settings = FusionSettings(population=1, iterations=3, cycles=0)
     model = fit_compensator("dlstm-temp", rec, {"settings": settings, "progress": False})
     assert model.offset is not None
-    # after the relative shift the settled estimate at T_ref is zero ...
-    assert model.drift_at_reference(model.offset.t_ref_c, RATE_HZ) == pytest.approx(0.0, abs=1e-6)
+    # after the relative shift its estimate at T_ref on the training run is zero ...
+    assert model.drift_at_reference(model.offset.t_ref_c, RATE_HZ, rec) == pytest.approx(0.0, abs=1e-6)
     # ... and a shift moves every estimate by exactly the shift
     before = model.predict_drift(rec)
     model.shift_drift(5.0)
     np.testing.assert_allclose(model.predict_drift(rec), before + 5.0, atol=1e-9)
+
+
+def test_temperature_dlstm_reference_is_read_on_the_training_run_not_at_rate_zero() -> None:
+    """Issue 22 item 7: the single ramp never shows the network a rate of 0, so its reference is
+    where the training run passes T_ref: there its relative estimate is zero, whatever it says
+    with the temperature held."""
+    torch.manual_seed(0)
+    n = 1200
+    temp = np.linspace(-10.0, 50.0, n)  # one ramp, as the paper's experiment
+    accel = GRAVITY_MG + cubic_drift(temp) + np.random.default_rng(1).normal(0.0, 0.2, n)
+    rec = Recording(
+        {"time_s": np.arange(n) / RATE_HZ, "temp_c": temp, "accel_mg": accel},
+        {"sample_rate_hz": str(RATE_HZ)},
+        "ramp.csv",
+    )
+    settings = FusionSettings(population=1, iterations=20, cycles=0)
+    model = fit_compensator("dlstm-temp", rec, {"settings": settings, "progress": False})
+    assert model.offset is not None and model.offset.t_ref_c == pytest.approx(20.0)
+    estimate = model.predict_drift(rec)
+    near = np.abs(temp - 20.0) <= 0.5  # the ramp's samples at T_ref, averaged by hand
+    assert float(np.mean(estimate[near])) == pytest.approx(0.0, abs=0.2)  # the old reading: 15 mg
 
 
 def test_recursive_methods_have_no_reference() -> None:

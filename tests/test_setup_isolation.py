@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SCRIPTS = ("setup.sh", "test.sh", "pipeline.sh")
+SCRIPTS = ("setup.sh", "test.sh", "pipeline.sh", "main_job.sh")
 
 LOGGER = """#!/bin/sh
 printf '%s %s' "{name}" "$*" | tr '\\n' ' ' >> "{log}"; echo >> "{log}"

@@ -58,12 +58,15 @@ class Compensator(ABC):
         """The compensated output ``accel_mg - drift`` in mg."""
         return rec.accel_mg - self.predict_drift(rec)
 
-    def drift_at_reference(self, t_ref_c: float, rate_hz: float) -> float:
-        """The settled drift estimate at the constant temperature ``t_ref_c`` (mg).
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float, training: Recording | None = None) -> float:
+        """The model's drift at ``t_ref_c`` (mg): what the offset policy moves out.
 
-        Any temperature-driven model gets it from its own stream: :data:`REFERENCE_SETTLE_S` of
-        constant temperature at ``rate_hz`` and zero acceleration; the last estimate is read.
+        By default the settled estimate at that constant temperature, from the model's own stream:
+        :data:`REFERENCE_SETTLE_S` of constant temperature at ``rate_hz`` and zero acceleration,
+        the last estimate read. ``training`` (the run the model was fitted on) is for a model whose
+        inputs a constant temperature would take outside what it was trained on (``dlstm-temp``).
         """
+        del training
         n = max(2, round(REFERENCE_SETTLE_S * rate_hz))
         columns = {
             "time_s": np.arange(n, dtype=np.float64) / rate_hz,

@@ -66,6 +66,14 @@ def add_parser(subparsers: Any) -> None:
         default=PAPER_RUN_SMOOTHING_S,
         help="validation smoothing in s (paper: 0.5)",
     )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="fit the methods side by side in N worker processes, each with --threads torch threads "
+        "(same results as 1, the default; e.g. the machine's cores)",
+    )
     add_dlstm_options(parser)
     add_offset_options(parser)
     add_channels_option(parser, "compare the methods on the channel, report in OUT/<channel>")
@@ -118,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
     settings, frontend = settings_from_args(args)
     policy = policy_from_args(args)
     if args.valid is not None and args.holdout is not None:
@@ -179,6 +189,7 @@ def run(args: argparse.Namespace) -> int:
         policy=policy,
         inject=args.inject,
         lead_in=lead_in,
+        jobs=args.jobs,
     )
     comparison.notes += notes
     signal = signal_of(valid)

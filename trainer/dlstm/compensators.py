@@ -41,6 +41,7 @@ from trainer.dlstm.realtime import (
     temperature_steps,
 )
 from trainer.errors import UserError
+from trainer.reference import value_at_temperature
 
 WEIGHT_KEYS = ("w_x0", "w_h0", "b0", "w_x1", "w_h1", "b1", "w_out", "b_out")
 MIN_TRAINING_STEPS = 16
@@ -56,7 +57,7 @@ def _run_network(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> np.nda
     return y.reshape(-1).numpy()
 
 
-class _StreamingDLSTM(Compensator):
+class StreamingDLSTM(Compensator):
     """Shared state and checkpoint layout of the DLSTM compensators."""
 
     kind: ClassVar[str]
@@ -172,7 +173,7 @@ class _StreamingDLSTM(Compensator):
         return model
 
 
-class RecursiveDLSTM(_StreamingDLSTM):
+class RecursiveDLSTM(StreamingDLSTM):
     """The paper's real-time model: ``u_{k+1} = F[u_k]`` on the smoothed output (DLSTM alone)."""
 
     kind = RECURSIVE_KIND
@@ -201,7 +202,7 @@ class RecursiveDLSTMWithISSA(RecursiveDLSTM):
     optimiser = "issa"
 
 
-class TemperatureDLSTM(_StreamingDLSTM):
+class TemperatureDLSTM(StreamingDLSTM):
     """Physically meaningful variant: smoothed temperature and its rate in, drift out."""
 
     kind = TEMPERATURE_KIND
@@ -218,6 +219,19 @@ class TemperatureDLSTM(_StreamingDLSTM):
 
     def run_inputs(self, rec: Recording) -> np.ndarray:
         return self._features(rec)
+
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float, training: Recording | None = None) -> float:
+        """The estimate at ``t_ref_c`` on the training run, as the run passed it (mg).
+
+        The network reads the temperature rate too: held at ``t_ref_c`` (the default reading) it sees
+        a rate of 0, which a single ramp never shows it, and its answer there is an offset, not its
+        shape. So the reference is read where it was trained: a line through the training run's
+        estimates nearest ``t_ref_c`` (:func:`~trainer.reference.value_at_temperature`, the same
+        reading the scoring applies to the true drift). Without the training run, the default.
+        """
+        if training is None:
+            return super().drift_at_reference(t_ref_c, rate_hz)
+        return value_at_temperature(training.temp_c, self.predict_drift(training), t_ref_c)
 
     def shift_drift(self, delta_mg: float) -> None:
         """The network's output is de-standardised with ``output_mean``: the shift goes there."""

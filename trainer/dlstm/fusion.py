@@ -21,7 +21,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from trainer.dlstm.network import PopulationDLSTM
+from trainer.dlstm.network import PopulationDLSTM, packed_groups
 from trainer.dlstm.optim import SsaSettings, minimize
 from trainer.dlstm.train import TrainingHistory, population_loss, train_population
 
@@ -87,26 +87,28 @@ def _as_batch(inputs: np.ndarray, targets: np.ndarray) -> tuple[torch.Tensor, to
     return x, y
 
 
-def train_stage(
-    inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, *, progress: bool = True
-) -> TrainedPopulation:
-    """Stage 1-2: initialise and gradient-train the population (ending condition one)."""
-    x, y = _as_batch(inputs, targets)
+def _initial_population(input_size: int, settings: FusionSettings) -> PopulationDLSTM:
+    """Stage 1: the seeded random population (individual k depends on (seed, k) only)."""
     torch.manual_seed(settings.seed)
-    model = PopulationDLSTM(
+    return PopulationDLSTM(
         settings.population,
-        x.shape[-1],
+        input_size,
         settings.hidden_size,
         settings.num_layers,
         1,
         seed=settings.seed,
     )
 
+
+def _train(
+    model: PopulationDLSTM, x: torch.Tensor, y: torch.Tensor, settings: FusionSettings, progress: bool
+) -> TrainingHistory:
+    """Stage 2 on ``model`` in place: Adam until ending condition one."""
+
     def reached_target(_: int, losses: torch.Tensor) -> bool:
         return settings.target_loss is not None and bool(torch.all(losses <= settings.target_loss))
 
-    start = time.perf_counter()
-    history = train_population(
+    return train_population(
         model,
         x,
         y,
@@ -116,7 +118,64 @@ def train_stage(
         progress=progress,
         callback=reached_target,
     )
+
+
+def train_stage(
+    inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, *, progress: bool = True
+) -> TrainedPopulation:
+    """Stage 1-2: initialise and gradient-train the population (ending condition one)."""
+    x, y = _as_batch(inputs, targets)
+    model = _initial_population(x.shape[-1], settings)
+    start = time.perf_counter()
+    history = _train(model, x, y, settings, progress)
     return TrainedPopulation(model, history, time.perf_counter() - start)
+
+
+# -- stage 2 in parts, side by side (trainer compare --jobs) ------------------------------------
+
+
+@dataclass
+class TrainedPart:
+    """Some individuals of the population, gradient-trained alone (:func:`train_part`)."""
+
+    individuals: list[dict[str, torch.Tensor]]
+    history: TrainingHistory
+
+
+def population_parts(settings: FusionSettings) -> list[range]:
+    """Parts of the population that train alone exactly as inside the whole: its packed groups.
+
+    The loss is a sum over individuals, Adam is element-wise and a group's arithmetic depends on
+    that group only (:func:`~trainer.dlstm.network.packed_groups`). One part when ``target_loss``
+    is set: that ending condition looks at every individual at once.
+    """
+    if settings.target_loss is not None:
+        return [range(settings.population)]
+    return packed_groups(settings.population)
+
+
+def train_part(inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, part: range) -> TrainedPart:
+    """Stage 1-2 for the individuals ``part`` of the population only (no progress bar)."""
+    x, y = _as_batch(inputs, targets)
+    whole = _initial_population(x.shape[-1], settings)
+    model = PopulationDLSTM.from_individuals([whole.individual(k) for k in part])
+    history = _train(model, x, y, settings, progress=False)
+    return TrainedPart([model.individual(k) for k in range(len(part))], history)
+
+
+def join_parts(parts: list[TrainedPart]) -> TrainedPopulation:
+    """The whole trained population from its parts (in population order), as :func:`train_stage`
+    would have returned it; ``seconds`` is the parts' training time summed."""
+    model = PopulationDLSTM.from_individuals([ind for part in parts for ind in part.individuals])
+    histories = [part.history for part in parts]
+    history = TrainingHistory(
+        losses=torch.cat([h.losses for h in histories], dim=1),
+        final_loss=torch.cat([h.final_loss for h in histories]),
+        iterations=histories[0].iterations,
+        stopped_early=histories[0].stopped_early,
+        seconds=sum(h.seconds for h in histories),
+    )
+    return TrainedPopulation(model, history, history.seconds)
 
 
 def refine_stage(

@@ -485,6 +485,18 @@ def _packed_group(
     return hs, y, new_state
 
 
+def packed_groups(population: int, group_size: int = DEFAULT_GROUP_SIZE) -> list[range]:
+    """The individuals of each packed ``torch.lstm`` call: balanced groups of at most ``group_size``.
+
+    An individual's arithmetic depends on its group only, so a group trains alone exactly as it
+    does inside the whole population (``trainer compare --jobs`` trains the groups side by side).
+    """
+    size = max(1, min(group_size, population))
+    n_groups = -(-population // size)
+    bounds = [population * i // n_groups for i in range(n_groups + 1)]
+    return [range(lo, hi) for lo, hi in itertools.pairwise(bounds)]
+
+
 def _individual_mask(t: Tensor, mask: Tensor) -> Tensor:
     return mask.view(-1, *([1] * (t.dim() - 1)))
 
@@ -509,10 +521,8 @@ def _forward_packed(
         x = clean(x) if per_individual_x else x
         state = tuple((clean(h), clean(c)) for h, c in state)
 
-    def run(size: int) -> tuple[Tensor, Tensor, State]:
-        n_groups = -(-P // size)  # balanced groups of at most `size` individuals
-        bounds = [P * i // n_groups for i in range(n_groups + 1)]
-        chunks = [range(lo, hi) for lo, hi in itertools.pairwise(bounds)]
+    def run(size: int) -> tuple[bool, Tensor, State]:
+        chunks = packed_groups(P, size)
         results = [
             _packed_group(
                 [p[g.start : g.stop] for p in params],
@@ -522,27 +532,28 @@ def _forward_packed(
             )
             for g in chunks
         ]
+        # Whether every h is finite, per group: a NaN in h reaches y (NaN * w is NaN), so y, 1/H the
+        # size, is checked first and h only when y is not finite (an overflow of the head).
+        finite = all(
+            bool(torch.isfinite(r[1].detach()).all()) or bool(torch.isfinite(r[0].detach()).all())
+            for r in results
+        )
         if len(results) == 1:
-            return results[0]
-        hs = torch.cat([r[0] for r in results])
+            return finite, results[0][1], results[0][2]
         y = torch.cat([r[1] for r in results])
         st = tuple(
             (torch.cat([r[2][layer][0] for r in results]), torch.cat([r[2][layer][1] for r in results]))
             for layer in range(spec.num_layers)
         )
-        return hs, y, st
+        return finite, y, st
 
     size = max(1, min(group_size, P))
-    hs, y, new_state = run(size)
+    finite, y, new_state = run(size)
     # With finite weights, inputs and state, h is bounded by tanh; a NaN here means some gate
     # overflowed (inf - inf) inside one individual and may have leaked through the packed matmul.
     # Re-run one individual per call so that no individual can affect another.
-    if (
-        size > 1
-        and not bool(torch.isfinite(hs.detach()).all())
-        and (per_individual_x or bool(torch.isfinite(x).all()))
-    ):
-        hs, y, new_state = run(1)
+    if size > 1 and not finite and (per_individual_x or bool(torch.isfinite(x).all())):
+        _, y, new_state = run(1)
     if bad.any():
         y = y.masked_fill(_individual_mask(y, bad), float("nan"))
         new_state = tuple(

@@ -89,9 +89,9 @@ class PhysicsCompensator(Compensator):
     def model(self) -> PhysicsModel:
         return PhysicsModel.from_effects(self.effects, self.temp_range_c)
 
-    def drift_at_reference(self, t_ref_c: float, rate_hz: float) -> float:
+    def drift_at_reference(self, t_ref_c: float, rate_hz: float, training: Recording | None = None) -> float:
         """Exactly the settled drift (filters settled, mid-branch, warm-up over), no simulation."""
-        del rate_hz
+        del rate_hz, training
         return self.model.static_drift_mg(t_ref_c)
 
     def shift_drift(self, delta_mg: float) -> None:

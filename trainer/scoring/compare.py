@@ -47,12 +47,15 @@ def fit_all(
     progress: bool = True,
     log: Callable[[str], None] = print,
     policy: OffsetPolicy | None = None,
+    jobs: int = 1,
 ) -> tuple[dict[str, Compensator], dict[str, float]]:
     """Fit every requested method (default: all) on ``train`` (ground truth hidden), in registry order.
 
     The methods that share the gradient-trained population are fitted first, from one population
     trained once (prepared by the first registered sharing method), then every other method. Every
     temperature-driven model then gets the offset ``policy`` (:mod:`trainer.reference`).
+    ``jobs`` > 1: the same fits side by side in that many worker processes, with the same results
+    (:mod:`trainer.scoring.side_by_side`).
     """
     train = train.without_truth()
     requested = registry.names() if methods is None else methods
@@ -61,8 +64,17 @@ def fit_all(
     seconds: dict[str, float] = {}
 
     def build(method: registry.Method) -> Compensator:
-        return method.cls(**method.options.compare_kwargs(settings, progress))
+        return method.cls(**method.options.compare_kwargs(settings, progress and jobs == 1))
 
+    if jobs > 1:
+        import torch
+
+        from trainer.scoring.side_by_side import fit_side_by_side
+
+        models, seconds = fit_side_by_side(
+            train, chosen, build, settings, jobs=jobs, threads=torch.get_num_threads(), log=log
+        )
+        return _with_policy(models, seconds, chosen, train, policy, log)
     sharing = [m for m in chosen if m.shares_population]
     if sharing:
         log(f"training the DLSTM population ({settings.population} x {settings.iterations} iterations)")
@@ -82,6 +94,18 @@ def fit_all(
             start = time.perf_counter()
             models[method.name] = build(method).fit(train)
             seconds[method.name] = time.perf_counter() - start
+    return _with_policy(models, seconds, chosen, train, policy, log)
+
+
+def _with_policy(
+    models: dict[str, Compensator],
+    seconds: dict[str, float],
+    chosen: list[registry.Method],
+    train: Recording,
+    policy: OffsetPolicy | None,
+    log: Callable[[str], None],
+) -> tuple[dict[str, Compensator], dict[str, float]]:
+    """The fitted models in registry order, each with the offset ``policy`` applied."""
     for method in chosen:
         record = apply_offset_policy(models[method.name], method, train, policy or OffsetPolicy())
         log(f"{method.name}: {record.describe() if record else RECURSIVE_NOTE}")
@@ -113,14 +137,18 @@ def compare(
     policy: OffsetPolicy | None = None,
     inject: str | None = None,
     lead_in: Recording | None = None,
+    jobs: int = 1,
 ) -> Comparison:
     """Fit on ``train``, score on ``valid``; ``inject`` (an input preset) is added to ``valid`` to
     measure how much of a known input each method keeps (:mod:`trainer.scoring.inject`).
 
     ``lead_in``: the samples that precede ``valid`` in the same recording (a held-out end part):
     every method runs through them first and is scored on ``valid`` only, as firmware that has run
-    since power-on; without it a method with state (filters, a branch, a network) starts cold."""
-    models, seconds = fit_all(train, settings, methods=methods, progress=progress, log=log, policy=policy)
+    since power-on; without it a method with state (filters, a branch, a network) starts cold.
+    ``jobs``: worker processes for the fits (:func:`fit_all`)."""
+    models, seconds = fit_all(
+        train, settings, methods=methods, progress=progress, log=log, policy=policy, jobs=jobs
+    )
     blind = valid.without_truth()
     compensated = {name: compensate_after(model, blind, lead_in) for name, model in models.items()}
     references = {
