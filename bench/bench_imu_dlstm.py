@@ -28,8 +28,10 @@ from codegen.export import export  # noqa: E402
 from codegen.imu import export_imu  # noqa: E402
 from codegen.imu_verify import _cortex_m, verify_imu  # noqa: E402
 from tests import testmodels as tm  # noqa: E402
+from trainer import methods as registry  # noqa: E402
 from trainer.data.recording import Recording  # noqa: E402
 from trainer.data.recording_io import write_recording  # noqa: E402
+from trainer.dlstm.compensators import RecursiveDLSTM  # noqa: E402
 
 cm = _cortex_m()  # firmware_c/cortex_m.py, loaded by path
 RATE_HZ = 200.0
@@ -60,7 +62,7 @@ def checkpoints(rec: Recording, root: Path, dlstm: str | None) -> list[Path]:
             {"sample_rate_hz": f"{RATE_HZ:g}"},
             name,
         )
-        method = "dlstm" if name == dlstm else "poly3"
+        method = registry.name_of(RecursiveDLSTM) if name == dlstm else registry.CUBIC
         checkpoint = tm.checkpoint_for(method, view, seed=0)
         unit = "dps" if name.startswith("gyro") else "mg"
         checkpoint["train_stats"] = {**checkpoint["train_stats"], "channel": name, "unit": unit}

@@ -24,6 +24,7 @@ from codegen.cli import main as codegen_main
 from codegen.flightparams import load_channel_cubic
 from codegen.px4_republish import lag_bound, republish_error
 from codegen.verify import verify
+from trainer import methods as registry
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
@@ -50,7 +51,7 @@ def main() -> int:
         )
         assert (
             trainer_main(
-                ["fit", "--method", "poly3", str(recording), "--channels", "all", "-o", str(fit_dir)]
+                ["fit", "--method", registry.CUBIC, str(recording), "--channels", "all", "-o", str(fit_dir)]
             )
             == 0
         )

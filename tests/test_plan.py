@@ -16,7 +16,8 @@ from trainer.errors import UserError, run_cli
 from trainer.physics.config import load_config
 from trainer.physics.profiles import PAPER_OVEN, SegmentSpec
 from trainer.plan import outputs, priors
-from trainer.plan.chamber import ChamberLimits, validation_program, violations
+from trainer.plan.chamber import validation_program, violations
+from trainer.plan.limits import ChamberLimits
 from trainer.plan.montecarlo import DrawTask, run_draw
 from trainer.plan.programs import Program, candidates
 from trainer.plan.summary import Target, identified

@@ -6,7 +6,7 @@ import argparse
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from trainer.plan.chamber import ChamberLimits
+from trainer.plan.limits import ChamberLimits
 from trainer.plan.summary import Target
 
 if TYPE_CHECKING:
@@ -146,11 +146,12 @@ def _with_noise(cfg: PhysicsConfig, path: str) -> PhysicsConfig:
     from trainer.data.recording_io import read_recording
     from trainer.diagnose.blocks import white_noise_density
     from trainer.errors import UserError
+    from trainer.physics.catalogue.white_noise import DEFINITION as WHITE_NOISE
     from trainer.physics.config import NoiseConfig
 
     rec = read_recording(path)
     measured = white_noise_density(rec.accel_mg, rec.sample_rate_hz)
-    white = cfg.noise_term("white_noise")
+    white = cfg.noise_term(WHITE_NOISE.identifier)
     if white is None or not white.params["n_mg_rt_s"] > 0:
         raise UserError(
             f"--noise-from {path}: the --sim has no white noise to scale from; add [noise.white_noise]"

@@ -1,36 +1,12 @@
-"""The chamber's limits, the check that a program respects them, and the validation profile."""
+"""The check that a program respects the chamber's limits, and the validation profile."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from trainer.errors import UserError
 from trainer.physics.profiles import REALISTIC_VALID, SegmentSpec
+from trainer.plan.limits import ChamberLimits
 from trainer.plan.programs import Program, ramp_rate
 
 RATE_SLACK = 1e-9  # relative: a ramp built at exactly the maximum rate passes
-
-
-@dataclass(frozen=True)
-class ChamberLimits:
-    """What the chamber can do: set-point range, fastest ramp, settling after a ramp, longest program."""
-
-    low_c: float = -20.0
-    high_c: float = 70.0
-    max_rate_c_per_min: float = 2.0
-    settling_s: float = 1200.0
-    max_duration_s: float = 6 * 3600.0
-
-    def __post_init__(self) -> None:
-        if not self.high_c > self.low_c:
-            raise UserError(f"--range: high {self.high_c:g} must be above low {self.low_c:g} degC")
-        for name, value in (
-            ("--max-rate", self.max_rate_c_per_min),
-            ("--settling", self.settling_s),
-            ("--max-hours", self.max_duration_s),
-        ):
-            if not value > 0:
-                raise UserError(f"{name} must be > 0, got {value:g}")
 
 
 def violations(program: Program, limits: ChamberLimits) -> list[str]:

@@ -17,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from trainer import methods as registry
 from trainer.physics.catalogue import EFFECTS, excluded
 from trainer.physics.config import PhysicsConfig, RecordingConfig
 from trainer.physics.effects import EffectConfig
 from trainer.plan.priors import Prior, draw_effects
 from trainer.plan.programs import Program
 
-CUBIC, PHYSICS = "poly3", "physics"
+CUBIC, PHYSICS = registry.CUBIC, registry.PHYSICS
 
 
 @dataclass(frozen=True)

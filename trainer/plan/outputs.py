@@ -13,8 +13,8 @@ from matplotlib.axes import Axes
 
 from trainer.physics.config import PhysicsConfig, config_to_toml
 from trainer.physics.profiles import build_profile
-from trainer.plan.chamber import ChamberLimits
 from trainer.plan.design import Choice
+from trainer.plan.limits import ChamberLimits
 from trainer.plan.montecarlo import CUBIC, PHYSICS, sensor
 from trainer.plan.priors import Prior
 from trainer.plan.programs import Program

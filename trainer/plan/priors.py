@@ -22,6 +22,9 @@ import numpy as np
 from trainer.errors import UserError
 from trainer.greybox.terms import NEEDS_POWER_ON_TIME, STREAMABLE
 from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, excluded
+from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
+from trainer.physics.catalogue.temp_rate import DEFINITION as TEMP_RATE
+from trainer.physics.catalogue.thermal_lag import DEFINITION as THERMAL_LAG
 from trainer.physics.effects import EffectConfig
 
 Range = tuple[float, float]
@@ -31,9 +34,9 @@ Range = tuple[float, float]
 # lag: y axis tau_s = 116 +- 9 s; rate: z axis k = 0.40 mg per degC/min through a 30 s filter, y axis
 # 1.0 through 280 s; branch offset: y and z axes 2.3 to 8.2 mg over play widths of 32 to 47 degC.
 BUNDLED_RUN: dict[str, dict[str, Range]] = {
-    "thermal_lag": {"tau_s": (90.0, 150.0)},
-    "temp_rate": {"k_mg_per_c_per_min": (0.4, 1.0), "tau_s": (30.0, 280.0)},
-    "hysteresis_offset": {"amp_mg": (2.3, 8.2), "width_c": (32.0, 47.0)},
+    THERMAL_LAG.identifier: {"tau_s": (90.0, 150.0)},
+    TEMP_RATE.identifier: {"k_mg_per_c_per_min": (0.4, 1.0), "tau_s": (30.0, 280.0)},
+    BRANCH_OFFSET.identifier: {"amp_mg": (2.3, 8.2), "width_c": (32.0, 47.0)},
 }
 # What a planned program may target: what the physics compensator models without a power-on clock.
 PLANNABLE: tuple[str, ...] = tuple(name for name in STREAMABLE if name not in NEEDS_POWER_ON_TIME)

@@ -15,7 +15,7 @@ from trainer.physics.config import ProtocolConfig
 from trainer.physics.profiles import PAPER_OVEN, SegmentSpec
 
 if TYPE_CHECKING:
-    from trainer.plan.chamber import ChamberLimits
+    from trainer.plan.limits import ChamberLimits
 
 # The bundled real run (shared/data/real): from 52 degC down to -17.6 at 3.05 degC/min, up to 74.0 at
 # 3.10, down to 36.0 at 2.05 (cooling 0-1363 s, heating 1364-3133 s, cooling 3134-4245 s), no holds.
