@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 SCRIPTS = ("setup.sh", "test.sh", "pipeline.sh", "main_job.sh")
 
 LOGGER = """#!/bin/sh
-printf '%s %s' "{name}" "$*" | tr '\\n' ' ' >> "{log}"; echo >> "{log}"
+printf '%s %s\\n' "{name}" "$(printf '%s' "$*" | tr '\\n' ' ')" >> "{log}"  # one write: side-by-side steps log at once
 {body}
 exit 0
 """
@@ -31,7 +31,7 @@ if [ "$1" = "-m" ] && [ "$2" = "venv" ]; then
   for tool in python pip ruff mypy trainer codegen; do
     cat > "$3/bin/$tool" <<'STUB'
 #!/bin/sh
-printf '%s %s' "venv/$(basename "$0")" "$*" | tr '\\n' ' ' >> "{log}"; echo >> "{log}"
+printf '%s %s\\n' "venv/$(basename "$0")" "$(printf '%s' "$*" | tr '\\n' ' ')" >> "{log}"
 exit 0
 STUB
     chmod +x "$3/bin/$tool"
