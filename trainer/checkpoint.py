@@ -92,10 +92,13 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise UserError(
             f"{p}: not a readable model file (truncated or corrupted: {type(exc).__name__})"
         ) from None
-    if not isinstance(checkpoint, dict) or checkpoint.get("format") != FORMAT_NAME:
+    # compared only once known to be plain values: a tensor there has no truth value
+    if not isinstance(checkpoint, dict) or not (
+        isinstance(checkpoint.get("format"), str) and checkpoint["format"] == FORMAT_NAME
+    ):
         raise UserError(f"{p}: not a mems-tdc model (field 'format' is not '{FORMAT_NAME}')")
     version = checkpoint.get("format_version")
-    if version != FORMAT_VERSION:
+    if not (_is_count(version) and version == FORMAT_VERSION):
         raise UserError(
             f"{p}: field 'format_version' is {version!r}; this tool reads version {FORMAT_VERSION}"
         )
