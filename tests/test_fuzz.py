@@ -28,7 +28,6 @@ import shutil
 import subprocess
 import sys
 import tomllib
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -59,7 +58,11 @@ from trainer.errors import EXIT_USER_ERROR, run_cli
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_SEEDS = (0, 1)
 SLOW_SEEDS = tuple(range(100, 110))
-SEEDS = tuple(int(s) for s in os.environ["FUZZ_SEED"].split(",")) if os.environ.get("FUZZ_SEED") else DEFAULT_SEEDS
+SEEDS = (
+    tuple(int(s) for s in os.environ["FUZZ_SEED"].split(","))
+    if os.environ.get("FUZZ_SEED")
+    else DEFAULT_SEEDS
+)
 FINDINGS = Path("/tmp/fuzz-findings")
 ADDRESS_SPACE_BYTES = 6 << 30  # torch and numpy map ~2 GB at import; a runaway allocation fails far above
 MAX_RSS_BYTES = 1536 << 20  # a mutant of a 400-row recording needs far less
@@ -168,7 +171,9 @@ def _swap_fields(rng: np.random.Generator, lines: list[str]) -> list[str]:
 
 def _unicode_line(rng: np.random.Generator, lines: list[str]) -> list[str]:
     at = int(rng.integers(0, len(lines) + 1))
-    junk = str(rng.choice(["\ufeff", "ß,∂,ø", "\u202e1,2,3", "１,２,３", "\x00\x00", "# sample_rate_hz=1e308"]))
+    junk = str(
+        rng.choice(["\ufeff", "ß,∂,ø", "\u202e1,2,3", "１,２,３", "\x00\x00", "# sample_rate_hz=1e308"])
+    )
     return lines[:at] + [junk] + lines[at:]
 
 
@@ -335,14 +340,34 @@ def _cheap(cases: list[Case]) -> list[Case]:
     return [case for case in cases if not case[0].startswith("diagnose")]
 
 
-def _kinds(files: dict[str, Path]) -> dict[str, tuple[Path, Callable[[np.random.Generator, bytes], bytes], list[Case], int]]:
+def _kinds(
+    files: dict[str, Path],
+) -> dict[str, tuple[Path, Callable[[np.random.Generator, bytes], bytes], list[Case], int]]:
     """Input kind -> (valid file, mutator, commands that read it, mutants per seed)."""
-    fleet_case: Case = ("fleet", trainer_main, lambda c, f, o: ["fleet", str(f), "-o", str(o / "f"), "--quiet",
-                                                               "--scheduler", c["scheduler"]])
-    blob_case: Case = ("codegen verify --channels", codegen_main, lambda c, f, o: [
-        "verify", str(c["fitdir"]), str(f.parent), str(c["multi.csv"]), "--channels", "all", "--json", str(o / "v.json")])
-    flight_case: Case = ("import", trainer_main, lambda c, f, o: ["import", str(f), "--channels", "all",
-                                                                  "-o", str(o / "r.csv")])
+    fleet_case: Case = (
+        "fleet",
+        trainer_main,
+        lambda c, f, o: ["fleet", str(f), "-o", str(o / "f"), "--quiet", "--scheduler", c["scheduler"]],
+    )
+    blob_case: Case = (
+        "codegen verify --channels",
+        codegen_main,
+        lambda c, f, o: [
+            "verify",
+            str(c["fitdir"]),
+            str(f.parent),
+            str(c["multi.csv"]),
+            "--channels",
+            "all",
+            "--json",
+            str(o / "v.json"),
+        ],
+    )
+    flight_case: Case = (
+        "import",
+        trainer_main,
+        lambda c, f, o: ["import", str(f), "--channels", "all", "-o", str(o / "r.csv")],
+    )
     sim, report_config = _cheap(config_cases())[0], _cheap(config_cases())[-1]
     return {
         "recording.csv": (files["good.csv"], _mutate_text, [_import_case(), *_cheap(recording_cases())], 14),
@@ -375,11 +400,18 @@ def valid(tmp_path_factory: pytest.TempPathFactory, client: Any) -> dict[str, An
     files["sim.toml"] = write_file(root / "sim.toml", (ROOT / "trainer/physics/default.toml").read_text())
     files["thresholds.toml"] = write_file(root / "thresholds.toml", THRESHOLDS)
     files["manifest.toml"] = write_file(root / "manifest.toml", _manifest_toml(files))
-    files["manifest.csv"] = write_file(root / "manifest.csv", f"id,recordings,methods\nU1,{files['good.csv'].name},poly3\n")
+    files["manifest.csv"] = write_file(
+        root / "manifest.csv", f"id,recordings,methods\nU1,{files['good.csv'].name},poly3\n"
+    )
     for suffix, data in valid_flight_logs(root).items():
         files[f"valid{suffix}"] = root / f"valid{suffix}"
         assert files[f"valid{suffix}"].read_bytes() == data
-    assert run_cli(trainer_main, ["import", str(files["valid.ulg"]), "--channels", "all", "-o", str(root / "m.csv")]) == 0
+    assert (
+        run_cli(
+            trainer_main, ["import", str(files["valid.ulg"]), "--channels", "all", "-o", str(root / "m.csv")]
+        )
+        == 0
+    )
     files["multi.csv"] = root / "m_accel0.csv"
     files["fitdir"] = root / "fit"
     assert run_cli(trainer_main, ["fit", "--method", "poly3", "--channels", "all", str(files["multi.csv"]),
@@ -404,17 +436,46 @@ def _allowed_codes(command: str) -> set[int]:
     return {0, EXIT_USER_ERROR} | ({1} if command.startswith(documented_failure) else set())
 
 
+ASCII_NUMBER = re.compile(r"[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?|[-+]?(nan|inf)", re.IGNORECASE)
+
+
+def _number(cell: str) -> float:
+    """A CSV cell as recording-format.md writes numbers (ASCII only), else NaN: never a silent read."""
+    return float(cell) if ASCII_NUMBER.fullmatch(cell) else math.nan
+
+
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
     """A recording CSV's columns by name (comment lines skipped), read without the tool's reader."""
-    lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
     names = lines[0].split(",")
-    values = np.array([[float(x) for x in line.split(",")] for line in lines[1:]], dtype=float)
-    return {name: values[:, k] for k, name in enumerate(names)}
+    rows = [line.split(",") for line in lines[1:]]
+    return {
+        name: np.array([_number(row[k]) if k < len(row) else math.nan for row in rows], dtype=float)
+        for k, name in enumerate(names)
+    }
+
+
+def _read_npz(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except Exception:
+        return {"time_s": np.array([math.nan])}
+    return {
+        n: (a.astype(float) if a.dtype.kind in "iuf" else np.array([math.nan])) for n, a in arrays.items()
+    }
 
 
 def _accepted_recording_is_possible(path: Path) -> str | None:
-    """What is impossible in a recording a command wrote (None: finite and within the bounds)."""
-    for name, values in _read_csv(path).items():
+    """What is impossible in a recording (None: its time, temperature and acceleration columns are
+    finite and within the plausibility bounds)."""
+    columns = _read_npz(path) if path.suffix == ".npz" else _read_csv(path)
+    for name, values in columns.items():
+        if not (name == "time_s" or name.endswith(("temp_c", "_mg"))):
+            continue
+        if values.size == 0:
+            continue
         if not np.all(np.isfinite(values)):
             return f"column {name} is not all finite"
         if name.endswith("temp_c") and (values.min() < TEMP_MIN_C or values.max() > TEMP_MAX_C):
@@ -439,7 +500,7 @@ def _run_one(
     capfd.readouterr()
     try:
         code = run_cli(main, argv)
-    except Exception as exc:  # noqa: BLE001 - any exception but UserError is the finding
+    except Exception as exc:
         where = _keep_finding(label, seed, source, argv)
         raise AssertionError(f"{where}: traceback {type(exc).__name__}: {exc}") from exc
     err = capfd.readouterr().err
@@ -453,6 +514,9 @@ def _run_one(
     leftovers = [p for p in hidden_files(out) if ".part" in p or p.endswith(".old")]
     if leftovers or hidden_files(inputs) != before:
         problems.append(f"temporary files left: {leftovers or hidden_files(inputs)}")
+    if code == 0 and label.split(" <- ")[1].startswith("recording"):
+        impossible = _accepted_recording_is_possible(source)
+        problems += [f"silently accepted a mutant with {impossible}"] if impossible else []
     if code == 0 and (out / "r.csv").is_file():
         impossible = _accepted_recording_is_possible(out / "r.csv")
         problems += [f"silently accepted: {impossible}"] if impossible else []
@@ -464,7 +528,9 @@ def _run_one(
         raise AssertionError(f"{where}: {'; '.join(problems)}")
 
 
-def _fuzz_kind(valid: dict[str, Any], kind: str, seed: int, work: Path, capfd: pytest.CaptureFixture[str]) -> None:
+def _fuzz_kind(
+    valid: dict[str, Any], kind: str, seed: int, work: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
     source, mutate, cases, count = _kinds(valid)[kind]
     rng = np.random.default_rng([seed, sorted(_kinds(valid)).index(kind)])
     original = source.read_bytes()
@@ -474,13 +540,24 @@ def _fuzz_kind(valid: dict[str, Any], kind: str, seed: int, work: Path, capfd: p
         mutant = mutant_dir / source.name
         mutant.write_bytes(mutate(rng, original))
         if kind == "blob":  # a blob is read from its module folder
-            shutil.copytree(source.parent, mutant_dir, dirs_exist_ok=True, ignore=shutil.ignore_patterns(source.name))
+            shutil.copytree(
+                source.parent, mutant_dir, dirs_exist_ok=True, ignore=shutil.ignore_patterns(source.name)
+            )
         if kind.startswith("manifest"):  # a manifest names its recordings relative to itself
             shutil.copy(valid["good.csv"], mutant_dir / valid["good.csv"].name)
         label, main, argv = cases[int(rng.integers(len(cases)))]
         out = work / f"out{number}"
         out.mkdir()
-        _run_one(f"{label} <- {kind} #{number}", seed, main, argv(valid, mutant, out), mutant, out, mutant_dir, capfd)
+        _run_one(
+            f"{label} <- {kind} #{number}",
+            seed,
+            main,
+            argv(valid, mutant, out),
+            mutant,
+            out,
+            mutant_dir,
+            capfd,
+        )
 
 
 KINDS = (
@@ -500,7 +577,9 @@ def test_mutants_fail_cleanly_or_pass_with_possible_values(
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", SLOW_SEEDS)
 @pytest.mark.parametrize("kind", KINDS)
-def test_more_mutants(valid: dict[str, Any], kind: str, seed: int, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+def test_more_mutants(
+    valid: dict[str, Any], kind: str, seed: int, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
     _fuzz_kind(valid, kind, seed, tmp_path, capfd)
 
 
