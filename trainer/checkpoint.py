@@ -221,7 +221,8 @@ def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} (key {exc} is missing)"
         ) from None
-    except (TypeError, ValueError, IndexError, AttributeError) as exc:  # wrong types or shapes
+    # wrong types or shapes (RuntimeError: torch's, e.g. the truth value of a tensor where a flag belongs)
+    except (TypeError, ValueError, IndexError, AttributeError, RuntimeError) as exc:
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None
