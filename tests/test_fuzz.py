@@ -174,7 +174,7 @@ def _unicode_line(rng: np.random.Generator, lines: list[str]) -> list[str]:
     junk = str(
         rng.choice(["\ufeff", "ß,∂,ø", "\u202e1,2,3", "１,２,３", "\x00\x00", "# sample_rate_hz=1e308"])
     )
-    return lines[:at] + [junk] + lines[at:]
+    return [*lines[:at], junk, *lines[at:]]
 
 
 TEXT_MUTATORS: tuple[Mutator, ...] = (
@@ -192,7 +192,7 @@ TEXT_MUTATORS: tuple[Mutator, ...] = (
 def _hostile_value(rng: np.random.Generator) -> Any:
     if rng.random() < 0.1:  # deep nesting
         value: Any = 1.0
-        for _ in range(int(rng.integers(50, 400))):
+        for _ in range(int(rng.integers(20, 150))):  # pickling recurses: deeper comes as TOML text
             value = [value]
         return value
     return HOSTILE_VALUES[int(rng.integers(len(HOSTILE_VALUES)))]
@@ -370,9 +370,9 @@ def _kinds(
     )
     sim, report_config = _cheap(config_cases())[0], _cheap(config_cases())[-1]
     return {
-        "recording.csv": (files["good.csv"], _mutate_text, [_import_case(), *_cheap(recording_cases())], 14),
-        "recording.npz": (files["good.npz"], _mutate_npz, [_import_case(), *_cheap(recording_cases())], 8),
-        "model.pt": (files["good.pt"], _mutate_model, model_cases(), 10),
+        "recording.csv": (files["good.csv"], _mutate_text, [_import_case(), *_cheap(recording_cases())], 12),
+        "recording.npz": (files["good.npz"], _mutate_npz, [_import_case(), *_cheap(recording_cases())], 6),
+        "model.pt": (files["good.pt"], _mutate_model, model_cases(), 8),
         "simulation.toml": (files["sim.toml"], _mutate_toml, [sim], 6),
         "thresholds.toml": (files["thresholds.toml"], _mutate_toml, [report_config], 5),
         "manifest.toml": (files["manifest.toml"], _mutate_toml, [fleet_case], 2),
@@ -589,12 +589,13 @@ def _limit_address_space() -> None:
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_a_mutant_runs_within_a_memory_limit(valid: dict[str, Any], seed: int, tmp_path: Path) -> None:
-    """A mutated recording through ``fit`` and one through ``diagnose`` in a child process under an
-    address-space limit: exit 0 or 2, no traceback, peak resident memory under MAX_RSS_BYTES."""
+    """A mutated recording through ``fit`` (even seeds) or ``diagnose`` (odd seeds) in a child
+    process under an address-space limit: exit 0 or 2, no traceback, peak resident memory under
+    MAX_RSS_BYTES."""
     rng = np.random.default_rng([seed, 99])
     code = "import sys; from trainer.cli import entry; sys.argv[0] = 'trainer'; entry()"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
-    for command in ("fit", "diagnose"):
+    for command in (("fit", "diagnose")[seed % 2],):
         mutant = tmp_path / f"{command}.csv"
         mutant.write_bytes(_mutate_text(rng, valid["good.csv"].read_bytes()))
         argv = (
