@@ -157,12 +157,13 @@ def _verify_imu(args: argparse.Namespace) -> int:
 
     from codegen.imu_verify import imu_report_lines, verify_imu, write_imu_json
     from trainer.commands.channel_options import model_files
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
 
     if args.json:
         check_output_path(args.json)  # before the build, not after it
-    rec = read_recording(args.recording)
+    rec = check_scored(read_recording(args.recording))
     models = model_files(args.model, args.channels)
     result = verify_imu(models, Path(args.out_dir), rec, name=args.name, cc=args.cc, cortex_m4=args.cortex_m4)
     for line in imu_report_lines(result):

@@ -271,6 +271,7 @@ def verify(
     resample: bool = False,
 ) -> VerifyResult:
     from trainer.checkpoint import load_model
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
 
     out = Path(out_dir)
@@ -292,7 +293,7 @@ def verify(
         raise UserError(
             f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})"
         )
-    rec = read_recording(recording)
+    rec = check_scored(read_recording(recording))
     q = model.quantised
     rate_hz = declared_rate_millihz(q) / 1000
     resampled_from = None

@@ -12,9 +12,7 @@ line on stderr, or any file left in the output directory or beside the inputs.
 
 from __future__ import annotations
 
-import io
 import shutil
-import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,40 +21,23 @@ import pytest
 import torch
 
 from codegen.cli import main as codegen_main
-from tests.flightlogs import DataFlashWriter, imu_topic, write_ulog
+from tests.cli_corpus import (
+    Main,
+    config_cases,
+    garbage,
+    hidden_files,
+    model_cases,
+    npz_bytes,
+    recording_cases,
+    valid_files,
+    valid_flight_logs,
+    valid_lines,
+    with_member,
+    write_file,
+)
 from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
 from trainer.errors import EXIT_USER_ERROR, run_cli
-
-N_ROWS = 400  # 1 Hz: a cooling and a heating ramp of 50 degC
-Main = Callable[[list[str] | None], int]
-
-
-def _valid_lines() -> list[str]:
-    rng = np.random.default_rng(0)
-    temp = np.concatenate([np.linspace(40, -10, N_ROWS // 2), np.linspace(-10, 40, N_ROWS - N_ROWS // 2)])
-    accel = 0.0002 * (temp - 15) ** 3 + 0.1 * (temp - 15) + rng.normal(0, 0.05, N_ROWS)
-    return ["# sample_rate_hz=1", "time_s,temp_c,accel_mg"] + [
-        f"{t:.3f},{c:.4f},{a:.5f}"
-        for t, c, a in zip(np.arange(N_ROWS, dtype=float), temp, accel, strict=True)
-    ]
-
-
-def _npz(**arrays: np.ndarray) -> bytes:
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)  # type: ignore[arg-type]
-    return buffer.getvalue()
-
-
-def _with_member(data: bytes, name: str, content: bytes) -> bytes:
-    buffer = io.BytesIO(data)
-    with zipfile.ZipFile(buffer, "a") as archive:
-        archive.writestr(name, content)
-    return buffer.getvalue()
-
-
-def _garbage(seed: int, size: int = 3000) -> bytes:
-    return bytes(np.random.default_rng(seed).integers(0, 256, size, dtype=np.uint8))
 
 
 def _recordings(lines: list[str]) -> dict[str, bytes | str]:
@@ -76,15 +57,15 @@ def _recordings(lines: list[str]) -> dict[str, bytes | str]:
         "missing_column.csv": "\n".join([meta, "time_s,temp_c", *(r.rsplit(",", 1)[0] for r in rows)]) + "\n",
         "bad_header.csv": "\n".join([meta, "time_s,time_s,accel_mg", *rows]) + "\n",
         "empty.csv": "",
-        "garbage.csv": _garbage(1),
-        "garbage.npz": _garbage(2),
-        "one_row.npz": _npz(**{k: v[:1] for k, v in ok.items()}),
-        "objects.npz": _npz(**{**ok, "accel_mg": np.array([{"a": 1}] * 5, dtype=object)}),
-        "truncated.npz": _npz(**ok)[:-40],
-        "member_not_an_array.npz": _with_member(_npz(**ok), "extra.npy", b"hello world"),
-        "member_not_npy.npz": _with_member(_npz(**ok), "notes.txt", b"hello"),
-        "member_forged_size.npz": _with_member(
-            _npz(**ok),
+        "garbage.csv": garbage(1),
+        "garbage.npz": garbage(2),
+        "one_row.npz": npz_bytes(**{k: v[:1] for k, v in ok.items()}),
+        "objects.npz": npz_bytes(**{**ok, "accel_mg": np.array([{"a": 1}] * 5, dtype=object)}),
+        "truncated.npz": npz_bytes(**ok)[:-40],
+        "member_not_an_array.npz": with_member(npz_bytes(**ok), "extra.npy", b"hello world"),
+        "member_not_npy.npz": with_member(npz_bytes(**ok), "notes.txt", b"hello"),
+        "member_forged_size.npz": with_member(
+            npz_bytes(**ok),
             "huge.npy",
             b"\x93NUMPY\x01\x00\x46\x00{'descr': '<f8', 'fortran_order': False, 'shape': (10000000000,), }    \n",
         ),
@@ -117,7 +98,7 @@ def _models(good: dict) -> dict[str, dict | bytes]:
         "range_text.pt": changed(valid_temp_range_c="abc"),
         "range_reversed.pt": changed(valid_temp_range_c=[50.0, -10.0]),
         "offset_not_a_record.pt": changed(offset=5),
-        "not_a_checkpoint.pt": _garbage(3),
+        "not_a_checkpoint.pt": garbage(3),
         "empty.pt": b"",
     }
 
@@ -125,7 +106,7 @@ def _models(good: dict) -> dict[str, dict | bytes]:
 BAD_TOML = {
     "syntax.toml": "[thresholds\nx=1",
     "wrong_type.toml": "[thresholds]\nholdout_rms_mg = 'a'\n",
-    "binary.toml": _garbage(4),
+    "binary.toml": garbage(4),
     "rate_text.toml": "[recording]\nsample_rate_hz = 'abc'\n",
     "rate_negative.toml": "[recording]\nsample_rate_hz = -5\n",
     "table_is_array.toml": "recording = [1, 2]\n",
@@ -135,73 +116,41 @@ BAD_MANIFESTS = {
     "syntax.toml": "[[unit]\nid=1",
     "two_id_columns.csv": "id,recordings,id\nA,good.csv,B\n",
     "empty.csv": "",
-    "binary.csv": _garbage(5),
+    "binary.csv": garbage(5),
     "id_not_text.toml": "[[unit]]\nid = 5\nrecordings = 'x'\n",
     "unknown_column.csv": "id,recordings,colour\nA,good.csv,red\n",
 }
 
 
-def _write(path: Path, content: object) -> Path:
-    """``content`` as the file: a dict saved with torch.save, bytes or text as they are."""
-    if isinstance(content, dict):
-        buffer = io.BytesIO()
-        torch.save(content, buffer)
-        content = buffer.getvalue()
-    if isinstance(content, bytes):
-        path.write_bytes(content)
-    else:
-        path.write_text(str(content))
-    return path
-
-
 def _flight_logs(root: Path) -> dict[str, Path]:
-    """A ULog and a DataFlash log, valid, then damaged: a block of garbage, garbage after the header."""
-    n = 600
-    time_us = (1_000_000 + np.arange(n) * 5000).astype(np.int64)
-    xyz = np.random.default_rng(6).normal(0, 0.1, (n, 3))
-    temp = np.linspace(20.0, 40.0, n)
-    gravity = np.array([0.0, 0.0, -9.8])  # m/s^2, a level board
-    ulog = write_ulog(
-        root / "valid.ulg",
-        [
-            imu_topic("sensor_accel", 0, 1, time_us, xyz + gravity, temp),
-            imu_topic("sensor_gyro", 0, 2, time_us + 37, xyz, temp),
-        ],
-    ).read_bytes()
-    writer = DataFlashWriter()
-    for k in range(n):
-        writer.imu(int(time_us[k]), 0, xyz[k], xyz[k] + gravity, temp[k])
-    dataflash = writer.write(root / "valid.bin").read_bytes()
+    """The valid ULog and DataFlash log, damaged: a block of garbage, garbage after the header."""
     logs = {}
-    for suffix, data in ((".ulg", ulog), (".bin", dataflash)):
+    for suffix, data in valid_flight_logs(root).items():
         third = len(data) // 3
-        logs[f"garbage_block{suffix}"] = data[:third] + _garbage(7, 5000) + data[third + 5000 :]
-        logs[f"garbage_after_header{suffix}"] = data[:400] + _garbage(8, 60_000)
-    return {name: _write(root / name, content) for name, content in logs.items()}
+        logs[f"garbage_block{suffix}"] = data[:third] + garbage(7, 5000) + data[third + 5000 :]
+        logs[f"garbage_after_header{suffix}"] = data[:400] + garbage(8, 60_000)
+    return {name: write_file(root / name, content) for name, content in logs.items()}
 
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("corpus")
-    good = _write(root / "good.csv", "\n".join(_valid_lines()) + "\n")
-    assert run_cli(trainer_main, ["fit", "--method", "poly3", str(good), "-o", str(root / "good.pt")]) == 0
-    assert run_cli(codegen_main, ["export", str(root / "good.pt"), "-o", str(root / "module")]) == 0
-    files = {"root": root, "good.csv": good, "good.pt": root / "good.pt", "module": root / "module"}
+    files = valid_files(root)
     bad = root / "bad"
     bad.mkdir()
     for name, content in {
-        **_recordings(_valid_lines()),
+        **_recordings(valid_lines()),
         **_models(load_checkpoint(root / "good.pt")),
     }.items():
-        files[name] = _write(bad / name, content)
+        files[name] = write_file(bad / name, content)
     for prefix, table in (("toml", BAD_TOML), ("json", BAD_JSON), ("manifest", BAD_MANIFESTS)):
         for file_name, text in table.items():
-            files[f"{prefix}:{file_name}"] = _write(bad / f"{prefix}_{file_name}", text)
+            files[f"{prefix}:{file_name}"] = write_file(bad / f"{prefix}_{file_name}", text)
     files.update(_flight_logs(bad))
     return files
 
 
-RECORDINGS = list(_recordings(_valid_lines()))
+RECORDINGS = list(_recordings(valid_lines()))
 MODELS = [
     "nan_coefficients.pt",
     "two_coefficients.pt",
@@ -221,55 +170,10 @@ MODELS = [
 FLIGHT_LOGS = [f"garbage_{part}{suffix}" for part in ("block", "after_header") for suffix in (".ulg", ".bin")]
 
 
-def _recording_cases() -> list[tuple[str, Main, Callable[[dict, Path, Path], list[str]]]]:
-    """(command, main, argv(corpus, bad file, out dir)) of every command that reads a recording."""
-    return [
-        ("import", trainer_main, lambda c, f, o: ["import", str(f), "--delimiter", "comma", "--time", "time_s",
-                                                  "--temp", "temp_c", "--accel", "accel_mg", "-o", str(o / "r.csv")]),
-        ("fit", trainer_main, lambda c, f, o: ["fit", "--method", "poly3", str(f), "-o", str(o / "m.pt")]),
-        ("fit --channels", trainer_main, lambda c, f, o: ["fit", "--method", "pla", str(f), "--channels", "all",
-                                                          "-o", str(o / "fit")]),
-        ("evaluate", trainer_main, lambda c, f, o: ["evaluate", str(c["good.pt"]), str(f), "--out-dir", str(o / "e")]),
-        ("compare", trainer_main, lambda c, f, o: ["compare", str(f), "--methods", "poly3", "--out-dir", str(o / "c")]),
-        ("compare VALID", trainer_main, lambda c, f, o: ["compare", str(c["good.csv"]), str(f), "--methods",
-                                                         "poly3", "--out-dir", str(o / "c")]),
-        ("diagnose", trainer_main, lambda c, f, o: ["diagnose", str(f), "--json", str(o / "d.json"),
-                                                    "--report", str(o / "d")]),
-        ("report", trainer_main, lambda c, f, o: ["report", str(c["good.pt"]), "--recording", str(f),
-                                                  "-o", str(o / "s")]),
-        ("codegen verify", codegen_main, lambda c, f, o: ["verify", str(c["good.pt"]), str(c["module"]), str(f),
-                                                          "--json", str(o / "v.json")]),
-    ]  # fmt: skip
-
-
-def _model_cases() -> list[tuple[str, Main, Callable[[dict, Path, Path], list[str]]]]:
-    return [
-        ("evaluate", trainer_main, lambda c, f, o: ["evaluate", str(f), str(c["good.csv"]), "--out-dir", str(o / "e")]),
-        ("report", trainer_main, lambda c, f, o: ["report", str(f), "--recording", str(c["good.csv"]),
-                                                  "-o", str(o / "s")]),
-        ("codegen export", codegen_main, lambda c, f, o: ["export", str(f), "-o", str(o / "c")]),
-        ("codegen export px4", codegen_main, lambda c, f, o: ["export", str(f), "-o", str(o / "p"), "--format",
-                                                              "px4-params"]),
-        ("codegen verify", codegen_main, lambda c, f, o: ["verify", str(f), str(c["module"]), str(c["good.csv"]),
-                                                          "--json", str(o / "v.json")]),
-    ]  # fmt: skip
-
-
-def _config_cases() -> list[tuple[str, Main, Callable[[dict, Path, Path], list[str]]]]:
-    return [
-        ("simulate", trainer_main, lambda c, f, o: ["simulate", "--seed", "1", "--config", str(f), "--duration",
-                                                    "100", "-o", str(o / "s.csv")]),
-        ("diagnose --sim", trainer_main, lambda c, f, o: ["diagnose", str(c["good.csv"]), "--sim", str(f),
-                                                          "--json", str(o / "d.json")]),
-        ("report --config", trainer_main, lambda c, f, o: ["report", str(c["good.pt"]), "--recording",
-                                                           str(c["good.csv"]), "--config", str(f), "-o", str(o / "s")]),
-    ]  # fmt: skip
-
-
 CASES = (
-    [(f"{cmd} <- {name}", main, argv, name) for cmd, main, argv in _recording_cases() for name in RECORDINGS]
-    + [(f"{cmd} <- {name}", main, argv, name) for cmd, main, argv in _model_cases() for name in MODELS]
-    + [(f"{cmd} <- {name}", main, argv, f"toml:{name}") for cmd, main, argv in _config_cases() for name in BAD_TOML]
+    [(f"{cmd} <- {name}", main, argv, name) for cmd, main, argv in recording_cases() for name in RECORDINGS]
+    + [(f"{cmd} <- {name}", main, argv, name) for cmd, main, argv in model_cases() for name in MODELS]
+    + [(f"{cmd} <- {name}", main, argv, f"toml:{name}") for cmd, main, argv in config_cases() for name in BAD_TOML]
     + [
         (f"report --verify <- {name}", trainer_main,
          lambda c, f, o: ["report", str(c["good.pt"]), "--recording", str(c["good.csv"]), "--verify", str(f),
@@ -289,10 +193,6 @@ CASES = (
 )  # fmt: skip
 
 
-def _hidden_files(directory: Path) -> list[str]:
-    return sorted(p.name for p in directory.rglob(".*"))
-
-
 @pytest.mark.parametrize(("label", "main", "argv", "name"), CASES, ids=[case[0] for case in CASES])
 def test_a_malformed_input_is_one_line_exit_2_and_nothing_written(
     corpus: dict[str, Path],
@@ -305,7 +205,7 @@ def test_a_malformed_input_is_one_line_exit_2_and_nothing_written(
 ) -> None:
     out = tmp_path / "out"
     out.mkdir()
-    before = _hidden_files(corpus["root"])
+    before = hidden_files(corpus["root"])
     code = run_cli(main, argv(corpus, corpus[name], out))  # a traceback fails the test here
     err = capfd.readouterr().err
     assert code == EXIT_USER_ERROR, f"{label}: exit {code}, stderr {err!r}"
@@ -316,7 +216,7 @@ def test_a_malformed_input_is_one_line_exit_2_and_nothing_written(
         f"{label}: names no file: {err!r}"
     )
     assert list(out.iterdir()) == [], f"{label}: left {sorted(p.name for p in out.iterdir())}"
-    assert _hidden_files(corpus["root"]) == before, f"{label}: left temporary files beside the inputs"
+    assert hidden_files(corpus["root"]) == before, f"{label}: left temporary files beside the inputs"
 
 
 def test_the_valid_inputs_pass(corpus: dict[str, Path], tmp_path: Path) -> None:

@@ -22,13 +22,13 @@ import os
 import re
 import shutil
 import stat
-import sys
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from trainer.errors import UserError
+from trainer.stale_files import process_alive, report_removed
 
 STAGING_SUFFIX = ".part"  # the new set being built (or, after the exchange, the old one being removed)
 ASIDE_SUFFIX = ".old"  # an existing set moved aside (no atomic exchange on this file system)
@@ -55,20 +55,6 @@ def check_output_directory(out: str | os.PathLike[str]) -> Path:
     return base
 
 
-def _process_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    except OverflowError:
-        return False
-    return True
-
-
 def remove_leftovers(out: str | os.PathLike[str]) -> list[str]:
     """Remove the sibling folders killed runs writing ``out`` left (their process is gone); a set
     moved aside is put back first when ``out`` is missing. Returns the names removed or restored."""
@@ -80,7 +66,7 @@ def remove_leftovers(out: str | os.PathLike[str]) -> list[str]:
         match = _SIBLING.match(entry.name)
         if match is None or match["name"] != target.name or not entry.is_dir() or entry.is_symlink():
             continue
-        if not _process_alive(int(match["pid"])):
+        if not process_alive(int(match["pid"])):
             stale.append(entry)
     found = [entry.name for entry in stale]
     aside = [entry for entry in stale if entry.name.endswith(ASIDE_SUFFIX)]
@@ -161,14 +147,6 @@ def _renameable(target: Path) -> bool:
     return not inside and os.access(target.parent, os.W_OK | os.X_OK)
 
 
-def _report(target: Path, names: list[str]) -> None:
-    if names:
-        print(
-            f"note: {target}: removed {len(names)} leftover(s) of an interrupted run: {', '.join(names)}",
-            file=sys.stderr,
-        )
-
-
 @contextmanager
 def atomic_directory(out: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield an empty staging folder; when the block succeeds its entries become ``out``'s (other
@@ -209,4 +187,4 @@ def atomic_directory(out: str | os.PathLike[str]) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    _report(given, leftovers)
+    report_removed(given, leftovers)

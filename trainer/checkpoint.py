@@ -92,15 +92,23 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise UserError(
             f"{p}: not a readable model file (truncated or corrupted: {type(exc).__name__})"
         ) from None
-    if not isinstance(checkpoint, dict) or checkpoint.get("format") != FORMAT_NAME:
+    # compared only once known to be plain values: a tensor there has no truth value
+    if not isinstance(checkpoint, dict) or not (
+        isinstance(checkpoint.get("format"), str) and checkpoint["format"] == FORMAT_NAME
+    ):
         raise UserError(f"{p}: not a mems-tdc model (field 'format' is not '{FORMAT_NAME}')")
     version = checkpoint.get("format_version")
-    if version != FORMAT_VERSION:
+    if not (_is_count(version) and version == FORMAT_VERSION):
         raise UserError(
             f"{p}: field 'format_version' is {version!r}; this tool reads version {FORMAT_VERSION}"
         )
     _check_fields(checkpoint, str(p))
     return checkpoint
+
+
+# No fitted number (a coefficient, temperature, time constant, pressure, network weight) comes near
+# this; a payload number beyond it overflows float64 on evaluation (a cube of 1e103 is inf).
+PAYLOAD_MAGNITUDE_LIMIT = 1e12
 
 
 def _is_text(value: Any) -> bool:
@@ -170,21 +178,30 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
             raise UserError(f"{source}: field 'offset' is malformed ({exc})") from None
     bad = _first_non_finite(checkpoint["payload"], "payload")
     if bad is not None:
-        raise UserError(f"{source}: field {bad!r} holds NaN or inf (a damaged or hand-edited model file)")
+        raise UserError(
+            f"{source}: field {bad!r} holds NaN, inf or a number beyond {PAYLOAD_MAGNITUDE_LIMIT:g} "
+            "(a damaged or hand-edited model file)"
+        )
 
 
 def _first_non_finite(value: Any, name: str) -> str | None:
-    """Dotted name of the first number (float, tensor, array) in ``value`` that is NaN or inf."""
+    """Dotted name of the first number (float, tensor, array) in ``value`` that is NaN, inf or
+    beyond :data:`PAYLOAD_MAGNITUDE_LIMIT`."""
     if isinstance(value, dict):
         items: Any = ((f"{name}.{k}", v) for k, v in value.items())
     elif isinstance(value, list | tuple):
         items = ((f"{name}[{i}]", v) for i, v in enumerate(value))
     elif isinstance(value, torch.Tensor):
-        return name if value.is_floating_point() and not bool(torch.isfinite(value).all()) else None
+        bounded = bool((value.abs() <= PAYLOAD_MAGNITUDE_LIMIT).all())  # False for NaN
+        return name if value.is_floating_point() and not bounded else None
     elif isinstance(value, np.ndarray):
-        return name if value.dtype.kind == "f" and not bool(np.isfinite(value).all()) else None
+        return (
+            name
+            if value.dtype.kind == "f" and not bool((np.abs(value) <= PAYLOAD_MAGNITUDE_LIMIT).all())
+            else None
+        )
     elif isinstance(value, float):
-        return None if math.isfinite(value) else name
+        return None if abs(value) <= PAYLOAD_MAGNITUDE_LIMIT else name
     else:
         return None
     for child, item in items:
@@ -204,7 +221,8 @@ def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} (key {exc} is missing)"
         ) from None
-    except (TypeError, ValueError, IndexError, AttributeError) as exc:  # wrong types or shapes
+    # wrong types or shapes (RuntimeError: torch's, e.g. the truth value of a tensor where a flag belongs)
+    except (TypeError, ValueError, IndexError, AttributeError, RuntimeError) as exc:
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None

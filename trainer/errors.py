@@ -18,13 +18,19 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
+from trainer.stale_files import part_prefix, remove_stale_parts, report_removed
+
 EXIT_USER_ERROR = 2
 # Write failures the user can fix (disk full, file-size or quota limit, permissions, read-only
 # file system): one line naming the path, never a traceback.
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EPERM, errno.EROFS})
-# A temporary file or staging folder beside an output (tempfile's 8 random characters between the
-# output's name and an optional ``.part``/``.old`` suffix): messages name the output instead.
-_STAGED_NAME = re.compile(r"\.(?P<name>.+)\.[A-Za-z0-9_]{8}(?:\.part.*|\.old)?")
+# A temporary file or staging folder beside an output (an optional writer's process id and tempfile's
+# 8 random characters between the output's name and an optional ``.part``/``.old`` suffix): messages
+# name the output instead.
+_STAGED_NAMES = (
+    re.compile(r"\.(?P<name>.+)\.[0-9]+\.[A-Za-z0-9_]{8}(?:\.part.*|\.old)"),  # with the writer's pid
+    re.compile(r"\.(?P<name>.+)\.[A-Za-z0-9_]{8}(?:\.part.*|\.old)?"),
+)
 _TERMINAL_CODES = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|[\x00-\x08\x0b-\x1f\x7f]")  # colours, cursor moves
 
 
@@ -39,11 +45,18 @@ class OneLineArgumentParser(argparse.ArgumentParser):
         raise UserError(f"{self.prog}: {message}")
 
 
+def _output_part(part: str) -> str:
+    for pattern in _STAGED_NAMES:
+        if match := pattern.fullmatch(part):
+            return match["name"]
+    return part
+
+
 def output_name(path: str | os.PathLike[str] | None) -> str | None:
     """``path`` as the user knows it: staging folders and ``.part`` files replaced by their outputs."""
     if path is None:
         return None
-    parts = [(m.group("name") if (m := _STAGED_NAME.fullmatch(part)) else part) for part in Path(path).parts]
+    parts = [_output_part(part) for part in Path(path).parts]
     return str(Path(*parts)) if parts else str(path)
 
 
@@ -120,14 +133,19 @@ def _current_umask() -> int:
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
 
-    Guarantees that a failed command leaves no partial output file behind. A write failure of :data:`WRITE_ERRNOS` on the output becomes a one-line UserError naming
+    Guarantees that a failed command leaves no partial output file behind; the temporary files a
+    killed writer of ``path`` left (its process gone) are removed first, in one ``note:`` line.
+    A write failure of :data:`WRITE_ERRNOS` on the output becomes a one-line UserError naming
     ``path`` (an error of another file, say an input read in the body, passes unchanged).
     """
     target = Path(path)
     check_output_path(target)
     parent = target.parent if str(target.parent) else Path(".")
+    report_removed(target, remove_stale_parts(parent, target.name))
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part" + target.suffix, dir=parent)
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=part_prefix(target), suffix=".part" + target.suffix, dir=parent
+        )
     except OSError as exc:
         raise write_error(exc, target) or exc from None
     os.close(fd)

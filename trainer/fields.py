@@ -188,11 +188,12 @@ class DottedFields(Fields):
         """A finite float64 copy of an array-like (tensors included) of exactly ``shape``."""
         value = self.raw(key)
         try:
-            arr = np.asarray(
-                value.detach().cpu().double().numpy() if hasattr(value, "detach") else value, dtype=np.float64
-            )
+            given = np.asarray(value.detach().cpu().double().numpy() if hasattr(value, "detach") else value)
         except (TypeError, ValueError):
             self.fail(f"field '{self.name(key)}' must be an array of numbers")
+        if given.dtype.kind not in "iuf":  # numpy would read text ("12", full-width "１２") as a number
+            self.fail(f"field '{self.name(key)}' must be an array of numbers, got {show(value)}")
+        arr = given.astype(np.float64)
         if arr.shape != shape:
             self.fail(f"field '{self.name(key)}' must have shape {shape}, got {arr.shape}")
         if not np.all(np.isfinite(arr)):

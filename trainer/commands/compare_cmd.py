@@ -138,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
     from trainer.fitting import training_stats
@@ -151,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     lead_in = None
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
-        train, valid = split(read_recording(args.train), holdout)
+        train, valid = split(check_scored(read_recording(args.train)), holdout)
         notes.append(
             f"one recording, {holdout.describe()}: training t = {train.time_s[0]:g} .. {train.time_s[-1]:g} s, "
             f"validation t = {valid.time_s[0]:g} .. {valid.time_s[-1]:g} s"
@@ -163,13 +164,13 @@ def run(args: argparse.Namespace) -> int:
                 "first (as firmware running since power-on) and is scored on the validation part only"
             )
     else:
-        train = read_recording(args.train)
-        valid = read_recording(args.valid)
+        train = check_scored(read_recording(args.train))
+        valid = check_scored(read_recording(args.valid))
     warning = overlap_warning(training_stats(train), valid, data_fingerprint(valid))
     if warning:
         print(warning, file=sys.stderr, flush=True)
         notes.append(f"**{warning}**")
-    input_tests = tuple(read_recording(path) for path in args.input_test)
+    input_tests = tuple(check_scored(read_recording(path)) for path in args.input_test)
     for rec in input_tests:
         if rec.truth("accel_mg") is None:
             raise UserError(f"{rec.source}: --input-test needs a true_accel_mg column (a simulated input)")
@@ -234,6 +235,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     import json
 
     from trainer.data.channels import signal_of
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_compensator
     from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
@@ -245,7 +247,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
-    rec = read_recording(args.train)
+    rec = check_scored(read_recording(args.train))
     signal = signal_of(rec)
     unit = signal.label
     settings, _ = settings_from_args(args)

@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         return run_per_channel(
             args, run, recordings=("recording",), out_dirs=("report",), out_files=("json",)
         )
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
     from trainer.diagnose import diagnose
     from trainer.diagnose.report import write_json, write_report
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     _check_outputs(args)
     sim = load_config(args.sim) if args.sim else None
-    rec = read_recording(args.recording)
+    rec = check_scored(read_recording(args.recording))
     result = diagnose(rec, sim, holdout_fraction=args.holdout, progress=True)
     if args.json:
         write_json(result, args.json)

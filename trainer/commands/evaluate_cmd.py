@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import load_model
     from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
     from trainer.scoring.allan import plot_allan
@@ -90,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)
-    rec = whole = read_recording(args.recording)
+    rec = whole = check_scored(read_recording(args.recording))
     lead_in = None
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)

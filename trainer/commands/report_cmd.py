@@ -313,6 +313,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit
     from trainer.data.holdout import overlap_warning, parse_holdout
+    from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
     from trainer.scoring import signoff
@@ -334,7 +335,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out-dir {out_dir}: parent directory {out_dir.parent} does not exist")
     unit = args.unit or Path(str(recordings[0])).stem
 
-    loaded = {path: read_recording(path) for path in dict.fromkeys(r for r in recordings if r)}
+    loaded = {path: check_scored(read_recording(path)) for path in dict.fromkeys(r for r in recordings if r)}
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(
         tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent if str(out_dir.parent) else ".")

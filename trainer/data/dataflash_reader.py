@@ -33,6 +33,7 @@ from trainer.data.flightlog import (
     quiet_library_call,
     sorted_channels,
 )
+from trainer.errors import UserError
 
 IMU_NAME = re.compile(r"IMU([23]?)")
 DEVICE_ID_PARAM = re.compile(r"INS_(ACC|GYR)([23]?)_ID|BARO([1-3])_DEVID")
@@ -74,6 +75,10 @@ def read_dataflash(path: str | Path) -> FlightLog:
     notes: dict[str, str] = {}
     for (kind, instance), samples in rows.items():
         table = np.array(samples, dtype=np.float64)
+        if not np.all((table[:, 0] >= 0) & (table[:, 0] < 2.0**63)):  # NaN fails too
+            raise UserError(
+                f"{source}: {kind} instance {instance}: a TimeUS that is not a time in us (a damaged log)"
+            )
         time_us = table[:, 0].astype(np.int64)
         if kind == "baro":
             channels.append(

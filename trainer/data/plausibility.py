@@ -46,13 +46,14 @@ WIDER_RUN_HINT = (
 class Plausibility:
     """Collects findings; raises on the first one unless ``accept`` (then keeps them as warnings)."""
 
-    def __init__(self, accept: bool = False) -> None:
+    def __init__(self, accept: bool = False, way_past: str = f"{ACCEPT_OPTION} to go on anyway") -> None:
         self.accept = accept
+        self.way_past = way_past
         self.warnings: list[str] = []
 
     def problem(self, message: str) -> None:
         if not self.accept:
-            raise UserError(f"{message} ({ACCEPT_OPTION} to go on anyway)")
+            raise UserError(f"{message} ({self.way_past})")
         self.warnings.append(message)
 
     def print_warnings(self) -> None:
@@ -163,3 +164,13 @@ def check_training(rec: Recording, method: Method, *, accept: bool = False) -> P
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
     checks.temperature_span(rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column 'temp_c'")
     return checks
+
+
+def check_scored(rec: Recording) -> Recording:
+    """``rec`` unchanged when every sample is one its sensor can output and every temperature one a
+    sensor survives; else one line. For the commands that score, compare, diagnose or verify a
+    recording (they take no ``--accept-implausible``): import and fit refuse such samples too, so
+    no model of this tool was made from them without that option."""
+    checks = Plausibility(way_past=f"repair or remove those rows; {ACCEPT_OPTION} is for import and fit")
+    checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), rec.source)
+    return rec

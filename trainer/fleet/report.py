@@ -40,8 +40,16 @@ from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 from trainer.scoring.verdict import FAIL, PASS, REVIEW, Figures, Verdict, verdict
+from trainer.stale_files import remove_stale_parts, report_removed
 
 FIGURES_DIR = "figures"
+
+
+def remove_stale_report_parts(out_dir: Path) -> None:
+    """Remove the temporary report, summary and figure files a killed run left (their writer is
+    gone): a restart may not write the same figures, so they are not left for it to replace."""
+    for folder in (out_dir, out_dir / FIGURES_DIR):
+        report_removed(folder, remove_stale_parts(folder))
 
 
 def verify_state(summary: dict[str, Any]) -> str:

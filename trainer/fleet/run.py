@@ -99,7 +99,7 @@ def run_fleet(
     """
     from tqdm import tqdm
 
-    from trainer.fleet.report import write_report
+    from trainer.fleet.report import remove_stale_report_parts, write_report
     from trainer.physics.config import parse_config_text
 
     manifest = load_manifest(manifest_path)
@@ -113,6 +113,7 @@ def run_fleet(
     if settings.sim is not None:
         sim_text = settings.sim.read_text(encoding="utf-8")
         parse_config_text(sim_text, str(settings.sim))  # a bad simulation fails the run before any work
+    remove_stale_report_parts(out)
     clean_staging(out)  # OUTDIR itself is created by the first result: a run that cannot start leaves none
     run = FleetRun(manifest, out)
 

@@ -8,7 +8,6 @@ no bench) fails the sign-off as "not measured": a reviewer signs what was measur
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,6 +55,11 @@ THRESHOLDS: dict[str, Threshold] = {
 TABLE = "thresholds"
 
 
+# Above every limit a sign-off can mean (mg, bytes, instructions, samples); a limit line at 1e308
+# cannot even be drawn.
+THRESHOLD_MAX = 1e9
+
+
 def load_thresholds(path: str | os.PathLike[str]) -> dict[str, float]:
     """The ``[thresholds]`` of a TOML file; a bad file, table, key or value is a one-line UserError."""
     p = Path(path)
@@ -81,10 +85,11 @@ def load_thresholds(path: str | os.PathLike[str]) -> dict[str, float]:
         if (
             isinstance(value, bool)
             or not isinstance(value, int | float)
-            or not math.isfinite(value)
-            or value < 0
+            or not 0 <= value <= THRESHOLD_MAX  # NaN fails too
         ):
-            raise UserError(f"{p}: [{TABLE}] {key} must be a number >= 0, got {value!r}")
+            raise UserError(
+                f"{p}: [{TABLE}] {key} must be a number from 0 to {THRESHOLD_MAX:g}, got {value!r}"
+            )
         if key == "min_coverage" and value > 1:
             raise UserError(f"{p}: [{TABLE}] min_coverage is a share between 0 and 1, got {value!r}")
         out[key] = float(value)
