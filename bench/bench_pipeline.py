@@ -24,19 +24,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_population import cpu_model  # noqa: E402  (the machine named the same way in every bench)
+
 TABLES = ("comparison", "realistic", "realistic-gyro")  # scripts/main_job.sh's $OUT/NAME.txt
 TIME_COLUMN = "fit time (s)"
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def children_cpu_s() -> float:
