@@ -304,7 +304,7 @@ def _damaged(kind: str, models: dict[str, Path], tmp_path: Path) -> Path:
         ("foreign", "not a mems-tdc model"),
         ("unknown-method", "kalman"),
         ("malformed-payload", "payload.weights.w_h0"),
-        ("non-finite", "NaN or inf"),
+        ("non-finite", "NaN, inf"),
     ],
 )
 def test_bad_model_files_fail_cleanly_without_output(
