@@ -18,7 +18,7 @@ import os
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -194,22 +194,31 @@ def _parse_npz_meta(source: str, array: np.ndarray) -> dict[str, str]:
     return meta
 
 
+def _member_name(zipped: zipfile.ZipFile, name: str) -> str:
+    """The zip member that holds the array ``name`` (np.savez writes ``name.npy``)."""
+    return f"{name}.npy" if f"{name}.npy" in zipped.namelist() else name
+
+
+def _member_header(zipped: zipfile.ZipFile, member: str) -> tuple[tuple[int, ...], np.dtype[Any]]:
+    """Shape and dtype from a ``.npy`` member's header alone: nothing of the data is read."""
+    with zipped.open(member) as handle:
+        version = np.lib.format.read_magic(handle)
+        read_header = (
+            np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        )
+        shape, _, dtype = read_header(handle)
+    return shape, dtype
+
+
 def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.ndarray:
     """One member as an array; a member that is not a ``.npy`` array, holds Python objects, or whose
     header promises more data than it holds is a one-line UserError (checked before allocating)."""
     where = f"{source}: column {name!r}"
     zipped = archive.zip
     assert zipped is not None, "an open NpzFile has its zip"
-    member = f"{name}.npy" if f"{name}.npy" in zipped.namelist() else name
+    member = _member_name(zipped, name)
     try:
-        with zipped.open(member) as handle:
-            version = np.lib.format.read_magic(handle)
-            read_header = (
-                np.lib.format.read_array_header_1_0
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0
-            )
-            shape, _, dtype = read_header(handle)
+        shape, dtype = _member_header(zipped, member)
         size = zipped.getinfo(member).file_size
         if math.prod(shape) * dtype.itemsize > size:
             raise UserError(
@@ -239,14 +248,7 @@ def _npz_bytes(archive: np.lib.npyio.NpzFile) -> float:
         return total
     for name in archive.files:
         try:
-            with archive.zip.open(f"{name}.npy") as member:
-                version = np.lib.format.read_magic(member)
-                read_header = (
-                    np.lib.format.read_array_header_1_0
-                    if version == (1, 0)
-                    else np.lib.format.read_array_header_2_0
-                )
-                shape, _, dtype = read_header(member)
+            shape, dtype = _member_header(archive.zip, _member_name(archive.zip, name))
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             continue
         total += math.prod(float(n) for n in shape) * (dtype.itemsize + FLOAT_BYTES)
