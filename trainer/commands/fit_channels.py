@@ -16,7 +16,7 @@ from typing import Any
 from trainer import methods
 from trainer.atomic_dir import atomic_directory, check_output_directory
 from trainer.commands.channel_options import INDEX_FILE, MODEL_SUFFIX
-from trainer.data.channels import channel_view, method_refusal, select_channels
+from trainer.data.channels import channel_view, method_refusal, relabel_units, select_channels
 from trainer.errors import UserError
 from trainer.reference import OffsetPolicy
 
@@ -76,8 +76,6 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), fit residual RMS "
             f"{stats['fit_residual_rms_mg']:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
         )
-        note = model.offset.describe() if model.offset else RECURSIVE_NOTE
-        if channel.unit != "mg":  # the offset text is written for an accelerometer
-            note = note.replace(" mg", f" {channel.label}").replace("accelerometer", channel.sensor)
+        note = relabel_units(model.offset.describe() if model.offset else RECURSIVE_NOTE, channel.unit)
         print(f"{methods.name_of(model)} {channel.name}: {note}")
     return 0

@@ -234,13 +234,18 @@ def method_refusal(method_name: str, family: str, channel: Channel) -> str | Non
 
 
 _UNIT_TOKEN = re.compile(r"\bmg\b")  # the unit word; column names (accel_mg, true_drift_mg) never match
+_SENSOR_WORD = re.compile(r"\baccelerometer\b")  # the sensor the mg text was written for
 
 
 def relabel_units(text: str, unit: str) -> str:
-    """Text written for milli-g with the unit word replaced by ``unit``'s label (deg/s, Pa).
+    """Text written for milli-g with the unit word replaced by ``unit``'s label (deg/s, Pa) and the
+    word accelerometer by the unit's sensor (gyro, baro).
 
     The scoring and report code is one-channel code that says "mg"; a one-channel view of a
     gyroscope holds deg/s in the same column, so its reports are relabelled rather than the
     scoring code made unit-generic. Column names keep their spelling (``accel_mg``).
     """
-    return text if unit == DEFAULT_UNIT else _UNIT_TOKEN.sub(UNIT_LABELS[unit], text)
+    if unit == DEFAULT_UNIT:
+        return text
+    sensor = next(name for name, suffix in SENSOR_UNITS.items() if suffix == unit)
+    return _SENSOR_WORD.sub(sensor, _UNIT_TOKEN.sub(UNIT_LABELS[unit], text))

@@ -17,6 +17,7 @@ import numpy as np
 
 from trainer import methods as registry
 from trainer.compensator import Compensator
+from trainer.data.channels import channel_unit, relabel_units
 from trainer.data.recording import Recording
 from trainer.dlstm.fusion import FusionSettings, train_stage
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
@@ -108,7 +109,11 @@ def _with_policy(
     """The fitted models in registry order, each with the offset ``policy`` applied."""
     for method in chosen:
         record = apply_offset_policy(models[method.name], method, train, policy or OffsetPolicy())
-        log(f"{method.name}: {record.describe() if record else RECURSIVE_NOTE}")
+        log(
+            relabel_units(
+                f"{method.name}: {record.describe() if record else RECURSIVE_NOTE}", channel_unit(train)
+            )
+        )
     return {m.name: models[m.name] for m in chosen}, seconds
 
 
