@@ -10,15 +10,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from trainer.checkpoint import save_model
 from trainer.cli import main
 from trainer.data.recording_io import read_recording
 from trainer.errors import UserError, run_cli
+from trainer.fitting import fit_compensator
+from trainer.greybox.compensator import PhysicsCompensator
 from trainer.physics.config import load_config
+from trainer.physics.effects import EffectConfig
 from trainer.physics.profiles import PAPER_OVEN, SegmentSpec
+from trainer.physics.simulate import simulate
 from trainer.plan import outputs, priors
 from trainer.plan.chamber import validation_program, violations
 from trainer.plan.limits import ChamberLimits
-from trainer.plan.montecarlo import DrawTask, run_draw
+from trainer.plan.montecarlo import DrawTask, run_draw, sensor
 from trainer.plan.programs import Program, candidates
 from trainer.plan.summary import Target, identified
 
@@ -132,6 +137,59 @@ def test_priors_draw_within_their_ranges_and_from_the_seed() -> None:
     assert priors.parse_spec("temp_rate")[0].ranges == priors.BUNDLED_RUN["temp_rate"]
 
 
+def test_gyroscope_priors_take_channel_names_and_the_measured_gyro_sizes() -> None:
+    targets = priors.parse_spec("hysteresis_offset:amp_dps=-0.08..-0.04:width_c=20,temp_rate", unit="dps")
+    offset, rate = targets
+    assert offset.ranges == {"amp_mg": (-0.08, -0.04), "width_c": (20.0, 20.0)}  # held under catalogue names
+    assert offset.describe() == "hysteresis_offset amp_dps -0.08..-0.04, width_c 20"
+    assert rate.ranges == priors.BUNDLED_GYRO["temp_rate"] and rate.unit == "dps"
+    with pytest.raises(UserError, match="has no parameter 'amp_mg'"):
+        priors.parse_spec("hysteresis_offset:amp_mg=1:width_c=3", unit="dps")
+    with pytest.raises(UserError, match="no measured sizes for a pa channel"):
+        priors.load(None, None, "pa")
+
+
+def _physics_model(path: Path, effects: list[EffectConfig], stats: dict[str, object]) -> None:
+    model = PhysicsCompensator()
+    model.effects, model.temp_range_c = tuple(effects), (-20.0, 70.0)
+    save_model(model, path, train_stats=stats, valid_temp_range_c=(-20.0, 70.0))
+
+
+def test_a_fitted_gyroscope_model_gives_targets_around_its_sizes_on_its_channel(tmp_path: Path) -> None:
+    poly = EffectConfig(
+        "bias_poly", {"c0_mg": 0.0, "c1_mg_per_c": 0.01, "c2_mg_per_c2": 3e-4, "c3_mg_per_c3": -2e-6}
+    )
+    offset = EffectConfig("hysteresis_offset", {"amp_mg": -0.05, "width_c": 20.0})
+    lag = EffectConfig("thermal_lag", {"tau_s": 100.0})
+    path = tmp_path / "gyro.pt"
+    _physics_model(path, [poly, lag, offset], {"channel": "gyro0_x", "unit": "dps"})
+    fitted = priors.from_model(path)
+    assert (fitted.channel, fitted.unit, fitted.bias_poly) == ("gyro0_x", "dps", poly)
+    by_name = {p.identifier: p for p in fitted.priors}
+    assert set(by_name) == {"thermal_lag", "hysteresis_offset"} and by_name["thermal_lag"].unit == "dps"
+    np.testing.assert_allclose(by_name["thermal_lag"].ranges["tau_s"], (70.0, 130.0))
+    np.testing.assert_allclose(by_name["hysteresis_offset"].ranges["amp_mg"], (-0.065, -0.035))
+    np.testing.assert_allclose(by_name["hysteresis_offset"].ranges["width_c"], (14.0, 26.0))
+
+
+def test_a_gyroscope_draw_puts_the_targets_in_its_channel_and_scores_it_in_deg_per_s() -> None:
+    """The accelerometer's physics stays; the drawn effects replace the gyro table's, and the fit sees
+    the gyro's one-channel view (so its drift left is of the order of the gyro's, not the mg's)."""
+    base = load_config(REALISTIC)
+    program = candidates(ChamberLimits())[0]
+    targets = priors.bundled("dps")
+    drawn = priors.draw_effects(targets, np.random.default_rng(1))
+    cfg = sensor(base, drawn, program, 0.05, "gyro0_x")
+    assert cfg.effects == base.effects and [c.name for c in cfg.channels] == ["gyro0_x"]
+    table = {e.identifier: e.params for e in cfg.channels[0].effects}
+    assert all(table[e.identifier] == e.params for e in drawn) and "bias_poly" in table
+    result = run_draw(
+        DrawTask(base, targets, program, validation_program(ChamberLimits()), 3, 0, 0.05, "gyro0_x")
+    )
+    gyro_span = 0.0108 * 90 + 0.00039 * 90**2  # the gyro table's cubic over the range, deg/s
+    assert 0 < result.drift_left["poly3"] < gyro_span and result.drift_left["poly3"] < 1.0
+
+
 def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_effects(tmp_path: Path) -> None:
     doc = {
         "ambiguous": [
@@ -168,16 +226,27 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
         (["--max-hours", "1"], "no candidate program fits"),
         (["--targets", "missing.toml"], "no such file"),
         (["--draws", "0"], "--draws must be >= 1"),
+        (["--channel", "gyro9_x"], "has no [channels.gyro9_x] table"),
+        (["--channel", "gyro_q"], "not a channel name"),
+        (["--targets", "poly3.pt"], "has no catalogue effects to plan for"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
 ) -> None:
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    if "poly3.pt" in argv:
+        rec = simulate(replace(load_config(REALISTIC), channels=()), 1)
+        save_model(
+            fit_compensator("poly3", rec), inputs / "poly3.pt", train_stats={}, valid_temp_range_c=(0.0, 1.0)
+        )
+    argv = [str(inputs / a) if a == "poly3.pt" else a for a in argv]
     out = tmp_path / "plan"
     assert _cli("plan", "-o", str(out), *argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "\n" not in err and message in err, err
-    assert not out.exists() and not list(tmp_path.iterdir())
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == ["in"]
 
 
 def test_toml_targets_errors_name_the_file(tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trainer.plan.limits import ChamberLimits
@@ -11,6 +12,8 @@ from trainer.plan.summary import Target
 
 if TYPE_CHECKING:
     from trainer.physics.config import PhysicsConfig
+    from trainer.physics.effects import EffectConfig
+    from trainer.plan.priors import FittedModel
 
 LIMITS, TARGET = ChamberLimits(), Target()
 SENSOR_CONFIG = "realistic.toml"  # the packaged sensor of the sizes measured on the bundled run
@@ -37,7 +40,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     what = p.add_argument_group("targets (default: lag, rate and branch offset of the bundled run's sizes)")
     what.add_argument(
-        "--targets", metavar="FILE", help="a TOML of prior ranges, or a trainer diagnose --json document"
+        "--targets",
+        metavar="FILE",
+        help="a TOML of prior ranges, a trainer diagnose --json document, or a fitted physics model.pt "
+        "(its effects, +-30 %% around their fitted sizes, on its channel, with its temperature polynomial)",
     )
     what.add_argument(
         "--effects",
@@ -49,6 +55,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--sim",
         metavar="CONFIG.toml",
         help=f"the sensor's physics besides the targets (default: the packaged {SENSOR_CONFIG})",
+    )
+    sensor.add_argument(
+        "--channel",
+        metavar="NAME",
+        help="plan for this channel of the --sim (gyro0_x: its [channels.gyro0_x] table; default the "
+        "accelerometer, or a --targets model's channel)",
     )
     sensor.add_argument(
         "--noise-from",
@@ -131,34 +143,80 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _base(args: argparse.Namespace) -> PhysicsConfig:
+def _channel(args: argparse.Namespace, fitted: FittedModel | None) -> tuple[str | None, str]:
+    """The planned channel's table name in the --sim (None: the accelerometer's physics) and unit."""
+    from trainer.data.channels import unit_of_channel_name
+    from trainer.data.flightlog import parse_channel
+    from trainer.errors import UserError
+
+    name = args.channel if args.channel is not None else (fitted.channel if fitted is not None else None)
+    if name is None:
+        return None, "mg"
+    if parse_channel(name) is None:
+        raise UserError(f"--channel {name!r}: not a channel name (accel0_z, gyro0_x, baro0)")
+    if fitted is not None and fitted.channel is not None and name != fitted.channel:
+        raise UserError(f"--channel {name} but the --targets model was fitted on {fitted.channel}; give one")
+    unit = unit_of_channel_name(name)
+    return (None if unit == "mg" else name), unit
+
+
+def _base(args: argparse.Namespace, channel: str | None, fitted: FittedModel | None) -> PhysicsConfig:
+    """The simulated sensor: --sim with only the planned channel's table, the model's polynomial."""
     from importlib import resources
 
-    from trainer.physics.config import load_config
+    from trainer.errors import UserError
+    from trainer.physics.config import ChannelConfig, load_config
 
     path = args.sim or str(resources.files("trainer.physics").joinpath(SENSOR_CONFIG))
-    cfg = replace(load_config(path), channels=())
-    return cfg if args.noise_from is None else _with_noise(cfg, args.noise_from)
+    cfg = load_config(path)
+    own = next((c for c in cfg.channels if c.name == channel), None)
+    if channel is not None and own is None:
+        raise UserError(
+            f"--channel {channel}: {path} has no [channels.{channel}] table (its noise and temperature "
+            "polynomial); give a --sim with one"
+        )
+    cfg = replace(cfg, channels=() if own is None else (own,))
+    if fitted is not None and fitted.bias_poly is not None:
+        poly = (fitted.bias_poly,)
+        if own is None:
+            cfg = replace(cfg, effects=_without(cfg.effects, poly) + poly)
+        else:
+            cfg = replace(
+                cfg, channels=(ChannelConfig(own.name, _without(own.effects, poly) + poly, own.noise),)
+            )
+    return cfg if args.noise_from is None else _with_noise(cfg, args.noise_from, channel)
 
 
-def _with_noise(cfg: PhysicsConfig, path: str) -> PhysicsConfig:
-    """The recording's white-noise density; the slow terms scaled by the same factor (their shares kept)."""
+def _without(effects: tuple[EffectConfig, ...], drop: tuple[EffectConfig, ...]) -> tuple[EffectConfig, ...]:
+    names = {e.identifier for e in drop}
+    return tuple(e for e in effects if e.identifier not in names)
+
+
+def _with_noise(cfg: PhysicsConfig, path: str, channel: str | None) -> PhysicsConfig:
+    """The recording's white-noise density (of the planned channel); the slow terms scaled by the same
+    factor (their shares kept)."""
+    from trainer.data.channels import channel_view, select_channels
     from trainer.data.recording_io import read_recording
     from trainer.diagnose.blocks import white_noise_density
     from trainer.errors import UserError
     from trainer.physics.catalogue.white_noise import DEFINITION as WHITE_NOISE
-    from trainer.physics.config import NoiseConfig
+    from trainer.physics.config import ChannelConfig, NoiseConfig
 
     rec = read_recording(path)
+    if channel is not None:
+        rec = channel_view(rec, select_channels(rec, (channel,))[0])
     measured = white_noise_density(rec.accel_mg, rec.sample_rate_hz)
-    white = cfg.noise_term(WHITE_NOISE.identifier)
+    own = cfg.channels[0] if channel is not None else None
+    terms = own.noise if own is not None else cfg.noise
+    white = next((n for n in terms if n.identifier == WHITE_NOISE.identifier), None)
     if white is None or not white.params["n_mg_rt_s"] > 0:
-        raise UserError(
-            f"--noise-from {path}: the --sim has no white noise to scale from; add [noise.white_noise]"
-        )
+        table = f"[channels.{channel}.noise.white_noise]" if channel else "[noise.white_noise]"
+        raise UserError(f"--noise-from {path}: the --sim has no white noise to scale from; add {table}")
     factor = measured / white.params["n_mg_rt_s"]
-    noise = tuple(NoiseConfig(n.identifier, {k: v * factor for k, v in n.params.items()}) for n in cfg.noise)
-    return replace(cfg, noise=noise)
+    noise = tuple(NoiseConfig(n.identifier, {k: v * factor for k, v in n.params.items()}) for n in terms)
+    if own is None:
+        return replace(cfg, noise=noise)
+    return replace(cfg, channels=(ChannelConfig(own.name, own.effects, noise),))
 
 
 def _stderr(line: str) -> None:
@@ -195,10 +253,16 @@ def run(args: argparse.Namespace) -> int:
 
     _check(args)
     check_output_directory(args.out)
-    targets = priors.load(args.targets, args.effects)
+    fitted = None
+    if args.targets is not None and args.targets.lower().endswith(".pt"):
+        if args.effects is not None:
+            raise UserError("--targets and --effects both give the targets; give one")
+        fitted = priors.from_model(Path(args.targets))
+    channel, unit = _channel(args, fitted)
+    targets = fitted.priors if fitted is not None else priors.load(args.targets, args.effects, unit)
     limits = ChamberLimits(args.range[0], args.range[1], args.max_rate, args.settling, args.max_hours * 3600)
     target = Target(args.identify_rate, args.tolerance, args.vs_cubic)
-    base = _base(args)
+    base = _base(args, channel, fitted)
     validation = validation_program(limits)
     options = candidates(limits)
     if not options:
@@ -207,7 +271,9 @@ def run(args: argparse.Namespace) -> int:
         )
 
     def make(program: Program, indices: range) -> list[DrawTask]:
-        return [DrawTask(base, targets, program, validation, args.seed, i, args.rate) for i in indices]
+        return [
+            DrawTask(base, targets, program, validation, args.seed, i, args.rate, channel) for i in indices
+        ]
 
     with runner(args.workers, args.scheduler, not args.no_progress) as pool:
         choice = choose(
@@ -221,12 +287,20 @@ def run(args: argparse.Namespace) -> int:
     assert not violations(choice.program, limits), "a candidate is built within the limits"
     with atomic_directory(args.out) as staging:
         (staging / outputs.PROGRAM_TOML).write_text(
-            outputs.program_toml(base, targets, choice.program, args.rate), encoding="utf-8"
+            outputs.program_toml(base, targets, choice.program, args.rate, channel), encoding="utf-8"
         )
         (staging / outputs.SETPOINTS_CSV).write_text(outputs.setpoints_csv(choice.program), encoding="utf-8")
         outputs.plot(staging / outputs.PLOT_PNG, choice.program, others, validation)
         text = outputs.report(
-            choice, rows, targets, limits, target, validation, seed=args.seed, rate_hz=args.rate
+            choice,
+            rows,
+            targets,
+            limits,
+            target,
+            validation,
+            seed=args.seed,
+            rate_hz=args.rate,
+            channel=channel,
         )
         (staging / outputs.REPORT_MD).write_text(text, encoding="utf-8")
     verdict = (

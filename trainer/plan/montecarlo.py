@@ -5,6 +5,10 @@ independent validation profile with the same sensor (other noise), fits ``poly3`
 (automatic structure: the finder diagnoses the run, cross-validation completes it) on the training
 run exactly as ``trainer compare`` does, and scores both on the validation run against the true
 drift. The same draw index gives the same sensor on every profile (common random numbers).
+
+On a further channel (a gyroscope axis: ``channel``) the targets replace that channel's effects
+in the ``[channels.<name>]`` table, the accelerometer's physics stays as it is, and the draw fits and
+scores the channel's one-channel view (its unit travels with it, as in ``trainer compare``).
 """
 
 from __future__ import annotations
@@ -18,8 +22,9 @@ from typing import Any
 import numpy as np
 
 from trainer import methods as registry
+from trainer.data.recording import Recording
 from trainer.physics.catalogue import EFFECTS, excluded
-from trainer.physics.config import PhysicsConfig, RecordingConfig
+from trainer.physics.config import ChannelConfig, PhysicsConfig, RecordingConfig
 from trainer.physics.effects import EffectConfig
 from trainer.plan.priors import Prior, draw_effects
 from trainer.plan.programs import Program
@@ -36,6 +41,7 @@ class DrawTask:
     seed: int
     index: int
     rate_hz: float
+    channel: str | None = None  # a [channels.<name>] table of ``base`` to plan for (None: the accelerometer)
 
 
 @dataclass(frozen=True)
@@ -44,25 +50,36 @@ class DrawResult:
     truth: dict[str, dict[str, float]]
     fitted: dict[str, dict[str, float]]  # the physics compensator's effects (bias polynomial left out)
     error: dict[str, float]  # largest relative error of the checked parameters (inf: not found)
-    drift_left_mg: dict[str, float]  # method -> RMS against the true drift on the validation run
+    drift_left: dict[str, float]  # method -> RMS against the true drift on the validation run (channel unit)
 
     @property
     def ratio(self) -> float:
-        return self.drift_left_mg[PHYSICS] / self.drift_left_mg[CUBIC]
+        return self.drift_left[PHYSICS] / self.drift_left[CUBIC]
 
 
 def sensor(
-    base: PhysicsConfig, effects: Sequence[EffectConfig], program: Program, rate_hz: float
+    base: PhysicsConfig,
+    effects: Sequence[EffectConfig],
+    program: Program,
+    rate_hz: float,
+    channel: str | None = None,
 ) -> PhysicsConfig:
-    """``base`` with ``effects`` in place of the same identifiers (and of those they exclude), on ``program``."""
-    names = {e.identifier for e in effects}
-    kept = tuple(
-        e for e in base.effects if not any(e.identifier == n or excluded(e.identifier, n) for n in names)
-    )
-    order = list(EFFECTS)
-    merged = tuple(sorted((*kept, *effects), key=lambda e: order.index(e.identifier)))
+    """``base`` on ``program`` with ``effects`` in place of the same identifiers (and of those they
+    exclude): the accelerometer's, or with ``channel`` that channel's alone (the only channel kept)."""
     recording = RecordingConfig(rate_hz, base.recording.sensor)
-    return replace(base, recording=recording, protocol=program.protocol, effects=merged, channels=())
+    if channel is None:
+        merged = _merged(base.effects, effects)
+        return replace(base, recording=recording, protocol=program.protocol, effects=merged, channels=())
+    own = next(c for c in base.channels if c.name == channel)
+    table = ChannelConfig(channel, _merged(own.effects, effects), own.noise)
+    return replace(base, recording=recording, protocol=program.protocol, channels=(table,))
+
+
+def _merged(current: Sequence[EffectConfig], effects: Sequence[EffectConfig]) -> tuple[EffectConfig, ...]:
+    names = {e.identifier for e in effects}
+    kept = [e for e in current if not any(e.identifier == n or excluded(e.identifier, n) for n in names)]
+    order = list(EFFECTS)
+    return tuple(sorted((*kept, *effects), key=lambda e: order.index(e.identifier)))
 
 
 def draw_seeds(seed: int, index: int) -> tuple[np.random.Generator, int, int]:
@@ -92,8 +109,12 @@ def run_draw(task: DrawTask) -> DrawResult:
 
     rng, train_seed, valid_seed = draw_seeds(task.seed, task.index)
     effects = draw_effects(task.priors, rng)
-    train = simulate(sensor(task.base, effects, task.train, task.rate_hz), train_seed)
-    valid = simulate(sensor(task.base, effects, task.valid, task.rate_hz), valid_seed)
+    train = _view(
+        simulate(sensor(task.base, effects, task.train, task.rate_hz, task.channel), train_seed), task
+    )
+    valid = _view(
+        simulate(sensor(task.base, effects, task.valid, task.rate_hz, task.channel), valid_seed), task
+    )
     models, _ = fit_all(train, FusionSettings(), methods=(CUBIC, PHYSICS), progress=False, log=lambda _: None)
     blind = valid.without_truth()
     left = {}
@@ -110,6 +131,13 @@ def run_draw(task: DrawTask) -> DrawResult:
         {p.identifier: _relative_error(p, e, fitted) for p, e in zip(task.priors, effects, strict=True)},
         left,
     )
+
+
+def _view(rec: Recording, task: DrawTask) -> Recording:
+    """The planned channel's one-channel view (the recording itself for the accelerometer)."""
+    from trainer.data.channels import channel_view, recording_channels
+
+    return rec if task.channel is None else channel_view(rec, recording_channels(rec)[task.channel])
 
 
 class Runner:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.physics.config import PhysicsConfig, config_to_toml
 from trainer.physics.profiles import build_profile
 from trainer.plan.design import Choice
@@ -25,9 +26,11 @@ from trainer.scoring.plots import new_figure, save_figure
 PROGRAM_TOML, SETPOINTS_CSV, PLOT_PNG, REPORT_MD = "program.toml", "setpoints.csv", "program.png", "report.md"
 
 
-def program_toml(base: PhysicsConfig, priors: Sequence[Prior], program: Program, rate_hz: float) -> str:
-    """The planned program on the sensor, the targets at their priors' centres."""
-    cfg = sensor(base, [p.centre for p in priors], program, rate_hz)
+def program_toml(
+    base: PhysicsConfig, priors: Sequence[Prior], program: Program, rate_hz: float, channel: str | None = None
+) -> str:
+    """The planned program on the sensor, the targets at their priors' centres (in ``channel``'s table)."""
+    cfg = sensor(base, [p.centre for p in priors], program, rate_hz, channel)
     head = (
         f"# trainer plan: {program.name}, {program.duration_s / 3600:.2f} h\n"
         "# [protocol] is the chamber program; the effects are the targets at their prior ranges' centres.\n"
@@ -66,12 +69,13 @@ def _cell(rate: float, error: float) -> str:
 
 
 def table(summaries: Sequence[Summary], priors: Sequence[Prior], target: Target) -> str:
+    unit = UNIT_LABELS[priors[0].unit]
     headers = [
         "profile",
         "hours",
         *(p.identifier for p in priors),
-        "physics (mg)",
-        "cubic (mg)",
+        f"physics ({unit})",
+        f"cubic ({unit})",
         "physics / cubic",
         "target",
     ]
@@ -80,8 +84,8 @@ def table(summaries: Sequence[Summary], priors: Sequence[Prior], target: Target)
             s.name,
             f"{s.duration_s / 3600:.2f}",
             *(_cell(s.identified[p.identifier], s.median_error[p.identifier]) for p in priors),
-            f"{s.drift_left_mg[PHYSICS]:.3g}",
-            f"{s.drift_left_mg[CUBIC]:.3g}",
+            f"{s.drift_left[PHYSICS]:.3g}",
+            f"{s.drift_left[CUBIC]:.3g}",
             f"{s.ratio_median:.2f} (max {s.ratio_max:.2f})",
             "met" if s.meets(target) else "not met",
         ]
@@ -100,6 +104,7 @@ def report(
     *,
     seed: int,
     rate_hz: float,
+    channel: str | None = None,
 ) -> str:
     s = choice.summary
     verdict = (
@@ -112,7 +117,10 @@ def report(
         "",
         f"Chamber: {limits.low_c:g}..{limits.high_c:g} degC, at most {limits.max_rate_c_per_min:g} degC/min, "
         f"{limits.settling_s:g} s settling, at most {limits.max_duration_s / 3600:g} h.",
-        "Targets (uniform priors): " + "; ".join(p.describe() for p in priors) + ".",
+        f"Channel: {channel or 'the accelerometer'}. "
+        + "Targets (uniform priors): "
+        + "; ".join(p.describe() for p in priors)
+        + ".",
         f"Target: each effect identified (named by `physics`, checked parameters within {100 * target.tolerance:g} %) "
         f"in >= {100 * target.identify_rate:g} % of draws, and `physics` leaving <= {target.vs_cubic:g}x the cubic "
         "(median over draws) on the validation profile.",

@@ -29,7 +29,7 @@ class Summary:
     draws: int
     identified: dict[str, float]  # effect -> share of draws
     median_error: dict[str, float]  # effect -> median largest relative error where found (nan: never)
-    drift_left_mg: dict[str, float]  # method -> median RMS over draws
+    drift_left: dict[str, float]  # method -> median RMS over draws
     ratio_median: float
     ratio_max: float
 
@@ -65,7 +65,7 @@ def summarise(
         found = err[np.isfinite(err)]
         errors[prior.identifier] = float(np.median(found)) if found.size else math.nan
     ratios = np.array([r.ratio for r in results])
-    left = {m: float(np.median([r.drift_left_mg[m] for r in results])) for m in (PHYSICS, CUBIC)}
+    left = {m: float(np.median([r.drift_left[m] for r in results])) for m in (PHYSICS, CUBIC)}
     return Summary(
         name, duration_s, len(results), rates, errors, left, float(np.median(ratios)), float(np.max(ratios))
     )
