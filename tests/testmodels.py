@@ -8,6 +8,7 @@ trainer itself. Nothing here is used by ``codegen export`` or ``verify``.
 
 from __future__ import annotations
 
+import io
 import os
 from typing import Any
 
@@ -102,8 +103,12 @@ def checkpoint_dict(
 
 
 def save_checkpoint(checkpoint: dict[str, Any], path: str | os.PathLike[str]) -> None:
+    """Byte-identical files for the same checkpoint (the archive's root folder named as
+    trainer.checkpoint.save_model names it, not after a temporary file)."""
+    buffer = io.BytesIO()
+    torch.save(checkpoint, buffer)
     with atomic_output(path) as tmp:
-        torch.save(checkpoint, tmp)
+        tmp.write_bytes(buffer.getvalue())
 
 
 def dlstm_checkpoint(
