@@ -821,7 +821,7 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
         for name, (_, fixed, _) in present.items()
         if fixed.proof_mass_weight
     )
-    layout = c_terms_of(present)
+    layout = _c_terms_of(present)
     filt: dict[str, QLowpass | None] = {}
     for fixed in layout:
         if fixed.tau_s is None:
@@ -867,6 +867,7 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
         if bound >= INT64_SAFE:
             continue
         options = {o: any(v[1].option == o for v in present.values()) for o in c_options()}
+        # the tag hashes every constant in the registry's layout (a term the model lacks as None)
         layout_margins = tuple(margin_q.get(f.name) for f in layout if f.margin is not None)
         constants = (
             lo,
@@ -911,7 +912,7 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     raise UserError("physics: coefficients too large for the fixed-point format")
 
 
-def c_terms_of(present: Mapping[str, tuple[str, FixedPoint, Mapping[str, float]]]) -> list[FixedPoint]:
+def _c_terms_of(present: Mapping[str, tuple[str, FixedPoint, Mapping[str, float]]]) -> list[FixedPoint]:
     """The registry's C terms (:func:`~trainer.physics.catalogue.streamed.c_terms`) with each present
     one as its model's effect declares it (effects that are the same C share a name)."""
     return [present[f.name][1] if f.name in present else f for f in c_terms()]

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Protocol
+from typing import Literal, Protocol
 
 from trainer.physics.thermal import lowpass_coefficients
 
@@ -162,7 +162,7 @@ class FixedPoint:
     filter_doc: str = ""
     gain_mg_per_c: Callable[[Params], float] | None = None
     gain_name: str = ""
-    difference: str = "temperature"
+    difference: Literal["temperature", "margin"] = "temperature"
     difference_text: str = ""
     margin: Callable[[Params], tuple[Fraction, str]] | None = None
     margin_field: str = ""
