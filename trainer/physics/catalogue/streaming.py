@@ -119,7 +119,7 @@ class StateWord:
 
     ``wide``: int64 Q(tf + 32) mdegC, a filter state whose high word is the temperature; else an
     int32 Q(tf) temperature. ``doc`` describes it in the one-channel module's state struct,
-    ``imu_doc`` in the IMU module's (None: no comment)."""
+    ``imu_doc`` an int32 word in the IMU module's (None: no comment; the int64 words share one)."""
 
     name: str
     wide: bool
