@@ -43,13 +43,14 @@ from codegen.quantize import (
     HI_BITS,
     X_SLOTS,
     QInput,
-    QLowpass,
     QPhysics,
     QPla,
     QPoly3,
     QStream,
     QuantModel,
 )
+from trainer.physics.catalogue.streamed import STREAMED
+from trainer.physics.catalogue.streaming import BRANCH, CHAIN, IntSample
 
 UINT32_MAX = (1 << 32) - 1
 EST_ONE = 1 << EST_FRAC
@@ -336,25 +337,24 @@ class GoldenStream(_Golden):
 class GoldenPhysics(_Golden):
     """The grey-box model sample by sample on Python integers, with the C struct's fields.
 
+    Each streamed effect's step is its own (``FixedPoint.golden``, trainer/physics/catalogue);
     Python integers never wrap, so an int64 overflow the generator failed to rule out would show
     here as a value beyond int64 (checked at every update) instead of agreeing with the C."""
 
     model: QPhysics
-    FILTERS = ("proof_mass", "play", "rate_lp", "creep_lp")
 
     def reset(self) -> None:
         self.started = 0
         self.temp_prev = 0
-        self.values = dict.fromkeys(self.FILTERS, 0)
+        self.values = dict.fromkeys(self.present(), 0)
 
     def init(self) -> None:
         super().init()
         self.tag = self.model.tag
 
     def present(self) -> tuple[str, ...]:
-        m = self.model
-        flags = (m.lag is not None, m.half_width_q is not None, m.rate is not None, m.creep is not None)
-        return tuple(name for name, on in zip(self.FILTERS, flags, strict=True) if on)
+        """The state words of the model's terms, in step order (the C state's fields)."""
+        return tuple(w.name for t in self.model.terms for w in t.fixed.state)
 
     def state(self) -> dict[str, np.ndarray | int]:
         out: dict[str, np.ndarray | int] = {name: self.values[name] for name in self.present()}
@@ -380,16 +380,13 @@ class GoldenPhysics(_Golden):
         )
         return True
 
-    @staticmethod
-    def _lowpass(f: QLowpass, y: int, prev: int, step_mdegc: int, tf: int) -> int:
-        """``tdcp_lowpass``: floors written as Python's exact ``>>`` on integers."""
-        d = ((prev << HI_BITS) - y) >> (HI_BITS + f.shift)
-        return y + d * f.c_q + (step_mdegc << (tf - f.shift)) * f.b_q
-
     def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
         m = self.model
         tf = m.temp_frac
         v = self.values
+        wide = {w.name: w.wide for t in m.terms for w in t.fixed.state}
+        before = [t for t in m.terms if STREAMED[t.identifier].phase in (CHAIN, BRANCH)]
+        after = [t for t in m.terms if t not in before]
         drift = np.empty(temp.size, dtype=np.int64)
         d0, d1, d2, d3 = m.coefficients_q
         for n, raw in enumerate(temp.tolist()):
@@ -400,34 +397,19 @@ class GoldenPhysics(_Golden):
             if not self.started:
                 self.started, self.temp_prev = 1, t
                 for name in self.present():
-                    v[name] = x if name == "play" else x << HI_BITS
-            prev, step = (self.temp_prev - m.centre_mdegc) << tf, t - self.temp_prev
-            t_pm = x
-            if m.lag is not None:
-                v["proof_mass"] = self._lowpass(m.lag, v["proof_mass"], prev, step, tf)
-                t_pm = v["proof_mass"] >> HI_BITS
-            t_b, acc = t_pm, 0
-            if m.half_width_q is not None:
-                h = m.half_width_q
-                v["play"] = min(max(v["play"], t_pm - h), t_pm + h)
-                if m.poly_reads_play:
-                    t_b = v["play"]
-                assert m.branch is not None
-                acc += (t_pm - v["play"]) * m.branch.q
-            u = t_b << m.u_shift
+                    v[name] = x << HI_BITS if wide[name] else x
+            prev = (self.temp_prev - m.centre_mdegc) << tf
+            s = IntSample(x, prev, t - self.temp_prev, tf, x, x)
+            acc = sum(term.fixed.golden(term, v, s) for term in before)
+            u = s.t_b << m.u_shift
             poly = d3
             for coefficient in (d2, d1, d0):  # each partial sum within m.horner_bounds (< 2**31)
                 poly = coefficient + ((poly * u + (1 << 31)) >> HI_BITS)
                 assert abs(poly) <= INT32_MAX
             acc += poly << HI_BITS
-            if m.rate is not None and m.rate_gain is not None:
-                v["rate_lp"] = self._lowpass(m.rate, v["rate_lp"], prev, step, tf)
-                acc += (x - (v["rate_lp"] >> HI_BITS)) * m.rate_gain.q
-            if m.creep is not None and m.creep_gain is not None:
-                v["creep_lp"] = self._lowpass(m.creep, v["creep_lp"], prev, step, tf)
-                acc += (x - (v["creep_lp"] >> HI_BITS)) * m.creep_gain.q
+            acc += sum(term.fixed.golden(term, v, s) for term in after)
             assert abs(u) <= INT32_MAX and abs(acc) <= m.bound
-            assert all(abs(y) < 1 << 62 for y in v.values()) and abs(v["play"]) <= INT32_MAX
+            assert all(abs(y) < 1 << 62 if wide[k] else abs(y) <= INT32_MAX for k, y in v.items())
             self.temp_prev = t
             drift[n] = (acc + (1 << (HI_BITS - 1 + m.frac))) >> (HI_BITS + m.frac)
         return self._output(accel, drift)  # |drift| < 2**30: only the output saturates

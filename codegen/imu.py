@@ -52,16 +52,17 @@ from codegen.render import (
     _environment,
     kernel_header,
     manifest_json,
+    physics_snippets,
     render_sources,
     validate_name,
 )
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
+from trainer.physics.catalogue.streamed import c_options, c_terms
+from trainer.physics.catalogue.streaming import FixedPoint
 
 KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
-# a physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these)
-PHYS_TERMS = {"LAG": 1, "BRANCH": 2, "RATE": 4, "CREEP": 8, "READS_PLAY": 16}
 BLOB_MAGIC = b"TDCC"
 BLOB_VERSION = 1
 BLOB_HEADER = struct.Struct(
@@ -194,48 +195,75 @@ def load_imu(
 # ------------------------------------------------------------------------------ tables and blob
 
 
+def phys_terms() -> dict[str, int]:
+    """A physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these): one
+    per C term of the streamed effects' registry, then its options, in step order."""
+    names = [t.name.upper() for t in c_terms()] + c_options()
+    return {name: 1 << k for k, name in enumerate(names)}
+
+
 @dataclass(frozen=True)
 class PhysicsTables:
     """A physics channel's constants exactly as ``NAME_physics_t`` holds them (its clip range, frac
-    and cubic are in the channel's record: ``ChannelTables``)."""
+    and cubic are in the channel's record: ``ChannelTables``), in the registry's layout
+    (:func:`trainer.physics.catalogue.streamed.c_terms`; zeros for a term the channel lacks)."""
 
-    terms: int  # PHYS_TERMS bits
+    terms: int  # phys_terms() bits
     centre: int  # mdegC
     scale: int  # 2^tf
     u_scale: int  # 2^u_shift
-    half_width: int  # play operator, Q(tf) mdegC
-    branch_q: int
-    rate_q: int
-    creep_q: int
-    lag: tuple[int, int, int, int]  # c, b0, step_scale 2^(tf - s), s (zeros: absent)
-    rate: tuple[int, int, int, int]
-    creep: tuple[int, int, int, int]
+    filters: list[tuple[int, int, int, int]]  # per filter: c, b0, step_scale 2^(tf - s), s
+    margins: list[int]  # per margin (the play's half width), Q(tf) mdegC
+    gains: list[int]
 
 
 def physics_tables(q: QPhysics) -> PhysicsTables:
     def lowpass(f: QLowpass | None) -> tuple[int, int, int, int]:
         return (0, 0, 0, 0) if f is None else (f.c_q, f.b_q, 1 << (q.temp_frac - f.shift), f.shift)
 
-    present = {
-        "LAG": q.lag is not None,
-        "BRANCH": q.half_width_q is not None,
-        "RATE": q.rate is not None,
-        "CREEP": q.creep is not None,
-        "READS_PLAY": q.poly_reads_play and q.half_width_q is not None,
-    }
+    present = {t.fixed.name: t for t in q.terms}
+    bits = phys_terms()
+    layout = c_terms()
     return PhysicsTables(
-        sum(bit for term, bit in PHYS_TERMS.items() if present[term]),
+        sum(bits[name.upper()] for name in present) + sum(bits[o] for o in q.options),
         q.centre_mdegc,
         1 << q.temp_frac,
         1 << q.u_shift,
-        q.half_width_q or 0,
-        q.branch.q if q.branch else 0,
-        q.rate_gain.q if q.rate_gain else 0,
-        q.creep_gain.q if q.creep_gain else 0,
-        lowpass(q.lag),
-        lowpass(q.rate),
-        lowpass(q.creep),
+        [lowpass(present[f.name].filter if f.name in present else None) for f in layout if f.tau_s],
+        [(present[f.name].margin_q or 0) if f.name in present else 0 for f in layout if f.margin],
+        [
+            present[f.name].gain.q if f.name in present and present[f.name].gain else 0  # type: ignore[union-attr]
+            for f in layout
+            if f.gain_mg_per_c
+        ],
     )
+
+
+def physics_layout(name: str) -> dict[str, object]:
+    """What the IMU templates render of the registry's C terms: the tables' and the state's fields
+    and each term's step, reading its constants from ``ph`` and testing its bit at run time."""
+    layout = c_terms()
+    on = {t: f"(ph->terms & {name.upper()}_PHYS_{t}) != 0u" for t in phys_terms()}
+
+    def values(f: FixedPoint) -> dict[str, object]:
+        filt = {k: f"ph->{f.name}.{k}" for k in ("c", "b0", "shift", "step_scale")}
+        margin = f"ph->{f.margin_field}"
+        return {**filt, "q": f"ph->{f.name}_q", "margin": margin, "margin_text": f"{margin} (Q(tf) mdegC)"}
+
+    u_source = "t_pm"
+    for f in reversed(layout):
+        if f.poly_reads is not None and f.option is not None:
+            u_source = f"({on[f.option]} ? state->{f.poly_reads} : {u_source})"
+    words = list({w.name: w for f in layout for w in f.state}.values())
+    return {
+        "filters": [{"field": f.name, "doc": f.filter_doc} for f in layout if f.tau_s],
+        "margins": [{"field": f.margin_field, "doc": f.margin_doc} for f in layout if f.margin],
+        "gains": [{"field": f"{f.name}_q", "text": f.difference_text} for f in layout if f.gain_mg_per_c],
+        "state": [w for w in words if w.wide] + [w for w in words if not w.wide],
+        "words": words,
+        "terms": [{"on": on[f.name.upper()], **physics_snippets(f, values(f))} for f in layout],
+        "u_source": u_source,
+    }
 
 
 @dataclass(frozen=True)
@@ -395,7 +423,8 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "kind_physics": KIND_PHYSICS,
         "kind_stream": KIND_STREAM,
         "stream_channels": _stream_modules(imu, name),
-        "phys_terms": PHYS_TERMS,
+        "phys_terms": phys_terms(),
+        "phys": physics_layout(name),
         "rate_millihz": imu.rate_millihz,
         "rate_hz": f"{imu.rate_millihz / 1000:g}",
         "physics_channels": [

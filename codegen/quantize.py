@@ -51,6 +51,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -88,7 +89,8 @@ from codegen.spec import (
     Poly3Spec,
 )
 from trainer.errors import UserError
-from trainer.greybox.terms import CREEP, LAG, RATE
+from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms
+from trainer.physics.catalogue.streaming import CHAIN, FixedPoint
 
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
 MAX_WINDOW_SAMPLES = 0xFFFF  # tdck_rdiv_round64 divides by fewer than 2**16 samples (32-bit divisions)
@@ -369,6 +371,22 @@ class QGain:
 
 
 @dataclass(frozen=True)
+class QTerm:
+    """One streamed effect of a :class:`QPhysics` in integers (its ``FixedPoint`` says what they mean)."""
+
+    identifier: str
+    filter: QLowpass | None
+    gain: QGain | None
+    margin_q: int | None  # an int32 temperature offset (the play's half width), Q(tf) mdegC
+
+    @property
+    def fixed(self) -> FixedPoint:
+        fixed = STREAMED[self.identifier].fixed
+        assert fixed is not None
+        return fixed
+
+
+@dataclass(frozen=True)
 class QPhysics:
     """The grey-box model in int32 temperatures and products (see :func:`_physics`)."""
 
@@ -379,29 +397,32 @@ class QPhysics:
     clip_hi_mdegc: int
     centre_mdegc: int  # temperatures are x = (T - centre) 2^temp_frac
     temp_frac: int  # tf: int32 temperatures Q(tf) mdegC; filter states int64 Q(tf + 32)
-    lag: QLowpass | None
-    rate: QLowpass | None
-    creep: QLowpass | None
-    half_width_q: int | None  # play operator: w / 2 in Q(tf) mdegC (None: no hysteresis)
-    poly_reads_play: bool
+    terms: tuple[QTerm, ...]  # the streamed effects the export carries, in step order
     t_ref_mdegc: int  # the catalogue's polynomial reference (re-expanded about the centre)
     u_shift: int  # Horner argument u = T_b 2^u_shift, |u| < 2^31, read as U = u / 2^31
     coefficients_q: tuple[int, ...]  # d0..d3: d_k of U^k in Q(frac + k) accel LSB, int32
     horner_bounds: tuple[int, ...]  # |p_0| .. |p_3| of the Horner steps, each < 2^31
-    branch: QGain | None
-    rate_gain: QGain | None
-    creep_gain: QGain | None
     frac: int  # the polynomial's value is Q(frac) accel LSB; the accumulator Q(frac + 32)
     bound: int  # |drift accumulator|, Q(frac + 32), < 2^62
     tag: int  # uint32 identifying these constants (a saved state is restored only by its own model)
 
     @property
     def filters(self) -> tuple[QLowpass, ...]:
-        return tuple(f for f in (self.lag, self.rate, self.creep) if f is not None)
+        return tuple(t.filter for t in self.terms if t.filter is not None)
 
     @property
     def gains(self) -> tuple[QGain, ...]:
-        return tuple(g for g in (self.branch, self.rate_gain, self.creep_gain) if g is not None)
+        return tuple(t.gain for t in self.terms if t.gain is not None)
+
+    @property
+    def options(self) -> tuple[str, ...]:
+        """The option bits its terms set (what the polynomial reads)."""
+        return tuple(t.fixed.option for t in self.terms if t.fixed.option is not None)
+
+    @property
+    def poly_reads(self) -> str | None:
+        """The state word the polynomial reads instead of T_pm (None: T_pm)."""
+        return next((t.fixed.poly_reads for t in self.terms if t.fixed.poly_reads is not None), None)
 
 
 QuantModel = QStream | QPla | QPoly3 | QPhysics
@@ -742,12 +763,13 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     """int32 temperatures, int64 filter states, int32 x int32 products (tdc_physics_kernels.h).
 
     Temperatures are ``x = (T - centre) 2^tf`` mdegC about the training range's centre, ``tf`` the
-    largest for which every temperature, difference and ``x +- w/2`` fits int32. The filters stay
-    within the range (their updates are convex combinations; the floors move them down by less
-    than 1 mdegC), so the states are bounded by the range too. The cubic is re-expanded exactly
-    about the centre in ``U = T_b 2^u_shift / 2^31`` and evaluated by Horner in int32 with rounded
-    high-word products; the drift accumulator is int64 Q(frac + 32) accel LSB, ``frac`` the largest
-    (<= 30) for which every Horner step, every gain and the sum fit (all proved here)."""
+    largest for which every temperature, difference and ``x +-`` a term's margin fits int32. The
+    filters stay within the range (their updates are convex combinations; the floors move them down
+    by less than 1 mdegC), so the states are bounded by the range too. The cubic is re-expanded
+    exactly about the centre in ``U = T_b 2^u_shift / 2^31`` and evaluated by Horner in int32 with
+    rounded high-word products; the drift accumulator is int64 Q(frac + 32) accel LSB, ``frac`` the
+    largest (<= 30) for which every Horner step, every gain and the sum fit (all proved here). What
+    each streamed effect quantises is its ``FixedPoint`` (trainer/physics/catalogue)."""
     m = spec.model
     lo = round_half_away(Fraction(m.temp_range_c[0]) * 1000)
     hi = round_half_away(Fraction(m.temp_range_c[1]) * 1000)
@@ -761,20 +783,27 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     grain = 1 if abs(mid) < 4096 else 1 << max(0, abs(mid).bit_length() - 8)
     centre = round_half_away(Fraction(mid, grain)) * grain
     reach = max(hi - centre, centre - lo) + 2  # |state - centre|, mdegC: the range and the floors' margin
-    half = None
-    if m.play_width_c is not None:
-        if not m.play_width_c > 0:
-            raise UserError(f"physics: play width {m.play_width_c!r} degC must be positive")
-        half = Fraction(m.play_width_c) * 500
+    present: dict[str, tuple[str, FixedPoint, Mapping[str, float]]] = {}
+    for term in m.terms:
+        fixed = STREAMED[term.identifier].fixed
+        if fixed is not None:
+            present[fixed.name] = (term.identifier, fixed, term.params)
+    margins: dict[str, tuple[Fraction, str]] = {}
+    for name, (_, fixed, params) in present.items():
+        if fixed.margin is not None:
+            margins[name] = fixed.margin(params)
+            if not margins[name][0] > 0:
+                raise UserError(f"physics: {margins[name][1]} must be positive")
     tf = -1
     for k in range(MAX_TEMP_FRAC, -1, -1):
-        h_q = 0 if half is None else round_half_away(half * 2**k)
+        h_q = max((round_half_away(half * 2**k) for half, _ in margins.values()), default=0)
         if (2 * reach) << k <= INT32_MAX and (reach << k) + h_q <= INT32_MAX:
             tf = k
             break
     if tf < 0:
-        raise UserError(f"physics: play width {m.play_width_c!r} degC is too wide for int32 temperatures")
-    half_q = None if half is None else round_half_away(half * 2**tf)
+        widest = max(margins.values(), key=lambda v: v[0])[1] if margins else "a margin"
+        raise UserError(f"physics: {widest} is too wide for int32 temperatures")
+    margin_q = {name: round_half_away(half * 2**tf) for name, (half, _) in margins.items()}
     from trainer.physics.catalogue.base import T_REF_C
 
     t_ref = round_half_away(Fraction(T_REF_C) * 1000)
@@ -782,15 +811,30 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     grid = np.linspace(lo / 1000, hi / 1000, 1001) - T_REF_C
     c1, c2, c3 = m.c_mg[1:]
     slope = float(np.max(np.abs(c1 + 2 * c2 * grid + 3 * c3 * grid**2)))
-    branch_gain = 0.0 if m.play_width_c is None else m.branch_amp_mg / (m.play_width_c / 2.0)
-    rate_gain = 0.0 if m.rate_tau_s is None else m.rate_k_mg_per_c_per_min * 60.0 / m.rate_tau_s
-    filt = {}
-    for name, tau, sensitivity in (
-        (LAG, m.lag_tau_s, slope + 2 * abs(branch_gain)),
-        (RATE, m.rate_tau_s, abs(rate_gain)),
-        (CREEP, m.creep_tau_s, abs(m.creep_gain_mg_per_c)),
-    ):
-        filt[name] = None if tau is None else _lowpass(name, tau, spec.rate_hz, tf, reach, span, sensitivity)
+    gain_mg_per_c = {
+        name: fixed.gain_mg_per_c(params)
+        for name, (_, fixed, params) in present.items()
+        if fixed.gain_mg_per_c is not None
+    }
+    proof_mass = slope + sum(
+        fixed.proof_mass_weight * abs(gain_mg_per_c[name])
+        for name, (_, fixed, _) in present.items()
+        if fixed.proof_mass_weight
+    )
+    layout = _c_terms_of(present)
+    filt: dict[str, QLowpass | None] = {}
+    for fixed in layout:
+        if fixed.tau_s is None:
+            continue
+        entry = present.get(fixed.name)
+        if entry is None:
+            filt[fixed.filter_name] = None
+            continue
+        chain = STREAMED[entry[0]].phase == CHAIN
+        sensitivity = proof_mass if chain else abs(gain_mg_per_c[fixed.name])
+        filt[fixed.filter_name] = _lowpass(
+            fixed.filter_name, fixed.tau_s(entry[2]), spec.rate_hz, tf, reach, span, sensitivity
+        )
     # the cubic about the centre, in U = T 2^(tf + u_shift) / 2^31 (T mdegC about the centre)
     u_shift = 0
     while (reach << (tf + u_shift + 1)) <= INT32_MAX:
@@ -801,31 +845,53 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     unit = Fraction(2**31, 2 ** (tf + u_shift))  # mdegC per unit of U
     a = [v * unit**j for j, v in enumerate(about_centre)]  # accel LSB per U^j
     per_mdegc = Fraction(ACCEL_PER_MG, 1000)
-    terms = [
-        ("branch", branch_gain, half_q),
-        (RATE, rate_gain if m.rate_tau_s is not None else None, (2 * reach) << tf),
-        (CREEP, m.creep_gain_mg_per_c if m.creep_tau_s is not None else None, (2 * reach) << tf),
-    ]
+    gain_terms = [fixed for fixed in layout if fixed.gain_mg_per_c is not None]
     for frac in range(MAX_DRIFT_FRAC, -1, -1):
         d = [round_half_away(v * Fraction(2) ** (frac + k)) for k, v in enumerate(a)]
         horner = _horner_bounds(d)
         if max(horner) > INT32_MAX:
             continue
-        gains: list[QGain | None] = []
-        for name, gain_mg_per_c, diff_bound in terms:
-            if gain_mg_per_c is None or diff_bound is None:
-                gains.append(None)
+        gains: dict[str, QGain | None] = {}
+        for fixed in gain_terms:
+            if fixed.name not in present:
+                gains[fixed.name] = None
                 continue
-            q = round_half_away(Fraction(gain_mg_per_c) * per_mdegc * Fraction(2) ** (frac + HI_BITS - tf))
-            gains.append(QGain(name, q, diff_bound, diff_bound * abs(q)))
-        if any(g is not None and abs(g.q) > INT32_MAX for g in gains):
+            diff_bound = margin_q[fixed.name] if fixed.difference == "margin" else (2 * reach) << tf
+            q = round_half_away(
+                Fraction(gain_mg_per_c[fixed.name]) * per_mdegc * Fraction(2) ** (frac + HI_BITS - tf)
+            )
+            gains[fixed.name] = QGain(fixed.gain_name, q, diff_bound, diff_bound * abs(q))
+        if any(g is not None and abs(g.q) > INT32_MAX for g in gains.values()):
             continue
-        bound = (horner[0] << HI_BITS) + sum(g.bound for g in gains if g is not None)
+        bound = (horner[0] << HI_BITS) + sum(g.bound for g in gains.values() if g is not None)
         if bound >= INT64_SAFE:
             continue
-        branch, gr, gc = gains
-        constants = (lo, hi, centre, tf, half_q, m.poly_reads_play, u_shift, d, frac, filt, branch, gr, gc)
+        options = {o: any(v[1].option == o for v in present.values()) for o in c_options()}
+        # the tag hashes every constant in the registry's layout (a term the model lacks as None)
+        layout_margins = tuple(margin_q.get(f.name) for f in layout if f.margin is not None)
+        constants = (
+            lo,
+            hi,
+            centre,
+            tf,
+            *layout_margins,
+            *options.values(),
+            u_shift,
+            d,
+            frac,
+            filt,
+            *gains.values(),
+        )
         tag = int(hashlib.sha256(repr(constants).encode()).hexdigest()[:8], 16)
+        terms = tuple(
+            QTerm(
+                identifier,
+                None if fixed.tau_s is None else filt[fixed.filter_name],
+                gains.get(name),
+                margin_q.get(name),
+            )
+            for name, (identifier, fixed, _) in present.items()
+        )
         return QPhysics(
             spec.method,
             limits,
@@ -834,23 +900,22 @@ def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
             hi,
             centre,
             tf,
-            filt[LAG],
-            filt[RATE],
-            filt[CREEP],
-            half_q,
-            m.poly_reads_play,
+            terms,
             t_ref,
             u_shift,
             tuple(d),
             tuple(horner),
-            branch,
-            gr,
-            gc,
             frac,
             bound,
             tag,
         )
     raise UserError("physics: coefficients too large for the fixed-point format")
+
+
+def _c_terms_of(present: Mapping[str, tuple[str, FixedPoint, Mapping[str, float]]]) -> list[FixedPoint]:
+    """The registry's C terms (:func:`~trainer.physics.catalogue.streamed.c_terms`) with each present
+    one as its model's effect declares it (effects that are the same C share a name)."""
+    return [present[f.name][1] if f.name in present else f for f in c_terms()]
 
 
 def quantise_checkpoint(

@@ -12,6 +12,7 @@ import re
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
+from string import Template
 
 import jinja2
 import numpy as np
@@ -32,16 +33,16 @@ from codegen.quantize import (
     FLAG_TEMP_OUT_OF_RANGE,
     HI_BITS,
     UNIT_TASKS,
-    QGain,
-    QLowpass,
     QPhysics,
     QPla,
     QStream,
+    QTerm,
     QuantModel,
 )
 from codegen.rate import declared_rate_millihz
 from trainer import methods as registry
 from trainer.errors import UserError
+from trainer.physics.catalogue.streaming import FixedPoint, StateWord
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
 C_KEYWORDS = frozenset(
@@ -130,30 +131,11 @@ def state_fields(model: QuantModel) -> list[Field]:
     ]
     if isinstance(model, QPhysics):
         wide = f"Q{model.temp_frac + HI_BITS} mdegC about {model.centre_mdegc} mdegC"
-        docs = {
-            "proof_mass": f"thermal_lag: proof-mass temperature T_pm, {wide}",
-            "rate_lp": f"temp_rate: the rate filter R, {wide}",
-            "creep_lp": f"stress_relaxation: the creep filter C, {wide}",
-        }
-        play = (
-            [
-                Field(
-                    "int32_t",
-                    "play",
-                    (),
-                    f"play operator output P (the hysteresis branch), Q{model.temp_frac} mdegC",
-                )
-            ]
-            if model.half_width_q is not None
-            else []
-        )
+        narrow = f"Q{model.temp_frac} mdegC"
+        words = physics_state_words(model)
         return [
-            *(
-                Field("int64_t", name, (), docs[name])
-                for name in physics_filter_fields(model)
-                if name != "play"
-            ),
-            *play,
+            *(Field("int64_t", w.name, (), f"{w.doc}, {wide}") for w in words if w.wide),
+            *(Field("int32_t", w.name, (), f"{w.doc}, {narrow}") for w in words if not w.wide),
             Field("int32_t", "temp_prev", (), "previous clipped temperature, mdegC"),
             Field("uint32_t", "started", (), "0 until the first sample after init/reset"),
             Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
@@ -208,11 +190,17 @@ def state_fields(model: QuantModel) -> list[Field]:
     return fields
 
 
-def physics_filter_fields(model: QPhysics) -> list[str]:
-    """The int64 state words a physics model keeps (one per filter, one for the play operator)."""
-    present = (model.lag, model.half_width_q, model.rate, model.creep)
-    names = ("proof_mass", "play", "rate_lp", "creep_lp")
-    return [name for name, part in zip(names, present, strict=True) if part is not None]
+def physics_state_words(model: QPhysics) -> list[StateWord]:
+    """The state words a physics model keeps (its terms' filters and play operator), in step order."""
+    return [w for t in model.terms for w in t.fixed.state]
+
+
+def physics_snippets(fixed: FixedPoint, values: dict[str, object]) -> dict[str, str]:
+    """A streamed effect's C step before and after the polynomial, its constants filled in."""
+    return {
+        "before": Template(fixed.before_poly).substitute(values),
+        "after": Template(fixed.after_poly).substitute(values),
+    }
 
 
 def state_bytes(fields: list[Field]) -> int:
@@ -397,41 +385,41 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
 
 
 def _physics_context(model: QPhysics) -> dict[str, object]:
-    def lowpass(f: QLowpass | None) -> dict[str, object] | None:
-        if f is None:
-            return None
-        return {
-            "name": f.name,
-            "tau": f"{f.tau_s:g}",
-            "c": f.c_q,
-            "b0": f.b_q,
-            "shift": f.shift,
-            "c_real": f"{f.c_real:.9g}",
-            "b0_real": f"{f.b0_real:.9g}",
-        }
+    tf = model.temp_frac
 
-    def gain(g: QGain | None) -> dict[str, object] | None:
-        return None if g is None else {"q": g.q}
+    def values(t: QTerm) -> dict[str, object]:
+        out: dict[str, object] = {}
+        if t.filter is not None:
+            f = t.filter
+            out |= {"c": f.c_q, "b0": f.b_q, "shift": f"{f.shift}u", "step_scale": 2 ** (tf - f.shift)}
+        if t.gain is not None:
+            out["q"] = t.gain.q
+        if t.margin_q is not None:
+            out |= {"margin": t.margin_q, "margin_text": f"{t.margin_q} (Q{tf} mdegC)"}
+        return out
 
     return {
         "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
         "rate_hz": f"{model.rate_hz:g}",
-        "tf": model.temp_frac,
+        "tf": tf,
         "centre": model.centre_mdegc,
         "frac": model.frac,
         "bound_text": _bound_text(model.bound),
         "clip_lo": model.clip_lo_mdegc,
         "clip_hi": model.clip_hi_mdegc,
-        "filters": [lowpass(f) for f in model.filters],
-        "filter_fields": physics_filter_fields(model),
-        "lag": lowpass(model.lag),
-        "rate": lowpass(model.rate),
-        "creep": lowpass(model.creep),
-        "branch": gain(model.branch),
-        "rate_gain": gain(model.rate_gain),
-        "creep_gain": gain(model.creep_gain),
-        "half_width": model.half_width_q,
-        "poly_reads_play": model.poly_reads_play,
+        "filters": [
+            {
+                "name": f.name,
+                "tau": f"{f.tau_s:g}",
+                "shift": f.shift,
+                "c_real": f"{f.c_real:.9g}",
+                "b0_real": f"{f.b0_real:.9g}",
+            }
+            for f in model.filters
+        ],
+        "words": physics_state_words(model),
+        "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
+        "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
         "u_shift": model.u_shift,
         "coefficients": _rows(model.coefficients_q, per_line=4),
     }

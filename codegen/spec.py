@@ -24,6 +24,7 @@ from trainer.dlstm.realtime import PERSISTENCE_KIND, RECURSIVE_KIND, TEMPERATURE
 from trainer.errors import UserError
 from trainer.fields import DottedFields as _Fields
 from trainer.greybox.stream import PhysicsModel
+from trainer.physics.catalogue.streamed import STREAMED
 
 MAX_WINDOW = 1 << 20  # keeps window sums times 2**8 inside int64
 
@@ -229,11 +230,15 @@ def _physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
         model = PhysicsCompensator.from_payload(payload.data).model
     except (KeyError, TypeError, ValueError, IndexError, UserError) as exc:
         root.fail(f"field 'payload' is not a physics model ({exc})")
-    if model.warmup_tau_s is not None and model.warmup_amp_mg != 0.0:
-        root.fail(
-            "the physics model includes the warm-up term, which needs the time since power-on; the C "
-            "export leaves it out: refit without --warmup (the warm-up is then left to the output)"
+    for term in model.terms:  # a streamed effect without a C form: refused, or left out when it adds nothing
+        streamed = STREAMED[term.identifier]
+        why = (
+            None
+            if streamed.fixed is not None or streamed.unexported is None
+            else streamed.unexported(term.params)
         )
+        if why is not None:
+            root.fail(why)
     lo, hi = model.temp_range_c
     if not lo < hi:
         root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")

@@ -89,3 +89,48 @@ def test_each_catalogue_identifier_is_written_only_in_its_definition() -> None:
     ]
     assert not offenders, "identifier strings outside the catalogue:\n" + "\n".join(offenders)
     assert len(identifiers) == len(set(identifiers)) >= 15
+
+
+def _code_names(path: Path) -> list[tuple[int, str]]:
+    """``(line, name)`` of what a module's code names: identifiers, attributes, imported names and
+    modules, and string constants that are one word (prose in strings, docstrings and comments is
+    left out)."""
+    names: list[tuple[int, str]] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Name):
+            names.append((node.lineno, node.id))
+        elif isinstance(node, ast.Attribute):
+            names.append((node.lineno, node.attr))
+        elif isinstance(node, ast.ImportFrom):
+            names += [(node.lineno, node.module or "")] + [
+                (node.lineno, a.asname or a.name) for a in node.names
+            ]
+        elif isinstance(node, ast.Import):
+            names += [(node.lineno, a.asname or a.name) for a in node.names]
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and re.fullmatch(r"[\w.]+", node.value)
+        ):
+            names.append((node.lineno, node.value))
+    return names
+
+
+def test_generic_physics_code_names_no_effect() -> None:
+    """The physics compensator and the C export loop over the registries (catalogue.EFFECTS and the
+    streamed effects, trainer/physics/catalogue/streamed.py): no code of trainer/greybox or codegen
+    names an effect, by its identifier or by importing its module (``<effect>.py``,
+    ``<effect>_stream.py``). The bias polynomial is the compensator's backbone (catalogue.BACKBONE)."""
+    identifiers = [k for k in catalogue.EFFECTS if k != catalogue.BACKBONE]
+    modules = [f"{name}_stream" for name in identifiers] + identifiers
+    word = re.compile(rf"\b({'|'.join(map(re.escape, modules))})\b")
+    generic = [ROOT / "trainer" / "greybox", ROOT / "codegen"]
+    offenders = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in _sources().values()
+        if any(folder in path.parents for folder in generic)
+        for line, name in _code_names(path)
+        if word.search(name)
+    ]
+    assert not offenders, "effects named in generic physics code:\n" + "\n".join(offenders)
+    assert len(identifiers) >= 10

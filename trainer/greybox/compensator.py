@@ -48,7 +48,7 @@ class PhysicsCompensator(Compensator):
         self.effects_option = effects
         self.forced = None if effects == "auto" else parse_effects(effects)
         self.from_sim = from_sim
-        self.warmup = with_warmup
+        self.with_warmup = with_warmup
         self.progress = progress
         self.effects: tuple[EffectConfig, ...] = ()
         self.temp_range_c = (np.nan, np.nan)
@@ -62,10 +62,10 @@ class PhysicsCompensator(Compensator):
                 raise UserError(
                     f"--from-sim: {path}: no such file (trainer diagnose --report writes augmented.toml)"
                 )
-            return structures.from_sim(path, rec, warmup_allowed=self.warmup)
+            return structures.from_sim(path, rec, warmup_allowed=self.with_warmup)
         if self.forced is not None:
             return structures.forced(self.forced)
-        return structures.auto(rec, warmup_allowed=self.warmup, progress=self.progress)
+        return structures.auto(rec, warmup_allowed=self.with_warmup, progress=self.progress)
 
     def fit(self, rec: Recording) -> Self:
         temp = np.asarray(rec.temp_c, dtype=np.float64)
@@ -116,7 +116,7 @@ class PhysicsCompensator(Compensator):
         return {
             "effects": [[e.identifier, {k: float(v) for k, v in e.params.items()}] for e in self.effects],
             "temp_range_c": [float(v) for v in self.temp_range_c],
-            "with_warmup": bool(self.warmup),
+            "with_warmup": bool(self.with_warmup),
             "effects_option": self.effects_option,
             "report": self.report,
         }

@@ -8,8 +8,9 @@ specific to a compensator:
 * the linear coefficients are refitted by least squares at the fitted nonlinear values: the
   compensator runs with no noise model in the field, which is what the finder's held-out figure
   scores too (``trainer.diagnose.holdout.HEADLINE``);
-* a ``temp_rate`` term gets a rate filter of at least :data:`RATE_TAU_MIN_S`: firmware cannot
-  differentiate a noisy, quantised thermometer reading without one (see :mod:`.stream`).
+* a term whose streamed form needs a filter (:attr:`StreamedEffect.min_filter_s`, the rate term)
+  has its time constant searched from at least that: firmware cannot differentiate a noisy,
+  quantised thermometer reading without one.
 """
 
 from __future__ import annotations
@@ -30,17 +31,13 @@ from trainer.diagnose.threads import single_blas_thread
 from trainer.errors import UserError
 from trainer.greybox.select import extend
 from trainer.greybox.structure import Structure
-from trainer.greybox.terms import RATE
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS
 from trainer.physics.catalogue.base import catalogue_params
 from trainer.physics.catalogue.plausibility import implausible
+from trainer.physics.catalogue.streamed import STREAMED
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import EffectConfig
 
-# The shortest rate filter (s): the derivative of a thermometer with 0.01-0.04 degC noise and a
-# 0.0625 degC LSB, low-passed over 30 s, is good to about 0.05 degC/min; it lags the true rate by
-# this much (a first-order filter's group delay at low frequency is its time constant).
-RATE_TAU_MIN_S = 30.0
 BOUND_MARGIN = 0.01  # a nonlinear value within 1 % of its search range's end sits at the bound
 
 
@@ -64,10 +61,13 @@ class FittedPhysics:
 
 def _start_term(effect: EffectConfig) -> Term | None:
     """A term from catalogue starting values; ``None`` when they are missing (profile it)."""
-    names = [name for name, _ in DEFINITIONS[effect.identifier].finder.nonlinear]
+    definition = DEFINITIONS[effect.identifier]
+    names = [name for name, _ in definition.finder.nonlinear]
     if not all(name in effect.params for name in names):
-        if effect.identifier == RATE and "k_mg_per_c_per_min" in effect.params:
-            return Term(RATE, (RATE_TAU_MIN_S,))
+        floor = _min_filter_s(effect.identifier)
+        linear = [p.name for p in definition.params if p.name not in names]
+        if floor is not None and any(name in effect.params for name in linear):
+            return Term(effect.identifier, (floor,))
         return None
     return Term(effect.identifier, tuple(float(effect.params[name]) for name in names))
 
@@ -85,22 +85,30 @@ def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
     return max(fits, key=lambda f: f.loglik)
 
 
+def _min_filter_s(identifier: str) -> float | None:
+    streamed = STREAMED.get(identifier)
+    return None if streamed is None else streamed.min_filter_s
+
+
 def _rate_filter(terms: tuple[Term, ...]) -> tuple[Term, ...]:
-    """Every ``temp_rate`` term searched from at least the shortest rate filter."""
-    return tuple(
-        replace(t, nl=(max(t.nl[0] if t.nl else 0.0, RATE_TAU_MIN_S),), fixed=False)
-        if t.identifier == RATE
-        else t
-        for t in terms
-    )
+    """Every term that needs a filter searched from at least its shortest filter."""
+    out = []
+    for t in terms:
+        floor = _min_filter_s(t.identifier)
+        out.append(
+            t if floor is None else replace(t, nl=(max(t.nl[0] if t.nl else 0.0, floor),), fixed=False)
+        )
+    return tuple(out)
 
 
 def _clamp_rate(fit: ModelFit, data: BlockData, noise_terms: tuple[str, ...]) -> ModelFit:
-    """A rate filter polished below the minimum is held at the minimum and the rest refitted."""
-    if all(t.identifier != RATE or t.nl[0] >= RATE_TAU_MIN_S for t in fit.terms):
+    """A filter polished below its minimum is held at the minimum and the rest refitted."""
+    floors = [_min_filter_s(t.identifier) for t in fit.terms]
+    if all(floor is None or t.nl[0] >= floor for t, floor in zip(fit.terms, floors, strict=True)):
         return fit
     terms = tuple(
-        replace(t, nl=(RATE_TAU_MIN_S,), fixed=True) if t.identifier == RATE else t for t in fit.terms
+        t if floor is None else replace(t, nl=(floor,), fixed=True)
+        for t, floor in zip(fit.terms, floors, strict=True)
     )
     return fit_model(terms, noise_terms, data, start=fit.noise)
 

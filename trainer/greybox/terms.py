@@ -9,52 +9,38 @@ the parameters, and are not compensated.
 from __future__ import annotations
 
 from trainer.errors import UserError
-from trainer.physics.catalogue import (
-    EFFECTS,
-    excluded,
-    hysteresis,
-    hysteresis_offset,
-    stress_relaxation,
-    temp_rate,
-    thermal_lag,
-    warmup,
-)
+from trainer.physics.catalogue import EFFECTS, excluded
+from trainer.physics.catalogue.streamed import STREAMED
 
-# The terms the streaming form (:mod:`trainer.greybox.stream`) implements, in catalogue order.
-STREAMABLE: tuple[str, ...] = tuple(
-    m.DEFINITION.identifier
-    for m in (thermal_lag, temp_rate, hysteresis, hysteresis_offset, stress_relaxation, warmup)
-)
-# Needs the time since power-on from the firmware: only with ``--warmup`` (or listed).
-NEEDS_POWER_ON_TIME: frozenset[str] = frozenset({warmup.DEFINITION.identifier})
-LAG = thermal_lag.DEFINITION.identifier
-RATE = temp_rate.DEFINITION.identifier
-HYSTERESIS = hysteresis.DEFINITION.identifier
-HYSTERESIS_OFFSET = hysteresis_offset.DEFINITION.identifier
-CREEP = stress_relaxation.DEFINITION.identifier
-WARMUP = warmup.DEFINITION.identifier
+# The terms the streaming form implements (the registry of streamed effects), in catalogue order;
+# these import-time views are for the planner, the functions below read the registry itself.
+STREAMABLE: tuple[str, ...] = tuple(STREAMED)
+# Need the time since power-on from the firmware: only with ``--warmup`` (or listed).
+NEEDS_POWER_ON_TIME: frozenset[str] = frozenset(k for k, e in STREAMED.items() if e.needs_power_on_time)
 
 assert all(EFFECTS[name].compensable for name in STREAMABLE)
 
 
 def compensated(identifier: str, *, warmup_allowed: bool) -> bool:
     """Whether a found effect goes into the compensator (else it is a nuisance term of the fit)."""
-    if identifier not in STREAMABLE:
+    effect = STREAMED.get(identifier)
+    if effect is None:
         return False
-    return warmup_allowed or identifier not in NEEDS_POWER_ON_TIME
+    return warmup_allowed or not effect.needs_power_on_time
 
 
 def parse_effects(text: str, option: str = "--effects") -> tuple[str, ...]:
     """``auto`` -> ``()`` sentinel handled by the caller; else a comma list of streamable effects."""
     names = tuple(n.strip() for n in text.split(",") if n.strip())
+    streamable = ", ".join(STREAMED)
     if not names:
-        raise UserError(f"{option}: empty list; give 'auto' or effects from {', '.join(STREAMABLE)}")
+        raise UserError(f"{option}: empty list; give 'auto' or effects from {streamable}")
     for name in names:
         if name not in EFFECTS:
-            raise UserError(f"{option}: unknown effect {name!r}; choose from {', '.join(STREAMABLE)}")
-        if name not in STREAMABLE:
+            raise UserError(f"{option}: unknown effect {name!r}; choose from {streamable}")
+        if name not in STREAMED:
             raise UserError(
-                f"{option}: {name} is not a drift the physics compensator models; choose from {', '.join(STREAMABLE)}"
+                f"{option}: {name} is not a drift the physics compensator models; choose from {streamable}"
             )
     if len(set(names)) != len(names):
         raise UserError(f"{option}: an effect is listed twice in {text!r}")

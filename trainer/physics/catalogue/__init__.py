@@ -5,7 +5,9 @@ Identifiers, parameter names, units and plausible ranges are the contract of
 tool knows about its identifier: parameters, the simulator's formula, how the mismatch finder
 models, searches, judges and reports it, and how the test bench conceals it
 (:mod:`trainer.physics.catalogue.base` describes the fields). Every other module loops over the
-registry below; adding an effect is one new module plus one line here.
+registry below; adding an effect is one new module plus one line here. What the physics
+compensator and its C export need of an effect it streams is in a sibling unit,
+``<effect>_stream.py``, listed in :mod:`trainer.physics.catalogue.streamed`.
 """
 
 from __future__ import annotations
