@@ -28,7 +28,7 @@ was off for much less than their time constants (else start fresh).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Self
 
 import numpy as np
@@ -99,9 +99,6 @@ class StreamState:
     rate_lp_c: float = 0.0
     creep_lp_c: float = 0.0
     time_s: float = 0.0
-
-    def as_tuple(self) -> tuple[float, ...]:
-        return tuple(float(getattr(self, f.name)) for f in fields(self))
 
 
 def _coefficients(tau_s: float | None, dt_s: float) -> tuple[float, float, float]:
