@@ -32,19 +32,18 @@ libm activations and with a rational fast tanh; the ratio of the network-step co
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import platform
 import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 from float_anchor import write_float_module
 
+from codegen import cortex_m as cm
 from codegen.export import LoadedModel, export
 from codegen.golden_select import golden_for
 from codegen.hostbuild import write_vectors
@@ -53,28 +52,15 @@ from codegen.spec import DlstmModelSpec
 from codegen.verify import to_step_units
 from trainer import methods as registry
 from trainer.cli import main as trainer_main
-from trainer.commands.method_options import DLSTM_OPTIONS
 from trainer.data.recording_io import read_recording
+from trainer.options.methods import DLSTM_OPTIONS
 
-ROOT = Path(__file__).resolve().parents[1]
 CLOCK_MHZ = 168.0  # a typical Cortex-M4F flight computer (STM32F4): time per sample at 1 instruction/cycle
 STREAM_RATE_HZ = 200  # the timed stream's rate: modules with a time base are exported for it (--rate)
 FIT_QUICK = ["--population", "2", "--iterations", "5", "--cycles", "2", "--quiet"]
 # physics: the structure forced to the terms the real run shows (a single simulated ramp identifies
 # none of them, so 'auto' would export a plain cubic); the cost does not depend on the values
 PHYSICS_FORCED = ["--effects", "thermal_lag,temp_rate,hysteresis_offset", "--quiet"]
-
-
-def _load_driver() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("cortex_m", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-cm = _load_driver()
 
 
 @dataclass(frozen=True)

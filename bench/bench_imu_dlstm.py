@@ -24,16 +24,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from codegen import cortex_m as cm  # noqa: E402
 from codegen.export import export  # noqa: E402
 from codegen.imu import export_imu  # noqa: E402
-from codegen.imu_verify import _cortex_m, verify_imu  # noqa: E402
+from codegen.imu_verify import verify_imu  # noqa: E402
 from tests import testmodels as tm  # noqa: E402
 from trainer import methods as registry  # noqa: E402
 from trainer.data.recording import Recording  # noqa: E402
 from trainer.data.recording_io import write_recording  # noqa: E402
 from trainer.dlstm.compensators import RecursiveDLSTM  # noqa: E402
 
-cm = _cortex_m()  # firmware_c/cortex_m.py, loaded by path
 RATE_HZ = 200.0
 SECONDS = 120
 CHANNELS = ("accel0_x", "accel0_y", "accel0_z", "gyro0_x", "gyro0_y", "gyro0_z")

@@ -33,10 +33,10 @@ from pathlib import Path
 import torch
 
 from trainer import methods as registry
-from trainer.commands.method_options import DLSTM_OPTIONS
 from trainer.data.holdout import parse_holdout, split
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.dlstm.fusion import FusionSettings
+from trainer.options.methods import DLSTM_OPTIONS
 from trainer.scoring.compare import compare
 from trainer.scoring.markdown import markdown_table
 

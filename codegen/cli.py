@@ -9,8 +9,8 @@ import sys
 from codegen import __version__
 from codegen.flightparams import EXTENSIONS
 from codegen.quantize import SCHEDULES
-from trainer.commands.channel_options import add_channels_option
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
+from trainer.options.channels import add_channels_option
 from trainer.output_lock import command_outputs_locked
 
 EXIT_MISMATCH = 1
@@ -18,7 +18,7 @@ EXIT_MISMATCH = 1
 
 def _export(args: argparse.Namespace) -> int:
     if args.channels is not None:
-        from trainer.commands.channel_options import model_files
+        from trainer.options.channels import model_files
 
         args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
     _identity_notes(args.model)
@@ -156,10 +156,10 @@ def _verify_imu(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from codegen.imu_verify import imu_report_lines, verify_imu, write_imu_json
-    from trainer.commands.channel_options import model_files
     from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
+    from trainer.options.channels import model_files
 
     if args.json:
         check_output_path(args.json)  # before the build, not after it

@@ -93,7 +93,7 @@ class GoldenStreamSpread(GoldenStream):
     def _tasks(self, until_phase: int) -> int | None:
         """The tasks due by the end of phase ``until_phase - 1``; the estimate if the head ran."""
         m = self.model
-        due = until_phase * m.tasks // m.frontend.decimation
+        due = m.tasks_before(until_phase)
         estimate = None
         for t in range(self.task, due):
             out = self._task(t)

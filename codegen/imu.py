@@ -72,7 +72,6 @@ CHANNEL_HEADER = struct.Struct(
     "<BBBBHHiii"
 )  # kind, sensor, frac, u_shift, intervals, reserved, clip lo/hi, t_ref
 SENSOR_RECORD = struct.Struct("<ii")  # valid range lo, hi (mdegC)
-CRC_SIZE = 4
 LSB_PER_UNIT = 16000  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
 MANIFEST_FORMAT = "mems-tdc-imu-module"
 BLOB_SUFFIX = ".cal.bin"

@@ -9,9 +9,7 @@ must equal the golden model of each channel's own checkpoint (:func:`codegen.imu
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +18,7 @@ from typing import Any
 import cffi
 import numpy as np
 
+from codegen import cortex_m as cm
 from codegen.hostbuild import cdef_from_header, compile_c
 from codegen.imu import BLOB_SUFFIX, MANIFEST_FORMAT, ImuModel, imu_golden, load_imu
 from codegen.render import _environment
@@ -27,8 +26,6 @@ from codegen.verify import to_step_units
 from trainer.data.channels import channel_view, recording_channels
 from trainer.data.recording import Recording
 from trainer.errors import UserError, atomic_output
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 @dataclass
@@ -187,18 +184,6 @@ def load_host_module(
     return ffi, lib
 
 
-def _cortex_m():  # type: ignore[no-untyped-def]
-    """firmware_c/cortex_m.py (not a package: imported by path, like the tests and the bench)."""
-    if "cortex_m" in sys.modules:
-        return sys.modules["cortex_m"]
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["cortex_m"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def target_run(
     out_dir: Path,
     name: str,
@@ -211,7 +196,6 @@ def target_run(
 ) -> tuple[np.ndarray, list[int], int, float]:
     """The module on a Cortex-M4 (QEMU mps2-an386), built by firmware_c/Makefile's imu-app target;
     also the instructions per step call (SysTick under ``-icount shift=0``, the loop subtracted)."""
-    cm = _cortex_m()
     reason = cm.ensure_toolchain()
     if reason is not None:
         raise UserError(f"--cortex-m4: {reason}")

@@ -19,7 +19,7 @@ import numpy as np
 from codegen.quantize import QPhysics, QStream, QuantModel
 from trainer import methods as registry
 from trainer.compensator import Compensator
-from trainer.data.importer import _resample as resample_columns
+from trainer.data.importer import resample_columns
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import FrontEnd
 from trainer.errors import UserError

@@ -250,10 +250,6 @@ def _bound_text(bound: int) -> str:
     return f"2^{math.floor(math.log2(bound) * 100) / 100:.2f}" if bound > 0 else "0"
 
 
-def _matrix_rows(q: np.ndarray) -> str:
-    return "\n".join("    { " + ", ".join(str(int(v)) for v in row) + " }," for row in np.atleast_2d(q))
-
-
 def _range_test(model: QuantModel) -> str:
     lim = model.limits
     return f"temp_mdegc < {lim.valid_lo_mdegc} || temp_mdegc > {lim.valid_hi_mdegc}"

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 
@@ -15,16 +12,6 @@ from codegen.hostbuild import FIRMWARE_WARNINGS, SANITIZER_FLAGS, STRICT_FLAGS, 
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = ROOT / "codegen" / "kernels"
-
-
-def cortex_m_driver() -> ModuleType:
-    """firmware_c/cortex_m.py (firmware_c/ is no package: imported by path)."""
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("cortex_m", module)
-    spec.loader.exec_module(module)
-    return module
 
 
 def assert_header_warning_free(compiler: str, header: str, harness: Path, work: Path) -> None:

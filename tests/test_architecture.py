@@ -1,55 +1,17 @@
 """The structure the code relies on: no import cycles, and each catalogue identifier written in one
-place (its definition module), so that adding an effect is one new definition."""
+place (its definition module), so that adding an effect is one new definition. Which layer may
+import which: tests/test_layers.py."""
 
 from __future__ import annotations
 
-import ast
 import re
-from pathlib import Path
 
+from tests.import_graph import ROOT, import_graph, sources
 from trainer.physics import catalogue
-
-ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("trainer", "codegen")
-
-
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
-    if parts[-1] == "__init__":
-        parts.pop()
-    return ".".join(parts)
-
-
-def _sources() -> dict[str, Path]:
-    return {_module_name(p): p for pkg in PACKAGES for p in sorted((ROOT / pkg).rglob("*.py"))}
-
-
-def _imports(path: Path, name: str, modules: set[str]) -> set[str]:
-    """Project modules that ``path`` imports anywhere (module level, functions, TYPE_CHECKING)."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        targets: list[str] = []
-        if isinstance(node, ast.Import):
-            targets = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*anchor, base] if base else anchor)
-            targets = [base] + [f"{base}.{alias.name}" for alias in node.names]
-        for target in targets:
-            # the longest project module that the imported name lies in
-            while target and target not in modules:
-                target = target.rpartition(".")[0]
-            if target and target != name:
-                found.add(target)
-    return found
 
 
 def test_no_import_cycles_between_project_modules() -> None:
-    sources = _sources()
-    graph = {name: _imports(path, name, set(sources)) for name, path in sources.items()}
+    graph = import_graph(sources())
     # A package's __init__ importing its own submodules is not a cycle of meaning: drop the edges
     # from a package to its children and from a child to its own package (Python runs __init__ first).
     for name, targets in graph.items():
@@ -82,7 +44,7 @@ def test_each_catalogue_identifier_is_written_only_in_its_definition() -> None:
     catalogue_dir = ROOT / "trainer" / "physics" / "catalogue"
     offenders = [
         f"{path.relative_to(ROOT)}:{line_no}: {line.strip()}"
-        for path in _sources().values()
+        for path in sources().values()
         if catalogue_dir not in path.parents
         for line_no, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
         if pattern.search(line)

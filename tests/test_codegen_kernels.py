@@ -19,6 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from codegen import cortex_m as cm
 from codegen import qformats
 from codegen.activations import ACT_KNOT
 from codegen.hostbuild import STRICT_FLAGS
@@ -26,7 +27,6 @@ from codegen.qformats import ACT_KNOTS, ACT_POS_BITS, ACT_SEGMENTS, ACT_STEP_BIT
 from tests.kernel_checks import (
     assert_header_warning_free,
     build_sanitized,
-    cortex_m_driver,
     run_sanitized,
     write_records,
 )
@@ -266,7 +266,6 @@ def test_q_format_block_is_generated_from_qformats() -> None:
 @pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
 def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     """The SMLAD path (the default on a Cortex-M4) and the portable path on the target."""
-    cm = cortex_m_driver()
     reason = cm.ensure_toolchain()
     if reason is not None:
         pytest.skip(f"Cortex-M toolchain unavailable: {reason}")

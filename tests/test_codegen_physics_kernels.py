@@ -18,10 +18,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from codegen import cortex_m as cm
 from tests.kernel_checks import (
     assert_header_warning_free,
     build_sanitized,
-    cortex_m_driver,
     run_sanitized,
     write_records,
 )
@@ -161,7 +161,6 @@ def test_header_is_warning_free(compiler: str, tmp_path: Path) -> None:
 @pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
 def test_kernels_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     """The SMMLAR path (the default on a Cortex-M4) and the portable path on the target."""
-    cm = cortex_m_driver()
     reason = cm.ensure_toolchain()
     if reason is not None:
         pytest.skip(f"Cortex-M toolchain unavailable: {reason}")

@@ -6,7 +6,6 @@ documented latency of D - 1 samples (so the drift left is unchanged up to that d
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import json
 import re
@@ -18,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from codegen import cortex_m as cm
 from codegen.export import export
 from codegen.golden_select import golden_for
 from codegen.hostbuild import (
@@ -192,11 +192,6 @@ def test_cli_refuses_a_schedule_without_a_network_step(
 @pytest.mark.parametrize("flags", ["", "-DTDCK_PORTABLE"])
 def test_bit_exact_on_the_cortex_m4(flags: str, tmp_path: Path) -> None:
     """The spread module on the target (QEMU), SMLAD and portable paths, with resets mid-period."""
-    spec = importlib.util.spec_from_file_location("cortex_m", ROOT / "firmware_c" / "cortex_m.py")
-    assert spec is not None and spec.loader is not None
-    cm = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("cortex_m", cm)
-    spec.loader.exec_module(cm)
     reason = cm.ensure_toolchain()
     if reason is not None:
         pytest.skip(f"Cortex-M toolchain unavailable: {reason}")

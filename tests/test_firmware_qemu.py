@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 import pytest
 
+from codegen import cortex_m as cm
 from codegen.export import LoadedModel, export
 from codegen.golden_select import golden_for
 from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
 from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
 from tests.golden_checks import replay
-from tests.kernel_checks import cortex_m_driver
 from trainer.cli import main as trainer_main
 from trainer.data.recording_io import read_recording
 
@@ -41,9 +41,6 @@ MODELS: dict[str, list[str]] = {
     "dlstm-issa": [*FIT_SMALL, "--hidden", "5", "--layers", "2"],
     "dlstm-temp": FIT_SMALL,  # the paper's 2 x 10
 }
-
-
-cm = cortex_m_driver()
 
 
 @pytest.fixture(scope="module", autouse=True)

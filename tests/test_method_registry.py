@@ -19,9 +19,9 @@ from trainer.baselines.base import TemperatureCompensator
 from trainer.checkpoint import load_model
 from trainer.cli import build_parser
 from trainer.cli import main as trainer_main
-from trainer.commands.method_options import OptionGroup
 from trainer.compensator import Compensator
 from trainer.errors import run_cli
+from trainer.options.methods import OptionGroup
 from trainer.scoring.compare import fit_all
 from trainer.selection import AUTO
 

@@ -17,7 +17,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
-from trainer.commands.method_options import (
+from trainer.errors import UserError
+from trainer.options.methods import (
     DLSTM_OPTIONS,
     NO_OPTIONS,
     PHYSICS_OPTIONS,
@@ -25,7 +26,6 @@ from trainer.commands.method_options import (
     POLY3_OPTIONS,
     OptionGroup,
 )
-from trainer.errors import UserError
 
 if TYPE_CHECKING:
     from trainer.compensator import Compensator

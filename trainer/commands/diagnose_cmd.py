@@ -6,7 +6,7 @@ import argparse
 import math
 from typing import TYPE_CHECKING
 
-from trainer.commands.channel_options import add_channels_option, run_per_channel
+from trainer.options.channels import add_channels_option, run_per_channel
 
 if TYPE_CHECKING:
     from trainer.diagnose.result import Diagnosis

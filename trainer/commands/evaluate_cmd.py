@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from trainer.commands.channel_options import add_channels_option, run_per_channel
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, atomic_outputs
+from trainer.options.channels import add_channels_option, run_per_channel
 from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.

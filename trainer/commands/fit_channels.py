@@ -15,9 +15,9 @@ from typing import Any
 
 from trainer import methods
 from trainer.atomic_dir import atomic_directory, check_output_directory
-from trainer.commands.channel_options import INDEX_FILE, MODEL_SUFFIX
 from trainer.data.channels import channel_view, method_refusal, relabel_units, select_channels
 from trainer.errors import UserError
+from trainer.options.channels import INDEX_FILE, MODEL_SUFFIX
 from trainer.reference import OffsetPolicy
 
 

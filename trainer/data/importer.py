@@ -348,7 +348,7 @@ def _finish(
     elif options.resample is not None:
         rate = _resample_rate(options.resample, time, source)
         meta["resampled_from"] = f"{_jitter_summary(time)}; linear interpolation"
-        columns = _resample(columns, rate)
+        columns = resample_columns(columns, rate)
     else:
         if options.time_unit == "index":
             assert options.rate_hz is not None, "index time needs --rate (checked by _check_options)"
@@ -466,8 +466,9 @@ def _jitter_summary(time: np.ndarray) -> str:
     )
 
 
-def _resample(columns: dict[str, np.ndarray], rate: float) -> dict[str, np.ndarray]:
-    """Every column linearly interpolated onto ``k / rate`` for all k inside the original span."""
+def resample_columns(columns: dict[str, np.ndarray], rate: float) -> dict[str, np.ndarray]:
+    """Every column linearly interpolated onto ``k / rate`` for all k inside the original span
+    (``trainer import --resample`` and ``codegen verify --resample`` share it)."""
     time = columns["time_s"]
     count = math.floor(float(time[-1]) * rate * (1 + 1e-12)) + 1
     grid = np.arange(count) / rate

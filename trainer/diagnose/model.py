@@ -36,11 +36,6 @@ POLISH_EVALS = 120
 POLISH_EVALS_PER_PARAM = 60
 
 
-def nonlinear_names(identifier: str) -> tuple[str, ...]:
-    """Names of the nonlinear parameters of ``identifier`` (the order of ``Term.nl``)."""
-    return tuple(name for name, _ in DEFINITIONS[identifier].finder.nonlinear)
-
-
 def search_bounds(identifier: str, data: BlockData) -> tuple[tuple[float, float], ...]:
     """Bounds of each nonlinear parameter of ``identifier`` for this recording."""
     return DEFINITIONS[identifier].finder.bounds(data)

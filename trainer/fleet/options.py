@@ -2,8 +2,8 @@
 
 A manifest gives a unit's import options and each method's fit options as the command-line text
 the user would type (``--preset tofupilot``, ``--intervals 12``), so they mean exactly what they
-mean on the command line; the parsers are built from :mod:`trainer.commands.import_cmd` and the
-method's :class:`~trainer.commands.method_options.OptionGroup` in :mod:`trainer.methods`, so a
+mean on the command line; the parsers are built from :mod:`trainer.options.importing` and the
+method's :class:`~trainer.options.methods.OptionGroup` in :mod:`trainer.methods`, so a
 method registered later (with its own options) works here unchanged.
 """
 
@@ -20,6 +20,7 @@ from trainer.data.flightlog import log_kind
 from trainer.data.plausibility import Plausibility
 from trainer.data.recording import Recording
 from trainer.errors import OneLineArgumentParser, UserError
+from trainer.options.importing import add_import_arguments, import_options, log_import_options
 
 if TYPE_CHECKING:
     from trainer.data.flightlog_import import LogImportOptions
@@ -41,10 +42,9 @@ def canonical(text: str, where: str) -> str:
 
 def _import_args(text: str, where: str) -> argparse.Namespace:
     """``trainer import`` options (``FOREIGN`` and ``-o`` are implied), parsed by its own parser."""
-    from trainer.commands import import_cmd
-
     parser = OneLineArgumentParser(prog=where)
-    import_cmd.add_parser(parser.add_subparsers(dest="command", parser_class=OneLineArgumentParser))
+    subparsers = parser.add_subparsers(dest="command", parser_class=OneLineArgumentParser)
+    add_import_arguments(subparsers.add_parser("import"))  # errors name "<where> import", as before
     return parser.parse_args(["import", "FOREIGN", "-o", "unused.npz", *split(text, where)])
 
 
@@ -70,16 +70,12 @@ class UnitImport:
 
     def text_options(self) -> ImportOptions:
         """The options of a delimited file (a UserError naming the unit's field when incomplete)."""
-        from trainer.commands import import_cmd
-
-        return import_cmd.import_options(self.args)
+        return import_options(self.args)
 
     def _log_options(self, path: Path, kind: str) -> LogImportOptions:
-        from trainer.commands import import_cmd
-
         args = argparse.Namespace(**{**vars(self.args), "foreign": str(path)})
         try:
-            return import_cmd.log_import_options(args, kind)
+            return log_import_options(args, kind)
         except UserError as exc:
             raise self._fail(path, exc) from None
 

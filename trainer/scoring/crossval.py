@@ -52,7 +52,6 @@ MIN_SEGMENTS = 2
 RAMP_PARTS = 3  # a run of one thermal segment (one ramp) is cut into this many parts in time
 UNCOMPENSATED = "uncompensated"
 LABELS = {HEATING: "heating", COOLING: "cooling", NEITHER: "dwell"}
-BRANCH_OF = {label: branch for branch, label in LABELS.items()}
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,6 @@ from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import plot_fit, plot_series
 from trainer.scoring.static import DEAD_BAND_C_PER_MIN, RATE_WINDOW_S, DriftLeft
 
-# Guo et al. 2023, Table 1 (validation data): the raw row here, each method's row in its registry
-# entry (trainer/methods.py, ``paper_table1``: value, improvement %).
-PAPER_TABLE_1_RAW = {"B": 5.43e-4, "K": 4.33e-5, "R": 1.18e-6}
-
 HONEST_SCORING = (
     "An Allan-variance improvement rewards any operation that removes low-frequency content: the "
     "persistence row subtracts the previous smoothed output with no model at all and still scores "

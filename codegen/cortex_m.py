@@ -1,7 +1,7 @@
 """Python driver of the Cortex-M4 build: make, run under QEMU (mps2-an386), read the results back.
 
-Shared by tests/test_firmware_qemu.py and bench/bench_cortex_m.py (imported by path: firmware_c/ is
-not a package). The apps exchange data with the host through semihosting files; QEMU runs with its
+Shared by ``codegen verify --cortex-m4``, the tests and bench/bench_cortex_m.py; the C it builds
+(the Makefile, start-up code and harnesses) stays in firmware_c/. The apps exchange data with the host through semihosting files; QEMU runs with its
 working directory set to a work folder and gets bare file names, so that paths with spaces or
 commas never reach the semihosting command line.
 """
@@ -19,7 +19,7 @@ import numpy as np
 
 from codegen.hostbuild import write_vectors
 
-FIRMWARE_DIR = Path(__file__).resolve().parent
+FIRMWARE_DIR = Path(__file__).resolve().parent.parent / "firmware_c"
 INSTALLER = FIRMWARE_DIR.parent / "scripts" / "install_arm_tools.sh"
 TOOLS = ("arm-none-eabi-gcc", "arm-none-eabi-size", "qemu-system-arm", "make")
 QEMU = "qemu-system-arm"

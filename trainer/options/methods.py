@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from trainer.commands.dlstm_options import add_dlstm_options, settings_from_args
+from trainer.options.dlstm import add_dlstm_options, settings_from_args
 
 
 def _no_arguments(parser: argparse.ArgumentParser) -> None:
