@@ -4,7 +4,9 @@ import which: tests/test_layers.py."""
 
 from __future__ import annotations
 
+import ast
 import re
+from pathlib import Path
 
 from tests.import_graph import ROOT, import_graph, sources
 from trainer.physics import catalogue
@@ -89,7 +91,7 @@ def test_generic_physics_code_names_no_effect() -> None:
     generic = [ROOT / "trainer" / "greybox", ROOT / "codegen"]
     offenders = [
         f"{path.relative_to(ROOT)}:{line}: {name}"
-        for path in _sources().values()
+        for path in sources().values()
         if any(folder in path.parents for folder in generic)
         for line, name in _code_names(path)
         if word.search(name)
