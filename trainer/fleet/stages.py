@@ -36,6 +36,7 @@ from trainer.errors import UserError
 from trainer.fleet.cache import RESULT_FILE, json_bytes
 from trainer.fleet.cluster import pinned
 from trainer.fleet.manifest import FleetSettings, UnitSpec
+from trainer.train_stats import TrainStats
 
 T = TypeVar("T")
 SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the scoring smoothing, `trainer report --smoothing`'s default
@@ -258,11 +259,11 @@ def drift_left_summary(scores: Any) -> dict[str, float]:
     return dict(zip(DRIFT_LEFT_KEYS, [*map(_rms, values), float(part.noise_floor_mg)], strict=True))
 
 
-def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> dict[str, Any]:
+def _scores(method: str, data: UnitData, model: Any, stats: TrainStats) -> dict[str, Any]:
     from trainer.scoring.evaluate import drift_score, evaluate
     from trainer.scoring.unit_scores import coverage, score_unit
 
-    trained = (float(stats["temp_min_c"]), float(stats["temp_max_c"]))
+    trained = stats.temp_range_c
     whole_run = model.compensate(data.scored.without_truth())
     scores = score_unit(data.scored, whole_run, SMOOTHING_S, trained, data.holdout)
     valid, rows = data.valid_rows()
@@ -288,7 +289,7 @@ def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> d
         "smoothing_s": SMOOTHING_S,
         # simulated data only: the residual against the simulator's ground truth (trainer evaluate's headline)
         "residual_vs_truth_mg": None if truth is None else truth.residual_rms_mg,
-        "fit_residual_rms_mg": stats["fit_residual_rms_mg"],
+        "fit_residual_rms_mg": stats.fit_residual_rms_mg,
         "out_of_range_fraction": float(np.mean(outside)),
         "allan": {
             "B_mg": coefficients.b_mg,
@@ -347,7 +348,7 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
                 model,
                 tmp / "model.pt",
                 train_stats=stats,
-                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+                valid_temp_range_c=stats.temp_range_c,
             )
             files["model.pt"] = (tmp / "model.pt").read_bytes()
             if methods.get(name).renderer is None:
