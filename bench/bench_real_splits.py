@@ -89,7 +89,7 @@ def main() -> int:
             met += gap <= TOLERANCE
             out.append(
                 f"| `{spec}` | {'cold' if first else 'warm'} | {raw:.4g} | {cub:.4g} | {mine:.4g} | "
-                f"{stats['selection']['chosen']} | {100 * gap:+.1f} % | {seconds:.0f} |"
+                f"{(stats.selection or {}).get('chosen')} | {100 * gap:+.1f} % | {seconds:.0f} |"
             )
             print(out[-1], flush=True)
         tally.append(

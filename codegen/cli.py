@@ -67,9 +67,10 @@ def _identity_notes(paths: list[str]) -> None:
     """Say, one line each, which models are the identity because auto found no compensation that helps."""
     from trainer.checkpoint import load_checkpoint
     from trainer.selection import identity_note
+    from trainer.train_stats import TrainStats
 
     for path in paths:
-        note = identity_note(load_checkpoint(path)["train_stats"], path)
+        note = identity_note(TrainStats.of_checkpoint(load_checkpoint(path)), path)
         if note is not None:
             print(note)
 

@@ -25,6 +25,7 @@ from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
 from trainer.fitting import removes_sustained_input
 from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, RECURSIVE_NOTE, OffsetRecord, check_constant
+from trainer.train_stats import TrainStats
 
 
 @dataclass(frozen=True)
@@ -65,13 +66,13 @@ def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...
     a first note saying how the header's acceleration units read for it."""
     from trainer.data.channels import UNIT_LABELS, relabel_units
 
-    stats = raw.get("train_stats")
-    if not isinstance(stats, dict) or stats.get("unit") not in UNIT_LABELS or stats["unit"] == "mg":
+    stats = TrainStats.of_checkpoint(raw)
+    unit = stats.unit
+    if unit is None or unit not in UNIT_LABELS or unit == "mg":
         return notes
-    unit = str(stats["unit"])
     label = UNIT_LABELS[unit]
     first = (
-        f"channel {stats.get('channel')}: values in {label}, not acceleration; read '1/16 ug' as 1/16000 "
+        f"channel {stats.channel}: values in {label}, not acceleration; read '1/16 ug' as 1/16000 "
         f"{label} (16000 LSB = 1 {label}) and 'mg' as {label}"
     )
     relabelled = (
@@ -103,7 +104,7 @@ def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
         return (f"offset: not recorded in {path.name} and not measurable by the trainer; check it",)
     lo, hi = (float(v) for v in raw["valid_temp_range_c"])
     frontend = raw["payload"].get("frontend", {}) if isinstance(raw["payload"], dict) else {}
-    rate_hz = float(frontend.get("rate_hz", raw["train_stats"].get("sample_rate_hz", 1.0)))
+    rate_hz = float(frontend.get("rate_hz", TrainStats.of_checkpoint(raw).sample_rate_hz or 1.0))
     t_ref = 0.5 * (lo + hi)
     constant = model.drift_at_reference(t_ref, rate_hz)
     note = (

@@ -122,13 +122,14 @@ def load_channel_cubic(
     import hashlib
 
     from trainer.checkpoint import load_checkpoint  # torch: imported on use, so --help stays fast
+    from trainer.train_stats import TrainStats
 
     source = str(path)
     raw = load_checkpoint(path)
     ckpt = parse_checkpoint(raw, source)
     coefficients, t_ref, (lo, hi) = _model_cubic(ckpt, source)
-    stats = raw["train_stats"] if isinstance(raw["train_stats"], dict) else {}
-    name = channel or stats.get("channel")
+    stats = TrainStats.of_checkpoint(raw)
+    name = channel or stats.channel
     if not isinstance(name, str):
         raise UserError(
             f"{source}: the model does not record which sensor axis it was fitted on (its recording has no "
@@ -139,8 +140,8 @@ def load_channel_cubic(
         raise UserError(
             f"{source}: channel {name!r} is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
         )
-    if device_id is None and channel is None and isinstance(stats.get("device_id"), int):
-        device_id = int(stats["device_id"])
+    if device_id is None and channel is None:
+        device_id = stats.device_id
     if not lo < hi:
         raise UserError(f"{source}: the valid temperature range {lo:g} .. {hi:g} degC is empty")
     scale = TO_STACK_UNIT[parsed.unit]

@@ -61,6 +61,7 @@ from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
 from trainer.physics.catalogue.streamed import c_options, c_terms
 from trainer.physics.catalogue.streaming import FixedPoint
+from trainer.train_stats import TrainStats
 
 KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
 BLOB_MAGIC = b"TDCC"
@@ -130,8 +131,7 @@ class ImuModel:
 
 
 def _channel_of(raw: dict[str, Any], path: Path) -> str:
-    stats = raw.get("train_stats")
-    name = stats.get("channel") if isinstance(stats, dict) else None
+    name = TrainStats.of_checkpoint(raw).channel
     if not isinstance(name, str) or parse_channel(name) is None:
         raise UserError(
             f"{path}: the model does not name its channel (fit it with 'trainer fit --channels' on a "

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from trainer.data.importer import resample_columns
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import FrontEnd
 from trainer.errors import UserError
+from trainer.train_stats import TrainStats
 
 ANY_RATE_MILLIHZ = 0  # NAME_SAMPLE_RATE_MILLIHZ of a memoryless module
 MAX_RATE_HZ = 1_000_000.0
@@ -62,7 +64,8 @@ def _retime_frontend(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
 
 def _retime_physics(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
     """The filters are discretised from their time constants at ``train_stats.sample_rate_hz``."""
-    return {**raw, "train_stats": {**raw["train_stats"], "sample_rate_hz": millihz / 1000}}
+    stats = replace(TrainStats.of_checkpoint(raw), sample_rate_hz=millihz / 1000)
+    return {**raw, "train_stats": stats.to_dict()}
 
 
 def _trained_frontend(raw: dict[str, Any]) -> float:
@@ -70,7 +73,10 @@ def _trained_frontend(raw: dict[str, Any]) -> float:
 
 
 def _trained_physics(raw: dict[str, Any]) -> float:
-    return float(raw["train_stats"]["sample_rate_hz"])
+    rate_hz = TrainStats.of_checkpoint(raw).sample_rate_hz
+    if rate_hz is None:
+        raise KeyError("train_stats.sample_rate_hz")
+    return rate_hz
 
 
 # renderer -> (rate the checkpoint was built for, re-derivation at another rate); memoryless ones absent

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 from pathlib import Path
 from typing import Any
@@ -16,10 +17,13 @@ from tests.testmodels import checkpoint_dict, random_weights, save_checkpoint
 from trainer.baselines.pla import PiecewiseLinear
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.checkpoint import load_model, save_model
+from trainer.data.recording import Recording
 from trainer.dlstm.compensators import RecursiveDLSTM, TemperatureDLSTM
 from trainer.dlstm.realtime import TEMPERATURE_KIND, FrontEnd, Standardiser
 from trainer.errors import UserError
+from trainer.fitting import fit_with_stats
 from trainer.methods import name_of
+from trainer.train_stats import TrainStats
 
 
 def _fitted_pla() -> PiecewiseLinear:
@@ -30,7 +34,7 @@ def _fitted_pla() -> PiecewiseLinear:
 def test_round_trip_with_weights_only(tmp_path: Path) -> None:
     model = _fitted_pla()
     path = tmp_path / "model.pt"
-    save_model(model, path, train_stats={"n_samples": 5000}, valid_temp_range_c=(-40.0, 80.0))
+    save_model(model, path, train_stats=TrainStats(n_samples=5000), valid_temp_range_c=(-40.0, 80.0))
     raw = torch.load(path, weights_only=True)  # must not need unsafe unpickling
     assert raw["method"] == "pla" and raw["valid_temp_range_c"] == [-40.0, 80.0]
     loaded, checkpoint = load_model(path)
@@ -42,14 +46,14 @@ def test_round_trip_with_weights_only(tmp_path: Path) -> None:
 def test_poly3_round_trip(tmp_path: Path) -> None:
     temp = np.linspace(-40, 80, 5_000)
     model = CubicPolynomial().fit_arrays(temp, 1e-4 * temp**3)
-    save_model(model, tmp_path / "m.pt", train_stats={}, valid_temp_range_c=(-40.0, 80.0))
+    save_model(model, tmp_path / "m.pt", train_stats=TrainStats(), valid_temp_range_c=(-40.0, 80.0))
     loaded, _ = load_model(tmp_path / "m.pt")
     np.testing.assert_array_equal(loaded.drift_at(temp), model.drift_at(temp))
 
 
 def _save_then(tmp_path: Path) -> Path:
     path = tmp_path / "model.pt"
-    save_model(_fitted_pla(), path, train_stats={}, valid_temp_range_c=(0.0, 1.0))
+    save_model(_fitted_pla(), path, train_stats=TrainStats(), valid_temp_range_c=(0.0, 1.0))
     return path
 
 
@@ -137,7 +141,9 @@ def test_malformed_payload_is_rejected(tmp_path: Path) -> None:
 
 def test_failed_save_leaves_no_file(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="does not exist"):
-        save_model(_fitted_pla(), tmp_path / "missing" / "m.pt", train_stats={}, valid_temp_range_c=(0, 1))
+        save_model(
+            _fitted_pla(), tmp_path / "missing" / "m.pt", train_stats=TrainStats(), valid_temp_range_c=(0, 1)
+        )
     assert not (tmp_path / "missing").exists()
 
 
@@ -146,7 +152,7 @@ def test_the_same_model_gives_byte_identical_files_whatever_the_path(tmp_path: P
     (tmp_path / "a").mkdir()
     paths = [tmp_path / "a" / "model.pt", tmp_path / "other-name.pt"]
     for path in paths:
-        save_model(model, path, train_stats={"n": 1}, valid_temp_range_c=(0.0, 1.0))
+        save_model(model, path, train_stats=TrainStats(n_samples=1), valid_temp_range_c=(0.0, 1.0))
     assert paths[0].read_bytes() == paths[1].read_bytes()
 
 
@@ -217,4 +223,55 @@ def test_every_field_is_checked_at_load_naming_it(tmp_path: Path, change: Any, f
     change(checkpoint)
     torch.save(checkpoint, path)
     with pytest.raises(UserError, match=rf"model\.pt: field '{field}'"):
+        load_model(path)
+
+
+# The order of the train_stats keys in every model.pt written so far (the file format): the record
+# must write them in this order for the same model to give the same bytes.
+STORED_ORDER = (
+    "source", "n_samples", "sample_rate_hz", "duration_s", "temp_min_c", "temp_max_c", "accel_mean_mg",
+    "accel_std_mg", "time_range_s", "data_sha256", "channel", "unit", "device_id", "fit_residual_rms_mg",
+)  # fmt: skip
+
+
+def _imu_recording() -> Recording:
+    time_s = np.arange(200) * 0.5
+    columns = {"time_s": time_s, "temp_c": 20.0 + 0.1 * time_s, "accel_mg": np.sin(time_s)}
+    meta = {"sample_rate_hz": "2", "channel": "gyro0_y", "unit": "dps", "device_id_gyro0": "2490378"}
+    return Recording(columns, meta, "imu.csv")
+
+
+def test_train_stats_are_stored_as_plain_values_in_the_format_order(tmp_path: Path) -> None:
+    rec = _imu_recording()
+    model, stats = fit_with_stats("poly3", rec)
+    save_model(model, tmp_path / "m.pt", train_stats=stats, valid_temp_range_c=stats.temp_range_c)
+    stored = torch.load(tmp_path / "m.pt", weights_only=True)["train_stats"]
+    assert tuple(stored) == STORED_ORDER
+    assert stored["time_range_s"] == [0.0, 99.5] and stored["n_samples"] == 200
+    assert (stored["channel"], stored["unit"], stored["device_id"]) == ("gyro0_y", "dps", 2490378)
+    assert (stored["temp_min_c"], stored["temp_max_c"]) == pytest.approx((20.0, 29.95))
+    loaded = TrainStats.of_checkpoint(load_model(tmp_path / "m.pt")[1])
+    assert loaded == stats and loaded.to_dict() == stored
+
+
+def test_train_stats_keep_only_known_fields_and_an_absent_table_is_empty() -> None:
+    assert TrainStats.from_dict({"n_samples": 3, "written_by_a_newer_version": 1}) == TrainStats(n_samples=3)
+    assert TrainStats.of_checkpoint({"train_stats": None}) == TrainStats()
+    assert TrainStats().to_dict() == {}
+    with pytest.raises(ValueError, match="no temperature range"):
+        _ = TrainStats(temp_min_c=1.0).temp_range_c
+
+
+# a value of the wrong kind for each kind of field
+WRONG = {str: 5, int: -1, float: "1.0", tuple: [3.0, 1.0], dict: [1]}
+
+
+@pytest.mark.parametrize("name", [f.name for f in dataclasses.fields(TrainStats)])
+def test_every_train_stats_field_is_checked_at_load(tmp_path: Path, name: str) -> None:
+    kind = next(k for k in WRONG if k.__name__ in str(TrainStats.__annotations__[name]))
+    path = _save_then(tmp_path)
+    checkpoint = torch.load(path, weights_only=True)
+    checkpoint["train_stats"] = {name: WRONG[kind]}
+    torch.save(checkpoint, path)
+    with pytest.raises(UserError, match=rf"field 'train_stats\.{name}' must be"):
         load_model(path)

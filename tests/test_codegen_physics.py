@@ -61,7 +61,7 @@ def fitted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Record
     )
     assert isinstance(model, PhysicsCompensator)
     path = folder / "model.pt"
-    save_model(model, path, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]))
+    save_model(model, path, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
     valid = simulate(cfg, 6)
     write_recording(valid.without_truth(), folder / "valid.csv")
     loaded, _ = export(path, folder / "out", name=NAME)

@@ -28,6 +28,7 @@ from trainer.fleet.cache import unit_key
 from trainer.fleet.cluster import open_client
 from trainer.fleet.manifest import load_manifest
 from trainer.fleet.outliers import Z_LIMIT, Finding, find_out_of_family
+from trainer.fleet.result import UnitResult
 from trainer.fleet.run import FleetRun, run_fleet
 from trainer.fleet.simulated import DEFAULT_DEFECTS, write_fleet
 
@@ -82,7 +83,7 @@ def test_every_unit_processed_and_verified(fleet: tuple[Path, FleetRun]) -> None
     assert sorted(run.computed) == sorted([*ids, BAD]) and run.skipped == []
     for uid in ids:
         result = run.results[uid]
-        assert result["status"] == "ok", result["errors"]
+        assert result.status == "ok", result.errors
         unit = run.out_dir / "units" / uid
         for method in ("poly3", "pla"):
             verify = json.loads((unit / method / "verify.json").read_text())
@@ -96,7 +97,7 @@ def test_every_unit_processed_and_verified(fleet: tuple[Path, FleetRun]) -> None
             model, checkpoint = load_model(unit / method / "model.pt")
             assert checkpoint["method"] == method
             # simulated data: the residual against the truth is kept too, under its own name
-            valid = read_recording(Path(result["recordings"][1]))
+            valid = read_recording(Path(result.recordings[1]))
             residual = valid.columns["true_drift_mg"] - model.predict_drift(valid.without_truth())
             scores = json.loads((unit / method / "scores.json").read_text())
             truth = float(np.sqrt(np.mean(residual**2)))
@@ -131,10 +132,10 @@ def test_fleet_drift_left_is_the_report_s(fleet: tuple[Path, FleetRun], tmp_path
     for uid in ("U01", "U07"):
         result = run.results[uid]
         for method in ("poly3", "pla"):
-            summary = result["methods"][method]
+            summary = result.methods[method]
             rows = _report_rows(
                 run.out_dir / "units" / uid / method / "model.pt",
-                Path(result["recordings"][1]),
+                Path(result.recordings[1]),
                 tmp_path / f"{uid}-{method}",
             )
             assert _same(summary["drift_left_mg"], rows["all"][0]), (summary, rows)
@@ -152,8 +153,8 @@ def test_fleet_holdout_is_the_report_s(fleet: tuple[Path, FleetRun], client: Any
     )
     done = run_fleet(tmp_path / "m.toml", tmp_path / "out", progress=False, client=client)
     result = done.results["H1"]
-    assert result["status"] == "ok", result["errors"]
-    summary = result["methods"]["poly3"]
+    assert result.status == "ok", result.errors
+    summary = result.methods["poly3"]
     model = tmp_path / "out" / "units" / "H1" / "poly3" / "model.pt"
     _, checkpoint = load_model(model)
     first = read_recording(run1)
@@ -170,9 +171,10 @@ def test_a_method_worse_than_uncompensated_fails_its_unit() -> None:
     """The fleet's verdict is the report's: the guard fails a model that leaves more drift."""
     from trainer.fleet.report import unit_verdict
 
-    def result(model_mg: float, raw_mg: float = 2.0) -> dict[str, Any]:
+    def result(model_mg: float, raw_mg: float = 2.0) -> UnitResult:
         figures = {"drift_left_mg": model_mg, "drift_left_uncompensated_mg": raw_mg, "noise_floor_mg": 0.1}
-        return {"status": "ok", "errors": [], "methods": {"poly3": {**figures, "verify": {"passed": True}}}}
+        methods = {"poly3": {**figures, "verify": {"passed": True}}}
+        return UnitResult.from_dict({"id": "A", "status": "ok", "errors": [], "methods": methods})
 
     assert unit_verdict("A", result(1.5), []).status == "PASS"
     assert unit_verdict("A", result(1.5), [Finding("A", "x", "odd")]).status == "REVIEW"
@@ -194,26 +196,27 @@ def test_flagged_units_are_exactly_the_planted_ones(fleet: tuple[Path, FleetRun]
     taus = [
         e["params"]["tau_s"]
         for uid, r in run.results.items()
-        if r["status"] == "ok"
-        for e in r["diagnosis"]["left_out"]
+        if r.status == "ok"
+        for e in r.diagnosis["left_out"]
         if e["effect"] == "thermal_lag"
     ]
-    lag_u18 = next(e for e in run.results["U18"]["diagnosis"]["left_out"] if e["effect"] == "thermal_lag")
+    lag_u18 = next(e for e in run.results["U18"].diagnosis["left_out"] if e["effect"] == "thermal_lag")
     assert lag_u18["params"]["tau_s"] / float(np.median(taus)) == pytest.approx(3.0, rel=0.25)
 
 
 def test_bad_file_is_one_line_in_its_unit_and_the_fleet_goes_on(fleet: tuple[Path, FleetRun]) -> None:
     _, run = fleet
     result = run.results[BAD]
-    assert result["status"] == "failed" and not result["retry"]
-    (error,) = result["errors"]
-    assert error["stage"] == "load"
-    assert f"{BAD}_run1.csv" in error["error"] and "\n" not in error["error"] and "accel_mg" in error["error"]
+    assert result.status == "failed" and not result.retry
+    assert len(result.errors) == 1, result.errors
+    (error,) = result.errors
+    assert error.stage == "load"
+    assert f"{BAD}_run1.csv" in error.error and "\n" not in error.error and "accel_mg" in error.error
     assert not (run.out_dir / "units" / BAD / "poly3").exists()
     summary = json.loads((run.out_dir / "fleet.json").read_text())
     verdicts = {u["id"]: u["sign_off"] for u in summary["units"]}
     assert verdicts[BAD] == "FAIL" and list(verdicts.values()).count("FAIL") == 1
-    assert f"- **{BAD}** (load): {error['error']}" in (run.out_dir / "report.md").read_text()
+    assert f"- **{BAD}** (load): {error.error}" in (run.out_dir / "report.md").read_text()
 
 
 def test_restart_skips_finished_units(
@@ -332,15 +335,21 @@ def test_method_list_comes_from_the_registry(tmp_path: Path) -> None:
 
 def test_robust_z_flags_only_the_outlier() -> None:
     rng = np.random.default_rng(3)
+    c1_mg_per_c = rng.normal(0.12, 0.01, 20)
+    c1_mg_per_c[7] = 0.12 + 2 * Z_LIMIT * 0.01
     results = {
-        f"u{i}": {
-            "status": "ok",
-            "methods": {},
-            "diagnosis": {"baseline_calibrated": {"bias_poly": {"c1_mg_per_c": float(v)}}, "left_out": []},
-        }
-        for i, v in enumerate(rng.normal(0.12, 0.01, 20))
+        f"u{i}": UnitResult.from_dict(
+            {
+                "id": f"u{i}",
+                "status": "ok",
+                "diagnosis": {
+                    "baseline_calibrated": {"bias_poly": {"c1_mg_per_c": float(v)}},
+                    "left_out": [],
+                },
+            }
+        )
+        for i, v in enumerate(c1_mg_per_c)
     }
-    results["u7"]["diagnosis"]["baseline_calibrated"]["bias_poly"]["c1_mg_per_c"] = 0.12 + 2 * Z_LIMIT * 0.01
     findings = find_out_of_family(results)
     assert [(f.unit, f.feature) for f in findings] == [("u7", "bias_poly.c1_mg_per_c")]
 

@@ -7,6 +7,7 @@ in-process Dask cluster (one worker thread) so that a write can be made to fail 
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import json
 from collections.abc import Iterator
@@ -21,6 +22,7 @@ from trainer.checkpoint import load_checkpoint
 from trainer.errors import UserError
 from trainer.fleet import stages
 from trainer.fleet.manifest import load_manifest
+from trainer.fleet.result import RESULT_FILE, Failure, UnitResult
 from trainer.fleet.run import run_fleet
 
 N = 3000
@@ -94,21 +96,21 @@ def test_flight_log_units_are_fitted_and_scored_with_their_coverage(
     fitted_rows = int(0.75 * N)  # holdout last:0.25: fitted on the first three quarters
     for uid, channel, unit, offset in (("A1", "accel0_z", "mg", 0.0), ("G1", "gyro0_z", "deg/s", 0.5)):
         result = run.results[uid]
-        assert result["status"] == "ok", result["errors"]
-        assert (result["channel"], result["unit"]) == (channel, unit)
+        assert result.status == "ok", result.errors
+        assert (result.channel, result.unit) == (channel, unit)
         stats = load_checkpoint(run.out_dir / "units" / uid / "poly3" / "model.pt")["train_stats"]
         assert stats["channel"] == channel
         assert stats["temp_min_c"] == pytest.approx(TEMP_C[0] + offset, abs=1e-4)
         assert stats["temp_max_c"] == pytest.approx(TEMP_C[fitted_rows - 1] + offset, abs=1e-4)
         # the scored quarter lies above everything trained on: none of its span is covered
-        summary = result["methods"]["poly3"]
+        summary = result.methods["poly3"]
         assert summary["coverage"] == 0.0
         assert summary["scored_range_c"][0] > summary["trained_range_c"][1]
     failed = run.results["ALL"]
-    assert failed["status"] == "failed" and not failed["retry"]
-    (error,) = failed["errors"]
+    assert failed.status == "failed" and not failed.retry
+    (error,) = failed.errors
     for part in ("unit 3 (ALL)", "import '--channels all'", str(ulog), "--channel NAME"):
-        assert part in error["error"]
+        assert part in error.error
     report = (run.out_dir / "report.md").read_text()
     assert "| A1 | PASS | accel0_z (mg) | 0 % |" in report
     assert "| G1 | PASS | gyro0_z (deg/s) | 0 % |" in report and " deg/s |" in report
@@ -178,17 +180,17 @@ def test_a_full_disk_during_export_is_retried_on_the_next_run(
     monkeypatch.setattr(Path, "write_text", disk_full)
     first = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
     result = first.results["A1"]
-    assert result["status"] == "failed" and result["retry"]
-    (error,) = result["errors"]
-    assert error["stage"] == "export poly3" and "No space left on device" in error["error"]
+    assert result.status == "failed" and result.retry
+    (error,) = result.errors
+    assert error.stage == "export poly3" and "No space left on device" in error.error
     assert json.loads((tmp_path / "out" / "fleet.json").read_text())["units"][0]["sign_off"] == "FAIL"
 
     monkeypatch.setattr(Path, "write_text", original)  # the disk is fixed
     second = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
     assert second.computed == ["A1"] and second.skipped == []
     again = second.results["A1"]
-    assert again["status"] == "ok" and again["errors"] == [], again["errors"]
-    assert again["methods"]["poly3"]["verify"]["passed"]
+    assert again.status == "ok" and again.errors == (), again.errors
+    assert again.methods["poly3"]["verify"]["passed"]
     third = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
     assert third.computed == [] and third.skipped == ["A1"]  # a finished unit stays cached
 
@@ -209,3 +211,26 @@ def test_a_failed_write_of_the_client_is_one_line_naming_the_path(
     assert "\n" not in message and message.startswith(
         f"{units / 'A1'}: cannot write (No space left on device)"
     )
+
+
+def test_a_result_reads_back_as_written_and_older_results_still_read(tmp_path: Path) -> None:
+    """``result.json`` through one record: strict JSON (an unobserved score is null), the same record
+    read back, and a file written before ``channel``/``unit``/``import_notes`` existed still reads."""
+    error = Failure("method poly3", "no fit", retry=False)
+    written = UnitResult(
+        id="A1", key="k", status="failed", retry=False, errors=(error,), recordings=("a.csv",),
+        evaluated_on="a.csv", export_name="tdc_A1", methods={"poly3": {"drift_left_mg": float("nan")}},
+        diagnosis=None, channel="gyro0_z", unit="deg/s", import_notes=("retimed",),
+    )  # fmt: skip
+    path = tmp_path / RESULT_FILE
+    path.write_bytes(written.to_json())
+    stored = json.loads(path.read_text())
+    assert stored["methods"]["poly3"]["drift_left_mg"] is None
+    assert stored["errors"] == [{"stage": "method poly3", "error": "no fit", "retry": False}]
+    read = UnitResult.read(path)
+    assert read == dataclasses.replace(written, methods={"poly3": {"drift_left_mg": None}})
+    older = {k: v for k, v in stored.items() if k not in ("channel", "unit", "import_notes")}
+    path.write_text(json.dumps(older))
+    assert UnitResult.read(path) == dataclasses.replace(read, channel=None, unit=None, import_notes=())
+    path.write_text('{"id": "A1"}')  # damaged: read as no result (the unit is computed again)
+    assert UnitResult.read(path) is None

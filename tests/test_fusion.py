@@ -15,6 +15,7 @@ from trainer.dlstm.compensators import RecursiveDLSTMWithISSA, TemperatureDLSTM
 from trainer.dlstm.fusion import FusionSettings, _as_batch, refine_stage, train_stage
 from trainer.dlstm.network import PopulationDLSTM
 from trainer.dlstm.train import population_loss
+from trainer.train_stats import TrainStats
 
 
 def _drift_pairs(steps: int = 300) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +66,7 @@ def test_dlstm_checkpoint_round_trip(cls: type, tmp_path: Path) -> None:
     rec = _short_recording(0)
     model = cls(settings=FusionSettings(population=2, iterations=5, cycles=3), progress=False).fit(rec)
     path = tmp_path / "model.pt"
-    save_model(model, path, train_stats={}, valid_temp_range_c=(20.0, 30.0))
+    save_model(model, path, train_stats=TrainStats(), valid_temp_range_c=(20.0, 30.0))
     raw = torch.load(path, weights_only=True)
     assert raw["payload"]["frontend"]["kind"] == cls.kind
     assert raw["payload"]["architecture"] == {

@@ -18,6 +18,7 @@ from trainer.greybox.stream import PhysicsModel, PhysicsStream
 from trainer.physics.config import parse_config_text
 from trainer.physics.effects import drift
 from trainer.physics.simulate import simulate
+from trainer.train_stats import TrainStats
 
 # A short chamber cycle at 2 Hz: both branches over a common range, two ramp rates, holds.
 CYCLE = """
@@ -163,7 +164,7 @@ def test_relative_drift_leaves_the_offset_and_the_checkpoint_round_trips(tmp_pat
     compensated = model.compensate(rec)
     assert abs(np.mean(compensated) - offset) < 5.0  # the offset stays in the output
     path = tmp_path / "model.pt"
-    save_model(model, path, train_stats={}, valid_temp_range_c=model.temp_range_c)
+    save_model(model, path, train_stats=TrainStats(), valid_temp_range_c=model.temp_range_c)
     loaded, _ = load_model(path)
     assert isinstance(loaded, PhysicsCompensator)
     assert np.array_equal(loaded.predict_drift(rec), model.predict_drift(rec))

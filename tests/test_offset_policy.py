@@ -26,6 +26,7 @@ from trainer.reference import (
     value_at_temperature,
 )
 from trainer.scoring.evaluate import drift_score
+from trainer.train_stats import TrainStats
 
 GRAVITY_MG = -981.0
 RATE_HZ = 2.0
@@ -208,7 +209,9 @@ def test_export_of_a_recursive_method_warns_about_sustained_inputs(
     assert "removes any sustained acceleration" in capsys.readouterr().out
     model = tmp_path / "m.pt"
     rec = read_recording(gravity_csv)
-    save_model(fit_compensator("persistence", rec), model, train_stats={}, valid_temp_range_c=(-10.0, 50.0))
+    save_model(
+        fit_compensator("persistence", rec), model, train_stats=TrainStats(), valid_temp_range_c=(-10.0, 50.0)
+    )
     assert codegen_main(["export", str(model), "-o", str(tmp_path / "c")]) == 0
     assert "removes any sustained acceleration" in capsys.readouterr().out
     header = " ".join((tmp_path / "c" / "tdc_persistence.h").read_text().replace("*", " ").split())

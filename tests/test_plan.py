@@ -26,6 +26,7 @@ from trainer.plan.limits import ChamberLimits
 from trainer.plan.montecarlo import DrawTask, run_draw, sensor
 from trainer.plan.programs import Program, candidates
 from trainer.plan.summary import Target, identified
+from trainer.train_stats import TrainStats
 
 REALISTIC = Path(__file__).resolve().parents[1] / "trainer" / "physics" / "realistic.toml"
 LIMITS = (
@@ -149,7 +150,7 @@ def test_gyroscope_priors_take_channel_names_and_the_measured_gyro_sizes() -> No
         priors.load(None, None, "pa")
 
 
-def _physics_model(path: Path, effects: list[EffectConfig], stats: dict[str, object]) -> None:
+def _physics_model(path: Path, effects: list[EffectConfig], stats: TrainStats) -> None:
     model = PhysicsCompensator()
     model.effects, model.temp_range_c = tuple(effects), (-20.0, 70.0)
     save_model(model, path, train_stats=stats, valid_temp_range_c=(-20.0, 70.0))
@@ -162,7 +163,7 @@ def test_a_fitted_gyroscope_model_gives_targets_around_its_sizes_on_its_channel(
     offset = EffectConfig("hysteresis_offset", {"amp_mg": -0.05, "width_c": 20.0})
     lag = EffectConfig("thermal_lag", {"tau_s": 100.0})
     path = tmp_path / "gyro.pt"
-    _physics_model(path, [poly, lag, offset], {"channel": "gyro0_x", "unit": "dps"})
+    _physics_model(path, [poly, lag, offset], TrainStats(channel="gyro0_x", unit="dps"))
     fitted = priors.from_model(path)
     assert (fitted.channel, fitted.unit, fitted.bias_poly) == ("gyro0_x", "dps", poly)
     by_name = {p.identifier: p for p in fitted.priors}
@@ -239,7 +240,10 @@ def test_bad_input_is_one_line_and_writes_nothing(
     if "poly3.pt" in argv:
         rec = simulate(replace(load_config(REALISTIC), channels=()), 1)
         save_model(
-            fit_compensator("poly3", rec), inputs / "poly3.pt", train_stats={}, valid_temp_range_c=(0.0, 1.0)
+            fit_compensator("poly3", rec),
+            inputs / "poly3.pt",
+            train_stats=TrainStats(),
+            valid_temp_range_c=(0.0, 1.0),
         )
     argv = [str(inputs / a) if a == "poly3.pt" else a for a in argv]
     out = tmp_path / "plan"

@@ -6,8 +6,9 @@ The file is a ``torch.save`` of a plain dict::
      "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0",
      "offset": {"mode": "relative", "t_ref_c": ..., "drift_at_t_ref_mg": ...}}
 
-``offset`` (optional; absent for recursive methods and older files) is the
-:class:`trainer.reference.OffsetRecord` of a temperature-driven model.
+``train_stats`` is the plain dict of a :class:`trainer.train_stats.TrainStats` (readers take it
+with ``TrainStats.of_checkpoint``); ``offset`` (optional; absent for recursive methods and older
+files) is the :class:`trainer.reference.OffsetRecord` of a temperature-driven model.
 
 and is always read with ``torch.load(weights_only=True)``, which refuses pickled code.
 
@@ -20,11 +21,9 @@ the field, never a traceback inside a command nor a report scored with NaN.
 from __future__ import annotations
 
 import io
-import math
 import os
 import pickle
 import re
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +35,7 @@ from trainer.compensator import Compensator
 from trainer.errors import UserError, atomic_output
 from trainer.fields import DottedFields, show
 from trainer.reference import OffsetRecord
+from trainer.train_stats import FIELD_CHECKS, TrainStats, is_count
 
 FORMAT_NAME = "mems-tdc-model"
 _UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
@@ -46,7 +46,7 @@ def save_model(
     model: Compensator,
     path: str | os.PathLike[str],
     *,
-    train_stats: dict[str, Any],
+    train_stats: TrainStats,
     valid_temp_range_c: tuple[float, float],
 ) -> None:
     """Write ``model`` to ``path`` atomically (no partial file on failure)."""
@@ -55,7 +55,7 @@ def save_model(
         "format_version": FORMAT_VERSION,
         "method": methods.name_of(model),
         "payload": model.to_payload(),
-        "train_stats": train_stats,
+        "train_stats": train_stats.to_dict(),
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
         "created_by": f"mems-tdc {__version__}",
     }
@@ -98,7 +98,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     ):
         raise UserError(f"{p}: not a mems-tdc model (field 'format' is not '{FORMAT_NAME}')")
     version = checkpoint.get("format_version")
-    if not (_is_count(version) and version == FORMAT_VERSION):
+    if not (is_count(version) and version == FORMAT_VERSION):
         raise UserError(
             f"{p}: field 'format_version' is {version!r}; this tool reads version {FORMAT_VERSION}"
         )
@@ -109,48 +109,6 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
 # No fitted number (a coefficient, temperature, time constant, pressure, network weight) comes near
 # this; a payload number beyond it overflows float64 on evaluation (a cube of 1e103 is inf).
 PAYLOAD_MAGNITUDE_LIMIT = 1e12
-
-
-def _is_text(value: Any) -> bool:
-    return isinstance(value, str)
-
-
-def _is_count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
-
-
-def _is_finite(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _is_rate(value: Any) -> bool:
-    return _is_finite(value) and value > 0
-
-
-def _is_time_range(value: Any) -> bool:
-    return (
-        isinstance(value, list | tuple)
-        and len(value) == 2
-        and all(map(_is_finite, value))
-        and value[0] <= value[1]
-    )
-
-
-# The train_stats fields that commands read (trainer/fitting.py training_stats writes them): each is
-# optional (hand-made and older files carry few), and when present it must be what its readers expect.
-TRAIN_STATS_FIELDS: dict[str, tuple[Callable[[Any], bool], str]] = {
-    "source": (_is_text, "a string"),
-    "data_sha256": (_is_text, "a string"),
-    "channel": (_is_text, "a string"),
-    "unit": (_is_text, "a string"),
-    "n_samples": (_is_count, "a whole number >= 0"),
-    "device_id": (_is_count, "a whole number >= 0"),
-    "sample_rate_hz": (_is_rate, "a finite number > 0"),
-    "temp_min_c": (_is_finite, "a finite number"),
-    "temp_max_c": (_is_finite, "a finite number"),
-    "time_range_s": (_is_time_range, "[start, end], finite and increasing"),
-    "selection": (lambda v: isinstance(v, dict), "a dict"),
-}
 
 
 def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
@@ -165,7 +123,7 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
         )
     root.sub("payload")  # a dict
     stats = root.sub("train_stats")
-    for key, (valid, what) in TRAIN_STATS_FIELDS.items():
+    for key, (valid, what) in FIELD_CHECKS.items():  # each optional; when present, what readers expect
         if stats.has(key) and not valid(stats.data[key]):
             stats.fail(f"field 'train_stats.{key}' must be {what}, got {show(stats.data[key])}")
     lo, hi = root.numbers("valid_temp_range_c", 2)

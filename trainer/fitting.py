@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -17,6 +18,7 @@ from trainer.reference import (
     check_constant,
     reference_temperature,
 )
+from trainer.train_stats import TrainStats
 
 
 def make_compensator(method: str, options: dict[str, Any] | None = None) -> Compensator:
@@ -28,25 +30,26 @@ def make_compensator(method: str, options: dict[str, Any] | None = None) -> Comp
         raise UserError(f"--method {method}: bad option ({exc})") from None
 
 
-def training_stats(rec: Recording) -> dict[str, Any]:
-    """What the checkpoint records about its training data (plain values only)."""
-    return {
-        "source": rec.source,
-        "n_samples": len(rec),
-        "sample_rate_hz": float(rec.sample_rate_hz),
-        "duration_s": float(rec.time_s[-1] - rec.time_s[0]),
-        "temp_min_c": float(np.min(rec.temp_c)),
-        "temp_max_c": float(np.max(rec.temp_c)),
-        "accel_mean_mg": float(np.mean(rec.accel_mg)),
-        "accel_std_mg": float(np.std(rec.accel_mg)),
-        "time_range_s": [float(rec.time_s[0]), float(rec.time_s[-1])],
-        "data_sha256": data_fingerprint(rec),
+def training_stats(rec: Recording) -> TrainStats:
+    """What the checkpoint records about its training data."""
+    return TrainStats(
+        source=rec.source,
+        n_samples=len(rec),
+        sample_rate_hz=float(rec.sample_rate_hz),
+        duration_s=float(rec.time_s[-1] - rec.time_s[0]),
+        temp_min_c=float(np.min(rec.temp_c)),
+        temp_max_c=float(np.max(rec.temp_c)),
+        accel_mean_mg=float(np.mean(rec.accel_mg)),
+        accel_std_mg=float(np.std(rec.accel_mg)),
+        time_range_s=(float(rec.time_s[0]), float(rec.time_s[-1])),
+        data_sha256=data_fingerprint(rec),
         **_channel_stats(rec),
-    }
+    )
 
 
 def _channel_stats(rec: Recording) -> dict[str, Any]:
-    """The sensor channel ``accel_mg`` came from and its device id, when the recording says so.
+    """The sensor channel ``accel_mg`` came from, its unit and its device id, when the recording
+    says so (TrainStats fields ``channel``, ``unit``, ``device_id``).
 
     Flight-stack parameters (``codegen export --format px4-params``) are keyed by them.
     """
@@ -117,10 +120,9 @@ def fit_with_stats(
     train: Recording,
     options: dict[str, Any] | None = None,
     policy: OffsetPolicy | None = None,
-) -> tuple[Compensator, dict[str, Any]]:
+) -> tuple[Compensator, TrainStats]:
     """Fit ``method`` and return it with its checkpoint's ``train_stats`` (incl. the fit residual RMS)."""
     model = fit_compensator(method, train, options, policy)
-    stats = training_stats(train)
     residual = train.accel_mg - model.predict_drift(train.without_truth())
-    stats["fit_residual_rms_mg"] = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
-    return model, stats
+    rms_mg = float(np.sqrt(np.mean((residual - residual.mean()) ** 2)))
+    return model, replace(training_stats(train), fit_residual_rms_mg=rms_mg)

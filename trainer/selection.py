@@ -15,7 +15,7 @@ What is fitted and saved is the chosen candidate, trained on the whole run; the 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from trainer import methods
@@ -29,6 +29,7 @@ from trainer.scoring.crossval import (
     segment_lines,
     table_lines,
 )
+from trainer.train_stats import TrainStats
 
 AUTO = "auto"  # the selector's name on the command line (trainer fit --method auto)
 NONE = "none"  # the candidate "no compensation" (a polynomial of order 0: zero drift)
@@ -172,12 +173,12 @@ def record_lines(record: dict[str, Any]) -> list[str]:
     ]
 
 
-def identity_note(train_stats: Any, source: str) -> str | None:
+def identity_note(train_stats: TrainStats, source: str) -> str | None:
     """One line for an export of a model that ``auto`` left uncompensated (None otherwise)."""
-    record = train_stats.get("selection") if isinstance(train_stats, dict) else None
-    if not isinstance(record, dict) or record.get("chosen") != NONE:
+    record = train_stats.selection
+    if record is None or record.get("chosen") != NONE:
         return None
-    channel = train_stats.get("channel", "the channel")
+    channel = train_stats.channel or "the channel"
     return (
         f"{source}: {channel} is exported as the identity (C: zero correction; flight-stack parameters: zero "
         f"coefficients, the sensor disabled where every axis is so): {record.get('reason', 'auto chose none')}"
@@ -198,7 +199,7 @@ def fit_with_selection(
     options: dict[str, Any] | None = None,
     policy: OffsetPolicy | None = None,
     log: Callable[[str], None] | None = None,
-) -> tuple[Any, dict[str, Any]]:
+) -> tuple[Any, TrainStats]:
     """:func:`trainer.fitting.fit_with_stats`, with ``auto`` resolved first: the candidates are
     cross-validated on ``train``, the chosen one is fitted on the whole of it, and
     ``train_stats.selection`` records the table that chose it."""
@@ -217,5 +218,4 @@ def fit_with_selection(
         log=log,
     )
     model, stats = fit_with_stats(selection.candidate.method, train, selection.candidate.options, policy)
-    stats["selection"] = selection_record(selection)
-    return model, stats
+    return model, replace(stats, selection=selection_record(selection))

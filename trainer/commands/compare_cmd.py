@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
                 model,
                 staging / "models" / f"{name}.pt",
                 train_stats=stats,
-                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+                valid_temp_range_c=stats.temp_range_c,
             )
         figures = write_figures(comparison, train, valid, staging)
         for index, rec in enumerate(input_tests):

@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.scoring.evaluate import evaluate
     from trainer.scoring.inject import injected_input, input_kept
     from trainer.scoring.plots import plot_series
+    from trainer.train_stats import TrainStats
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
@@ -112,8 +113,8 @@ def run(args: argparse.Namespace) -> int:
         references=references,
     )
 
-    stats = checkpoint["train_stats"] if isinstance(checkpoint.get("train_stats"), dict) else {}
-    signal = signal_of(rec, stats.get("channel"))
+    stats = TrainStats.of_checkpoint(checkpoint)
+    signal = signal_of(rec, stats.channel)
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     text = f"{signal.heading}\n{result.table.to_text()}"
@@ -126,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         )
     # a held-out part the model was trained on is not held out: said in the output and the report
     warning = overlap_warning(
-        checkpoint["train_stats"],
+        stats,
         rec,
         data_fingerprint(rec),
         whole=whole,

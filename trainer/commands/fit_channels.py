@@ -50,7 +50,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
                 model,
                 staging / f"{channel.name}{MODEL_SUFFIX}",
                 train_stats=stats,
-                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+                valid_temp_range_c=stats.temp_range_c,
             )
             index["channels"].append(
                 {
@@ -59,22 +59,22 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
                     "unit": channel.label,
                     "column": channel.column,
                     "temp_column": channel.temp_column,
-                    "temp_range_c": [stats["temp_min_c"], stats["temp_max_c"]],
-                    "fit_residual_rms": stats["fit_residual_rms_mg"],
+                    "temp_range_c": list(stats.temp_range_c),
+                    "fit_residual_rms": stats.fit_residual_rms_mg,
                     "method": methods.name_of(model),
-                    **({"auto_chose": stats["selection"]["chosen"]} if "selection" in stats else {}),
+                    **({"auto_chose": stats.selection["chosen"]} if stats.selection is not None else {}),
                 }
             )
         (staging / INDEX_FILE).write_text(json.dumps(index, indent=2) + "\n", encoding="utf-8")
     for channel, model, stats, checks in fitted:
         checks.print_warnings()
-        if "selection" in stats:
+        if stats.selection is not None:
             print(f"== {channel.name} [{channel.label}]")
             print_selection(stats)
         print(
-            f"{methods.name_of(model)} {channel.name}: fitted on {stats['n_samples']} samples "
-            f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), fit residual RMS "
-            f"{stats['fit_residual_rms_mg']:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
+            f"{methods.name_of(model)} {channel.name}: fitted on {stats.n_samples} samples "
+            f"({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} degC), fit residual RMS "
+            f"{stats.fit_residual_rms_mg:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
         )
         note = relabel_units(model.offset.describe() if model.offset else RECURSIVE_NOTE, channel.unit)
         print(f"{methods.name_of(model)} {channel.name}: {note}")

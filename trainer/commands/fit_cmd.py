@@ -75,16 +75,14 @@ def run(args: argparse.Namespace) -> int:
     model, stats = fit_with_selection(args.method, train, options, policy, log=progress_log(args))
     checks.print_warnings()
     print_selection(stats)
-    save_model(
-        model, args.output, train_stats=stats, valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"])
-    )
+    save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
     name = methods.name_of(model)
     unit = channel_unit(train)  # a gyro or baro recording holds its own unit in the accel_mg column
     print(
         relabel_units(
-            f"{name}: fitted on {stats['n_samples']} samples "
-            f"({stats['temp_min_c']:.2f} .. {stats['temp_max_c']:.2f} degC), "
-            f"fit residual RMS {stats['fit_residual_rms_mg']:.4g} mg -> {args.output}",
+            f"{name}: fitted on {stats.n_samples} samples "
+            f"({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} degC), "
+            f"fit residual RMS {stats.fit_residual_rms_mg:.4g} mg -> {args.output}",
             unit,
         )
     )

@@ -14,6 +14,7 @@ from typing import Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, raise_write_error
+from trainer.train_stats import TrainStats
 
 EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
 ANY_RANGE_C = (-math.inf, math.inf)  # scores that need no in-range part
@@ -348,9 +349,9 @@ def run(args: argparse.Namespace) -> int:
             assert rec_path is not None
             model_path = Path(model_arg)
             model, ckpt = load_model(model_path)
-            stats = ckpt["train_stats"]  # a dict: trainer/checkpoint.py validated it
-            rec = model_view(loaded[rec_path], str(stats.get("channel") or ""), model_path)
-            channel = str(stats.get("channel") or model_path.stem)
+            stats = TrainStats.of_checkpoint(ckpt)
+            rec = model_view(loaded[rec_path], stats.channel or "", model_path)
+            channel = stats.channel or model_path.stem
             label = f"{channel} / {ckpt['method']}"
             if label in seen:
                 raise UserError(
@@ -382,10 +383,9 @@ def run(args: argparse.Namespace) -> int:
                 notes.append(f"whole recording: {warning}")
             # an auto model carries the cross-validation that chose it: on its own training run those
             # figures, not an in-sample or single-split one, are what the verdict judges
-            selection = stats.get("selection")
             crossval = (
-                selection
-                if isinstance(selection, dict) and stats.get("data_sha256") == data_fingerprint(rec)
+                stats.selection
+                if stats.selection is not None and stats.data_sha256 == data_fingerprint(rec)
                 else None
             )
             verify, sizes = (

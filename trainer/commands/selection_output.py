@@ -8,6 +8,7 @@ from typing import Any
 
 from trainer import methods
 from trainer.selection import AUTO, record_lines
+from trainer.train_stats import TrainStats
 
 
 def checked_method(name: str) -> methods.Method:
@@ -22,9 +23,9 @@ def progress_log(args: argparse.Namespace) -> Any:
     return lambda message: print(message, file=sys.stderr, flush=True)
 
 
-def print_selection(stats: dict[str, Any]) -> None:
+def print_selection(stats: TrainStats) -> None:
     """The table that chose an auto model (from the checkpoint's record), and the choice in one line."""
-    record = stats.get("selection")
+    record = stats.selection
     if record is not None:
         for line in record_lines(record):
             print(line)

@@ -16,12 +16,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
 from trainer.data.recording import Recording, data_fingerprint
 from trainer.errors import UserError
+from trainer.train_stats import TrainStats
 
 MIN_ROWS = 16  # each part must hold at least this many samples
 Side = Literal["first", "last"]
@@ -102,19 +103,19 @@ def _same_file(a: str, b: str) -> bool:
         return a == b
 
 
-def _trained_on(train_stats: dict[str, Any], rec: Recording, lo: float, hi: float) -> bool:
+def _trained_on(train_stats: TrainStats, rec: Recording, lo: float, hi: float) -> bool:
     """Whether the rows of ``rec`` in ``[lo, hi]`` s are the training data, by content
     (``data_sha256``): whatever the path, the working directory or a copy of the file."""
     start = int(np.searchsorted(rec.time_s, lo, side="left"))
     stop = int(np.searchsorted(rec.time_s, hi, side="right"))
     part = rec.slice(start, stop)
-    if len(part) != train_stats.get("n_samples", len(part)):  # cheap first test
+    if train_stats.n_samples is not None and len(part) != train_stats.n_samples:  # cheap first test
         return False
-    return data_fingerprint(part) == train_stats.get("data_sha256")
+    return data_fingerprint(part) == train_stats.data_sha256
 
 
 def overlap_warning(
-    train_stats: dict[str, Any],
+    train_stats: TrainStats,
     valid: Recording,
     fingerprint: str,
     *,
@@ -129,19 +130,18 @@ def overlap_warning(
     message. Overlap is proved by content (the training rows' fingerprint found in ``whole``) or by
     the same file and overlapping times.
     """
-    if train_stats.get("data_sha256") == fingerprint:
+    if train_stats.data_sha256 == fingerprint:
         return (
             f"warning: the {what} data is the training data: every score is in-sample and says "
             "nothing about a new run (use another recording or --holdout)"
         )
-    time_range = train_stats.get("time_range_s")
-    if not time_range:
+    if train_stats.time_range_s is None:
         return None
-    lo, hi = float(time_range[0]), float(time_range[1])
+    lo, hi = train_stats.time_range_s
     inside = (valid.time_s >= lo) & (valid.time_s <= hi)
     if not np.any(inside):
         return None
-    source = str(train_stats.get("source", ""))
+    source = train_stats.source or ""
     if (source and _same_file(source, valid.source)) or _trained_on(train_stats, whole or valid, lo, hi):
         return (
             f"warning: {100 * float(np.mean(inside)):.1f} % of the {what} rows are training rows (the "

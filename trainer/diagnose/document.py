@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -48,7 +49,7 @@ def params(values: dict[str, float]) -> dict[str, float]:
     return {k: sig(v, 6) for k, v in values.items()}
 
 
-def significance(values: dict[str, Any]) -> dict[str, Any]:
+def significance(values: Mapping[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in values.items():
         if key == "p_value":

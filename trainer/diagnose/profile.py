@@ -11,13 +11,14 @@ identifiable, with the test that would make them identifiable.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from trainer.diagnose.blocks import BlockData
 from trainer.physics.catalogue import CANDIDATE_ORDER, DEFINITIONS
-from trainer.physics.catalogue.base import Identifiability
+from trainer.physics.catalogue.base import Identifiability, Region
 from trainer.physics.profiles import parse_segments
 
 BRANCH_NAMES = {1: "heating", -1: "cooling", 0: "hold"}
@@ -186,42 +187,12 @@ def identifiability(p: Profile) -> dict[str, Identifiability]:
     return {k: rule(p) for k in CANDIDATE_ORDER if (rule := DEFINITIONS[k].finder.identifiability)}
 
 
-@dataclass(frozen=True)
-class Region:
-    """Where something shows: a time range, annotated from the temperature profile."""
-
-    t_start_s: float
-    t_end_s: float
-    segment: str
-    temp_min_c: float
-    temp_max_c: float
-    branch: str
-    significance: dict[str, float]
-    kind: str = "residual"
-    note: str = ""
-
-    def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {
-            "t_start_s": round(self.t_start_s, 3),
-            "t_end_s": round(self.t_end_s, 3),
-            "segment": self.segment,
-            "temp_min_c": round(self.temp_min_c, 3),
-            "temp_max_c": round(self.temp_max_c, 3),
-            "branch": self.branch,
-            "significance": self.significance,
-            "kind": self.kind,
-        }
-        if self.note:
-            out["note"] = self.note
-        return out
-
-
 def region(
     data: BlockData,
     profile: Profile,
     a: int,
     b: int,
-    significance: dict[str, float],
+    significance: Mapping[str, float | str],
     kind: str,
     note: str = "",
 ) -> Region:

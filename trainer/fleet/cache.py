@@ -18,13 +18,12 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
 
 from trainer import __version__
 from trainer.errors import UserError, raise_write_error
 from trainer.fleet.manifest import FleetSettings, UnitSpec
+from trainer.fleet.result import RESULT_FILE, UnitResult
 
-RESULT_FILE = "result.json"
 UNITS_DIR = "units"
 _STAGING_PREFIX = "."  # staging and retired directories are hidden and cleaned at the next start
 _CHUNK_BYTES = 1 << 20
@@ -62,20 +61,15 @@ def unit_dir(out_dir: Path, unit_id: str) -> Path:
     return out_dir / UNITS_DIR / unit_id
 
 
-def read_result(out_dir: Path, unit_id: str) -> dict[str, Any] | None:
+def read_result(out_dir: Path, unit_id: str) -> UnitResult | None:
     """The unit's stored ``result.json``, or None when there is none (or it is unreadable)."""
-    path = unit_dir(out_dir, unit_id) / RESULT_FILE
-    try:
-        result: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return result
+    return UnitResult.read(unit_dir(out_dir, unit_id) / RESULT_FILE)
 
 
 def is_done(out_dir: Path, unit_id: str, key: str) -> bool:
     """A finished result of the same inputs and settings (an infrastructure failure is retried)."""
     result = read_result(out_dir, unit_id)
-    return result is not None and result.get("key") == key and not result.get("retry", False)
+    return result is not None and result.key == key and not result.retry
 
 
 def clean_staging(out_dir: Path) -> None:
@@ -85,11 +79,6 @@ def clean_staging(out_dir: Path) -> None:
         for entry in units.iterdir():
             if entry.name.startswith(_STAGING_PREFIX) and entry.is_dir():
                 shutil.rmtree(entry, ignore_errors=True)
-
-
-def json_bytes(value: Any) -> bytes:
-    """Stable JSON (sorted keys, two-space indent, newline at the end)."""
-    return (json.dumps(value, indent=2, sort_keys=True, allow_nan=False) + "\n").encode()
 
 
 def publish_unit(out_dir: Path, unit_id: str, files: dict[str, bytes]) -> Path:

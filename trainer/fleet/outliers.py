@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import median_abs_deviation
 
+from trainer.fleet.result import UnitResult
 from trainer.physics.catalogue import EFFECTS, WHITE_NOISE
 
 Z_LIMIT = 5.0  # 24 normal units x 10 numbers stay below ~4; a planted defect scores far above
@@ -49,9 +50,9 @@ def drift_feature(method: str, unit: str) -> str:
     return f"{DRIFT_PREFIX}{method} ({unit})"
 
 
-def unit_label(result: dict[str, Any]) -> str:
+def unit_label(result: UnitResult) -> str:
     """The unit a unit's figures are in (``result.json`` ``unit``; results written before it: mg)."""
-    return str(result.get("unit") or "mg")
+    return result.unit or "mg"
 
 
 def _params(features: dict[str, float], effect: str, params: Any, seen: Counter[str]) -> None:
@@ -64,10 +65,10 @@ def _params(features: dict[str, float], effect: str, params: Any, seen: Counter[
                 features[f"{label}.{name}"] = float(value)
 
 
-def unit_features(result: dict[str, Any]) -> dict[str, float]:
+def unit_features(result: UnitResult) -> dict[str, float]:
     """The numbers of one finished unit that the fleet compares (see the module docstring)."""
     features: dict[str, float] = {}
-    diagnosis = result.get("diagnosis") or {}
+    diagnosis = result.diagnosis or {}
     seen: Counter[str] = Counter()
     for effect, params in (diagnosis.get("baseline_calibrated") or {}).items():
         if effect in EFFECTS or effect in SCORED_NOISE:
@@ -75,16 +76,16 @@ def unit_features(result: dict[str, Any]) -> dict[str, float]:
     for entry in diagnosis.get("left_out", []):
         if entry["effect"] in EFFECTS or entry["effect"] in SCORED_NOISE:
             _params(features, entry["effect"], entry["params"], seen)
-    for method, summary in (result.get("methods") or {}).items():
+    for method, summary in result.methods.items():
         drift = summary.get("drift_left_mg")
         if isinstance(drift, int | float) and np.isfinite(drift):
             features[drift_feature(method, unit_label(result))] = float(drift)
     return features
 
 
-def named_effects(result: dict[str, Any]) -> list[str]:
+def named_effects(result: UnitResult) -> list[str]:
     """The effects the finder named in a unit (each once)."""
-    diagnosis = result.get("diagnosis") or {}
+    diagnosis = result.diagnosis or {}
     return sorted({entry["effect"] for entry in diagnosis.get("left_out", [])})
 
 
@@ -97,9 +98,9 @@ def robust_z(values: np.ndarray) -> tuple[np.ndarray, float, float]:
     return (values - median) / scale, median, scale
 
 
-def find_out_of_family(results: dict[str, dict[str, Any]]) -> list[Finding]:
+def find_out_of_family(results: dict[str, UnitResult]) -> list[Finding]:
     """Every reason each ``ok`` unit is out of family, in unit then feature order."""
-    ok = {uid: r for uid, r in results.items() if r.get("status") == "ok"}
+    ok = {uid: r for uid, r in results.items() if r.ok}
     if len(ok) < MIN_UNITS:
         return []
     features = {uid: unit_features(r) for uid, r in ok.items()}

@@ -21,7 +21,6 @@ import numpy as np
 
 from trainer.data.channels import ONE_AXIS_CHANNEL
 from trainer.errors import atomic_output
-from trainer.fleet.cache import json_bytes
 from trainer.fleet.manifest import Manifest
 from trainer.fleet.outliers import (
     COMMON_SHARE,
@@ -36,6 +35,7 @@ from trainer.fleet.outliers import (
     unit_features,
     unit_label,
 )
+from trainer.fleet.result import Failure, UnitResult, json_bytes
 from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
@@ -81,21 +81,21 @@ def _figures(summary: dict[str, Any], basis: str) -> Figures | None:
     return Figures(basis, model, raw, model_in, raw_in, floor)
 
 
-def unit_verdict(uid: str, result: dict[str, Any] | None, findings: list[Finding]) -> Verdict:
+def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -> Verdict:
     """The unit's verdict: processed, every export verified, every method better than uncompensated
     on the scored data (the guard of ``trainer report``); out of family asks for REVIEW."""
     if result is None:
         return verdict({}, [PipelineCheck(f"{uid}: no result", False)])
-    checks = [PipelineCheck(f"{uid} {e['stage']}: {e['error']}", False) for e in result.get("errors", [])]
-    checks.append(PipelineCheck(f"{uid} processed", result.get("status") == "ok"))
-    methods = result.get("methods") or {}
+    checks = [PipelineCheck(f"{uid} {e.stage}: {e.error}", False) for e in result.errors]
+    checks.append(PipelineCheck(f"{uid} processed", result.ok))
+    methods = result.methods
     checks += [
         PipelineCheck(f"{uid} / {m} C module verified", verify_state(s) != "NO") for m, s in methods.items()
     ]
     figures = {
         f"{uid} / {m}": f
         for m, s in methods.items()
-        if (f := _figures(s, str(result.get("evaluated_on") or "scored part"))) is not None
+        if (f := _figures(s, result.evaluated_on or "scored part")) is not None
     }
     return verdict(figures, checks, [f.reason for f in findings])
 
@@ -104,30 +104,30 @@ def _mg(value: Any, unit: str = "") -> str:
     return f"{value:.4g}{unit}" if isinstance(value, int | float) else "-"
 
 
-def _channel(result: dict[str, Any] | None) -> str:
+def _channel(result: UnitResult | None) -> str:
     """``gyro0_z (deg/s)``: the unit's channel and unit (results written before they were kept: mg)."""
-    if not result or (not result.get("channel") and result.get("status") != "ok"):
+    if result is None or (not result.channel and not result.ok):
         return "-"  # failed before its recording was read
-    return f"{result.get('channel') or ONE_AXIS_CHANNEL} ({unit_label(result)})"
+    return f"{result.channel or ONE_AXIS_CHANNEL} ({unit_label(result)})"
 
 
-def unit_coverage(result: dict[str, Any] | None) -> tuple[float, list[float], list[float]] | None:
+def unit_coverage(result: UnitResult | None) -> tuple[float, list[float], list[float]] | None:
     """(coverage, scored range, trained range) of a unit's scored part: the smallest coverage of its
     methods (all are fitted on the same run), or None when no method was scored."""
     found = [
         (float(s["coverage"]), list(s["scored_range_c"]), list(s["trained_range_c"]))
-        for s in ((result or {}).get("methods") or {}).values()
+        for s in (result.methods if result is not None else {}).values()
         if isinstance(s, dict) and isinstance(s.get("coverage"), int | float)
     ]
     return min(found, key=lambda item: item[0]) if found else None
 
 
-def _coverage_cell(result: dict[str, Any] | None) -> str:
+def _coverage_cell(result: UnitResult | None) -> str:
     covered = unit_coverage(result)
     return "-" if covered is None else f"{100 * covered[0]:.0f} %"
 
 
-def _coverage_lines(units: list[str], results: dict[str, dict[str, Any]]) -> list[str]:
+def _coverage_lines(units: list[str], results: dict[str, UnitResult]) -> list[str]:
     """The units scored partly outside their trained range: a PASS there includes extrapolation."""
     lines = ["## Coverage", ""]
     partial = []
@@ -211,7 +211,7 @@ def _distribution_rows(columns: list[tuple[str, dict[str, float]]]) -> list[list
     return rows
 
 
-def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str, Any]]) -> Path:
+def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResult]) -> Path:
     """Write ``report.md``, ``figures/*.png`` and ``fleet.json``; returns the report's path."""
     units = [u.id for u in manifest.units]
     methods = list(dict.fromkeys(m for u in manifest.units for m in u.methods))
@@ -219,7 +219,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     by_unit: dict[str, list[Finding]] = {u: [f for f in findings if f.unit == u] for u in units}
     decided = {u: unit_verdict(u, results.get(u), by_unit[u]) for u in units}
     verdicts = {u: v.status for u, v in decided.items()}
-    ok = [u for u in units if results.get(u, {}).get("status") == "ok"]
+    ok = [u for u in units if u in results and results[u].ok]
     flagged = {f.unit for f in findings}
 
     features = {u: unit_features(results[u]) for u in ok}
@@ -274,10 +274,10 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     rows = []
     for u in units:
         result = results.get(u)
-        summaries = result["methods"] if result else {}
-        cell_unit = "" if common or not result else f" {unit_label(result)}"
+        summaries = result.methods if result is not None else {}
+        cell_unit = "" if common or result is None else f" {unit_label(result)}"
         row = [u, verdicts[u], _channel(result), _coverage_cell(result)]
-        row.append(", ".join(named_effects(result)) if result else "-")
+        row.append(", ".join(named_effects(result)) if result is not None else "-")
         row += [_mg(summaries.get(m, {}).get("drift_left_mg"), cell_unit) for m in methods]
         raw = [s.get("drift_left_uncompensated_mg") for s in summaries.values() if isinstance(s, dict)]
         row.append(_mg(next((v for v in raw if v is not None), None), cell_unit))
@@ -288,21 +288,21 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
     lines += [markdown_table(header, rows), ""]
     lines += _coverage_lines(units, results)
 
-    failed = [u for u in units if results.get(u, {}).get("status") != "ok"]
+    failed = [u for u in units if u not in results or not results[u].ok]
     lines += ["## Failed units", ""]
     if failed:
         for u in failed:
-            errors = results[u]["errors"] if u in results else [{"stage": "-", "error": "no result"}]
-            lines += [f"- **{u}** ({e['stage']}): {e['error']}" for e in errors]
+            errors = results[u].errors if u in results else (Failure("-", "no result", False),)
+            lines += [f"- **{u}** ({e.stage}): {e.error}" for e in errors]
     else:
         lines.append("None.")
     lines += ["", "## Exports that failed to verify", ""]
     unverified = [
-        (u, m, results[u]["methods"][m]["verify"])
+        (u, m, results[u].methods[m]["verify"])
         for u in units
         if u in results
-        for m in results[u]["methods"]
-        if verify_state(results[u]["methods"][m]) == "NO"
+        for m in results[u].methods
+        if verify_state(results[u].methods[m]) == "NO"
     ]
     if unverified:
         for u, m, v in unverified:
@@ -367,13 +367,13 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, dict[str,
             {
                 "id": u,
                 "sign_off": verdicts[u],
-                "status": results.get(u, {}).get("status", "missing"),
+                "status": results[u].status if u in results else "missing",
                 "out_of_family": [f.reason for f in by_unit[u]],
                 "failed": list(decided[u].failed),
-                "channel": results.get(u, {}).get("channel"),
-                "unit": results.get(u, {}).get("unit"),
+                "channel": results[u].channel if u in results else None,
+                "unit": results[u].unit if u in results else None,
                 "coverage": None if (covered := unit_coverage(results.get(u))) is None else covered[0],
-                "errors": [e["error"] for e in results.get(u, {}).get("errors", [])],
+                "errors": [e.error for e in results[u].errors] if u in results else [],
             }
             for u in units
         ],

@@ -20,12 +20,12 @@ from trainer.fleet.cache import (
     UNITS_DIR,
     clean_staging,
     is_done,
-    json_bytes,
     publish_unit,
     read_result,
     unit_key,
 )
 from trainer.fleet.manifest import FleetSettings, Manifest, UnitSpec, load_manifest
+from trainer.fleet.result import RESULT_FILE, Failure, UnitResult
 
 T = TypeVar("T")
 
@@ -38,7 +38,7 @@ class FleetRun:
     out_dir: Path
     computed: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
-    results: dict[str, dict[str, Any]] = field(default_factory=dict)
+    results: dict[str, UnitResult] = field(default_factory=dict)
     report: Path | None = None
 
 
@@ -55,19 +55,8 @@ def _failed(unit: UnitSpec, key: str | None, stage: str, exc: BaseException) -> 
     """A unit that never reached ``assemble`` (unreadable input, lost worker): its result only."""
     message, retry = stages.one_line(exc)
     retry = retry or key is None  # no key: an unreadable recording, read again next run
-    result = {
-        "id": unit.id,
-        "key": key,
-        "status": "failed",
-        "retry": retry,
-        "errors": [{"stage": stage, "error": message, "retry": retry}],
-        "recordings": [str(p) for p in unit.recordings],
-        "evaluated_on": None,
-        "export_name": unit.export_name,
-        "methods": {m: {"error": message} for m in unit.methods},
-        "diagnosis": None,
-    }
-    return stages.UnitOutcome(unit.id, {"result.json": json_bytes(result)}, result)
+    result = UnitResult.failed(unit, key, Failure(stage, message, retry))
+    return stages.UnitOutcome(unit.id, {RESULT_FILE: result.to_json()}, result)
 
 
 def _written(what: Path, write: Callable[[], T]) -> T:

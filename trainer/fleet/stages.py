@@ -33,9 +33,10 @@ from trainer.data.holdout import Holdout, parse_holdout
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
-from trainer.fleet.cache import RESULT_FILE, json_bytes
 from trainer.fleet.cluster import pinned
 from trainer.fleet.manifest import FleetSettings, UnitSpec
+from trainer.fleet.result import FAILED, OK, RESULT_FILE, Failure, UnitResult, finite, json_bytes
+from trainer.train_stats import TrainStats
 
 T = TypeVar("T")
 SMOOTHING_S = PAPER_RUN_SMOOTHING_S  # the scoring smoothing, `trainer report --smoothing`'s default
@@ -47,16 +48,6 @@ TIMING_FILE = "timing.json"  # wall times: the one file of a unit that differs b
 ENVIRONMENT_ERRNOS = frozenset(
     {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EACCES, errno.EPERM, errno.EROFS}
 )
-
-
-@dataclass(frozen=True)
-class Failure:
-    """A stage that failed: the one-line error, and whether a restart should compute it again
-    (``retry``: not the unit's fault but a bug, a lost worker or the environment)."""
-
-    stage: str
-    error: str
-    retry: bool = False
 
 
 @dataclass(frozen=True)
@@ -102,7 +93,7 @@ class UnitOutcome:
 
     unit_id: str
     files: dict[str, bytes] = field(repr=False)
-    result: dict[str, Any]
+    result: UnitResult
 
 
 def environment_failure(exc: BaseException) -> bool:
@@ -258,11 +249,11 @@ def drift_left_summary(scores: Any) -> dict[str, float]:
     return dict(zip(DRIFT_LEFT_KEYS, [*map(_rms, values), float(part.noise_floor_mg)], strict=True))
 
 
-def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> dict[str, Any]:
+def _scores(method: str, data: UnitData, model: Any, stats: TrainStats) -> dict[str, Any]:
     from trainer.scoring.evaluate import drift_score, evaluate
     from trainer.scoring.unit_scores import coverage, score_unit
 
-    trained = (float(stats["temp_min_c"]), float(stats["temp_max_c"]))
+    trained = stats.temp_range_c
     whole_run = model.compensate(data.scored.without_truth())
     scores = score_unit(data.scored, whole_run, SMOOTHING_S, trained, data.holdout)
     valid, rows = data.valid_rows()
@@ -288,7 +279,7 @@ def _scores(method: str, data: UnitData, model: Any, stats: dict[str, Any]) -> d
         "smoothing_s": SMOOTHING_S,
         # simulated data only: the residual against the simulator's ground truth (trainer evaluate's headline)
         "residual_vs_truth_mg": None if truth is None else truth.residual_rms_mg,
-        "fit_residual_rms_mg": stats["fit_residual_rms_mg"],
+        "fit_residual_rms_mg": stats.fit_residual_rms_mg,
         "out_of_range_fraction": float(np.mean(outside)),
         "allan": {
             "B_mg": coefficients.b_mg,
@@ -347,7 +338,7 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
                 model,
                 tmp / "model.pt",
                 train_stats=stats,
-                valid_temp_range_c=(stats["temp_min_c"], stats["temp_max_c"]),
+                valid_temp_range_c=stats.temp_range_c,
             )
             files["model.pt"] = (tmp / "model.pt").read_bytes()
             if methods.get(name).renderer is None:
@@ -363,8 +354,8 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
                 else:
                     c_files, verified = outcome
                     files.update(c_files)
-        files["scores.json"] = json_bytes(_finite(scores))
-        files["verify.json"] = json_bytes(_finite(verified))
+        files["scores.json"] = json_bytes(finite(scores))
+        files["verify.json"] = json_bytes(finite(verified))
         summary = {
             **{k: scores[k] for k in (*DRIFT_LEFT_KEYS, *COVERAGE_KEYS, "residual_vs_truth_mg")},
             "verify": verified,
@@ -377,17 +368,6 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
 
 
 # --------------------------------------------------------------------------------- assemble
-
-
-def _finite(value: Any) -> Any:
-    """NaN/inf (an unobserved score) as None, so that ``result.json`` is strict JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    return value
 
 
 @pinned
@@ -409,7 +389,7 @@ def assemble(
     if isinstance(diagnosis, StageOutput):
         files.update(diagnosis.files)
         timing["diagnose"] = diagnosis.seconds
-    elif diagnosis is not data:
+    elif diagnosis != data:  # the load's failure, passed on (a copy when Dask moved it)
         errors.append(diagnosis)
     method_results: dict[str, Any] = {}
     for name, output in zip(unit.methods, outputs, strict=True):
@@ -420,25 +400,24 @@ def assemble(
             errors.extend(output.failures)
         else:
             method_results[name] = {"error": output.error}
-            if output is not data:
+            if output != data:
                 errors.append(output)
-    result = _finite(
-        {
-            "id": unit.id,
-            "key": key,
-            "status": "failed" if errors else "ok",
-            "retry": any(e.retry for e in errors),
-            "errors": [{"stage": e.stage, "error": e.error, "retry": e.retry} for e in errors],
-            "recordings": [str(p) for p in unit.recordings],
-            "evaluated_on": None if isinstance(data, Failure) else data.evaluated_on,
-            "channel": None if isinstance(data, Failure) else signal_of(data.train).channel,
-            "unit": None if isinstance(data, Failure) else signal_of(data.train).label,
-            "import_notes": [] if isinstance(data, Failure) else list(data.notes),
-            "export_name": unit.export_name,
-            "methods": method_results,
-            "diagnosis": diagnosis.summary if isinstance(diagnosis, StageOutput) else None,
-        }
+    loaded = None if isinstance(data, Failure) else data
+    result = UnitResult(
+        id=unit.id,
+        key=key,
+        status=FAILED if errors else OK,
+        retry=any(e.retry for e in errors),
+        errors=tuple(errors),
+        recordings=tuple(str(p) for p in unit.recordings),
+        evaluated_on=None if loaded is None else loaded.evaluated_on,
+        export_name=unit.export_name,
+        methods=method_results,
+        diagnosis=diagnosis.summary if isinstance(diagnosis, StageOutput) else None,
+        channel=None if loaded is None else signal_of(loaded.train).channel,
+        unit=None if loaded is None else signal_of(loaded.train).label,
+        import_notes=() if loaded is None else tuple(loaded.notes),
     )
     files[TIMING_FILE] = json_bytes({k: round(v, 3) for k, v in timing.items()})
-    files[RESULT_FILE] = json_bytes(result)
+    files[RESULT_FILE] = result.to_json()
     return UnitOutcome(unit.id, files, result)

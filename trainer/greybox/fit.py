@@ -22,12 +22,20 @@ import numpy as np
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
-from trainer.diagnose.baseline import build_baseline
-from trainer.diagnose.blocks import BlockData, build_blocks
-from trainer.diagnose.candidates import propose
-from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
-from trainer.diagnose.run import channel_scale
-from trainer.diagnose.threads import single_blas_thread
+from trainer.diagnose.api import (
+    BlockData,
+    ModelFit,
+    Term,
+    build_baseline,
+    build_blocks,
+    build_design,
+    channel_scale,
+    evaluate,
+    fit_model,
+    propose,
+    search_bounds,
+    single_blas_thread,
+)
 from trainer.errors import UserError
 from trainer.greybox.select import extend
 from trainer.greybox.structure import Structure

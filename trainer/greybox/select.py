@@ -26,8 +26,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
-from trainer.diagnose.blocks import BlockData
-from trainer.diagnose.model import ModelFit, Term, build_design
+from trainer.diagnose.api import BlockData, ModelFit, Term, build_design
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import excluded
 from trainer.physics.effects import EffectConfig

@@ -67,8 +67,7 @@ def from_sim(path: Path, rec: Recording, *, warmup_allowed: bool) -> Structure:
 
 def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Structure:
     """What the mismatch finder names on the training recording itself (no user simulation)."""
-    from trainer.diagnose import diagnose  # the finder is heavy; import it only when used
-    from trainer.diagnose.verdict import ambiguity_line, implausible_effects
+    from trainer.diagnose.api import ambiguity_line, diagnose, implausible_effects  # heavy: on use
 
     diagnosis = diagnose(rec, None, holdout_fraction=0.0, progress=progress)
     rejected = implausible_effects(diagnosis)

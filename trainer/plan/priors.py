@@ -271,6 +271,7 @@ def from_model(path: Path) -> FittedModel:
     from trainer.data.channels import unit_of_channel_name
     from trainer.greybox.compensator import PhysicsCompensator
     from trainer.physics.catalogue.bias_poly import DEFINITION as BIAS_POLY
+    from trainer.train_stats import TrainStats
 
     model, checkpoint = load_model(path)
     if not isinstance(model, PhysicsCompensator):
@@ -278,8 +279,7 @@ def from_model(path: Path) -> FittedModel:
             f"{path}: a {checkpoint['method']} model has no catalogue effects to plan for; "
             "give a physics model (trainer fit --method physics)"
         )
-    stats = checkpoint.get("train_stats", {})
-    channel = stats.get("channel") if isinstance(stats, dict) else None
+    channel = TrainStats.of_checkpoint(checkpoint).channel
     unit = unit_of_channel_name(channel)
     found = [e for e in model.effects if e.identifier in PLANNABLE]
     if not found:

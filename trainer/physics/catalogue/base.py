@@ -3,15 +3,17 @@
 A definition is plain data plus plain functions of arrays. The simulator reads its parameters and
 its formula; the mismatch finder (``trainer/diagnose``) reads :class:`Finder`; the test bench
 (``trainer/diagnose/scenarios.py``) reads :class:`Scenario`. Nothing here imports the finder:
-its objects (block data, model terms, the temperature profile) are passed in and only read.
+its objects (block data, model terms, the temperature profile) are passed in and only read, and
+:class:`FinderData`, :class:`FinderTerm` and :class:`FinderProfile` say what of them the hooks
+read, so the type checker sees through every hook.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
@@ -70,6 +72,82 @@ class Signals:
         return self.T_pm if self._poly_temperature is None else self._poly_temperature(self.T_pm)
 
 
+class FinderData(Protocol):
+    """What hooks read of the finder's block means (``trainer.diagnose.blocks.BlockData``)."""
+
+    @property
+    def t(self) -> np.ndarray: ...  # block centres (s)
+    @property
+    def n(self) -> int: ...
+    @property
+    def block_s(self) -> float: ...
+    @property
+    def starts(self) -> np.ndarray: ...  # each block's first sample time (s)
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def fine_step_s(self) -> float: ...
+    @property
+    def full_t(self) -> np.ndarray: ...
+    @property
+    def known_input_block(self) -> np.ndarray | None: ...
+    @property
+    def lattice_lsb_c(self) -> float | None: ...
+    @property
+    def plateaus(self) -> list[tuple[float, float]]: ...
+
+
+class FinderTerm(Protocol):
+    """What hooks read of one model term (``trainer.diagnose.model.Term``)."""
+
+    @property
+    def identifier(self) -> str: ...
+    @property
+    def nl(self) -> tuple[float, ...]: ...  # nonlinear values, in Finder.nonlinear order
+    @property
+    def fixed(self) -> bool: ...
+    @property
+    def offset(self) -> tuple[float, ...] | None: ...  # held linear values
+
+
+class FinderSegment(Protocol):
+    @property
+    def label(self) -> str: ...
+    @property
+    def start_s(self) -> float: ...
+    @property
+    def end_s(self) -> float: ...
+
+
+class FinderProfile(Protocol):
+    """What identifiability rules read of the temperature profile (``trainer.diagnose.profile.Profile``)."""
+
+    @property
+    def segments(self) -> Sequence[FinderSegment]: ...
+    @property
+    def reversals(self) -> int: ...
+    @property
+    def overlap_c(self) -> tuple[float, float] | None: ...
+    @property
+    def hold_s(self) -> float: ...
+    @property
+    def holds_after_ramp_s(self) -> float: ...
+    @property
+    def corners(self) -> int: ...
+    @property
+    def ramp_rates(self) -> Sequence[float]: ...
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def lattice_lsb_c(self) -> float | None: ...
+    @property
+    def known_input_varies(self) -> bool: ...
+    @property
+    def block_t_s(self) -> np.ndarray: ...
+    @property
+    def block_temp_c(self) -> np.ndarray: ...
+
+
 @dataclass
 class BlockDesign:
     """Work state of one design matrix on block means (``trainer.diagnose.model.build_design``).
@@ -78,7 +156,7 @@ class BlockDesign:
     a term with held linear parameters adds its known contribution to ``offset``.
     """
 
-    data: Any  # trainer.diagnose.blocks.BlockData
+    data: FinderData
     T: np.ndarray  # block temperature (dequantised when a term asks for it)
     rate: np.ndarray  # block dT/dt in degC/min
     T_pm: np.ndarray
@@ -112,6 +190,36 @@ class StartContext:
 
 
 @dataclass(frozen=True)
+class Region:
+    """Where something shows: a time range, annotated from the temperature profile."""
+
+    t_start_s: float
+    t_end_s: float
+    segment: str
+    temp_min_c: float
+    temp_max_c: float
+    branch: str
+    significance: Mapping[str, float | str]  # figures, or the selection step's evidence in words
+    kind: str = "residual"
+    note: str = ""
+
+    def to_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "t_start_s": round(self.t_start_s, 3),
+            "t_end_s": round(self.t_end_s, 3),
+            "segment": self.segment,
+            "temp_min_c": round(self.temp_min_c, 3),
+            "temp_max_c": round(self.temp_max_c, 3),
+            "branch": self.branch,
+            "significance": self.significance,
+            "kind": self.kind,
+        }
+        if self.note:
+            out["note"] = self.note
+        return out
+
+
+@dataclass(frozen=True)
 class WhereContext:
     """What a ``where`` hook reads: the block data and the finder's helpers, bound to the residual.
 
@@ -119,13 +227,13 @@ class WhereContext:
     deviation; ``region(a, b, significance, kind, note)`` is the finder's region over blocks ``a:b``.
     """
 
-    data: Any  # trainer.diagnose.blocks.BlockData
+    data: FinderData
     evidence: str  # the selection step's evidence for the effect
     window_z: Callable[[int, int], float]
-    region: Callable[[int, int, dict[str, Any], str, str], Any]
+    region: Callable[[int, int, Mapping[str, float | str], str, str], Region]
 
 
-def _no_bounds(data: Any) -> Bounds:
+def _no_bounds(data: FinderData) -> Bounds:
     return ()
 
 
@@ -154,21 +262,21 @@ class Finder:
 
     search: str | None = None
     nonlinear: tuple[tuple[str, bool], ...] = ()
-    bounds: Callable[[Any], Bounds] = _no_bounds
+    bounds: Callable[[FinderData], Bounds] = _no_bounds
     grid_points: int = 0
     max_terms: int = 1  # how many instances the finder may add
     # (term, term, block data): two instances coincide within the data's resolution (one instance)
-    same_instance: Callable[[Any, Any, Any], bool] | None = None
+    same_instance: Callable[[FinderTerm, FinderTerm, FinderData], bool] | None = None
     # BIC: parameters the term adds besides its linear columns (None: its free nonlinear ones)
     bic_nonlinear: int | None = None
-    columns: Callable[[Any, BlockDesign], list[tuple[str, np.ndarray]]] | None = None
-    proof_mass: Callable[[Any, np.ndarray, float], np.ndarray] | None = None  # (term, T, block_s)
+    columns: Callable[[FinderTerm, BlockDesign], list[tuple[str, np.ndarray]]] | None = None
+    proof_mass: Callable[[FinderTerm, np.ndarray, float], np.ndarray] | None = None  # (term, T, block_s)
     dequantize: bool = False  # its presence makes the model read the de-quantised temperature
-    fine_offset: Callable[[Any, np.ndarray], np.ndarray] | None = None  # held part on the fine grid
-    to_params: Callable[[Any, Mapping[str, float]], dict[str, float]] | None = None
+    fine_offset: Callable[[FinderTerm, np.ndarray], np.ndarray] | None = None  # held part on the fine grid
+    to_params: Callable[[FinderTerm, Mapping[str, float]], dict[str, float]] | None = None
     from_config: Callable[[Mapping[str, float], StartContext], StartingTerm] | None = None
     backbone: bool = False  # always in the model, its columns first (only bias_poly)
-    identifiability: Callable[[Any], Identifiability] | None = None  # from the temperature profile
+    identifiability: Callable[[FinderProfile], Identifiability] | None = None
     advice: str = ""
     confounders: tuple[str, ...] = ()
     # what separates it from a confounder: {other identifier: signature}, each pair written once
@@ -180,10 +288,10 @@ class Finder:
     allan_variance: Callable[[np.ndarray, float, float, Mapping[str, float]], np.ndarray] | None = None
     # special cases (see the docstring)
     event_time: bool = False
-    full_rate: Callable[[Mapping[str, float], Any, np.ndarray], np.ndarray | None] | None = None
-    where: Callable[[Mapping[str, float], WhereContext], list[Any]] | None = None
+    full_rate: Callable[[Mapping[str, float], FinderData, np.ndarray], np.ndarray | None] | None = None
+    where: Callable[[Mapping[str, float], WhereContext], list[Region]] | None = None
     absent_when_unidentifiable: bool = False
-    unused_note: Callable[[Any], str] | None = None
+    unused_note: Callable[[FinderData], str] | None = None
     config_note: str = ""  # remark when the user's simulation has it but the finder does not model it
     missing_note: str = ""  # remark when the user's simulation lacks it (white noise)
 
@@ -266,7 +374,7 @@ def rate_c_per_min(t: np.ndarray, T_die: np.ndarray) -> np.ndarray:
 
 
 def catalogue_params(
-    definition: Effect | NoiseTerm, term: Any, linear: Mapping[str, float]
+    definition: Effect | NoiseTerm, term: FinderTerm, linear: Mapping[str, float]
 ) -> dict[str, float]:
     """A fitted model term as catalogue parameters (catalogue order).
 

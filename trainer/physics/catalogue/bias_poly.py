@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
-from trainer.physics.catalogue.base import T_REF_C, BlockDesign, Effect, Finder, Param, Signals
+from trainer.physics.catalogue.base import T_REF_C, BlockDesign, Effect, Finder, FinderTerm, Param, Signals
 
 POLY_SCALE_C = 50.0  # finder columns ((T - 25) / 50)^k keep the GLS well conditioned
 
@@ -34,12 +33,12 @@ def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return polynomial(s.T_b, p["c0_mg"], p["c1_mg_per_c"], p["c2_mg_per_c2"], p["c3_mg_per_c3"])
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     u = (d.T_b - T_REF_C) / POLY_SCALE_C
     return [(f"c{k}", u**k) for k in range(4)]
 
 
-def _to_params(term: Any, lin: Mapping[str, float]) -> dict[str, float]:
+def _to_params(term: FinderTerm, lin: Mapping[str, float]) -> dict[str, float]:
     return {
         "c0_mg": lin["c0"],
         "c1_mg_per_c": lin["c1"] / POLY_SCALE_C,

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -11,8 +10,11 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderData,
+    FinderTerm,
     Identifiability,
     Param,
+    Region,
     Scenario,
     WhereContext,
 )
@@ -25,17 +27,17 @@ def step(t: np.ndarray, t_s: float, step_mg: float) -> np.ndarray:
     return np.where(t >= t_s, step_mg, 0.0)
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     B = d.data.block_s  # the block mean of a step inside the block is the fraction after it
     return [("step_mg", np.clip((d.data.t + 0.5 * B - term.nl[0]) / B, 0.0, 1.0))]
 
 
-def _same_instance(a: Any, b: Any, data: Any) -> bool:
+def _same_instance(a: FinderTerm, b: FinderTerm, data: FinderData) -> bool:
     """Two step times within ``RESOLUTION_BLOCKS`` blocks: the block means cannot tell them apart."""
     return bool(abs(a.nl[0] - b.nl[0]) <= RESOLUTION_BLOCKS * data.block_s)
 
 
-def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Region]:
     """The blocks around the step, with the residual's z on either side of it."""
     data = ctx.data
     j = int(np.clip(np.searchsorted(data.starts, p["t_s"]), 1, data.n - 1))

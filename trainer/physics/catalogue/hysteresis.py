@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -11,6 +10,8 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     Param,
     Scenario,
@@ -29,20 +30,20 @@ def branch_contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return branch_offset(s.T_pm, play_operator(s.T_pm, p["width_c"]), p["amp_mg"], p["width_c"])
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     width = term.nl[0]
     play = play_operator(d.T_pm, width)
     d.T_b = play  # the polynomial reads the play output (catalogue: T_b)
     return [("amp_mg", branch_offset(d.T_pm, play, 1.0, width))]
 
 
-def reversal_identifiability(p: Any) -> Identifiability:
+def reversal_identifiability(p: FinderProfile) -> Identifiability:
     """A branch offset needs both branches over a common range (shared with ``hysteresis_offset``)."""
-    overlap_span = 0.0 if p.overlap_c is None else p.overlap_c[1] - p.overlap_c[0]
-    if p.reversals >= 1 and overlap_span >= 3.0:
+    overlap = p.overlap_c
+    if p.reversals >= 1 and overlap is not None and overlap[1] - overlap[0] >= 3.0:
         return Identifiability(
             True,
-            f"heating and cooling both cover {p.overlap_c[0]:.1f}..{p.overlap_c[1]:.1f} degC",
+            f"heating and cooling both cover {overlap[0]:.1f}..{overlap[1]:.1f} degC",
             "" if p.holds_after_ramp_s >= 600 else "a hold at the turning point separates it from a lag",
         )
     return Identifiability(

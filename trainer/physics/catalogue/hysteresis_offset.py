@@ -7,16 +7,14 @@ branches are the polynomial shifted up and down, the form that fits real chamber
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from trainer.physics.catalogue.base import BlockDesign, Effect, Finder, Param, Scenario
+from trainer.physics.catalogue.base import BlockDesign, Effect, Finder, FinderTerm, Param, Scenario
 from trainer.physics.catalogue.hysteresis import branch_contribution, branch_offset, reversal_identifiability
 from trainer.physics.thermal import play_operator
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     width = term.nl[0]
     return [("amp_mg", branch_offset(d.T_pm, play_operator(d.T_pm, width), 1.0, width))]
 

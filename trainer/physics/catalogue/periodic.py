@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -12,8 +11,11 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderData,
+    FinderTerm,
     Identifiability,
     Param,
+    Region,
     Scenario,
     WhereContext,
 )
@@ -36,7 +38,7 @@ def periodic_columns(t: np.ndarray, period_s: float, block_s: float) -> tuple[np
     return gain * np.sin(w * t), gain * np.cos(w * t)
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     s, c = periodic_columns(d.data.t, term.nl[0], d.data.block_s)
     if term.offset is not None:  # a fast component fitted on the fine grid: a known contribution
         amp, phase = term.offset
@@ -45,23 +47,25 @@ def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("sin", s), ("cos", c)]
 
 
-def _fine_offset(term: Any, t: np.ndarray) -> np.ndarray:
+def _fine_offset(term: FinderTerm, t: np.ndarray) -> np.ndarray:
+    if term.offset is None:
+        raise ValueError("periodic: the fine-grid part is that of a held component (term.offset)")
     amp, phase = term.offset
     return amp * np.sin(2 * math.pi * t / term.nl[0] + phase)
 
 
-def _same_instance(a: Any, b: Any, data: Any) -> bool:
+def _same_instance(a: FinderTerm, b: FinderTerm, data: FinderData) -> bool:
     """Two frequencies within ``1 / duration`` (the Fourier resolution of the run) are one component."""
     return bool(abs(1.0 / a.nl[0] - 1.0 / b.nl[0]) <= 1.0 / data.duration_s)
 
 
-def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Region]:
     """The whole run, with the selection's evidence."""
     note = f"period {p['period_s']:.4g} s, whole run"
     return [ctx.region(0, ctx.data.n, {"evidence": ctx.evidence}, REGION_KIND, note)]
 
 
-def _to_params(term: Any, lin: Mapping[str, float]) -> dict[str, float]:
+def _to_params(term: FinderTerm, lin: Mapping[str, float]) -> dict[str, float]:
     if term.offset is not None:
         amp, phase = term.offset
     else:

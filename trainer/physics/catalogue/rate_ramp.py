@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
 from trainer.physics.catalogue.base import (
     BlockDesign,
     Finder,
+    FinderData,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     NoiseTerm,
     Param,
@@ -21,11 +23,11 @@ def synthesize(p: Mapping[str, float], n: int, dt_s: float, rng: np.random.Gener
     return p["r_mg_per_s"] * (np.arange(n) * dt_s)
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("r_mg_per_s", d.data.t)]
 
 
-def _identifiability(p: Any) -> Identifiability:
+def _identifiability(p: FinderProfile) -> Identifiability:
     monotone = p.reversals == 0 and p.hold_s < 0.1 * p.duration_s
     return Identifiability(
         not monotone,
@@ -36,7 +38,7 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
-def _full_rate(lin: Mapping[str, float], data: Any, T_pm: np.ndarray) -> np.ndarray:
+def _full_rate(lin: Mapping[str, float], data: FinderData, T_pm: np.ndarray) -> np.ndarray:
     return lin["r_mg_per_s"] * data.full_t
 
 

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-from trainer.physics.catalogue.base import Identifiability
+from trainer.physics.catalogue.base import FinderProfile, Identifiability
 
 
-def rate_changes(p: Any) -> Identifiability:
+def rate_changes(p: FinderProfile) -> Identifiability:
     """``thermal_lag`` and ``temp_rate``: the heating rate must change (corners, two rates).
 
     On one constant-rate ramp both are a constant temperature offset the polynomial absorbs.
@@ -28,6 +26,6 @@ def rate_changes(p: Any) -> Identifiability:
     return Identifiability(False, reason, "ramp at two different rates, or add a hold after the ramp")
 
 
-def whole_run(p: Any) -> Identifiability:
+def whole_run(p: FinderProfile) -> Identifiability:
     """Noise terms: any recording shows them."""
     return Identifiability(True, f"{p.duration_s:.0f} s of data")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -12,6 +11,9 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderData,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     Param,
     Signals,
@@ -31,14 +33,14 @@ def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return scale_error(g, s.T_pm, p["sf_ppm_per_c"])
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     g = d.data.known_input_block
     if g is None:  # a zero input: nothing to fit (the configured value is kept)
         return []
     return [("sf_ppm_per_c", g * 1e-6 * (d.T_pm - T_REF_C))]
 
 
-def _full_rate(lin: Mapping[str, float], data: Any, T_pm: np.ndarray) -> np.ndarray | None:
+def _full_rate(lin: Mapping[str, float], data: FinderData, T_pm: np.ndarray) -> np.ndarray | None:
     """The fitted tempco on the known input (drift() runs at a zero input)."""
     if data.known_input_block is None or "sf_ppm_per_c" not in lin:
         return None
@@ -56,7 +58,7 @@ def _from_config(p: Mapping[str, float], ctx: StartContext) -> StartingTerm:
     return StartingTerm((p["sf_ppm_per_c"],), fixed=True, note=note)
 
 
-def _identifiability(p: Any) -> Identifiability:
+def _identifiability(p: FinderProfile) -> Identifiability:
     if p.known_input_varies:
         return Identifiability(True, "the known true input changes (a second orientation)")
     return Identifiability(

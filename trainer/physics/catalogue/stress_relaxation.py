@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -11,6 +10,8 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     Param,
     Scenario,
@@ -28,11 +29,11 @@ def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return creep(s.T_die, p["gain_mg_per_c"], p["tau_s"], sample_period(s.t))
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     return [("gain_mg_per_c", d.T - lowpass(d.T, term.nl[0], d.data.block_s))]
 
 
-def _identifiability(p: Any) -> Identifiability:
+def _identifiability(p: FinderProfile) -> Identifiability:
     if p.duration_s >= 1200.0 and (p.holds_after_ramp_s >= 600.0 or p.reversals >= 1):
         return Identifiability(
             True,

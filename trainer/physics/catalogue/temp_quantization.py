@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -11,6 +10,9 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderData,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     Param,
     Scenario,
@@ -24,7 +26,7 @@ def quantize(temp_c: np.ndarray, lsb_c: float) -> np.ndarray:
     return lsb_c * np.round(np.asarray(temp_c, dtype=np.float64) / lsb_c)
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     # In a quantised hold the true temperature is only known within +-LSB/2: an unknown
     # offset per plateau (the polynomial's slope times that temperature error).
     t = d.data.t
@@ -43,7 +45,7 @@ def _from_config(p: Mapping[str, float], ctx: StartContext) -> StartingTerm:
     return StartingTerm((ctx.lattice_lsb_c,), fixed=True)
 
 
-def _identifiability(p: Any) -> Identifiability:
+def _identifiability(p: FinderProfile) -> Identifiability:
     if p.lattice_lsb_c is not None:
         return Identifiability(
             True, f"the thermometer column lies on a {p.lattice_lsb_c:g} degC lattice (a staircase)"
@@ -53,7 +55,7 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
-def _unused_note(data: Any) -> str:
+def _unused_note(data: FinderData) -> str:
     if data.lattice_lsb_c is None:
         return ""
     return (

@@ -8,7 +8,6 @@ derivative: a compensator computes it from a noisy, quantised thermometer exactl
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -17,6 +16,7 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderTerm,
     Param,
     Scenario,
     Signals,
@@ -46,14 +46,14 @@ def _contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     return rate_term(rate, p["k_mg_per_c_per_min"])
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     tau = term.nl[0] if term.nl else 0.0
     if tau > 0:
         return [("k_mg_per_c_per_min", filtered_rate(d.T, tau, d.data.block_s))]
     return [("k_mg_per_c_per_min", d.rate)]
 
 
-def _to_params(term: Any, linear: Mapping[str, float]) -> dict[str, float]:
+def _to_params(term: FinderTerm, linear: Mapping[str, float]) -> dict[str, float]:
     """The instantaneous form (``tau_s = 0``, the default) is written without ``tau_s``."""
     params = {"k_mg_per_c_per_min": linear["k_mg_per_c_per_min"]}
     if term.nl and term.nl[0] > 0:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -12,8 +11,11 @@ from trainer.physics.catalogue.base import (
     BlockDesign,
     Effect,
     Finder,
+    FinderProfile,
+    FinderTerm,
     Identifiability,
     Param,
+    Region,
     Scenario,
     WhereContext,
 )
@@ -29,7 +31,7 @@ def settling(t: np.ndarray, amp_mg: float, tau_s: float) -> np.ndarray:
     return amp_mg * np.exp(-t / tau_s)
 
 
-def _columns(term: Any, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
+def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
     tau = term.nl[0]
     x = d.data.block_s / (2.0 * tau)  # exact block mean of the exponential
     return [("amp_mg", np.exp(-d.data.t / tau) * (math.sinh(x) / x if x > 1e-8 else 1.0))]
@@ -42,7 +44,7 @@ def absorbed_taus(t_s: np.ndarray, temp_c: np.ndarray) -> list[float]:
     return [float(tau) for tau in taus if absorbed_fraction(temp_c, np.exp(-t_s / tau)) >= ABSORBED]
 
 
-def _identifiability(p: Any) -> Identifiability:
+def _identifiability(p: FinderProfile) -> Identifiability:
     """A soak at power-on shows a warm-up; without one, it must not be a function of temperature:
     when the bias cubic absorbs it at most plausible time constants it cannot be named."""
     soak = bool(p.segments and p.segments[0].label == "soak")
@@ -67,7 +69,7 @@ def _identifiability(p: Any) -> Identifiability:
     )
 
 
-def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Any]:
+def _where(p: Mapping[str, float], ctx: WhereContext) -> list[Region]:
     """The first three time constants after power-on."""
     data = ctx.data
     b = int(np.clip(np.searchsorted(data.starts, WARMUP_TIME_CONSTANTS * p["tau_s"]), 2, data.n))
