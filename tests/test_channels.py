@@ -338,19 +338,14 @@ def test_imu_module_on_cortex_m4(imu: dict[str, Path], tmp_path: Path) -> None:
     assert all(sum(r.mismatches) == 0 and r.state_equal for r in result.runs)
 
 
-def test_import_real_run_keeps_accelerometer_and_gyroscope(tmp_path: Path) -> None:
-    source = (
-        Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
-    )
-    if not source.is_file():
-        pytest.skip("the bundled real run is not next to this checkout")
+def test_import_real_run_keeps_accelerometer_and_gyroscope(tmp_path: Path, real_run: Path) -> None:
     out = tmp_path / "real.npz"
     assert (
-        trainer_main(["import", str(source), "--preset", "tofupilot", "--channels", "all", "-o", str(out)])
+        trainer_main(["import", str(real_run), "--preset", "tofupilot", "--channels", "all", "-o", str(out)])
         == 0
     )
     rec = read_recording(out)
-    raw = np.genfromtxt(source, delimiter="\t", names=True, max_rows=50)
+    raw = np.genfromtxt(real_run, delimiter="\t", names=True, max_rows=50)
     np.testing.assert_allclose(rec.columns["gyro0_x_dps"][:50], raw["imugyrox"] * 180 / np.pi, rtol=1e-12)
     np.testing.assert_allclose(rec.columns["accel0_y_mg"][:50], raw["imuaccy"] / 9.80665 * 1000, rtol=1e-12)
     assert "accel_x_mg" not in rec.columns  # the channels replace the older spelling

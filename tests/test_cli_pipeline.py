@@ -12,14 +12,23 @@ import pytest
 from trainer.checkpoint import load_model
 from trainer.cli import main
 from trainer.data.recording_io import read_recording
+from trainer.errors import run_cli
 from trainer.methods import name_of
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    """Run the real entry point in a fresh interpreter, as a user would."""
-    return subprocess.run(
+def _process(*args: str) -> tuple[int, str]:
+    """Run the real entry point in a fresh interpreter, as a user would (exit code, stderr)."""
+    done = subprocess.run(
         [sys.executable, "-m", "trainer.cli", *args], capture_output=True, text=True, timeout=300
     )
+    return done.returncode, done.stderr
+
+
+def _in_process(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
+    """The entry point's ``run_cli(main)`` in this interpreter (no start-up): exit code, stderr."""
+    capsys.readouterr()
+    code = run_cli(main, list(args))
+    return code, capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
@@ -104,11 +113,12 @@ def test_fit_never_reads_ground_truth(recordings: tuple[Path, Path], tmp_path: P
     np.testing.assert_array_equal(a.slopes_mg_per_c, b.slopes_mg_per_c)
 
 
-def _assert_clean_failure(result: subprocess.CompletedProcess[str], *fragments: str) -> None:
-    assert result.returncode == 2, result.stderr
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
-    assert "Traceback" not in result.stderr
+def _assert_clean_failure(result: tuple[int, str], *fragments: str) -> None:
+    code, stderr = result
+    assert code == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), stderr
+    assert "Traceback" not in stderr
     for fragment in fragments:
         assert fragment in lines[0]
 
@@ -116,39 +126,47 @@ def _assert_clean_failure(result: subprocess.CompletedProcess[str], *fragments: 
 def test_fit_missing_recording(tmp_path: Path) -> None:
     out = tmp_path / "m.pt"
     _assert_clean_failure(
-        _cli("fit", "--method", "pla", str(tmp_path / "nope.csv"), "-o", str(out)), "nope.csv"
+        _process("fit", "--method", "pla", str(tmp_path / "nope.csv"), "-o", str(out)), "nope.csv"
     )
     assert not out.exists()
 
 
-def test_fit_bad_recording_leaves_no_model(tmp_path: Path) -> None:
+def test_fit_bad_recording_leaves_no_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,temp_c,accel_mg\n0.0,20.0,1.0\n0.005,abc,1.0\n")
     out = tmp_path / "m.pt"
-    _assert_clean_failure(_cli("fit", "--method", "poly3", str(bad), "-o", str(out)), "bad.csv", "temp_c")
+    _assert_clean_failure(
+        _in_process(capsys, "fit", "--method", "poly3", str(bad), "-o", str(out)), "bad.csv", "temp_c"
+    )
     assert not out.exists()
     assert list(tmp_path.iterdir()) == [bad]
 
 
 def test_fit_unknown_method_is_a_usage_error(tmp_path: Path) -> None:
-    _assert_clean_failure(_cli("fit", "--method", "magic", "x.csv", "-o", str(tmp_path / "m.pt")), "--method")
+    _assert_clean_failure(
+        _process("fit", "--method", "magic", "x.csv", "-o", str(tmp_path / "m.pt")), "--method"
+    )
 
 
-def test_evaluate_rejects_a_foreign_model_file(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+def test_evaluate_rejects_a_foreign_model_file(
+    recordings: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     fake = tmp_path / "model.pt"
     fake.write_bytes(b"this is not a checkpoint")
     out_dir = tmp_path / "eval"
     _assert_clean_failure(
-        _cli("evaluate", str(fake), str(recordings[1]), "--out-dir", str(out_dir)), "model.pt"
+        _in_process(capsys, "evaluate", str(fake), str(recordings[1]), "--out-dir", str(out_dir)), "model.pt"
     )
     assert not out_dir.exists()
 
 
-def test_evaluate_negative_smoothing_is_rejected(recordings: tuple[Path, Path], tmp_path: Path) -> None:
+def test_evaluate_negative_smoothing_is_rejected(
+    recordings: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     model = tmp_path / "m.pt"
     assert main(["fit", "--method", "pla", str(recordings[0]), "-o", str(model)]) == 0
     _assert_clean_failure(
-        _cli("evaluate", str(model), str(recordings[1]), "--smoothing", "-1"), "--smoothing"
+        _in_process(capsys, "evaluate", str(model), str(recordings[1]), "--smoothing", "-1"), "--smoothing"
     )
 
 
@@ -263,8 +281,18 @@ def test_fit_dlstm_from_the_cli(recordings: tuple[Path, Path], tmp_path: Path) -
     assert out.read_bytes() == first
 
 
-def test_fit_dlstm_rejects_bad_settings(recordings: tuple[Path, Path], tmp_path: Path) -> None:
-    result = _cli(
-        "fit", "--method", "dlstm", str(recordings[0]), "-o", str(tmp_path / "m.pt"), "--population", "0"
+def test_fit_dlstm_rejects_bad_settings(
+    recordings: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result = _in_process(
+        capsys,
+        "fit",
+        "--method",
+        "dlstm",
+        str(recordings[0]),
+        "-o",
+        str(tmp_path / "m.pt"),
+        "--population",
+        "0",
     )
     _assert_clean_failure(result, "--population")

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import itertools
 import json
-import subprocess
-import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 
+from codegen.cli import main as codegen_main
 from trainer.baselines.poly3 import CubicPolynomial
+from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
-from trainer.errors import UserError
+from trainer.errors import UserError, run_cli
 from trainer.scoring.crossval import (
     UNCOMPENSATED,
     cross_validate,
@@ -167,13 +169,26 @@ def test_the_rule_prefers_the_simpler_of_two_equal_candidates() -> None:
     assert choose(cv)[0] == "poly2"
 
 
-def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "trainer.cli", *args], cwd=cwd, capture_output=True, text=True, check=False
-    )
+class Run(NamedTuple):
+    """What a command left: its exit code and its captured output."""
+
+    returncode: int
+    stdout: str
+    stderr: str
 
 
-def test_fit_auto_and_export_of_an_uncompensated_channel(tmp_path: Path) -> None:
+def _run(main: Callable[[list[str] | None], int], *args: str, capsys: pytest.CaptureFixture[str]) -> Run:
+    """One command in-process through its entry point's ``run_cli`` (exit code, stdout, stderr)."""
+    capsys.readouterr()
+    code = run_cli(main, list(args))
+    out, err = capsys.readouterr()
+    return Run(code, out, err)
+
+
+def test_fit_auto_and_export_of_an_uncompensated_channel(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
     temp = profile_temperature()
     rng = np.random.default_rng(3)
     d = temp - 25.0
@@ -186,6 +201,7 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(tmp_path: Path) -> None
     columns["accel_mg"] = columns["accel0_z_mg"]
     write_recording(Recording(columns, {"sample_rate_hz": "2.0"}, "imu"), tmp_path / "imu.csv")
     fit = _run(
+        trainer_main,
         "fit",
         "--method",
         "auto",
@@ -196,53 +212,76 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(tmp_path: Path) -> None
         "all",
         "-o",
         "m",
-        cwd=tmp_path,
+        capsys=capsys,
     )
     assert fit.returncode == 0, fit.stderr
     assert "auto: chose none" in fit.stdout and "deg/s" in fit.stdout
     index = json.loads((tmp_path / "m" / "channels.json").read_text())
     chosen = {c["channel"]: c["auto_chose"] for c in index["channels"]}
     assert chosen["gyro0_x"] == NONE and chosen["accel0_z"] != NONE
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "codegen.cli",
-            "export",
-            "m",
-            "--channels",
-            "all",
-            "--format",
-            "px4-params",
-            "--device-id",
-            "accel0=1,gyro0=2",
-            "-o",
-            "params",
-        ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        check=False,
+    out = _run(
+        codegen_main,
+        "export",
+        "m",
+        "--channels",
+        "all",
+        "--format",
+        "px4-params",
+        "--device-id",
+        "accel0=1,gyro0=2",
+        "-o",
+        "params",
+        capsys=capsys,
     )
     assert out.returncode == 0, out.stderr
     assert "gyro0_x is exported as the identity" in out.stdout
     params = (tmp_path / "params" / "px4_thermal.params").read_text()
     assert "\tTC_G_ENABLE\t0\t" in params and "\tTC_A_ENABLE\t1\t" in params
     signoff = _run(
-        "report", "m/accel0_z.pt", "m/gyro0_x.pt", "--recording", "imu.csv", "-o", "so", cwd=tmp_path
+        trainer_main,
+        "report",
+        "m/accel0_z.pt",
+        "m/gyro0_x.pt",
+        "--recording",
+        "imu.csv",
+        "-o",
+        "so",
+        capsys=capsys,
     )
     assert signoff.returncode in (0, 1), signoff.stderr
     text = (tmp_path / "so" / "report.md").read_text()
     assert text.count("### Cross-validation") == 2 and "cross-validated over 3 thermal segments" in text
     assert "worse than uncompensated" not in text  # auto never ships a channel CV says is made worse
-    bad = _run("fit", "--method", "poly3", "--candidates", "none", "imu.csv", "-o", "x.pt", cwd=tmp_path)
+    bad = _run(
+        trainer_main,
+        "fit",
+        "--method",
+        "poly3",
+        "--candidates",
+        "none",
+        "imu.csv",
+        "-o",
+        "x.pt",
+        capsys=capsys,
+    )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--candidates applies" in bad.stderr
 
 
-def test_compare_without_validation_cross_validates(tmp_path: Path) -> None:
+def test_compare_without_validation_cross_validates(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
     write_recording(chamber_run(), tmp_path / "run.csv")
     out = _run(
-        "compare", "run.csv", "--methods", "poly3,pla,dlstm", "--out-dir", "cv", "--quiet", cwd=tmp_path
+        trainer_main,
+        "compare",
+        "run.csv",
+        "--methods",
+        "poly3,pla,dlstm",
+        "--out-dir",
+        "cv",
+        "--quiet",
+        capsys=capsys,
     )
     assert out.returncode == 0, out.stderr
     data = json.loads((tmp_path / "cv" / "crossval.json").read_text())
@@ -250,5 +289,5 @@ def test_compare_without_validation_cross_validates(tmp_path: Path) -> None:
     assert len(data["segments"]) == 3
     report = (tmp_path / "cv" / "report.md").read_text()
     assert "| uncompensated |" in report and "not cross-validated" in report
-    refused = _run("compare", "run.csv", "--inject", "steps", "--out-dir", "x", cwd=tmp_path)
+    refused = _run(trainer_main, "compare", "run.csv", "--inject", "steps", "--out-dir", "x", capsys=capsys)
     assert refused.returncode == 2 and "Traceback" not in refused.stderr and not (tmp_path / "x").exists()

@@ -178,17 +178,13 @@ def test_errors_are_one_line_and_leave_nothing(tmp_path: Path, capsys: pytest.Ca
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "keep", "rec.npz"]
 
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
-
-
 @pytest.mark.slow
-@pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
-def test_real_chamber_run() -> None:
+def test_real_chamber_run(real_run: Path) -> None:
     """The real run: the one-sample jump visible in the raw data is found where it is, and the
     augmented model predicts the held-out tail better than the polynomial."""
     from trainer.data.importer import import_foreign, options_with_preset
 
-    rec = import_foreign(REAL, options_with_preset("tofupilot"))
+    rec = import_foreign(real_run, options_with_preset("tofupilot"))
     t, a = rec.time_s, rec.accel_mg
     # independent look at the raw data: the largest jump between 20-sample means 10 s apart
     means = np.convolve(a, np.ones(20) / 20, mode="valid")

@@ -61,16 +61,12 @@ def test_summary_and_report(huge_creep: Diagnosis) -> None:
     assert "as fitted (GLS" not in report and "| heating |" in report
 
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
-
-
 @pytest.mark.slow  # about 20 s alone, up to 45 s on a busy machine
-@pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
-def test_real_run_names_no_implausible_effect() -> None:
+def test_real_run_names_no_implausible_effect(real_run: Path) -> None:
     from trainer.data.importer import import_foreign, options_with_preset
 
     started = time.perf_counter()
-    d = diagnose(import_foreign(REAL, options_with_preset("tofupilot")))
+    d = diagnose(import_foreign(real_run, options_with_preset("tofupilot")))
     assert time.perf_counter() - started < 120.0
     assert all(not e.flags for e in d.left_out if e.peak_visible_mg is not None)
     assert any(a.implausible is not None for a in d.ambiguous)

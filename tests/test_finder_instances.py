@@ -135,17 +135,13 @@ def test_a_slow_period_leaves_no_harmonic_for_the_fast_search() -> None:
     assert sorted(round(p["period_s"]) for p in found) == [150, 600]
 
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
-
-
 @pytest.mark.slow
-@pytest.mark.skipif(not REAL.is_file(), reason="real chamber recording not available")
-def test_real_run_keeps_its_findings_when_effects_are_added() -> None:
+def test_real_run_keeps_its_findings_when_effects_are_added(real_run: Path) -> None:
     """The bundled real run (z axis) plus a 2.4 mg step and a 0.9 mg, 300 s periodic: every finding of
     the clean run is still there (same effect, same instant or period) and both additions are named."""
     from trainer.data.importer import import_foreign, options_with_preset
 
-    rec = import_foreign(REAL, options_with_preset("tofupilot"))
+    rec = import_foreign(real_run, options_with_preset("tofupilot"))
     clean = diagnose(rec, holdout_fraction=0.0)
     t = rec.time_s - rec.time_s[0]
     duration_s = float(t[-1])

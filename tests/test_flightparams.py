@@ -24,7 +24,6 @@ from trainer.errors import UserError
 
 G = 9.80665  # m/s^2 per g
 F32 = np.float32
-REAL = Path(__file__).resolve().parents[2] / "shared/data/real/tofupilot_imu_chamber_cycle.tsv"
 DEVICE_ID = 2490378
 
 
@@ -249,11 +248,9 @@ def test_a_one_interval_pla_is_a_line(tmp_path: Path) -> None:
     assert params["INS_TCAL3_ACC2_X"] == 0.0 and params["INS_TCAL3_ACC3_X"] == 0.0
 
 
-def test_real_run_parameters_match_the_model(tmp_path: Path) -> None:
-    if not REAL.is_file():
-        pytest.skip(f"real recording not found at {REAL}")
+def test_real_run_parameters_match_the_model(tmp_path: Path, real_run: Path) -> None:
     rec = tmp_path / "real.npz"
-    assert trainer_main(["import", str(REAL), "--preset", "tofupilot", "-o", str(rec)]) == 0
+    assert trainer_main(["import", str(real_run), "--preset", "tofupilot", "-o", str(rec)]) == 0
     model_path = fit(rec, tmp_path / "poly3.pt")
     px4 = read_px4_params(export(tmp_path / "px4", "px4-params", model_path, "--device-id", str(DEVICE_ID)))
     ap = read_ardupilot_parm(export(tmp_path / "ap", "ardupilot-parm", model_path))

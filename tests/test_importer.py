@@ -13,17 +13,13 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.errors import UserError, run_cli
 
-REAL = Path(__file__).resolve().parents[2] / "shared/data/real/tofupilot_imu_chamber_cycle.tsv"
-
 
 @pytest.fixture(scope="module")
-def real_raw() -> dict[str, np.ndarray]:
+def real_raw(real_run: Path) -> dict[str, np.ndarray]:
     """The real file read independently of the importer (column name -> values)."""
-    if not REAL.is_file():
-        pytest.skip(f"real recording not found at {REAL} (shared data not checked out)")
-    names = REAL.read_text().splitlines()[0].split("\t")
-    timestamps = np.loadtxt(REAL, delimiter="\t", skiprows=1, usecols=0, dtype=np.int64)
-    values = np.loadtxt(REAL, delimiter="\t", skiprows=1)
+    names = real_run.read_text().splitlines()[0].split("\t")
+    timestamps = np.loadtxt(real_run, delimiter="\t", skiprows=1, usecols=0, dtype=np.int64)
+    values = np.loadtxt(real_run, delimiter="\t", skiprows=1)
     raw = {name: values[:, i] for i, name in enumerate(names)}
     raw["timestamp"] = timestamps  # exact integers (microseconds)
     return raw
@@ -49,8 +45,8 @@ def import_error(output: Path, *args: str | Path) -> str:
 # --------------------------------------------------------------------------- the real file
 
 
-def test_real_file_with_preset(tmp_path: Path, real_raw: dict[str, np.ndarray]) -> None:
-    rec = run_import(REAL, "--preset", "tofupilot", "-o", tmp_path / "real.csv")
+def test_real_file_with_preset(tmp_path: Path, real_run: Path, real_raw: dict[str, np.ndarray]) -> None:
+    rec = run_import(real_run, "--preset", "tofupilot", "-o", tmp_path / "real.csv")
     assert len(rec) == 8400
     assert rec.temp_c.min() == pytest.approx(-17.6, abs=0.05)
     assert rec.temp_c.max() == pytest.approx(74.0, abs=0.05)
@@ -66,25 +62,27 @@ def test_real_file_with_preset(tmp_path: Path, real_raw: dict[str, np.ndarray]) 
     assert rec.time_s[-1] == pytest.approx(span_s, abs=1e-6)
     np.testing.assert_allclose(np.diff(rec.time_s), span_s / 8399, rtol=1e-5)
     assert rec.meta["license"] == "MIT (c) 2024 tofupilot, see LICENSE.tofupilot"
-    assert rec.meta["source"] == REAL.name
+    assert rec.meta["source"] == real_run.name
     assert "retimed_from" in rec.meta
     assert float(rec.meta["sample_rate_hz"]) == pytest.approx(8399 / span_s, rel=1e-9)
     first_line = (tmp_path / "real.csv").read_text().splitlines()[0]
     assert first_line.startswith("# sample_rate_hz=")
 
 
-def test_real_file_breaks_the_jitter_rule_at_the_first_late_step(tmp_path: Path, real_raw: dict) -> None:
+def test_real_file_breaks_the_jitter_rule_at_the_first_late_step(
+    tmp_path: Path, real_run: Path, real_raw: dict
+) -> None:
     steps = np.diff(real_raw["timestamp"])
     median = np.median(steps)
     first_late_step = int(np.flatnonzero(np.abs(steps - median) > 0.01 * median)[0])
     expected_line = first_late_step + 3  # header is line 1, row i is line i + 2, step i ends at row i + 1
-    message = import_error(tmp_path / "real.csv", REAL, "--preset", "tofupilot", "--resample", "none")
+    message = import_error(tmp_path / "real.csv", real_run, "--preset", "tofupilot", "--resample", "none")
     assert f"line {expected_line}, column 'timestamp'" in message
     assert "--resample" in message
 
 
-def test_real_file_resampled_linearly(tmp_path: Path, real_raw: dict) -> None:
-    rec = run_import(REAL, "--preset", "tofupilot", "--resample", "auto", "-o", tmp_path / "real.npz")
+def test_real_file_resampled_linearly(tmp_path: Path, real_run: Path, real_raw: dict) -> None:
+    rec = run_import(real_run, "--preset", "tofupilot", "--resample", "auto", "-o", tmp_path / "real.npz")
     assert len(rec) == 8400
     assert "resampled_from" in rec.meta
     source_time = (real_raw["timestamp"] - real_raw["timestamp"][0]) * 1e-6
@@ -96,8 +94,10 @@ def test_real_file_resampled_linearly(tmp_path: Path, real_raw: dict) -> None:
     assert np.all((rec.temp_c >= low) & (rec.temp_c <= high))
 
 
-def test_real_file_with_gravity_removed(tmp_path: Path, real_raw: dict) -> None:
-    rec = run_import(REAL, "--preset", "tofupilot", "--remove-gravity", "nominal", "-o", tmp_path / "g.csv")
+def test_real_file_with_gravity_removed(tmp_path: Path, real_run: Path, real_raw: dict) -> None:
+    rec = run_import(
+        real_run, "--preset", "tofupilot", "--remove-gravity", "nominal", "-o", tmp_path / "g.csv"
+    )
     expected = real_raw["imu.acc.z"] / STANDARD_GRAVITY * 1000 + 1000.0  # -1 g axis: add 1000 mg back
     np.testing.assert_allclose(rec.accel_mg, expected, rtol=0, atol=1e-6)
     np.testing.assert_allclose(rec.columns["accel_z_mg"].mean(), -968, atol=30)  # extra axes keep gravity
@@ -358,8 +358,8 @@ def test_cli_exit_code_and_one_line_message(tmp_path: Path, capsys: pytest.Captu
     assert err.count("\n") == 1
 
 
-def test_another_preset_column_is_named_as_its_own_channel(tmp_path: Path) -> None:
+def test_another_preset_column_is_named_as_its_own_channel(tmp_path: Path, real_run: Path) -> None:
     """--accel imu.acc.x with the tofupilot preset is the x channel, not the preset's default z."""
-    rec = run_import(REAL, "--preset", "tofupilot", "--accel", "imu.acc.x", "-o", tmp_path / "x.csv")
+    rec = run_import(real_run, "--preset", "tofupilot", "--accel", "imu.acc.x", "-o", tmp_path / "x.csv")
     assert rec.meta["channel"] == "accel0_x" and rec.meta["sensor"] == "tofupilot-imu-acc-x"
     np.testing.assert_array_equal(rec.accel_mg, rec.columns["accel_x_mg"])

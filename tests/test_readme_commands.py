@@ -55,10 +55,10 @@ def test_every_readme_command_parses(line: str) -> None:
         assert program in ("mkdir", "make"), f"unknown program in the README: {line!r}"
 
 
-@pytest.mark.skipif(not doc_numbers.REAL.is_file(), reason="real chamber recording not available")
-def test_quoted_cheap_numbers_match_a_fresh_run() -> None:
+def test_quoted_cheap_numbers_match_a_fresh_run(real_run: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The cubic and PLA figures of the real run quoted in README/docs (a few seconds); the physics
     ones need ``--slow`` (below)."""
+    monkeypatch.setattr(doc_numbers, "REAL", real_run)
     values = doc_numbers.measure(doc_numbers.FORMATS, slow=False)
     assert values, "nothing measured"
     quoted = 0
@@ -74,6 +74,8 @@ def test_quoted_cheap_numbers_match_a_fresh_run() -> None:
 
 
 @pytest.mark.slow  # the physics fits: about a minute of CPU
-@pytest.mark.skipif(not doc_numbers.REAL.is_file(), reason="real chamber recording not available")
-def test_quoted_numbers_match_a_fresh_run_including_physics(capsys: pytest.CaptureFixture[str]) -> None:
+def test_quoted_numbers_match_a_fresh_run_including_physics(
+    real_run: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(doc_numbers, "REAL", real_run)
     assert doc_numbers.main(["--check", "--slow"]) == 0, capsys.readouterr().out

@@ -104,7 +104,6 @@ def test_a_bad_thresholds_file_is_one_line_and_writes_nothing(
 
 
 # ------------------------------------------------------------ a channel of a multi-channel recording
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 HELD_OUT = 0.3  # first:0.3: the first cooling, which the cubic of gyro0_x fitted on the rest makes worse
 
 
@@ -117,13 +116,11 @@ def _trailing_mean_about_mean(x: np.ndarray, n: int) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def imu(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+def imu(tmp_path_factory: pytest.TempPathFactory, real_run: Path) -> dict[str, Path]:
     """The real run with all six channels, and a cubic of gyro0_x fitted on its last 70 %."""
-    if not REAL.is_file():
-        pytest.skip("the bundled real run is not next to this checkout")
     folder = tmp_path_factory.mktemp("imu")
     rec, train, models = folder / "imu.csv", folder / "train.csv", folder / "models"
-    importing = ["import", str(REAL), "--preset", "tofupilot", "--channels", "all", "-o", str(rec)]
+    importing = ["import", str(real_run), "--preset", "tofupilot", "--channels", "all", "-o", str(rec)]
     assert trainer_main(importing) == 0
     from trainer.data.holdout import parse_holdout, split
     from trainer.data.recording_io import write_recording
