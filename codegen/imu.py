@@ -33,14 +33,14 @@ import numpy as np
 
 from codegen import __version__
 from codegen.export import LoadedModel, load_for_codegen
+from codegen.families.cubic import QPoly3
+from codegen.families.pla import QPla
 from codegen.golden_select import golden_for
 from codegen.quantize import (
     DEFAULT_ACCEL_LIMIT_G,
     TEMP_LIMITS_MDEGC,
     QLowpass,
     QPhysics,
-    QPla,
-    QPoly3,
     QStream,
 )
 from codegen.rate import declared_rate_millihz
