@@ -428,7 +428,21 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
             for c, t in zip(imu.channels, tables, strict=True)
         ],
         "sha_bytes": ", ".join(f"0x{b:02x}u" for b in bytes.fromhex(imu.sha256)),
+        "loader": loader_source(name),
     }
+
+
+LOADER = PHYSICS_KERNEL_HEADER.with_name(
+    "tdc_imu_load.c"
+)  # the calibration loader: static C of the kernel library
+
+
+def loader_source(name: str) -> str:
+    """The loader's C for module ``name``: from its first section line on, with the module's prefix
+    for the file's placeholder ``tdcimu_`` / ``TDCIMU_`` (no trailing newline: the template's line)."""
+    text = LOADER.read_text(encoding="utf-8")
+    body = text[text.index("/* ---- blob decoding") :].rstrip("\n")
+    return body.replace("tdcimu_", f"{name}_").replace("TDCIMU_", f"{name.upper()}_")
 
 
 def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:
