@@ -397,7 +397,7 @@ def physics_context(model: QPhysics) -> dict[str, object]:
         return None if g is None else {"q": g.q}
 
     return {
-        "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
+        "family": registry.PHYSICS_RENDERER,  # the template families/physics/_physics.c.j2
         "rate_hz": f"{model.rate_hz:g}",
         "tf": model.temp_frac,
         "centre": model.centre_mdegc,

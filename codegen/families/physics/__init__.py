@@ -1,17 +1,19 @@
 """The grey-box physics family: a cubic of the clipped temperature plus the streamed effects'
 terms (lag, hysteresis branch, rate, creep). Its per-effect stages stay in
 :func:`codegen.spec.parse_physics`, :func:`codegen.quantize.quantise_physics`,
-:class:`codegen.golden.GoldenPhysics`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2``,
+:class:`codegen.golden.GoldenPhysics`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` (here),
 the kernel header ``tdc_physics_kernels.h`` and :func:`codegen.manifest.physics_manifest`
 (trainer/physics/catalogue/ is to hold what each effect needs of them)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from codegen.family import CFamily
 from codegen.golden import GoldenPhysics
 from codegen.manifest import physics_manifest
 from codegen.quantize import Limits, QPhysics, quantise_physics
-from codegen.render import PHYSICS_KERNEL_HEADER, TEMPLATES, physics_context, physics_tables
+from codegen.render import PHYSICS_KERNEL_HEADER, physics_context, physics_tables
 from codegen.spec import PhysicsSpec, parse_physics
 from trainer.methods import PHYSICS_RENDERER
 
@@ -29,7 +31,7 @@ FAMILY = CFamily(
     parse=parse_physics,
     quantise=quantise,
     golden=GoldenPhysics,
-    template=TEMPLATES / "_physics.c.j2",
+    template=Path(__file__).with_name("_physics.c.j2"),
     context=context,
     manifest=physics_manifest,
     tables=physics_tables,

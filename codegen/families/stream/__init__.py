@@ -1,19 +1,20 @@
 """The streaming DLSTM family (``lstm-stream``: recursive and temperature input) and the
 persistence front end without a network (``mean-stream``): window means, a decimated network, a
 held estimate. Its stages are :func:`codegen.spec.parse_dlstm`, :func:`codegen.quantize.quantise_stream`,
-:class:`codegen.golden.GoldenStream` (and :class:`codegen.golden_spread.GoldenStreamSpread`), the
-template ``_stream.c.j2`` and the manifest section :func:`codegen.manifest.stream_manifest`."""
+:class:`codegen.golden.GoldenStream` (and the spread schedule's, :mod:`golden_spread` here), the template
+``_stream.c.j2`` here and the manifest section :func:`codegen.manifest.stream_manifest`."""
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
+from codegen.families.stream.golden_spread import GoldenStreamSpread
 from codegen.family import CFamily
 from codegen.golden import GoldenBase, GoldenStream
-from codegen.golden_spread import GoldenStreamSpread
 from codegen.manifest import stream_manifest
 from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
-from codegen.render import TEMPLATES, stream_context, stream_tables
+from codegen.render import stream_context, stream_tables
 from codegen.spec import DlstmModelSpec, PersistenceSpec, parse_dlstm, parse_persistence
 
 
@@ -22,7 +23,7 @@ def quantise(spec: DlstmModelSpec | PersistenceSpec, limits: Limits, schedule: s
 
 
 def golden(model: QStream) -> GoldenBase:
-    """The spread schedule's golden model is its own (codegen/golden_spread.py)."""
+    """The spread schedule's golden model is its own (golden_spread.py)."""
     return GoldenStreamSpread(model) if model.layers and model.schedule == "spread" else GoldenStream(model)
 
 
@@ -31,7 +32,7 @@ LSTM = CFamily(
     parse=parse_dlstm,
     quantise=quantise,
     golden=golden,
-    template=TEMPLATES / "_stream.c.j2",
+    template=Path(__file__).with_name("_stream.c.j2"),
     context=stream_context,
     manifest=stream_manifest,
     tables=stream_tables,
