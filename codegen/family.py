@@ -71,6 +71,18 @@ UNITS: dict[str, str] = {
 }
 
 
+@dataclass(frozen=True)
+class TimeBase:
+    """A family built for one sample rate (codegen/rate.py): ``rate_hz`` of a quantised model,
+    ``trained_hz`` of a raw checkpoint, ``retime``: the raw checkpoint re-derived for another rate
+    (millihertz), ``what`` it re-derives (for the export's note)."""
+
+    rate_hz: Callable[[Any], float]
+    trained_hz: Callable[[dict[str, Any]], float]
+    retime: Callable[[dict[str, Any], int], dict[str, Any]]
+    what: str
+
+
 def _no_state(model: Any, common: list[Any]) -> list[Any]:
     return common
 
@@ -81,7 +93,8 @@ class CFamily:
     and _step); ``context``: that template's variables (``family``, the name the shared templates
     test, defaults to ``name``; ``macros``: its own NAME_ macros); ``state``: the state struct's members given the common ones (flags, samples);
     ``schedules``: the ``--schedule`` values it takes; ``kernels``: extra kernel headers shipped with
-    its modules (manifest key -> file); ``restore``: it has NAME_restore."""
+    its modules (manifest key -> file); ``restore``: it has NAME_restore; ``time_base``: None for a
+    memoryless family (any rate)."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
@@ -95,6 +108,7 @@ class CFamily:
     schedules: tuple[str, ...] = ("step",)
     kernels: dict[str, Path] = field(default_factory=dict)
     restore: bool = False
+    time_base: TimeBase | None = None
 
 
 _LOADED: dict[str, CFamily] = {}

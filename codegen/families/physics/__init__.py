@@ -8,8 +8,9 @@ the kernel header ``tdc_physics_kernels.h`` and :func:`codegen.manifest.physics_
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from codegen.family import CFamily
+from codegen.family import CFamily, TimeBase
 from codegen.golden import GoldenPhysics
 from codegen.manifest import physics_manifest
 from codegen.quantize import Limits, QPhysics, quantise_physics
@@ -26,6 +27,18 @@ def context(model: QPhysics) -> dict[str, object]:
     return {**physics_context(model), "macros": [("MODEL_TAG", f"{model.tag}u")]}
 
 
+def retime(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
+    """The filters are discretised from their time constants at ``train_stats.sample_rate_hz``."""
+    return {**raw, "train_stats": {**raw["train_stats"], "sample_rate_hz": millihz / 1000}}
+
+
+TIME_BASE = TimeBase(
+    rate_hz=lambda model: model.rate_hz,
+    trained_hz=lambda raw: float(raw["train_stats"]["sample_rate_hz"]),
+    retime=retime,
+    what="filter coefficients",
+)
+
 FAMILY = CFamily(
     name=PHYSICS_RENDERER,
     parse=parse_physics,
@@ -37,4 +50,5 @@ FAMILY = CFamily(
     tables=physics_tables,
     kernels={"physics_kernels": PHYSICS_KERNEL_HEADER},
     restore=True,
+    time_base=TIME_BASE,
 )

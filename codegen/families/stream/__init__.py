@@ -8,14 +8,32 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 from codegen.families.stream.golden_spread import GoldenStreamSpread
-from codegen.family import CFamily
+from codegen.family import CFamily, TimeBase
 from codegen.golden import GoldenBase, GoldenStream
 from codegen.manifest import stream_manifest
 from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
 from codegen.render import stream_context, stream_tables
 from codegen.spec import DlstmModelSpec, PersistenceSpec, parse_dlstm, parse_persistence
+from trainer.dlstm.realtime import FrontEnd
+
+
+def retime_frontend(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
+    """The front end's windows and decimation in samples at another rate."""
+    payload = raw["payload"]
+    frontend = payload["frontend"]
+    retimed = FrontEnd.from_dict(frontend).at_rate(millihz).to_dict()
+    return {**raw, "payload": {**payload, "frontend": {**frontend, **retimed}}}
+
+
+TIME_BASE = TimeBase(
+    rate_hz=lambda model: model.frontend.rate_hz,
+    trained_hz=lambda raw: float(raw["payload"]["frontend"]["rate_hz"]),
+    retime=retime_frontend,
+    what="windows and decimation",
+)
 
 
 def quantise(spec: DlstmModelSpec | PersistenceSpec, limits: Limits, schedule: str) -> QStream:
@@ -37,5 +55,6 @@ LSTM = CFamily(
     manifest=stream_manifest,
     tables=stream_tables,
     schedules=SCHEDULES,
+    time_base=TIME_BASE,
 )
 MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))
