@@ -83,6 +83,16 @@ class TimeBase:
     what: str
 
 
+@dataclass(frozen=True)
+class ImuForm:
+    """A family's channel of the IMU module (codegen/imu.py): ``kind``, its NAME_KIND_ code (the
+    blob's), and ``tables``, the channel's record (codegen.imu.ChannelTables) given the model and
+    the index of the sensor whose temperature it reads."""
+
+    kind: int
+    tables: Callable[[Any, int], Any]
+
+
 def _no_state(model: Any, common: list[Any]) -> list[Any]:
     return common
 
@@ -94,7 +104,7 @@ class CFamily:
     test, defaults to ``name``; ``macros``: its own NAME_ macros); ``state``: the state struct's members given the common ones (flags, samples);
     ``schedules``: the ``--schedule`` values it takes; ``kernels``: extra kernel headers shipped with
     its modules (manifest key -> file); ``restore``: it has NAME_restore; ``time_base``: None for a
-    memoryless family (any rate)."""
+    memoryless family (any rate); ``imu``: None when it has no IMU-module form."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
@@ -109,6 +119,7 @@ class CFamily:
     kernels: dict[str, Path] = field(default_factory=dict)
     restore: bool = False
     time_base: TimeBase | None = None
+    imu: ImuForm | None = None
 
 
 _LOADED: dict[str, CFamily] = {}

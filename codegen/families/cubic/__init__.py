@@ -10,9 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.family import CFamily
+from codegen.family import CFamily, ImuForm
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits, round_half_away, rshift_round
 from codegen.golden import GoldenBase
+from codegen.imu import KIND_CUBIC, ChannelTables
 from codegen.manifest import memoryless_rates, six_digits
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
 from codegen.render import c_rows
@@ -115,6 +116,13 @@ def tables(model: QPoly3) -> dict[str, int]:
     return {"poly3_coefficients": 16}
 
 
+def imu_tables(q: QPoly3, sensor: int) -> ChannelTables:
+    return ChannelTables(
+        KIND_CUBIC, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, q.t_ref_mdegc,
+        tuple(q.coefficients_q), (), (), (),
+    )  # fmt: skip
+
+
 FAMILY = CFamily(
     name="cubic",
     parse=parse,
@@ -124,4 +132,5 @@ FAMILY = CFamily(
     context=context,
     manifest=manifest,
     tables=tables,
+    imu=ImuForm(KIND_CUBIC, imu_tables),
 )

@@ -10,8 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from codegen.family import CFamily, TimeBase
+from codegen.family import CFamily, ImuForm, TimeBase
 from codegen.golden import GoldenPhysics
+from codegen.imu import KIND_PHYSICS, ChannelTables
 from codegen.manifest import physics_manifest
 from codegen.quantize import Limits, QPhysics, quantise_physics
 from codegen.render import PHYSICS_KERNEL_HEADER, physics_context, physics_tables
@@ -39,6 +40,15 @@ TIME_BASE = TimeBase(
     what="filter coefficients",
 )
 
+
+def imu_tables(q: QPhysics, sensor: int) -> ChannelTables:
+    """Its clip range, frac and cubic (its filters and gains: codegen.imu.physics_tables)."""
+    return ChannelTables(
+        KIND_PHYSICS, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, 0,
+        tuple(q.coefficients_q), (), (), (),
+    )  # fmt: skip
+
+
 FAMILY = CFamily(
     name=PHYSICS_RENDERER,
     parse=parse_physics,
@@ -51,4 +61,5 @@ FAMILY = CFamily(
     kernels={"physics_kernels": PHYSICS_KERNEL_HEADER},
     restore=True,
     time_base=TIME_BASE,
+    imu=ImuForm(KIND_PHYSICS, imu_tables),
 )

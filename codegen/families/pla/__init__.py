@@ -10,9 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.family import CFamily
+from codegen.family import CFamily, ImuForm
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits, round_half_away, rshift_round
 from codegen.golden import GoldenBase
+from codegen.imu import KIND_PLA, ChannelTables
 from codegen.manifest import memoryless_rates, six_digits
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
 from codegen.render import c_rows
@@ -111,6 +112,13 @@ def tables(model: QPla) -> dict[str, int]:
     return {"pla_tables": 4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)}
 
 
+def imu_tables(q: QPla, sensor: int) -> ChannelTables:
+    return ChannelTables(
+        KIND_PLA, sensor, q.frac, 0, q.limits.temp_lo_mdegc, q.limits.temp_hi_mdegc, 0,
+        (0, 0, 0, 0), tuple(q.splits_mdegc), tuple(q.slopes_q), tuple(q.intercepts_q),
+    )  # fmt: skip
+
+
 FAMILY = CFamily(
     name=PLA,
     parse=parse,
@@ -120,4 +128,5 @@ FAMILY = CFamily(
     context=context,
     manifest=manifest,
     tables=tables,
+    imu=ImuForm(KIND_PLA, imu_tables),
 )

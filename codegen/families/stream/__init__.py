@@ -11,8 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from codegen.families.stream.golden_spread import GoldenStreamSpread
-from codegen.family import CFamily, TimeBase
+from codegen.family import CFamily, ImuForm, TimeBase
 from codegen.golden import GoldenBase, GoldenStream
+from codegen.imu import KIND_STREAM, ChannelTables
 from codegen.manifest import stream_manifest
 from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
 from codegen.render import stream_context, stream_tables
@@ -36,6 +37,11 @@ TIME_BASE = TimeBase(
 )
 
 
+def imu_tables(q: QStream, sensor: int) -> ChannelTables:
+    """Its numbers are in its own module, embedded in the IMU module: the record names its kind and sensor."""
+    return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
+
+
 def quantise(spec: DlstmModelSpec | PersistenceSpec, limits: Limits, schedule: str) -> QStream:
     return dataclasses.replace(quantise_stream(spec, limits), schedule=schedule)
 
@@ -56,5 +62,6 @@ LSTM = CFamily(
     tables=stream_tables,
     schedules=SCHEDULES,
     time_base=TIME_BASE,
+    imu=ImuForm(KIND_STREAM, imu_tables),
 )
 MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))
