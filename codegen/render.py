@@ -306,6 +306,12 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
     return ctx
 
 
+def sigmoid_offset(shift: int) -> int | None:
+    """tdck_lstm_gates' ``sig`` argument as an offset into the activation table (the sigmoid gates'
+    base, where their accumulators cannot leave the table: shift >= 22), None for NULL."""
+    return ACT_SEGMENTS // 2 - 2 ** (30 - shift) if shift >= 22 else None
+
+
 def stream_context(model: QStream) -> dict[str, object]:
     fe = model.frontend
     ctx: dict[str, object] = dict(
@@ -338,12 +344,19 @@ def stream_context(model: QStream) -> dict[str, object]:
                 "acc_frac": lay.acc_frac,
                 "acc_bound_text": _bound_text(lay.acc_bound),
                 "w": c_rows(lay.kernel_weights(), per_line=4 + 4 * lay.pairs),
+                "row_words": 4 + 4 * lay.pairs,  # a unit's block: 4 biases, then 4 words per pair
+                "rest_w": 4 + 4 * lay.first_pairs,  # spread schedule: the block's words of dot_rest
+                "rest_v": lay.offset + 2 * lay.first_pairs,  # ... and its first slot of state->vec
+                # spread schedule: the layer's tasks are task_first .. task_end - 1, UNIT_TASKS per unit
+                "task_first": len(model.inputs) + len(UNIT_TASKS) * model.hidden_size * k,
+                "task_end": len(model.inputs) + len(UNIT_TASKS) * model.hidden_size * (k + 1),
                 "w_words": lay.kernel_weights().size,
                 "shift": lay.shift,
             }
             for k, lay in enumerate(model.layers)
         ],
         hidden=model.hidden_size,
+        sig_offset={lay.shift: sigmoid_offset(lay.shift) for lay in model.layers},
         inputs=[
             {
                 "mu": _c_int(q.mu_q, 64),
