@@ -160,8 +160,11 @@ def state_fields(model: QuantModel) -> list[Field]:
             Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
             *common,
         ]
-    if not isinstance(model, QStream):
-        return family_of(model).state(model, common)
+    return family_of(model).state(model, common)
+
+
+def stream_state_fields(model: QStream, common: list[Field]) -> list[Field]:
+    """The stream family's state members, the common ones (flags, samples) placed among them."""
     unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
     fields = [Field("int64_t", "window_current", (), f"running sum since the window's start phase, {unit}")]
     if model.chunks:

@@ -16,7 +16,7 @@ from codegen.golden import GoldenBase, GoldenStream
 from codegen.imu import KIND_STREAM, ChannelTables
 from codegen.manifest import stream_manifest
 from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
-from codegen.render import stream_context, stream_tables
+from codegen.render import stream_context, stream_state_fields, stream_tables
 from codegen.spec import DlstmModelSpec, PersistenceSpec, parse_dlstm, parse_persistence
 from trainer.dlstm.realtime import FrontEnd
 
@@ -60,6 +60,7 @@ LSTM = CFamily(
     context=stream_context,
     manifest=stream_manifest,
     tables=stream_tables,
+    state=stream_state_fields,
     schedules=SCHEDULES,
     time_base=TIME_BASE,
     imu=ImuForm(KIND_STREAM, imu_tables),
