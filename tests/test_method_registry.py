@@ -12,8 +12,8 @@ from typing import Any, Self
 import numpy as np
 import pytest
 
-from codegen.cli import main as codegen_main
 from codegen import family
+from codegen.cli import main as codegen_main
 from trainer import methods
 from trainer.baselines.base import TemperatureCompensator
 from trainer.checkpoint import load_model
