@@ -26,8 +26,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from codegen.export import export
+from codegen.families.pla import QPla
 from codegen.hostbuild import STRICT_FLAGS, find_compiler
-from codegen.quantize import QPla, QStream
+from codegen.quantize import QStream
 from codegen.render import render_template
 from tests import testmodels as tm
 from trainer.cli import main as trainer_main

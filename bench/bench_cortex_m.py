@@ -45,9 +45,11 @@ from float_anchor import write_float_module
 
 from codegen import cortex_m as cm
 from codegen.export import LoadedModel, export
+from codegen.families.cubic import QPoly3
+from codegen.families.pla import QPla
 from codegen.golden_select import golden_for
 from codegen.hostbuild import write_vectors
-from codegen.quantize import QPhysics, QPla, QPoly3, QStream
+from codegen.quantize import QPhysics, QStream
 from codegen.spec import DlstmModelSpec
 from codegen.verify import to_step_units
 from trainer import methods as registry

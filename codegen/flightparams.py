@@ -36,7 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.spec import Checkpoint, PlaSpec, Poly3Spec, parse_checkpoint
+from codegen.families.cubic import Poly3Spec
+from codegen.families.pla import PlaSpec
+from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods
 from trainer.data.ardupilot_tcal import INSTANCES as ARDUPILOT_INSTANCES  # INS_TCAL1..3
 from trainer.data.ardupilot_tcal import PREFIX as ARDUPILOT_PREFIX

@@ -44,8 +44,6 @@ from codegen.quantize import (
     X_SLOTS,
     QInput,
     QPhysics,
-    QPla,
-    QPoly3,
     QStream,
     QuantModel,
 )
@@ -65,8 +63,9 @@ def _as_int64(values: np.ndarray) -> np.ndarray:
     return arr.astype(np.int64)
 
 
-class _Golden:
-    """Common state (flags, sample counter) and the input flags every method shares."""
+class GoldenBase:
+    """Common state (flags, sample counter) and the input flags every method shares; each C family
+    (codegen/families/) derives its golden model from it."""
 
     def __init__(self, model: QuantModel) -> None:
         self.model = model
@@ -117,39 +116,12 @@ class _Golden:
         return {"flags": self.flags, "samples": self.samples}
 
 
-class GoldenPla(_Golden):
-    model: QPla
-
-    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
-        m = self.model
-        t = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
-        k = np.searchsorted(np.asarray(m.splits_mdegc, dtype=np.int64), t, side="right")
-        slopes = np.asarray(m.slopes_q, dtype=np.int64)
-        intercepts = np.asarray(m.intercepts_q, dtype=np.int64)
-        drift = self._sat(rshift_round(slopes[k] * t + intercepts[k], m.frac))
-        return self._output(accel, drift)
-
-
-class GoldenPoly3(_Golden):
-    model: QPoly3
-
-    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
-        m = self.model
-        u = self._clamp(temp, m.clip_lo_mdegc, m.clip_hi_mdegc) - m.t_ref_mdegc
-        d0, d1, d2, d3 = m.coefficients_q
-        acc = np.full(u.shape, d3, dtype=np.int64)
-        for coefficient in (d2, d1, d0):
-            acc = rshift_round(acc * u, m.u_shift) + coefficient
-        drift = self._sat(rshift_round(acc, m.frac))
-        return self._output(accel, drift)
-
-
 def _half_up_shift(x: np.ndarray | int, shift: int) -> np.ndarray:
     """floor(x / 2**shift + 1/2) on int64 (the C ``tdck_round_shift32/64``)."""
     return (np.asarray(x, dtype=np.int64) + (1 << (shift - 1))) >> shift
 
 
-class GoldenStream(_Golden):
+class GoldenStream(GoldenBase):
     """DLSTM methods and persistence: window means, decimated network, zero-order hold."""
 
     model: QStream
@@ -334,7 +306,7 @@ class GoldenStream(_Golden):
         return estimate
 
 
-class GoldenPhysics(_Golden):
+class GoldenPhysics(GoldenBase):
     """The grey-box model sample by sample on Python integers, with the C struct's fields.
 
     Each streamed effect's step is its own (``FixedPoint.golden``, trainer/physics/catalogue);

@@ -33,15 +33,13 @@ import numpy as np
 
 from codegen import __version__
 from codegen.export import LoadedModel, load_for_codegen
+from codegen.family import QuantModel, family_of
 from codegen.golden_select import golden_for
 from codegen.quantize import (
     DEFAULT_ACCEL_LIMIT_G,
     TEMP_LIMITS_MDEGC,
     QLowpass,
     QPhysics,
-    QPla,
-    QPoly3,
-    QStream,
 )
 from codegen.rate import declared_rate_millihz
 from codegen.render import (
@@ -89,9 +87,9 @@ class ImuChannel:
 
     @property
     def kind(self) -> int:
-        q = self.model.quantised
-        kinds = ((QPoly3, KIND_CUBIC), (QPhysics, KIND_PHYSICS), (QStream, KIND_STREAM), (QPla, KIND_PLA))
-        return next(kind for cls, kind in kinds if isinstance(q, cls))
+        form = family_of(self.model.quantised).imu
+        assert form is not None  # load_imu refuses the others
+        return form.kind
 
 
 @dataclass(frozen=True)
@@ -151,7 +149,7 @@ def load_imu(
     for path in paths:
         name = _channel_of(load_checkpoint(path), path)
         model = load_for_codegen(path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
-        if not isinstance(model.quantised, QPoly3 | QPla | QPhysics | QStream):
+        if family_of(model.quantised).imu is None:
             raise UserError(
                 f"{path}: channel {name}: method {model.checkpoint.method!r} has no IMU-module form"
             )
@@ -179,7 +177,7 @@ def load_imu(
         valid.append(ranges.pop())
     capacity = (
         max(  # pla intervals per channel (a unit's blob must have the module's: trainer fit --intervals)
-            [len(c.model.quantised.slopes_q) for c in channels if isinstance(c.model.quantised, QPla)] + [1]
+            [len(_tables(c.model.quantised, 0).slopes) for c in channels] + [1]
         )
     )
     rates = {declared_rate_millihz(c.model.quantised) for c in channels} - {0}
@@ -282,26 +280,16 @@ class ChannelTables:
     intercepts: tuple[int, ...]
 
 
+def _tables(q: QuantModel, sensor: int) -> ChannelTables:
+    form = family_of(q).imu
+    assert form is not None  # load_imu refuses the others
+    tables: ChannelTables = form.tables(q, sensor)
+    return tables
+
+
 def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
-    q = channel.model.quantised
-    sensor = imu.sensors.index(channel.sensor)
-    if isinstance(q, QStream):  # its numbers are in its own module; the record names its kind and sensor
-        return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
-    if isinstance(q, QPhysics):
-        return ChannelTables(
-            KIND_PHYSICS, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, 0,
-            tuple(q.coefficients_q), (), (), (),
-        )  # fmt: skip
-    if isinstance(q, QPoly3):
-        return ChannelTables(
-            KIND_CUBIC, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, q.t_ref_mdegc,
-            tuple(q.coefficients_q), (), (), (),
-        )  # fmt: skip
-    assert isinstance(q, QPla)
-    return ChannelTables(
-        KIND_PLA, sensor, q.frac, 0, q.limits.temp_lo_mdegc, q.limits.temp_hi_mdegc, 0,
-        (0, 0, 0, 0), tuple(q.splits_mdegc), tuple(q.slopes_q), tuple(q.intercepts_q),
-    )  # fmt: skip
+    """The channel's record, built by its family's unit (codegen/families/)."""
+    return _tables(channel.model.quantised, imu.sensors.index(channel.sensor))
 
 
 def encode_blob(imu: ImuModel) -> bytes:
@@ -456,7 +444,21 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
             for c, t in zip(imu.channels, tables, strict=True)
         ],
         "sha_bytes": ", ".join(f"0x{b:02x}u" for b in bytes.fromhex(imu.sha256)),
+        "loader": loader_source(name),
     }
+
+
+LOADER = PHYSICS_KERNEL_HEADER.with_name(
+    "tdc_imu_load.c"
+)  # the calibration loader: static C of the kernel library
+
+
+def loader_source(name: str) -> str:
+    """The loader's C for module ``name``: from its first section line on, with the module's prefix
+    for the file's placeholder ``tdcimu_`` / ``TDCIMU_`` (no trailing newline: the template's line)."""
+    text = LOADER.read_text(encoding="utf-8")
+    body = text[text.index("/* ---- blob decoding") :].rstrip("\n")
+    return body.replace("tdcimu_", f"{name}_").replace("TDCIMU_", f"{name.upper()}_")
 
 
 def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:

@@ -10,6 +10,7 @@ import math
 
 from codegen import __version__
 from codegen.activations import ACT_ERROR_LSB
+from codegen.family import QuantModel, family_of
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
 from codegen.qformats import (
     C_FRAC,
@@ -24,16 +25,12 @@ from codegen.quantize import (
     QLayer,
     QMatrix,
     QPhysics,
-    QPla,
-    QPoly3,
     QStream,
-    QuantModel,
 )
 from codegen.rate import ANY_RATE_MILLIHZ, rate_millihz
 from codegen.render import (
     FLAGS,
     KERNEL_FILE,
-    PHYSICS_KERNEL_FILE,
     activation_summary,
     state_bytes,
     state_fields,
@@ -46,7 +43,12 @@ FORMAT_VERSION = 3
 CELL_LIMIT = INT32_MAX / 2.0**C_FRAC
 
 
-def _num(value: float) -> float | str:
+def memoryless_rates() -> dict[str, object]:
+    """The ``rates`` of a memoryless model's manifest: any rate."""
+    return {"sample_rate_hz": None, "sample_rate_millihz": ANY_RATE_MILLIHZ, "memoryless": True}
+
+
+def six_digits(value: float) -> float | str:
     """Six significant digits (stable JSON); infinities as strings."""
     if math.isinf(value):
         return "inf"
@@ -72,27 +74,27 @@ def _layer(layer: QLayer) -> dict[str, object]:
         "acc_frac_bits": layer.acc_frac,
         "acc_bound": layer.acc_bound,
         "acc_limit": INT32_MAX,
-        "acc_headroom_bits": _num(layer.acc_headroom),
+        "acc_headroom_bits": six_digits(layer.acc_headroom),
         "activation_shift": layer.shift,
-        "z_bound": _num(layer.z_bound),
+        "z_bound": six_digits(layer.z_bound),
         "z_note": "the accumulator indexes the activation table directly; beyond the table (|z| >= 8 for "
         "tanh, 16 for sigmoid) the functions are constant",
-        "forget_gate_max": _num(layer.forget_max_q / 2.0**GATE_FRAC),
-        "cell_bound": _num(layer.cell_bound),
-        "cell_limit": _num(CELL_LIMIT),
-        "cell_headroom_bits": _num(headroom_bits(layer.cell_bound, CELL_LIMIT)),
+        "forget_gate_max": six_digits(layer.forget_max_q / 2.0**GATE_FRAC),
+        "cell_bound": six_digits(layer.cell_bound),
+        "cell_limit": six_digits(CELL_LIMIT),
+        "cell_headroom_bits": six_digits(headroom_bits(layer.cell_bound, CELL_LIMIT)),
         "cell_saturation_reachable": bool(layer.cell_bound > CELL_LIMIT),
     }
 
 
-def _stream(model: QStream) -> dict[str, object]:
+def stream_manifest(model: QStream) -> dict[str, object]:
     fe = model.frontend
     out: dict[str, object] = {
         "rates": {
             "sample_rate_hz": fe.rate_hz,
             "sample_rate_millihz": rate_millihz(fe.rate_hz),
             "decimation": fe.decimation,
-            "network_step_hz": _num(fe.rate_hz / fe.decimation),
+            "network_step_hz": six_digits(fe.rate_hz / fe.decimation),
         },
         **(
             {
@@ -100,7 +102,7 @@ def _stream(model: QStream) -> dict[str, object]:
                     "name": model.schedule,
                     "tasks_per_step": model.tasks if model.schedule == "spread" else 1,
                     "latency_samples": model.latency_samples,
-                    "latency_s": _num(model.latency_samples / fe.rate_hz),
+                    "latency_s": six_digits(model.latency_samples / fe.rate_hz),
                 }
             }
             if model.layers
@@ -150,7 +152,7 @@ def _stream(model: QStream) -> dict[str, object]:
                 "shift": q.shift,
                 "d_max": q.d_max,
                 "x_frac_bits": q.frac,
-                "product_headroom_bits": _num(q.product_headroom),
+                "product_headroom_bits": six_digits(q.product_headroom),
             }
             for q in model.inputs
         ],
@@ -160,9 +162,9 @@ def _stream(model: QStream) -> dict[str, object]:
             "shift": head.shift,
             "bias_q": head.bias_q,
             "acc_bound": head.acc_bound,
-            "acc_headroom_bits": _num(headroom_bits(head.acc_bound, INT64_MAX)),
-            "estimate_bound_lsb": _num(head.estimate_bound),
-            "estimate_headroom_bits": _num(headroom_bits(head.estimate_bound, INT32_MAX)),
+            "acc_headroom_bits": six_digits(headroom_bits(head.acc_bound, INT64_MAX)),
+            "estimate_bound_lsb": six_digits(head.estimate_bound),
+            "estimate_headroom_bits": six_digits(headroom_bits(head.estimate_bound, INT32_MAX)),
             "output_mean_mg": model.frontend.output_mean,
             "output_std_mg": model.frontend.output_std,
         },
@@ -177,41 +179,7 @@ def _stream(model: QStream) -> dict[str, object]:
     return out
 
 
-def _pla(model: QPla) -> dict[str, object]:
-    return {
-        "rates": {"sample_rate_hz": None, "sample_rate_millihz": ANY_RATE_MILLIHZ, "memoryless": True},
-        "quantisation": {
-            "rounding": "half away from zero",
-            "split_points_mdegc": list(model.splits_mdegc),
-            "slopes": f"int32 Q{model.frac} accel LSB per mdegC",
-            "intercepts": f"int64 Q{model.frac} accel LSB",
-            "frac_bits": model.frac,
-            "bound": model.bound,
-            "headroom_bits": _num(headroom_bits(model.bound, INT64_MAX)),
-        },
-        "macs_per_sample": 1,
-    }
-
-
-def _poly3(model: QPoly3) -> dict[str, object]:
-    return {
-        "rates": {"sample_rate_hz": None, "sample_rate_millihz": ANY_RATE_MILLIHZ, "memoryless": True},
-        "quantisation": {
-            "rounding": "half away from zero",
-            "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],
-            "t_ref_mdegc": model.t_ref_mdegc,
-            "u": f"(T - T_ref) / 2^{model.u_shift}",
-            "coefficients": f"int32 Q{model.frac} accel LSB, of u^0..u^3",
-            "coefficients_q": list(model.coefficients_q),
-            "frac_bits": model.frac,
-            "horner_bound": model.bound,
-            "horner_headroom_bits": _num(headroom_bits(model.bound * 2.0**model.u_shift, INT64_MAX)),
-        },
-        "macs_per_sample": 3,
-    }
-
-
-def _physics(model: QPhysics) -> dict[str, object]:
+def physics_manifest(model: QPhysics) -> dict[str, object]:
     return {
         "rates": {
             "sample_rate_hz": model.rate_hz,
@@ -231,7 +199,7 @@ def _physics(model: QPhysics) -> dict[str, object]:
             "drift_frac_bits": model.frac,
             "accumulator_frac_bits": model.frac + 32,
             "drift_bound": model.bound,
-            "drift_headroom_bits": _num(headroom_bits(model.bound, INT64_MAX)),
+            "drift_headroom_bits": six_digits(headroom_bits(model.bound, INT64_MAX)),
             "filters": [
                 {
                     "name": f.name,
@@ -240,8 +208,8 @@ def _physics(model: QPhysics) -> dict[str, object]:
                     "b0_q": f.b_q,
                     "frac_bits": 32 + f.shift,
                     "difference_shift": f.shift,
-                    "state_error_bound_mdegc": _num(f.error_mdegc),
-                    "state_error_bound_drift_mg": _num(f.error_mg),
+                    "state_error_bound_mdegc": six_digits(f.error_mdegc),
+                    "state_error_bound_drift_mg": six_digits(f.error_mg),
                 }
                 for f in model.filters
             ],
@@ -259,15 +227,8 @@ def build_manifest(
 ) -> dict[str, object]:
     lim = model.limits
     tables = table_bytes(model)
-    body = (
-        _stream(model)
-        if isinstance(model, QStream)
-        else _physics(model)
-        if isinstance(model, QPhysics)
-        else _pla(model)
-        if isinstance(model, QPla)
-        else (_poly3(model))
-    )
+    unit = family_of(model)
+    body = unit.manifest(model)
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -278,7 +239,7 @@ def build_manifest(
             "header": f"{name}.h",
             "source": f"{name}.c",
             "kernels": KERNEL_FILE,
-            **({"physics_kernels": PHYSICS_KERNEL_FILE} if isinstance(model, QPhysics) else {}),
+            **{key: header.name for key, header in unit.kernels.items()},
         },
         "model": {"sha256": sha256, "id": f"sha256:{sha256}"},
         "api": {
@@ -290,7 +251,7 @@ def build_manifest(
             "model_id": f"const char *{name}_model_id(void)",
             **(
                 {"restore": f"int {name}_restore({name}_state_t *state, const {name}_state_t *saved)"}
-                if isinstance(model, QPhysics)
+                if unit.restore
                 else {}
             ),
         },

@@ -48,7 +48,6 @@ before the normalisation multiply so that the multiplier keeps 31 significant bi
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 from collections.abc import Mapping
@@ -58,6 +57,7 @@ from fractions import Fraction
 import numpy as np
 
 from codegen.activations import ACT_ERROR_LSB, T_MAX, sigmoid_q16, tanh_q15
+from codegen.family import QuantModel, family_of
 from codegen.fixedpoint import (
     INT16_MAX,
     INT32_MAX,
@@ -85,8 +85,6 @@ from codegen.spec import (
     FrontEndSpec,
     PersistenceSpec,
     PhysicsSpec,
-    PlaSpec,
-    Poly3Spec,
 )
 from trainer.errors import UserError
 from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms
@@ -312,30 +310,6 @@ class QStream:
 
 
 @dataclass(frozen=True)
-class QPla:
-    method: str
-    limits: Limits
-    splits_mdegc: tuple[int, ...]
-    slopes_q: tuple[int, ...]  # int32, Q(frac) accel LSB per mdegC
-    intercepts_q: tuple[int, ...]  # int64, Q(frac) accel LSB
-    frac: int
-    bound: int  # worst-case |slope_q * T + intercept_q|
-
-
-@dataclass(frozen=True)
-class QPoly3:
-    method: str
-    limits: Limits
-    clip_lo_mdegc: int
-    clip_hi_mdegc: int
-    t_ref_mdegc: int
-    u_shift: int  # u = (T - T_ref) / 2**u_shift, |u| <= 1
-    coefficients_q: tuple[int, ...]  # int32, d0..d3, Q(frac) accel LSB
-    frac: int
-    bound: int  # worst-case |Horner accumulator|
-
-
-@dataclass(frozen=True)
 class QLowpass:
     """The exact first-order-hold low-pass ``y' = a y + b0 x + b1 x_prev`` as ``tdcp_lowpass``::
 
@@ -423,9 +397,6 @@ class QPhysics:
     def poly_reads(self) -> str | None:
         """The state word the polynomial reads instead of T_pm (None: T_pm)."""
         return next((t.fixed.poly_reads for t in self.terms if t.fixed.poly_reads is not None), None)
-
-
-QuantModel = QStream | QPla | QPoly3 | QPhysics
 
 
 def _fits_int32(q: np.ndarray) -> bool:
@@ -595,7 +566,7 @@ def _mean_frac(window: int, v_max: int) -> int:
     return frac
 
 
-def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
+def quantise_stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     fe = spec.frontend
     used = (
         "temp_window" if not isinstance(spec, PersistenceSpec) and fe.kind != "recursive" else "accel_window"
@@ -662,43 +633,6 @@ def _stream(spec: DlstmModelSpec | PersistenceSpec, limits: Limits) -> QStream:
     return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec), frac)
 
 
-def _pla(spec: PlaSpec, limits: Limits) -> QPla:
-    splits = tuple(
-        math.ceil(Fraction(s) * 1000) for s in spec.split_points_c
-    )  # T_q >= s*1000 <=> T_q >= ceil
-    splits = tuple(min(max(s, -INT32_MAX), INT32_MAX) for s in splits)
-    t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
-    slopes_lsb = [Fraction(v) * ACCEL_PER_MG / 1000 for v in spec.slopes_mg_per_c]  # accel LSB per mdegC
-    intercepts_lsb = [Fraction(v) * ACCEL_PER_MG for v in spec.intercepts_mg]
-    for frac in range(40, -1, -1):
-        slopes = [round_half_away(v * (1 << frac)) for v in slopes_lsb]
-        intercepts = [round_half_away(v * (1 << frac)) for v in intercepts_lsb]
-        bound = max(abs(s) * t_max + abs(c) for s, c in zip(slopes, intercepts, strict=True))
-        if max(abs(s) for s in slopes) <= INT32_MAX and bound < INT64_SAFE:
-            return QPla(spec.method, limits, splits, tuple(slopes), tuple(intercepts), frac, bound)
-    raise UserError("pla: slopes or intercepts too large for the fixed-point format")
-
-
-def _poly3(spec: Poly3Spec, limits: Limits) -> QPoly3:
-    lo = round_half_away(Fraction(spec.temp_range_c[0]) * 1000)
-    hi = round_half_away(Fraction(spec.temp_range_c[1]) * 1000)
-    if not (-INT32_MAX <= lo < hi <= INT32_MAX):
-        raise UserError(f"poly3: temperature range {spec.temp_range_c} degC is outside int32 mdegC")
-    t_ref = round_half_away(Fraction(spec.t_ref_c) * 1000)
-    t_ref = min(max(t_ref, lo), hi)
-    u_shift = max(1, math.ceil(math.log2(max(abs(lo - t_ref), abs(hi - t_ref), 1))))
-    delta = t_ref - Fraction(spec.t_ref_c) * 1000  # exact: p(T - t_ref) = q(T - T_ref_int)
-    e = [Fraction(c) * ACCEL_PER_MG / Fraction(1000) ** k for k, c in enumerate(spec.coefficients_mg)]
-    shifted = [sum(e[k] * math.comb(k, j) * delta ** (k - j) for k in range(j, 4)) for j in range(4)]
-    d = [v * Fraction(2) ** (u_shift * j) for j, v in enumerate(shifted)]  # coefficients of u^j, accel LSB
-    for frac in range(40, -1, -1):
-        coeffs = [round_half_away(v * Fraction(2) ** frac) for v in d]
-        bound = sum(abs(c) for c in coeffs) + 3
-        if max(abs(c) for c in coeffs) <= INT32_MAX and bound << u_shift < INT64_SAFE:
-            return QPoly3(spec.method, limits, lo, hi, t_ref, u_shift, tuple(coeffs), frac, bound)
-    raise UserError("poly3: coefficients too large for the fixed-point format")
-
-
 HI_BITS = 32  # a filter state's high word is its int32 temperature (tdcp_hi)
 MAX_TEMP_FRAC = 24  # finer int32 temperatures buy nothing (the filters' floors are bounded below)
 MAX_DRIFT_FRAC = 30
@@ -759,7 +693,7 @@ def _horner_bounds(d: list[int]) -> list[int]:
     return bounds
 
 
-def _physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
+def quantise_physics(spec: PhysicsSpec, limits: Limits) -> QPhysics:
     """int32 temperatures, int64 filter states, int32 x int32 products (tdc_physics_kernels.h).
 
     Temperatures are ``x = (T - centre) 2^tf`` mdegC about the training range's centre, ``tf`` the
@@ -926,12 +860,7 @@ def quantise_checkpoint(
     model = ckpt.model
     if schedule not in SCHEDULES:
         raise UserError(f"--schedule must be one of {', '.join(SCHEDULES)}, got {schedule!r}")
-    if schedule != "step" and not isinstance(model, DlstmModelSpec):
+    unit = family_of(model)
+    if schedule not in unit.schedules:
         raise UserError(f"--schedule {schedule}: only a DLSTM has a network step to spread")
-    if isinstance(model, DlstmModelSpec | PersistenceSpec):
-        return dataclasses.replace(_stream(model, limits), schedule=schedule)
-    if isinstance(model, PlaSpec):
-        return _pla(model, limits)
-    if isinstance(model, PhysicsSpec):
-        return _physics(model, limits)
-    return _poly3(model, limits)
+    return unit.quantise(model, limits, schedule)

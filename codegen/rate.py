@@ -11,20 +11,18 @@ rate as an integer in millihertz next to a compile-time check macro (``module.h.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from codegen.quantize import QPhysics, QStream, QuantModel
+from codegen import family
+from codegen.family import QuantModel, family_of
 from trainer import methods as registry
 from trainer.compensator import Compensator
 from trainer.data.importer import resample_columns
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import FrontEnd
 from trainer.errors import UserError
-from trainer.train_stats import TrainStats
 
 ANY_RATE_MILLIHZ = 0  # NAME_SAMPLE_RATE_MILLIHZ of a memoryless module
 MAX_RATE_HZ = 1_000_000.0
@@ -48,45 +46,8 @@ def parse_rate_hz(rate_hz: float) -> int:
 
 def declared_rate_millihz(model: QuantModel) -> int:
     """The rate a quantised model is built for, in millihertz; 0 for a memoryless one."""
-    if isinstance(model, QStream):
-        return rate_millihz(model.frontend.rate_hz)
-    if isinstance(model, QPhysics):
-        return rate_millihz(model.rate_hz)
-    return ANY_RATE_MILLIHZ
-
-
-def _retime_frontend(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
-    payload = raw["payload"]
-    frontend = payload["frontend"]
-    retimed = FrontEnd.from_dict(frontend).at_rate(millihz).to_dict()
-    return {**raw, "payload": {**payload, "frontend": {**frontend, **retimed}}}
-
-
-def _retime_physics(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
-    """The filters are discretised from their time constants at ``train_stats.sample_rate_hz``."""
-    stats = replace(TrainStats.of_checkpoint(raw), sample_rate_hz=millihz / 1000)
-    return {**raw, "train_stats": stats.to_dict()}
-
-
-def _trained_frontend(raw: dict[str, Any]) -> float:
-    return float(raw["payload"]["frontend"]["rate_hz"])
-
-
-def _trained_physics(raw: dict[str, Any]) -> float:
-    rate_hz = TrainStats.of_checkpoint(raw).sample_rate_hz
-    if rate_hz is None:
-        raise KeyError("train_stats.sample_rate_hz")
-    return rate_hz
-
-
-# renderer -> (rate the checkpoint was built for, re-derivation at another rate); memoryless ones absent
-TIME_BASED: dict[
-    str, tuple[Callable[[dict[str, Any]], float], Callable[[dict[str, Any], int], dict[str, Any]]]
-] = {
-    "lstm-stream": (_trained_frontend, _retime_frontend),
-    "mean-stream": (_trained_frontend, _retime_frontend),
-    registry.PHYSICS_RENDERER: (_trained_physics, _retime_physics),
-}
+    time_base = family_of(model).time_base
+    return ANY_RATE_MILLIHZ if time_base is None else rate_millihz(time_base.rate_hz(model))
 
 
 def retime_checkpoint(
@@ -97,27 +58,26 @@ def retime_checkpoint(
     A memoryless method is unchanged at any rate. A malformed rate field is left for the parser
     (``codegen.spec``) to report.
     """
-    method = registry.REGISTRY[raw["method"]]
-    entry = TIME_BASED.get(method.renderer or "")
-    if millihz is None or entry is None:
+    renderer = registry.REGISTRY[raw["method"]].renderer
+    time_base = family.get(renderer).time_base if renderer in family.names() else None
+    if millihz is None or time_base is None:
         return raw, None
-    trained_of, retime = entry
     try:
-        trained = rate_millihz(trained_of(raw))
+        trained = rate_millihz(time_base.trained_hz(raw))
     except (KeyError, TypeError, ValueError):
         return raw, None
     if trained == millihz:
         return raw, None
     try:
-        retimed = retime(raw, millihz)
+        retimed = time_base.retime(raw, millihz)
     except UserError as exc:
         raise UserError(f"{source}: {exc}") from None
     except (KeyError, TypeError, ValueError):
         return raw, None
-    what = "windows and decimation" if method.renderer != registry.PHYSICS_RENDERER else "filter coefficients"
     return (
         retimed,
-        f"rate: exported for {millihz / 1000:g} Hz (trained at {trained / 1000:g} Hz; {what} re-derived)",
+        f"rate: exported for {millihz / 1000:g} Hz (trained at {trained / 1000:g} Hz; "
+        f"{time_base.what} re-derived)",
     )
 
 

@@ -13,12 +13,15 @@ import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from string import Template
+from typing import cast
 
 import jinja2
 import numpy as np
 
 from codegen import __version__
 from codegen.activations import ACT_KNOT, activation_errors
+from codegen.family import QuantModel, family_of
+from codegen.family import entries as family_entries
 from codegen.qformats import (
     ACT_SEGMENTS,
     C_FRAC,
@@ -34,10 +37,8 @@ from codegen.quantize import (
     HI_BITS,
     UNIT_TASKS,
     QPhysics,
-    QPla,
     QStream,
     QTerm,
-    QuantModel,
 )
 from codegen.rate import declared_rate_millihz
 from trainer import methods as registry
@@ -141,8 +142,11 @@ def state_fields(model: QuantModel) -> list[Field]:
             Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
             *common,
         ]
-    if not isinstance(model, QStream):
-        return common
+    return family_of(model).state(model, common)
+
+
+def stream_state_fields(model: QStream, common: list[Field]) -> list[Field]:
+    """The stream family's state members, the common ones (flags, samples) placed among them."""
     unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
     fields = [Field("int64_t", "window_current", (), f"running sum since the window's start phase, {unit}")]
     if model.chunks:
@@ -215,21 +219,21 @@ def state_bytes(fields: list[Field]) -> int:
 
 def table_bytes(model: QuantModel) -> dict[str, int]:
     """Flash used by the const tables (code and immediates not included)."""
-    sizes = {"model_id_string": len("sha256:") + 64 + 1}
-    if isinstance(model, QStream):
-        if model.layers:
-            sizes["activation_table"] = 2 * ACT_KNOT.size
-            sizes["weights"] = sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size
-            sizes["biases"] = sum(4 * lay.b.size for lay in model.layers)
-    elif isinstance(model, QPhysics):
-        sizes["physics_coefficients"] = 16
-    elif isinstance(model, QPla):
-        sizes["pla_tables"] = (
-            4 * len(model.splits_mdegc) + 4 * len(model.slopes_q) + 8 * len(model.intercepts_q)
-        )
-    else:
-        sizes["poly3_coefficients"] = 16
-    return sizes
+    return {"model_id_string": len("sha256:") + 64 + 1, **family_of(model).tables(model)}
+
+
+def stream_tables(model: QStream) -> dict[str, int]:
+    if not model.layers:
+        return {}
+    return {
+        "activation_table": 2 * ACT_KNOT.size,
+        "weights": sum(2 * lay.w_padded.size for lay in model.layers) + 4 * model.hidden_size,
+        "biases": sum(4 * lay.b.size for lay in model.layers),
+    }
+
+
+def physics_tables(model: QPhysics) -> dict[str, int]:
+    return {"physics_coefficients": 16}
 
 
 def _c_int(value: int, width: int = 32) -> str:
@@ -239,7 +243,7 @@ def _c_int(value: int, width: int = 32) -> str:
     return str(value)
 
 
-def _rows(values: np.ndarray | list[int] | tuple[int, ...], *, width: int = 32, per_line: int = 12) -> str:
+def c_rows(values: np.ndarray | list[int] | tuple[int, ...], *, width: int = 32, per_line: int = 12) -> str:
     items = [_c_int(int(v), width) for v in np.asarray(values, dtype=np.int64).ravel()]
     lines = [", ".join(items[k : k + per_line]) + "," for k in range(0, len(items), per_line)]
     return "\n".join("    " + line for line in lines)
@@ -280,107 +284,102 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         ("SAMPLE_RATE_MILLIHZ", f"{millihz}u"),
     ]
     ctx["rate_millihz"] = millihz  # 0: memoryless, any rate (codegen/rate.py)
-    if isinstance(model, QStream):
-        fe = model.frontend
-        ctx.update(
-            family="stream",
-            kind=model.kind,
-            rate_hz=f"{fe.rate_hz:g}",
-            decimation=fe.decimation,
-            step_hz=f"{fe.rate_hz / fe.decimation:g}",
-            window=model.window,
-            chunks=model.chunks,
-            vector_slots=model.vector_slots,
-            chunk_start=model.chunk_start,
-            full_steps=model.full_steps,
-            mean_scale=f"INT64_C({1 << model.mean_frac})",
-            mean_frac=model.mean_frac,
-            est_frac=EST_FRAC,
-            est_limit=_c_int(EST_LIMIT, 64),
-            layers=[
-                {
-                    "rows": lay.wx.q.shape[0],
-                    "n_in": lay.wx.q.shape[1],
-                    "pairs": lay.pairs,
-                    "first_pairs": lay.first_pairs,
-                    "rest_pairs": lay.pairs - lay.first_pairs,
-                    "offset": lay.offset,
-                    "h_start": model.vector_slots - (len(model.layers) - k) * model.hidden_slots,
-                    "wx_frac": lay.wx.frac,
-                    "wh_frac": lay.wh.frac,
-                    "acc_frac": lay.acc_frac,
-                    "acc_bound_text": _bound_text(lay.acc_bound),
-                    "w": _rows(lay.kernel_weights(), per_line=4 + 4 * lay.pairs),
-                    "w_words": lay.kernel_weights().size,
-                    "shift": lay.shift,
-                }
-                for k, lay in enumerate(model.layers)
-            ],
-            hidden=model.hidden_size,
-            inputs=[
-                {
-                    "mu": _c_int(q.mu_q, 64),
-                    "inv": _c_int(q.inv_q, 64),
-                    "d_max": _c_int(q.d_max, 64),
-                    "pre_shift": q.pre_shift,
-                    "shift": q.shift,
-                    "doc": f"({q.name} - {q.mean:.6g} {q.unit}) / {q.std:.6g} {q.unit}",
-                }
-                for q in model.inputs
-            ],
-            act_table=_rows(ACT_KNOT, per_line=12),
-            act_knots=ACT_KNOT.size,
-            schedule=model.schedule,
-            tasks=model.tasks,
-            unit_tasks=UNIT_TASKS,  # the order of a unit's tasks (the C's switch follows it)
-            # spread schedule: one dot-product function per pair count of a task (first pairs, rest)
-            dot_pair_counts=sorted(
-                {n for lay in model.layers for n in (lay.first_pairs, lay.pairs - lay.first_pairs)}
-            ),
-            hidden_slots=model.hidden_slots,
-        )
-        if model.head is not None:
-            ctx["head"] = {
-                "w": _rows(model.head.w.q),
-                "frac": model.head.w.frac,
-                "shift": model.head.shift,
-                "bias": _c_int(model.head.bias_q, 64),
-                "acc_bound_text": _bound_text(model.head.acc_bound),
-                "may_saturate": model.head.may_saturate,
-                "h_start": model.vector_slots - model.hidden_slots,
-            }
-        macros += [
-            ("DECIMATION", f"{fe.decimation}u"),
-            ("WINDOW", f"{model.window}u"),
-        ]
-    elif isinstance(model, QPhysics):
-        ctx.update(_physics_context(model))
-        macros += [("MODEL_TAG", f"{model.tag}u")]
-    elif isinstance(model, QPla):
-        ctx.update(
-            family="piecewise_linear",
-            splits=_rows(model.splits_mdegc) if model.splits_mdegc else "",
-            n_splits=len(model.splits_mdegc),
-            n_intervals=len(model.slopes_q),
-            slopes=_rows(model.slopes_q),
-            intercepts=_rows(model.intercepts_q, width=64, per_line=4),
-            frac=model.frac,
-        )
-    else:
-        ctx.update(
-            family="cubic",
-            coefficients=_rows(model.coefficients_q),
-            frac=model.frac,
-            u_shift=model.u_shift,
-            t_ref=model.t_ref_mdegc,
-            clip_lo=model.clip_lo_mdegc,
-            clip_hi=model.clip_hi_mdegc,
-        )
+    unit = family_of(model)
+    family_ctx = unit.context(model)
+    macros += cast(list[tuple[str, object]], family_ctx.pop("macros", []))  # the family's own NAME_ macros
+    ctx.update(family_ctx, family_template=unit.template.name)
+    ctx.setdefault("family", unit.name)  # the name the shared templates test
     ctx["macros"] = macros
     return ctx
 
 
-def _physics_context(model: QPhysics) -> dict[str, object]:
+def sigmoid_offset(shift: int) -> int | None:
+    """tdck_lstm_gates' ``sig`` argument as an offset into the activation table (the sigmoid gates'
+    base, where their accumulators cannot leave the table: shift >= 22), None for NULL."""
+    return ACT_SEGMENTS // 2 - 2 ** (30 - shift) if shift >= 22 else None
+
+
+def stream_context(model: QStream) -> dict[str, object]:
+    fe = model.frontend
+    ctx: dict[str, object] = dict(
+        family="stream",
+        macros=[("DECIMATION", f"{fe.decimation}u"), ("WINDOW", f"{model.window}u")],
+        kind=model.kind,
+        rate_hz=f"{fe.rate_hz:g}",
+        decimation=fe.decimation,
+        step_hz=f"{fe.rate_hz / fe.decimation:g}",
+        window=model.window,
+        chunks=model.chunks,
+        vector_slots=model.vector_slots,
+        chunk_start=model.chunk_start,
+        full_steps=model.full_steps,
+        mean_scale=f"INT64_C({1 << model.mean_frac})",
+        mean_frac=model.mean_frac,
+        est_frac=EST_FRAC,
+        est_limit=_c_int(EST_LIMIT, 64),
+        layers=[
+            {
+                "rows": lay.wx.q.shape[0],
+                "n_in": lay.wx.q.shape[1],
+                "pairs": lay.pairs,
+                "first_pairs": lay.first_pairs,
+                "rest_pairs": lay.pairs - lay.first_pairs,
+                "offset": lay.offset,
+                "h_start": model.vector_slots - (len(model.layers) - k) * model.hidden_slots,
+                "wx_frac": lay.wx.frac,
+                "wh_frac": lay.wh.frac,
+                "acc_frac": lay.acc_frac,
+                "acc_bound_text": _bound_text(lay.acc_bound),
+                "w": c_rows(lay.kernel_weights(), per_line=4 + 4 * lay.pairs),
+                "row_words": 4 + 4 * lay.pairs,  # a unit's block: 4 biases, then 4 words per pair
+                "rest_w": 4 + 4 * lay.first_pairs,  # spread schedule: the block's words of dot_rest
+                "rest_v": lay.offset + 2 * lay.first_pairs,  # ... and its first slot of state->vec
+                # spread schedule: the layer's tasks are task_first .. task_end - 1, UNIT_TASKS per unit
+                "task_first": len(model.inputs) + len(UNIT_TASKS) * model.hidden_size * k,
+                "task_end": len(model.inputs) + len(UNIT_TASKS) * model.hidden_size * (k + 1),
+                "w_words": lay.kernel_weights().size,
+                "shift": lay.shift,
+            }
+            for k, lay in enumerate(model.layers)
+        ],
+        hidden=model.hidden_size,
+        sig_offset={lay.shift: sigmoid_offset(lay.shift) for lay in model.layers},
+        inputs=[
+            {
+                "mu": _c_int(q.mu_q, 64),
+                "inv": _c_int(q.inv_q, 64),
+                "d_max": _c_int(q.d_max, 64),
+                "pre_shift": q.pre_shift,
+                "shift": q.shift,
+                "doc": f"({q.name} - {q.mean:.6g} {q.unit}) / {q.std:.6g} {q.unit}",
+            }
+            for q in model.inputs
+        ],
+        act_table=c_rows(ACT_KNOT, per_line=12),
+        act_knots=ACT_KNOT.size,
+        schedule=model.schedule,
+        tasks=model.tasks,
+        unit_tasks=UNIT_TASKS,  # the order of a unit's tasks (the C's switch follows it)
+        # spread schedule: one dot-product function per pair count of a task (first pairs, rest)
+        dot_pair_counts=sorted(
+            {n for lay in model.layers for n in (lay.first_pairs, lay.pairs - lay.first_pairs)}
+        ),
+        hidden_slots=model.hidden_slots,
+    )
+    if model.head is not None:
+        ctx["head"] = {
+            "w": c_rows(model.head.w.q),
+            "frac": model.head.w.frac,
+            "shift": model.head.shift,
+            "bias": _c_int(model.head.bias_q, 64),
+            "acc_bound_text": _bound_text(model.head.acc_bound),
+            "may_saturate": model.head.may_saturate,
+            "h_start": model.vector_slots - model.hidden_slots,
+        }
+    return ctx
+
+
+def physics_context(model: QPhysics) -> dict[str, object]:
     tf = model.temp_frac
 
     def values(t: QTerm) -> dict[str, object]:
@@ -395,7 +394,7 @@ def _physics_context(model: QPhysics) -> dict[str, object]:
         return out
 
     return {
-        "family": registry.PHYSICS_RENDERER,  # the template _physics.c.j2
+        "family": registry.PHYSICS_RENDERER,  # the template families/physics/_physics.c.j2
         "rate_hz": f"{model.rate_hz:g}",
         "tf": tf,
         "centre": model.centre_mdegc,
@@ -417,7 +416,7 @@ def _physics_context(model: QPhysics) -> dict[str, object]:
         "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
         "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
         "u_shift": model.u_shift,
-        "coefficients": _rows(model.coefficients_q, per_line=4),
+        "coefficients": c_rows(model.coefficients_q, per_line=4),
     }
 
 
@@ -434,9 +433,13 @@ def header_version(path: Path, macro: str) -> int:
     return int(found.group(1))
 
 
+TEMPLATES = Path(__file__).with_name("templates")  # the shared templates; each family's are in its unit
+
+
 def _environment() -> jinja2.Environment:
+    family_dirs = sorted({unit.template.parent for unit in family_entries()} - {TEMPLATES})
     env = jinja2.Environment(
-        loader=jinja2.PackageLoader("codegen", "templates"),
+        loader=jinja2.FileSystemLoader([TEMPLATES, *family_dirs]),
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,
@@ -457,8 +460,8 @@ def kernel_header() -> str:
 
 
 def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = ()) -> dict[str, str]:
-    """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` (and ``tdc_physics_kernels.h`` for a physics
-    model); ``notes`` are lines for the header's comment."""
+    """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
+    (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
@@ -467,8 +470,8 @@ def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, 
         f"{name}.c": env.get_template("module.c.j2").render(ctx),
         KERNEL_FILE: kernel_header(),
     }
-    if isinstance(model, QPhysics):
-        files[PHYSICS_KERNEL_FILE] = PHYSICS_KERNEL_HEADER.read_text(encoding="utf-8")
+    for header in family_of(model).kernels.values():
+        files[header.name] = header.read_text(encoding="utf-8")
     return files
 
 

@@ -13,12 +13,13 @@ decimation) and ``normalisation`` (``inputs_mean``, ``inputs_std``, ``output_mea
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from codegen import family
+from codegen.family import ModelSpec
 from trainer import methods as registry
 from trainer.dlstm.realtime import PERSISTENCE_KIND, RECURSIVE_KIND, TEMPERATURE_KIND
 from trainer.errors import UserError
@@ -75,31 +76,12 @@ class PersistenceSpec:
 
 
 @dataclass(frozen=True)
-class PlaSpec:
-    method: str
-    split_points_c: np.ndarray
-    slopes_mg_per_c: np.ndarray
-    intercepts_mg: np.ndarray
-
-
-@dataclass(frozen=True)
-class Poly3Spec:
-    method: str
-    coefficients_mg: np.ndarray  # c0..c3 of (T - t_ref)^k, mg / degC^k
-    t_ref_c: float
-    temp_range_c: tuple[float, float]
-
-
-@dataclass(frozen=True)
 class PhysicsSpec:
     """The grey-box model's plain parameters and the sample rate its filters are discretised for."""
 
     method: str
     model: PhysicsModel
     rate_hz: float  # the training recording's (train_stats.sample_rate_hz)
-
-
-ModelSpec = DlstmModelSpec | PersistenceSpec | PlaSpec | Poly3Spec | PhysicsSpec
 
 
 @dataclass(frozen=True)
@@ -171,7 +153,7 @@ def _weight_names(weights: dict[str, Any]) -> dict[str, Any]:
     return renamed
 
 
-def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmModelSpec:
+def parse_dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmModelSpec:
     frontend = _frontend(root, payload, method)
     arch = payload.sub("architecture")
     n_in = 2 if frontend.kind == TEMPERATURE_KIND else 1
@@ -200,28 +182,11 @@ def _dlstm(root: _Fields, payload: _Fields, method: str) -> DlstmModelSpec:
     return DlstmModelSpec(method, frontend, tuple(layers), head_w, head_b)
 
 
-def _persistence(root: _Fields, payload: _Fields, method: str) -> PersistenceSpec:
+def parse_persistence(root: _Fields, payload: _Fields, method: str) -> PersistenceSpec:
     return PersistenceSpec(method, _frontend(root, payload, method))
 
 
-def _pla(root: _Fields, payload: _Fields, method: str) -> PlaSpec:
-    n = payload.integer("n_intervals", 1, 4096)
-    splits = payload.array("split_points_c", (n - 1,))
-    if np.any(np.diff(splits) < 0):
-        root.fail("field 'payload.split_points_c' must be in ascending order")
-    return PlaSpec(
-        method, splits, payload.array("slopes_mg_per_c", (n,)), payload.array("intercepts_mg", (n,))
-    )
-
-
-def _poly3(root: _Fields, payload: _Fields, method: str) -> Poly3Spec:
-    lo, hi = payload.numbers("temp_range_c", 2)
-    if not lo < hi:
-        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
-    return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
-
-
-def _physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
+def parse_physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
     """Parameters through the trainer's own payload reader (one definition of the layout)."""
     from trainer.greybox.compensator import PhysicsCompensator
 
@@ -245,28 +210,18 @@ def _physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
     return PhysicsSpec(method, model, rate_hz)
 
 
-# One parser per renderer of trainer/methods.py (tests/test_method_registry.py checks the keys).
-PARSERS: dict[str, Callable[[_Fields, _Fields, str], ModelSpec]] = {
-    "lstm-stream": _dlstm,
-    "mean-stream": _persistence,
-    "piecewise-linear": _pla,
-    "cubic": _poly3,
-    registry.PHYSICS_RENDERER: _physics,
-}
-
-
 def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
     """Typed specs of a checkpoint already validated by ``load_checkpoint``."""
     root = _Fields(source, checkpoint, "")
     method = checkpoint.get("method")
     entry = registry.REGISTRY.get(method) if isinstance(method, str) else None
-    if entry is None or entry.renderer is None:
-        supported = registry.with_renderer()
+    if entry is None or entry.renderer is None or entry.renderer not in family.names():
+        supported = [m for m in registry.with_renderer() if registry.get(m).renderer in family.names()]
         root.fail(f"method {method!r} has no code generator (supported: {', '.join(supported)})")
     assert entry is not None and entry.renderer is not None
     lo, hi = root.numbers("valid_temp_range_c", 2)
     if not lo <= hi:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
     payload = root.sub("payload")
-    model = PARSERS[entry.renderer](root, payload, entry.name)
+    model = family.get(entry.renderer).parse(root, payload, entry.name)
     return Checkpoint(entry.name, model, (lo, hi))

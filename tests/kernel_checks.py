@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 from pathlib import Path
 
@@ -12,6 +13,22 @@ from codegen.hostbuild import FIRMWARE_WARNINGS, SANITIZER_FLAGS, STRICT_FLAGS, 
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = ROOT / "codegen" / "kernels"
+
+
+def harness_codes(harness: Path) -> dict[str, int]:
+    """The kernel-test harness's op codes (its ``enum kernel``) and its record widths (``KERNEL_IN``,
+    ``KERNEL_OUT``), read from the C: declared there only, so Python and C cannot disagree."""
+    text = harness.read_text(encoding="utf-8")
+    codes = {
+        m[1]: int(m[2]) for m in re.finditer(r"^#define (KERNEL_IN|KERNEL_OUT) (\d+)$", text, re.MULTILINE)
+    }
+    enum = re.search(r"enum kernel \{([^}]*)\}", text)
+    if enum is None or set(codes) != {"KERNEL_IN", "KERNEL_OUT"}:
+        raise ValueError(f"{harness}: no 'enum kernel {{ ... }}' or no KERNEL_IN / KERNEL_OUT")
+    for entry in enum[1].split(","):
+        name, _, value = entry.partition("=")
+        codes[name.strip()] = int(value)
+    return codes
 
 
 def assert_header_warning_free(compiler: str, header: str, harness: Path, work: Path) -> None:

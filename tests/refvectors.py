@@ -56,7 +56,7 @@ def _checkpoint(method: str) -> dict[str, object]:
     rec = read_recording(work)
     work.unlink()
     renderer = registry.get(method).renderer
-    if renderer in ("piecewise-linear", "cubic", "mean-stream", "physics"):
+    if renderer in ("pla", "cubic", "mean-stream", "physics"):
         return tm.checkpoint_for(method, rec)
     fe = tm.frontend_fields(200.0, run_s=0.05, temp_s=0.1, step_s=0.05)
     hidden = 4 if tm.frontend_kind(registry.REGISTRY[method]) == "temperature" else 10

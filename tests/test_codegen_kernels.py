@@ -27,6 +27,7 @@ from codegen.qformats import ACT_KNOTS, ACT_POS_BITS, ACT_SEGMENTS, ACT_STEP_BIT
 from tests.kernel_checks import (
     assert_header_warning_free,
     build_sanitized,
+    harness_codes,
     run_sanitized,
     write_records,
 )
@@ -34,13 +35,27 @@ from tests.kernel_checks import (
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "firmware_c" / "harness" / "kernel_app.c"
 KERNELS = ROOT / "codegen" / "kernels"
-N_IN, N_OUT = 11, 5
-K_TABLE, K_ACT, K_RS64, K_RS32, K_RR64, K_RDIV, K_DOT4, K_CELL, K_INPUT, K_HOLD, K_SAT, K_CLAMP, K_SHAPE = (
-    range(13)
+CODES = harness_codes(HARNESS)  # the op codes and record widths, declared in the C harness only
+N_IN, N_OUT = CODES["KERNEL_IN"], CODES["KERNEL_OUT"]
+K_TABLE, K_ACT, K_RS64, K_RS32, K_RR64, K_RDIV = (
+    CODES[k]
+    for k in ("K_TABLE", "K_ACT", "K_ROUND_SHIFT64", "K_ROUND_SHIFT32", "K_RSHIFT_ROUND64", "K_RDIV_ROUND64")
 )
-K_WINDOW = 13
-K_DOT_WIDE = 14
-K_GATES = 15
+K_DOT4, K_CELL, K_INPUT, K_HOLD, K_SAT, K_CLAMP, K_SHAPE, K_WINDOW, K_DOT_WIDE, K_GATES = (
+    CODES[k]
+    for k in (
+        "K_DOT4",
+        "K_CELL",
+        "K_INPUT",
+        "K_HOLD",
+        "K_SAT",
+        "K_CLAMP",
+        "K_SHAPE",
+        "K_WINDOW",
+        "K_DOT_WIDE",
+        "K_GATES",
+    )
+)
 I32 = (-(2**31), 2**31 - 1)
 
 

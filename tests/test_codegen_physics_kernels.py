@@ -22,6 +22,7 @@ from codegen import cortex_m as cm
 from tests.kernel_checks import (
     assert_header_warning_free,
     build_sanitized,
+    harness_codes,
     run_sanitized,
     write_records,
 )
@@ -29,8 +30,11 @@ from tests.kernel_checks import (
 ROOT = Path(__file__).resolve().parents[1]
 HARNESS = ROOT / "firmware_c" / "harness" / "physics_kernel_app.c"
 KERNELS = ROOT / "codegen" / "kernels"
-N_IN, N_OUT = 7, 3
-K_HI, K_HI_FLOOR, K_HI_ROUND, K_MLA, K_LOWPASS, K_PLAY, K_OUTPUT = range(7)
+CODES = harness_codes(HARNESS)  # the op codes and record widths, declared in the C harness only
+N_IN, N_OUT = CODES["KERNEL_IN"], CODES["KERNEL_OUT"]
+K_HI, K_HI_FLOOR, K_HI_ROUND, K_MLA, K_LOWPASS, K_PLAY, K_OUTPUT = (
+    CODES[k] for k in ("K_HI", "K_HI_FLOOR", "K_HI_ROUND", "K_MLA", "K_LOWPASS", "K_PLAY", "K_OUTPUT")
+)
 I32 = (-(2**31), 2**31 - 1)
 I64 = (-(2**63), 2**63 - 1)
 SAT_BIT = 4

@@ -12,8 +12,8 @@ from typing import Any, Self
 import numpy as np
 import pytest
 
+from codegen import family
 from codegen.cli import main as codegen_main
-from codegen.spec import PARSERS
 from trainer import methods
 from trainer.baselines.base import TemperatureCompensator
 from trainer.checkpoint import load_model
@@ -210,9 +210,10 @@ def test_every_entry_resolves_to_a_compensator_class() -> None:
         assert methods.name_of(cls) == method.name
 
 
-def test_codegen_parses_every_renderer() -> None:
-    assert set(PARSERS) == set(methods.RENDERERS)
-    assert {m.renderer for m in methods.entries()} <= {*methods.RENDERERS, None}
+def test_codegen_has_a_family_for_every_renderer() -> None:
+    assert family.names() == methods.RENDERERS
+    assert {m.renderer for m in methods.entries()} <= {*family.names(), None}
+    assert all(family.get(name).name == name for name in family.names())
 
 
 def test_method_names_are_written_only_in_the_registry() -> None:

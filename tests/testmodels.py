@@ -172,7 +172,7 @@ def physics_checkpoint(
 def checkpoint_for(method: str, rec: Recording, **kwargs: Any) -> dict[str, Any]:
     """A test checkpoint of any method with a renderer (``kwargs`` go to :func:`dlstm_checkpoint`)."""
     renderer = registry.get(method).renderer
-    if renderer in ("piecewise-linear", "cubic"):
+    if renderer in ("pla", "cubic"):
         return baseline_checkpoint(method, rec)
     if renderer == "mean-stream":
         return persistence_checkpoint(rec)

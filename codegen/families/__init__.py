@@ -1,0 +1,2 @@
+"""The C families' units, one package each (parser, quantiser, golden model, template, manifest
+section); :mod:`codegen.family` lists them."""

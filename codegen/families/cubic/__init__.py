@@ -1,0 +1,136 @@
+"""The cubic in temperature (``poly3``): Horner in u = (T - T_ref) / 2^u_shift, T clipped to the
+fitted range. Its C is ``cubic.c.j2`` (one channel) and ``tdcf_cubic`` of the IMU module."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from codegen.family import CFamily, ImuForm
+from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits, round_half_away, rshift_round
+from codegen.golden import GoldenBase
+from codegen.imu import KIND_CUBIC, ChannelTables
+from codegen.manifest import memoryless_rates, six_digits
+from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
+from codegen.render import c_rows
+from trainer.errors import UserError
+from trainer.fields import DottedFields
+
+
+@dataclass(frozen=True)
+class Poly3Spec:
+    method: str
+    coefficients_mg: np.ndarray  # c0..c3 of (T - t_ref)^k, mg / degC^k
+    t_ref_c: float
+    temp_range_c: tuple[float, float]
+
+
+def parse(root: DottedFields, payload: DottedFields, method: str) -> Poly3Spec:
+    lo, hi = payload.numbers("temp_range_c", 2)
+    if not lo < hi:
+        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
+    return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
+
+
+@dataclass(frozen=True)
+class QPoly3:
+    method: str
+    limits: Limits
+    clip_lo_mdegc: int
+    clip_hi_mdegc: int
+    t_ref_mdegc: int
+    u_shift: int  # u = (T - T_ref) / 2**u_shift, |u| <= 1
+    coefficients_q: tuple[int, ...]  # int32, d0..d3, Q(frac) accel LSB
+    frac: int
+    bound: int  # worst-case |Horner accumulator|
+
+
+def quantise(spec: Poly3Spec, limits: Limits, schedule: str = "step") -> QPoly3:
+    lo = round_half_away(Fraction(spec.temp_range_c[0]) * 1000)
+    hi = round_half_away(Fraction(spec.temp_range_c[1]) * 1000)
+    if not (-INT32_MAX <= lo < hi <= INT32_MAX):
+        raise UserError(f"poly3: temperature range {spec.temp_range_c} degC is outside int32 mdegC")
+    t_ref = round_half_away(Fraction(spec.t_ref_c) * 1000)
+    t_ref = min(max(t_ref, lo), hi)
+    u_shift = max(1, math.ceil(math.log2(max(abs(lo - t_ref), abs(hi - t_ref), 1))))
+    delta = t_ref - Fraction(spec.t_ref_c) * 1000  # exact: p(T - t_ref) = q(T - T_ref_int)
+    e = [Fraction(c) * ACCEL_PER_MG / Fraction(1000) ** k for k, c in enumerate(spec.coefficients_mg)]
+    shifted = [sum(e[k] * math.comb(k, j) * delta ** (k - j) for k in range(j, 4)) for j in range(4)]
+    d = [v * Fraction(2) ** (u_shift * j) for j, v in enumerate(shifted)]  # coefficients of u^j, accel LSB
+    for frac in range(40, -1, -1):
+        coeffs = [round_half_away(v * Fraction(2) ** frac) for v in d]
+        bound = sum(abs(c) for c in coeffs) + 3
+        if max(abs(c) for c in coeffs) <= INT32_MAX and bound << u_shift < INT64_SAFE:
+            return QPoly3(spec.method, limits, lo, hi, t_ref, u_shift, tuple(coeffs), frac, bound)
+    raise UserError("poly3: coefficients too large for the fixed-point format")
+
+
+class GoldenPoly3(GoldenBase):
+    model: QPoly3
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        u = self._clamp(temp, m.clip_lo_mdegc, m.clip_hi_mdegc) - m.t_ref_mdegc
+        d0, d1, d2, d3 = m.coefficients_q
+        acc = np.full(u.shape, d3, dtype=np.int64)
+        for coefficient in (d2, d1, d0):
+            acc = rshift_round(acc * u, m.u_shift) + coefficient
+        drift = self._sat(rshift_round(acc, m.frac))
+        return self._output(accel, drift)
+
+
+def context(model: QPoly3) -> dict[str, object]:
+    return {
+        "coefficients": c_rows(model.coefficients_q),
+        "frac": model.frac,
+        "u_shift": model.u_shift,
+        "t_ref": model.t_ref_mdegc,
+        "clip_lo": model.clip_lo_mdegc,
+        "clip_hi": model.clip_hi_mdegc,
+    }
+
+
+def manifest(model: QPoly3) -> dict[str, object]:
+    return {
+        "rates": memoryless_rates(),
+        "quantisation": {
+            "rounding": "half away from zero",
+            "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],
+            "t_ref_mdegc": model.t_ref_mdegc,
+            "u": f"(T - T_ref) / 2^{model.u_shift}",
+            "coefficients": f"int32 Q{model.frac} accel LSB, of u^0..u^3",
+            "coefficients_q": list(model.coefficients_q),
+            "frac_bits": model.frac,
+            "horner_bound": model.bound,
+            "horner_headroom_bits": six_digits(headroom_bits(model.bound * 2.0**model.u_shift, INT64_MAX)),
+        },
+        "macs_per_sample": 3,
+    }
+
+
+def tables(model: QPoly3) -> dict[str, int]:
+    return {"poly3_coefficients": 16}
+
+
+def imu_tables(q: QPoly3, sensor: int) -> ChannelTables:
+    return ChannelTables(
+        KIND_CUBIC, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, q.t_ref_mdegc,
+        tuple(q.coefficients_q), (), (), (),
+    )  # fmt: skip
+
+
+FAMILY = CFamily(
+    name="cubic",
+    parse=parse,
+    quantise=quantise,
+    golden=GoldenPoly3,
+    template=Path(__file__).with_name("cubic.c.j2"),
+    context=context,
+    manifest=manifest,
+    tables=tables,
+    imu=ImuForm(KIND_CUBIC, imu_tables),
+)

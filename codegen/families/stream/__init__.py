@@ -1,0 +1,68 @@
+"""The streaming DLSTM family (``lstm-stream``: recursive and temperature input) and the
+persistence front end without a network (``mean-stream``): window means, a decimated network, a
+held estimate. Its stages are :func:`codegen.spec.parse_dlstm`, :func:`codegen.quantize.quantise_stream`,
+:class:`codegen.golden.GoldenStream` (and the spread schedule's, :mod:`golden_spread` here), the template
+``_stream.c.j2`` here and the manifest section :func:`codegen.manifest.stream_manifest`."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+from codegen.families.stream.golden_spread import GoldenStreamSpread
+from codegen.family import CFamily, ImuForm, TimeBase
+from codegen.golden import GoldenBase, GoldenStream
+from codegen.imu import KIND_STREAM, ChannelTables
+from codegen.manifest import stream_manifest
+from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
+from codegen.render import stream_context, stream_state_fields, stream_tables
+from codegen.spec import DlstmModelSpec, PersistenceSpec, parse_dlstm, parse_persistence
+from trainer.dlstm.realtime import FrontEnd
+
+
+def retime_frontend(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
+    """The front end's windows and decimation in samples at another rate."""
+    payload = raw["payload"]
+    frontend = payload["frontend"]
+    retimed = FrontEnd.from_dict(frontend).at_rate(millihz).to_dict()
+    return {**raw, "payload": {**payload, "frontend": {**frontend, **retimed}}}
+
+
+TIME_BASE = TimeBase(
+    rate_hz=lambda model: model.frontend.rate_hz,
+    trained_hz=lambda raw: float(raw["payload"]["frontend"]["rate_hz"]),
+    retime=retime_frontend,
+    what="windows and decimation",
+)
+
+
+def imu_tables(q: QStream, sensor: int) -> ChannelTables:
+    """Its numbers are in its own module, embedded in the IMU module: the record names its kind and sensor."""
+    return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
+
+
+def quantise(spec: DlstmModelSpec | PersistenceSpec, limits: Limits, schedule: str) -> QStream:
+    return dataclasses.replace(quantise_stream(spec, limits), schedule=schedule)
+
+
+def golden(model: QStream) -> GoldenBase:
+    """The spread schedule's golden model is its own (golden_spread.py)."""
+    return GoldenStreamSpread(model) if model.layers and model.schedule == "spread" else GoldenStream(model)
+
+
+LSTM = CFamily(
+    name="lstm-stream",
+    parse=parse_dlstm,
+    quantise=quantise,
+    golden=golden,
+    template=Path(__file__).with_name("_stream.c.j2"),
+    context=stream_context,
+    manifest=stream_manifest,
+    tables=stream_tables,
+    state=stream_state_fields,
+    schedules=SCHEDULES,
+    time_base=TIME_BASE,
+    imu=ImuForm(KIND_STREAM, imu_tables),
+)
+MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))

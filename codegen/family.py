@@ -1,0 +1,167 @@
+"""THE list of C families: one :class:`CFamily` per renderer of ``trainer/methods.py``.
+
+A C family is everything the code generator knows of one kind of model, found together in one
+unit of ``codegen/families/``: its checkpoint parser, its quantiser, its golden (integer numpy)
+model, its template and the template's variables, its manifest section and table sizes. Export,
+verify and the IMU module dispatch through :func:`family_of` instead of testing model types.
+
+Adding a family is one unit plus one line of :data:`UNITS` (or one :func:`register` call, as
+``tests/test_codegen_family_registry.py`` does with a throwaway one). Units are named by import
+path and imported on first use, so the stage modules (spec, quantize, render, manifest) can
+dispatch here while the units build on them: no import cycle.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from trainer import methods as registry
+from trainer.errors import UserError
+from trainer.fields import DottedFields
+
+# The contracts between the stage modules and the units (declared here, so that this module
+# imports none of codegen: the stage modules import it).
+
+
+class ModelSpec(Protocol):
+    """A parsed model (each family's parser returns its own spec)."""
+
+    @property
+    def method(self) -> str: ...
+
+
+class QuantModel(Protocol):
+    """A quantised model (each family's quantiser returns its own; ``limits``: codegen.quantize.Limits)."""
+
+    @property
+    def method(self) -> str: ...
+
+    @property
+    def limits(self) -> Any: ...
+
+
+class Golden(Protocol):
+    """A golden model (codegen.golden.GoldenBase): the C's integer arithmetic in numpy."""
+
+    flags: int
+    samples: int
+
+    def init(self) -> None: ...
+
+    def reset(self) -> None: ...
+
+    def run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray: ...
+
+    def state(self) -> dict[str, np.ndarray | int]: ...
+
+
+# renderer name -> "module:ATTRIBUTE" of its CFamily, in the order of trainer/methods.py RENDERERS
+UNITS: dict[str, str] = {
+    "lstm-stream": "codegen.families.stream:LSTM",
+    "mean-stream": "codegen.families.stream:MEAN",
+    registry.PLA: "codegen.families.pla:FAMILY",
+    "cubic": "codegen.families.cubic:FAMILY",
+    registry.PHYSICS_RENDERER: "codegen.families.physics:FAMILY",
+}
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    """A family built for one sample rate (codegen/rate.py): ``rate_hz`` of a quantised model,
+    ``trained_hz`` of a raw checkpoint, ``retime``: the raw checkpoint re-derived for another rate
+    (millihertz), ``what`` it re-derives (for the export's note)."""
+
+    rate_hz: Callable[[Any], float]
+    trained_hz: Callable[[dict[str, Any]], float]
+    retime: Callable[[dict[str, Any], int], dict[str, Any]]
+    what: str
+
+
+@dataclass(frozen=True)
+class ImuForm:
+    """A family's channel of the IMU module (codegen/imu.py): ``kind``, its NAME_KIND_ code (the
+    blob's), and ``tables``, the channel's record (codegen.imu.ChannelTables) given the model and
+    the index of the sensor whose temperature it reads."""
+
+    kind: int
+    tables: Callable[[Any, int], Any]
+
+
+def _no_state(model: Any, common: list[Any]) -> list[Any]:
+    return common
+
+
+@dataclass(frozen=True, eq=False)
+class CFamily:
+    """One C family. ``template``: its C template (included by ``module.c.j2`` for NAME_init, _reset
+    and _step); ``context``: that template's variables (``family``, the name the shared templates
+    test, defaults to ``name``; ``macros``: its own NAME_ macros); ``state``: the state struct's members given the common ones (flags, samples);
+    ``schedules``: the ``--schedule`` values it takes; ``kernels``: extra kernel headers shipped with
+    its modules (manifest key -> file); ``restore``: it has NAME_restore; ``time_base``: None for a
+    memoryless family (any rate); ``imu``: None when it has no IMU-module form."""
+
+    name: str
+    parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
+    quantise: Callable[[Any, Any, str], QuantModel]  # (spec, codegen.quantize.Limits, schedule)
+    golden: Callable[[Any], Golden]
+    template: Path
+    context: Callable[[Any], dict[str, object]]
+    manifest: Callable[[Any], dict[str, object]]
+    tables: Callable[[Any], dict[str, int]]
+    state: Callable[[Any, list[Any]], list[Any]] = _no_state  # codegen.render.Field
+    schedules: tuple[str, ...] = ("step",)
+    kernels: dict[str, Path] = field(default_factory=dict)
+    restore: bool = False
+    time_base: TimeBase | None = None
+    imu: ImuForm | None = None
+
+
+_LOADED: dict[str, CFamily] = {}
+
+
+def register(family: CFamily) -> CFamily:
+    """Add a family (a test's throwaway one); its name is the renderer a method names."""
+    if family.name in UNITS or family.name in _LOADED:
+        raise ValueError(f"C family {family.name!r} is registered already")
+    _LOADED[family.name] = family
+    return family
+
+
+def unregister(name: str) -> None:
+    """Remove a family added by :func:`register` (tests)."""
+    if name in UNITS:
+        raise ValueError(f"C family {name!r} is built in")
+    del _LOADED[name]
+
+
+def get(name: str) -> CFamily:
+    """The family of renderer ``name`` (its unit imported on first use)."""
+    if name not in _LOADED:
+        if name not in UNITS:
+            raise UserError(f"no C family {name!r} (known: {', '.join(names())})")
+        module, _, attribute = UNITS[name].partition(":")
+        _LOADED[name] = getattr(importlib.import_module(module), attribute)
+    return _LOADED[name]
+
+
+def names() -> tuple[str, ...]:
+    """Every family: the built-in units, then the registered ones."""
+    return (*UNITS, *(name for name in _LOADED if name not in UNITS))
+
+
+def entries() -> Iterator[CFamily]:
+    return iter(tuple(get(name) for name in names()))
+
+
+def family_of(model: QuantModel | ModelSpec) -> CFamily:
+    """The family of a parsed or quantised model (through its method's renderer)."""
+    renderer = registry.get(model.method).renderer
+    if renderer is None:
+        raise UserError(f"method {model.method!r} has no code generator")
+    return get(renderer)
