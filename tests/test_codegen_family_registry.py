@@ -29,6 +29,7 @@ from trainer.checkpoint import save_model
 from trainer.cli import main as trainer_main
 from trainer.errors import run_cli
 from trainer.fields import DottedFields
+from trainer.train_stats import TrainStats
 
 NAME = "line-c"
 FRAC = 16  # the line's fractional bits (a fixed format keeps the throwaway quantiser short)
@@ -130,7 +131,7 @@ def test_a_registered_family_exports_and_verifies_bit_exact(
     temp_c = np.linspace(10.0, 50.0, 50)
     model = LinearInTemperature().fit_arrays(temp_c, 0.8 * temp_c - 3.0)
     model_path = tmp_path / "line.pt"
-    save_model(model, model_path, train_stats={}, valid_temp_range_c=(10.0, 50.0))
+    save_model(model, model_path, train_stats=TrainStats(), valid_temp_range_c=(10.0, 50.0))
 
     out = tmp_path / "c"
     assert run_cli(codegen_main, ["export", str(model_path), "-o", str(out), "--name", "tdc_line"]) == 0
