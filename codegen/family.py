@@ -6,7 +6,7 @@ model, its template and the template's variables, its manifest section and table
 verify and the IMU module dispatch through :func:`family_of` instead of testing model types.
 
 Adding a family is one unit plus one line of :data:`UNITS` (or one :func:`register` call, as
-``tests/test_codegen_family_registry.py`` does with a throwaway one). Units are named by import
+``tests/export/test_codegen_family_registry.py`` does with a throwaway one). Units are named by import
 path and imported on first use, so the stage modules (spec, quantize, render, manifest) can
 dispatch here while the units build on them: no import cycle.
 """

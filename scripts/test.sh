@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The test command of the README (and of CI): set-up into .venv, the linters and the type checker
 # (a finding fails the run), then the whole suite on both cores.
-# Extra arguments go to pytest, e.g. scripts/test.sh --runslow  or  scripts/test.sh tests/test_allan.py
+# Extra arguments go to pytest, e.g. scripts/test.sh --runslow  or  scripts/test.sh tests/scoring/test_allan.py
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh test

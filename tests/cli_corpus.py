@@ -1,5 +1,5 @@
 """What the command-line robustness tests share: a small valid recording, and each command's
-argument list by the kind of input it reads (see tests/test_malformed_corpus.py, tests/test_fuzz.py).
+argument list by the kind of input it reads (see tests/robustness/test_malformed_corpus.py, tests/robustness/test_fuzz.py).
 
 A case is ``(command label, main, argv(files, input file, output dir))``: ``files`` maps
 ``good.csv``, ``good.pt`` and ``module`` (a valid recording, its poly3 model and C module) to paths.

@@ -1,5 +1,5 @@
 """The project's imports read from the source (ast), for the structure tests: no cycles
-(tests/test_architecture.py) and which layer may import which (tests/test_layers.py).
+(tests/project/test_architecture.py) and which layer may import which (tests/project/test_layers.py).
 
 Every import counts: module level, inside functions and under ``TYPE_CHECKING``.
 """

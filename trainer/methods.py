@@ -7,7 +7,7 @@ range checks, the shared DLSTM population), checkpoints (name <-> class) and the
 
 Each entry names its class by import path (``"package.module:Class"``) and the class is imported
 on first use, so that importing this module (and ``trainer --help``) does not import torch.
-``tests/test_method_registry.py`` resolves every entry.
+``tests/methods/test_method_registry.py`` resolves every entry.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 ``trainer/greybox`` fits the physics compensator with the finder's own machinery (block means,
 the calibrated baseline, the GLS model and the candidate search) and names its structure with the
-finder's verdict; it imports them from here only (tests/test_public_interfaces.py), so the
+finder's verdict; it imports them from here only (tests/project/test_public_interfaces.py), so the
 finder's modules can be split or renamed by changing this list.
 """
 

@@ -2,5 +2,5 @@
 
 The method registry, the fleet's manifests and ``codegen`` parse the same options as ``trainer``'s
 sub-commands; they import them from here, so that :mod:`trainer.commands` stays on top
-(``tests/test_layers.py``).
+(``tests/project/test_layers.py``).
 """

@@ -1,7 +1,7 @@
 """``trainer compare --jobs N``: the comparison's fits side by side in N worker processes.
 
 The results are those of fitting one method after another (``--jobs 1``; tested in
-``tests/test_side_by_side.py``): each task is one deterministic computation run with the caller's
+``tests/methods/test_side_by_side.py``): each task is one deterministic computation run with the caller's
 torch thread count, and a DLSTM population trains in parts that are exact
 (:func:`trainer.dlstm.fusion.population_parts`: its packed groups). The tasks:
 

@@ -1,0 +1,435 @@
+"""Several channels in one recording: --channels for fit/evaluate/import, the IMU C module and its blob.
+
+A small synthetic IMU recording (accelerometer and gyroscope x/y/z sharing a temperature, and a
+barometer with its own) is written by the test; every per-channel result is compared with the
+one-channel path run on that column alone, and the IMU module with each channel's golden model.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.cli import main as codegen_main
+from codegen.imu import BLOB_HEADER, CHANNEL_HEADER, encode_blob, imu_golden, load_imu
+from codegen.imu_verify import load_host_module, step_inputs, verify_imu
+from trainer.checkpoint import load_checkpoint, load_model
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
+from trainer.errors import run_cli
+
+RATE_HZ = 2.0
+N = 1200  # 10 minutes at 2 Hz: one heating and one cooling ramp
+CHANNELS = ("accel0_x", "accel0_y", "accel0_z", "gyro0_x", "gyro0_y", "gyro0_z")
+
+
+def _ramp(n: int, lo: float, hi: float) -> np.ndarray:
+    half = n // 2
+    return np.concatenate([np.linspace(lo, hi, half), np.linspace(hi, lo, n - half)])
+
+
+def imu_recording(n: int = N, seed: int = 3, temp_span: tuple[float, float] = (-10.0, 60.0)) -> Recording:
+    """Six IMU channels (own cubic drift each), a barometer with its own temperature; no truth columns."""
+    rng = np.random.default_rng(seed)
+    temp = _ramp(n, *temp_span) + rng.normal(0, 0.01, n)
+    baro_temp = temp + 2.0
+    columns: dict[str, np.ndarray] = {"time_s": np.arange(n) / RATE_HZ, "temp_c": temp}
+    for k, name in enumerate(CHANNELS):
+        u = (temp - 25.0) / 35.0
+        coefficients = rng.normal(0, [2.0, 5.0, 1.5, 0.8]) * (0.05 if name.startswith("gyro") else 1.0)
+        level = -1000.0 if name == "accel0_z" else 10.0 * k
+        drift = sum(c * u**j for j, c in enumerate(coefficients))
+        noise = rng.normal(0, 0.002 if name.startswith("gyro") else 0.05, n)
+        columns[f"{name}_{'dps' if name.startswith('gyro') else 'mg'}"] = level + drift + noise
+    columns["baro0_pa"] = (
+        101325.0 + 3.0 * (baro_temp - 25.0) + 0.02 * (baro_temp - 25.0) ** 2 + rng.normal(0, 0.5, n)
+    )
+    columns["baro0_temp_c"] = baro_temp
+    columns["accel_mg"] = columns["accel0_z_mg"]
+    return Recording(columns, {"sample_rate_hz": f"{RATE_HZ:g}", "channel": "accel0_z"}, "synthetic-imu")
+
+
+def one_axis(rec: Recording, channel: str, temp_column: str = "temp_c") -> Recording:
+    """The channel as an ordinary one-axis recording (what a user would write by hand)."""
+    unit = "pa" if channel.startswith("baro") else ("dps" if channel.startswith("gyro") else "mg")
+    column = f"{channel}_{unit}"
+    return Recording(
+        {"time_s": rec.time_s, "temp_c": rec.columns[temp_column], "accel_mg": rec.columns[column]},
+        # the unit of accel_mg said, as a one-channel view says it: Pa in an accel column is implausible
+        {"sample_rate_hz": rec.meta["sample_rate_hz"], **({"unit": unit} if unit != "mg" else {})},
+        f"{channel}.npz",
+    )
+
+
+@pytest.fixture(scope="module")
+def imu(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("imu")
+    rec = imu_recording()
+    write_recording(rec, root / "imu.csv")
+    write_recording(imu_recording(seed=4, temp_span=(-30.0, 90.0)), root / "wide.npz")  # beyond the range
+    assert (
+        trainer_main(
+            [
+                "fit",
+                "--method",
+                "poly3",
+                str(root / "imu.csv"),
+                "--channels",
+                "all",
+                "-o",
+                str(root / "poly3"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        trainer_main(
+            ["fit", "--method", "pla", "--intervals", "4", str(root / "imu.csv"), "--channels", "gyro0_x,gyro0_y,baro0",
+             "-o", str(root / "pla")]
+        )
+        == 0
+    )  # fmt: skip
+    return {"root": root, "rec": root / "imu.csv", "wide": root / "wide.npz"}
+
+
+def test_fit_per_channel_equals_a_one_channel_fit_of_that_column(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
+    rec = read_recording(imu["rec"])
+    index = json.loads((imu["root"] / "poly3" / "channels.json").read_text())
+    assert [c["channel"] for c in index["channels"]] == [*CHANNELS, "baro0"]
+    units = {c["channel"]: c["unit"] for c in index["channels"]}
+    assert units["accel0_x"] == "mg" and units["gyro0_z"] == "deg/s" and units["baro0"] == "Pa"
+    for channel in (*CHANNELS, "baro0"):
+        temp_column = "baro0_temp_c" if channel == "baro0" else "temp_c"
+        single = tmp_path / f"{channel}.npz"
+        write_recording(one_axis(rec, channel, temp_column), single)
+        assert (
+            trainer_main(["fit", "--method", "poly3", str(single), "-o", str(tmp_path / f"{channel}.pt")])
+            == 0
+        )
+        alone, _ = load_model(tmp_path / f"{channel}.pt")
+        multi, checkpoint = load_model(imu["root"] / "poly3" / f"{channel}.pt")
+        assert checkpoint["train_stats"]["channel"] == channel
+        view = read_recording(single)
+        np.testing.assert_array_equal(multi.predict_drift(view), alone.predict_drift(view))
+        lo, hi = checkpoint["valid_temp_range_c"]
+        assert (lo, hi) == (float(np.min(view.temp_c)), float(np.max(view.temp_c)))
+
+
+def test_evaluate_per_channel_reports_in_the_channel_unit(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = read_recording(imu["rec"])
+    out = tmp_path / "ev"
+    assert trainer_main(["evaluate", str(imu["root"] / "poly3"), str(imu["rec"]), "--channels", "gyro0_x,accel0_y",
+                         "--out-dir", str(out), "--smoothing", "0"]) == 0  # fmt: skip
+    multi = capsys.readouterr().out
+    for channel, unit in (("gyro0_x", "deg/s"), ("accel0_y", "mg")):
+        single = tmp_path / f"{channel}.npz"
+        write_recording(one_axis(rec, channel), single)
+        assert trainer_main(["evaluate", str(imu["root"] / "poly3" / f"{channel}.pt"), str(single),
+                             "--out-dir", str(tmp_path / channel), "--smoothing", "0"]) == 0  # fmt: skip
+        line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("drift left"))
+        expected = line.replace(" mg", f" {unit}")
+        assert expected in multi.splitlines()
+        report = (out / channel / "report.md").read_text()
+        assert f" {unit}" in report and (unit == "mg" or " mg" not in report)
+
+
+def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = run_cli(trainer_main, ["fit", "--method", "poly3", str(imu["rec"]), "--channels", "accel0_x,gyro0_q",
+                                  "-o", str(tmp_path / "m")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert (
+        "'gyro0_q'" in err
+        and "available: accel0_x, accel0_y, accel0_z, gyro0_x, gyro0_y, gyro0_z, baro0" in err
+    )
+    assert not (tmp_path / "m").exists()
+    code = run_cli(
+        codegen_main,
+        ["export", str(imu["root"] / "pla"), "--channels", "accel0_x", "-o", str(tmp_path / "c")],
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "available: gyro0_x, gyro0_y, baro0" in err
+
+
+def test_refusals_say_why(imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = run_cli(trainer_main, ["fit", "--method", "dlstm", str(imu["rec"]), "--channels", "baro0", "-o",
+                                  str(tmp_path / "d")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "baro0" in err and "recursive" in err and "altitude" in err
+
+
+def test_compare_and_diagnose_per_channel_outputs(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "cmp"
+    argv = [
+        "compare",
+        str(imu["rec"]),
+        "--holdout",
+        "0.5",
+        "--methods",
+        "poly3",
+        "--channels",
+        "gyro0_x,baro0",
+    ]
+    assert trainer_main([*argv, "--out-dir", str(out), "--quiet"]) == 0
+    for channel, unit in (("gyro0_x", "deg/s"), ("baro0", "Pa")):
+        report = (out / channel / "report.md").read_text()
+        assert f"drift left RMS ({unit})" in report and "(mg)" not in report
+        assert load_checkpoint(out / channel / "models" / "poly3.pt")["train_stats"]["channel"] == channel
+    code = run_cli(
+        trainer_main, [*argv[:-1], "baro0", "--methods", "dlstm,poly3", "--out-dir", str(tmp_path / "x")]
+    )
+    assert code == 2 and "recursive" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    (tmp_path / "j").mkdir()
+    argv = ["diagnose", str(imu["rec"]), "--channels", "accel0_x", "--json", str(tmp_path / "j" / "d.json")]
+    assert trainer_main(argv) == 0
+    assert json.loads((tmp_path / "j" / "d.accel0_x.json").read_text())
+
+
+def _mixed_models(imu: dict[str, Path]) -> list[Path]:
+    """poly3 on accelerometer and gyro z, pla on gyro x/y and the barometer."""
+    pla = {"gyro0_x", "gyro0_y", "baro0"}
+    return [imu["root"] / ("pla" if c in pla else "poly3") / f"{c}.pt" for c in (*CHANNELS, "baro0")]
+
+
+def test_imu_module_is_bit_exact_against_each_channel_golden_model(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
+    models = _mixed_models(imu)
+    out = tmp_path / "c"
+    assert codegen_main(["export", *map(str, models), "-o", str(out), "--name", "imu0"]) == 0
+    wide = read_recording(imu["wide"])
+    for cc in ("gcc", "clang"):  # strict warnings are errors with both
+        if shutil.which(cc) is None:
+            continue
+        result = verify_imu(models, out, wide, cc=cc)
+        assert [run.target for run in result.runs] == ["host"]
+        assert result.runs[0].mismatches == [0] * 7 and result.runs[0].state_equal
+    # the golden flags saw the out-of-range temperatures; the C agrees on them (state_equal)
+    model = load_imu(models)
+    raw, temp = step_inputs(model, wide)
+    _, flags, samples = imu_golden(model, raw, temp)
+    assert samples == len(wide) and all(f & 1 for f in flags)
+    # identical files for identical models (determinism)
+    again = tmp_path / "again"
+    assert codegen_main(["export", *map(str, reversed(models)), "-o", str(again), "--name", "imu0"]) == 0
+    for name in ("imu0.h", "imu0.c", "imu0.manifest.json"):
+        assert (out / name).read_bytes() == (again / name).read_bytes()
+    header = (out / "imu0.h").read_text()
+    assert (
+        "gyro0_x [deg/s], pla" in header and "baro0 [Pa], pla" in header and "accel0_z [mg], poly3" in header
+    )
+
+
+def test_imu_module_under_sanitizers_saturates_and_flags(imu: dict[str, Path], tmp_path: Path) -> None:
+    models = _mixed_models(imu)
+    out = tmp_path / "c"
+    assert codegen_main(["export", *map(str, models), "-o", str(out), "--name", "imu0"]) == 0
+    model = load_imu(models)
+    rng = np.random.default_rng(9)
+    n = 400
+    raw = rng.integers(-(2**31), 2**31, size=(n, 7), dtype=np.int64).astype(np.int32)
+    raw[:100:2], raw[1:100:2] = (
+        np.iinfo(np.int32).max,
+        np.iinfo(np.int32).min,
+    )  # a drift of either sign saturates
+    temp = rng.integers(-300_000, 300_000, size=(n, 3)).astype(np.int32)
+    ffi, lib = load_host_module(
+        out, "imu0", flags=("-O1", "-fsanitize=undefined", "-fno-sanitize-recover=all")
+    )
+    state = ffi.new("imu0_state_t *")
+    lib.imu0_init(state, lib.imu0_builtin())
+    c_out = np.empty_like(raw)
+    for k in range(n):
+        o = ffi.new("int32_t[7]")
+        lib.imu0_step(
+            state,
+            ffi.from_buffer("int32_t[]", raw[k].copy()),
+            ffi.from_buffer("int32_t[]", temp[k].copy()),
+            o,
+        )
+        c_out[k] = list(o)
+    g_out, g_flags, g_samples = imu_golden(model, raw, temp)
+    np.testing.assert_array_equal(c_out.astype(np.int64), g_out)
+    assert list(state.flags) == g_flags and state.samples == g_samples
+    assert all(f & 4 for f in g_flags)  # saturation happened on every channel and is flagged
+
+
+def _reseal(blob: bytes) -> bytes:
+    return blob[:-4] + struct.pack("<I", zlib.crc32(blob[:-4]))
+
+
+def test_blob_round_trip_and_refusals(imu: dict[str, Path], tmp_path: Path) -> None:
+    models = _mixed_models(imu)
+    out = tmp_path / "c"
+    assert codegen_main(["export", *map(str, models), "-o", str(out), "--name", "imu0", "--blob"]) == 0
+    blob = (out / "imu0.cal.bin").read_bytes()
+    model = load_imu(models)
+    assert blob == encode_blob(model)
+    # the documented layout, read independently: header, then sensors, then channel records, CRC32
+    magic, version, channels, sensors, capacity, module_id, sha = BLOB_HEADER.unpack_from(blob, 0)
+    assert (magic, version, channels, sensors) == (b"TDCC", 1, 7, 3) and capacity == 4
+    assert sha.hex() == model.sha256 and module_id == model.module_id
+    assert struct.unpack("<I", blob[-4:])[0] == zlib.crc32(blob[:-4])
+    first = BLOB_HEADER.size + 8 * sensors
+    kind, sensor, *_ = CHANNEL_HEADER.unpack_from(blob, first)
+    assert (kind, sensor) == (1, 0)  # accel0_x: a cubic on the first sensor
+
+    ffi, lib = load_host_module(out, "imu0")
+    assert "imu0_builtin" not in dir(lib)  # data-only module
+    cal = ffi.new("imu0_calibration_t *")
+    assert lib.imu0_load(cal, ffi.from_buffer("uint8_t[]", blob), len(blob)) == 0
+    assert bytes(cal.sha256) == bytes.fromhex(model.sha256)
+    result = verify_imu(models, out, read_recording(imu["wide"]))
+    assert [(r.calibration, sum(r.mismatches), r.state_equal) for r in result.runs] == [("blob", 0, True)]
+
+    corrupted = bytearray(blob)
+    corrupted[first + 30] ^= 0x01
+    version_2 = bytearray(blob)
+    version_2[4] = 2
+    other_module = bytearray(blob)
+    other_module[12] ^= 0xFF
+    bad_shift = bytearray(blob)
+    bad_shift[first + 3] = 40  # u_shift of a cubic beyond what its arithmetic is proved for
+    cases = {
+        4: bytes(corrupted),  # CRC
+        3: _reseal(bytes(version_2)),  # layout version
+        5: _reseal(bytes(other_module)),  # module id
+        6: _reseal(bytes(bad_shift)),  # table bounds
+        1: blob[:20],  # too short
+    }
+    for status, data in cases.items():
+        cal = ffi.new("imu0_calibration_t *")
+        assert lib.imu0_load(cal, ffi.from_buffer("uint8_t[]", data), len(data)) == status
+        assert not any(bytes(ffi.buffer(cal))), "a refused blob leaves the calibration zeroed"
+
+
+def test_imu_module_on_cortex_m4(imu: dict[str, Path], tmp_path: Path) -> None:
+    if shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None:
+        pytest.skip("Cortex-M toolchain unavailable")
+    models = _mixed_models(imu)
+    out = tmp_path / "c"
+    assert codegen_main(["export", *map(str, models), "-o", str(out), "--name", "imu0"]) == 0
+    shutil.copy(out / "imu0.c", tmp_path / "keep.c")
+    assert (
+        codegen_main(
+            ["export", *map(str, models), "-o", str(out), "--format", "calibration-blob", "--name", "imu0"]
+        )
+        == 0
+    )
+    result = verify_imu(models, out, read_recording(imu["wide"]), cortex_m4=True)
+    assert [(r.target, r.calibration) for r in result.runs] == [
+        ("host", "builtin"), ("cortex-m4", "builtin"), ("host", "blob"), ("cortex-m4", "blob")
+    ]  # fmt: skip
+    assert all(sum(r.mismatches) == 0 and r.state_equal for r in result.runs)
+
+
+def test_import_real_run_keeps_accelerometer_and_gyroscope(tmp_path: Path, real_run: Path) -> None:
+    out = tmp_path / "real.npz"
+    assert (
+        trainer_main(["import", str(real_run), "--preset", "tofupilot", "--channels", "all", "-o", str(out)])
+        == 0
+    )
+    rec = read_recording(out)
+    raw = np.genfromtxt(real_run, delimiter="\t", names=True, max_rows=50)
+    np.testing.assert_allclose(rec.columns["gyro0_x_dps"][:50], raw["imugyrox"] * 180 / np.pi, rtol=1e-12)
+    np.testing.assert_allclose(rec.columns["accel0_y_mg"][:50], raw["imuaccy"] / 9.80665 * 1000, rtol=1e-12)
+    assert "accel_x_mg" not in rec.columns  # the channels replace the older spelling
+
+
+def test_a_gyro_channel_carries_its_unit_into_checkpoint_and_header(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
+    stats = load_checkpoint(imu["root"] / "poly3" / "gyro0_y.pt")["train_stats"]
+    assert stats["channel"] == "gyro0_y" and stats["unit"] == "dps"
+    assert (
+        codegen_main(
+            ["export", str(imu["root"] / "poly3" / "gyro0_y.pt"), "-o", str(tmp_path), "--name", "g"]
+        )
+        == 0
+    )
+    header = " ".join((tmp_path / "g.h").read_text().replace(" * ", " ").split())  # unwrapped comment
+    assert "channel gyro0_y: values in deg/s" in header and "16000 LSB = 1 deg/s" in header
+
+
+# --------------------------------------------------------------------------- flight logs
+from tests.data_io.test_flightlog_import import dataflash, ulog_data, ulog_path  # noqa: E402, F401  (fixtures)
+
+
+def test_flight_log_channels_keep_what_was_asked_on_one_time_base(
+    tmp_path: Path,
+    dataflash: tuple[Path, dict],  # noqa: F811 (the fixture imported above)
+    ulog_path: Path,  # noqa: F811
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from trainer.data.channels import recording_channels
+
+    path, _ = dataflash
+    out = tmp_path / "df.npz"
+    assert (
+        trainer_main(["import", str(path), "--channel", "accel1_z", "--channels", "all", "-o", str(out)]) == 0
+    )
+    # one recording per time base: the test log writes both IMUs at the same timestamps (one file),
+    # the barometers at their own
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "df_accel0-accel1-gyro0-gyro1.npz",
+        "df_baro0-baro1.npz",
+    ]
+    rec = read_recording(tmp_path / "df_accel0-accel1-gyro0-gyro1.npz")
+    expected = [f"{s}{i}_{a}" for s in ("accel", "gyro") for i in (0, 1) for a in "xyz"]
+    assert list(recording_channels(rec)) == expected
+    assert recording_channels(rec)["gyro1_x"].temp_column == "gyro1_temp_c"
+    assert rec.meta["channel"] == "accel1_z"
+    assert list(recording_channels(read_recording(tmp_path / "df_baro0-baro1.npz"))) == ["baro0", "baro1"]
+
+    out = tmp_path / "ulog.npz"
+    assert trainer_main(["import", str(ulog_path), "--channels", "accel0_x,accel0_z", "-o", str(out)]) == 0
+    assert list(recording_channels(read_recording(out))) == ["accel0_x", "accel0_z"]
+    code = run_cli(
+        trainer_main,
+        [
+            "import",
+            str(ulog_path),
+            "--channel",
+            "accel0_z",
+            "--channels",
+            "accel0_x,gyro0_x",
+            "-o",
+            str(tmp_path / "x.npz"),
+        ],
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "--channel 'accel0_z' is not among --channels (accel0_x, gyro0_x)" in err
+    assert not list(tmp_path.glob("x*.npz"))
+
+
+def test_channel_map_of_a_delimited_file_converts_each_sensor_unit(tmp_path: Path) -> None:
+    n = 40
+    temp = 20.0 + 0.25 * np.arange(n)
+    ax, gx, p = 0.01 * np.arange(n), 0.001 * np.arange(n), 1013.0 + 0.01 * np.arange(n)
+    lines = ["t;T;ax;gx;p"] + [f"{0.1 * i:.1f};{temp[i]};{ax[i]};{gx[i]};{p[i]}" for i in range(n)]
+    source = tmp_path / "log.csv"
+    source.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "rec.npz"
+    argv = ["import", str(source), "--time", "t", "--temp", "T", "--accel", "ax", "--accel-unit", "g"]
+    argv += ["--channel-map", "accel0_x=ax,gyro0_x=gx,baro0=p", "--gyro-unit", "rad/s", "--baro-unit", "hPa"]
+    assert trainer_main([*argv, "--channels", "all", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    np.testing.assert_allclose(rec.columns["accel0_x_mg"], ax * 1000.0, rtol=1e-12)
+    np.testing.assert_allclose(rec.columns["gyro0_x_dps"], np.degrees(gx), rtol=1e-12)
+    np.testing.assert_allclose(rec.columns["baro0_pa"], p * 100.0, rtol=1e-12)

@@ -1,0 +1,165 @@
+"""codegen/family.py is the one list of C families: a new family is one unit plus one register() call.
+
+A throwaway family (a line in temperature, its C template written here) is registered with a
+throwaway method; export and verify then handle it without any other file knowing it.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen import family
+from codegen.cli import main as codegen_main
+from codegen.fixedpoint import INT32_MAX, round_half_away, rshift_round
+from codegen.golden import GoldenBase
+from codegen.manifest import memoryless_rates
+from codegen.quantize import ACCEL_PER_MG, Limits
+from codegen.verify import verify
+from tests.methods.test_method_registry import LinearInTemperature
+from trainer import methods
+from trainer.checkpoint import save_model
+from trainer.cli import main as trainer_main
+from trainer.errors import run_cli
+from trainer.fields import DottedFields
+from trainer.train_stats import TrainStats
+
+NAME = "line-c"
+FRAC = 16  # the line's fractional bits (a fixed format keeps the throwaway quantiser short)
+
+TEMPLATE = """\
+/* ---- a line in T (the throwaway family of tests/export/test_codegen_family_registry.py) ---- */
+void {{ name }}_reset({{ name }}_state_t *state)
+{
+    (void)state;
+}
+
+void {{ name }}_init({{ name }}_state_t *state)
+{
+    state->flags = 0u;
+    state->samples = 0u;
+    {{ name }}_reset(state);
+}
+
+int32_t {{ name }}_step({{ name }}_state_t *state, int32_t accel_q4ug, int32_t temp_mdegc)
+{
+    int32_t t;
+    int32_t drift;
+    {{ p }}check_range(temp_mdegc, &state->flags);
+    t = tdck_clamp32_flag(temp_mdegc, {{ temp_lo }}, {{ temp_hi }}, &state->flags, {{ NAME }}_FLAG_INPUT_CLAMPED);
+    drift = tdck_sat32_flag(tdck_rshift_round64(INT64_C({{ slope }}) * t + INT64_C({{ offset }}), {{ frac }}u),
+        &state->flags, {{ NAME }}_FLAG_SATURATED);
+    return tdck_output(&state->samples, &state->flags, {{ NAME }}_FLAG_SATURATED, accel_q4ug, drift);
+}
+"""
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    method: str
+    slope_mg_per_c: float
+    offset_mg: float
+
+
+@dataclass(frozen=True)
+class QLine:
+    method: str
+    limits: Limits
+    slope_q: int  # accel LSB per mdegC, Q(FRAC)
+    offset_q: int  # accel LSB, Q(FRAC)
+
+
+def _parse(root: DottedFields, payload: DottedFields, method: str) -> LineSpec:
+    slope, offset = payload.numbers("coefficients", 2)
+    return LineSpec(method, slope, offset)
+
+
+def _quantise(spec: LineSpec, limits: Limits, schedule: str) -> QLine:
+    slope = round_half_away(Fraction(spec.slope_mg_per_c) * ACCEL_PER_MG / 1000 * (1 << FRAC))
+    offset = round_half_away(Fraction(spec.offset_mg) * ACCEL_PER_MG * (1 << FRAC))
+    assert abs(slope) <= INT32_MAX and abs(offset) < 1 << 40  # the product stays inside int64
+    return QLine(spec.method, limits, slope, offset)
+
+
+class GoldenLine(GoldenBase):
+    model: QLine
+
+    def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        m = self.model
+        t = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
+        return self._output(accel, self._sat(rshift_round(m.slope_q * t + m.offset_q, FRAC)))
+
+
+@pytest.fixture
+def line_family(tmp_path_factory: pytest.TempPathFactory) -> Iterator[family.CFamily]:
+    template = tmp_path_factory.mktemp("line_family") / "line.c.j2"
+    template.write_text(TEMPLATE, encoding="utf-8")
+    methods.register(methods.Method(NAME, LinearInTemperature, methods.MEMORYLESS, renderer=NAME))
+    unit = family.register(
+        family.CFamily(
+            name=NAME,
+            parse=_parse,
+            quantise=_quantise,
+            golden=GoldenLine,
+            template=template,
+            context=lambda m: {"slope": m.slope_q, "offset": m.offset_q, "frac": FRAC},
+            manifest=lambda m: {"rates": memoryless_rates(), "quantisation": {"frac_bits": FRAC}},
+            tables=lambda m: {},
+        )
+    )
+    yield unit
+    family.unregister(NAME)
+    methods.unregister(NAME)
+
+
+@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler")
+def test_a_registered_family_exports_and_verifies_bit_exact(
+    line_family: family.CFamily, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recording = tmp_path / "run.npz"
+    assert (
+        trainer_main(["simulate", "--seed", "4", "--duration", "120", "--rate", "20", "-o", str(recording)])
+        == 0
+    )
+    temp_c = np.linspace(10.0, 50.0, 50)
+    model = LinearInTemperature().fit_arrays(temp_c, 0.8 * temp_c - 3.0)
+    model_path = tmp_path / "line.pt"
+    save_model(model, model_path, train_stats=TrainStats(), valid_temp_range_c=(10.0, 50.0))
+
+    out = tmp_path / "c"
+    assert run_cli(codegen_main, ["export", str(model_path), "-o", str(out), "--name", "tdc_line"]) == 0
+    source = (out / "tdc_line.c").read_text()
+    assert "a line in T (the throwaway family" in source  # its own template, found through the registry
+    manifest = json.loads((out / "tdc_line.manifest.json").read_text())
+    assert manifest["method"] == NAME and manifest["quantisation"] == {"frac_bits": FRAC}
+
+    result = verify(model_path, out, recording, table1=False)
+    assert result.samples > 0 and result.mismatches == 0 and result.state_equal
+    # the golden model is the family's: its drift is the line (1 LSB of rounding)
+    quantised = line_family.quantise(_parse_line(model_path), Limits(16_000_000), "step")
+    drift = GoldenLine(quantised).run(np.zeros(3, dtype=np.int64), np.array([10_000, 30_000, 50_000]))
+    expected_lsb = -(0.8 * np.array([10.0, 30.0, 50.0]) - 3.0) * ACCEL_PER_MG
+    np.testing.assert_allclose(drift, expected_lsb, atol=1.0)
+
+
+def _parse_line(model_path: Path) -> LineSpec:
+    from codegen.spec import parse_checkpoint
+    from trainer.checkpoint import load_checkpoint
+
+    spec = parse_checkpoint(load_checkpoint(model_path), str(model_path)).model
+    assert isinstance(spec, LineSpec)
+    return spec
+
+
+def test_registering_a_built_in_name_is_refused() -> None:
+    with pytest.raises(ValueError, match="registered already"):
+        family.register(family.get("cubic"))
+    with pytest.raises(ValueError, match="built in"):
+        family.unregister("cubic")

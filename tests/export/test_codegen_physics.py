@@ -1,0 +1,340 @@
+"""The ``physics`` export: a grey-box model fitted on a short simulated chamber cycle (lag, rate,
+branch offset), rendered to C, compared bit for bit with the golden model (gcc and clang, strict
+flags, ASan/UBSan), the golden model against the float64 ``PhysicsStream`` (the error budget),
+save/restore across a power cycle, the out-of-range flag and the export's refusals."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from codegen.cli import main as codegen_main
+from codegen.export import LoadedModel, export
+from codegen.golden import GoldenPhysics
+from codegen.golden_select import golden_for
+from codegen.hostbuild import (
+    CMD_INIT,
+    CMD_RESET,
+    SANITIZER_FLAGS,
+    STRICT_FLAGS,
+    build_harness,
+    load_module,
+    run_harness,
+    write_vectors,
+)
+from codegen.quantize import ACCEL_PER_MG, FLAG_TEMP_OUT_OF_RANGE, QPhysics
+from codegen.render import render_template
+from codegen.verify import to_step_units, verify
+from tests import testmodels as tm
+from tests.methods.test_greybox import LAG_RATE_OFFSET, config
+from tests.repo import REPO_ROOT
+from trainer.checkpoint import load_checkpoint, load_model, save_model
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import run_cli
+from trainer.fitting import fit_with_stats
+from trainer.greybox.compensator import PhysicsCompensator
+from trainer.greybox.stream import PhysicsStream, StreamState
+from trainer.physics.config import parse_config_text
+from trainer.physics.effects import EffectConfig
+from trainer.physics.simulate import simulate
+
+NAME = "tdc_phys"
+BUDGET_MG = 1e-3  # golden minus float64 stream on the same integer inputs (docs/codegen.md)
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Recording, LoadedModel]:
+    """(model.pt, module directory, validation recording, loaded model): fitted on one cycle with the
+    offset policy, validated on another seed of the same cycle (written as a CSV recording)."""
+    folder = tmp_path_factory.mktemp("physics")
+    cfg = parse_config_text(config(LAG_RATE_OFFSET, noise=True))
+    model, stats = fit_with_stats(
+        "physics", simulate(cfg, 5), {"effects": "thermal_lag,temp_rate,hysteresis_offset"}
+    )
+    assert isinstance(model, PhysicsCompensator)
+    path = folder / "model.pt"
+    save_model(model, path, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
+    valid = simulate(cfg, 6)
+    write_recording(valid.without_truth(), folder / "valid.csv")
+    loaded, _ = export(path, folder / "out", name=NAME)
+    return path, folder / "out", valid, loaded
+
+
+def _float_drift_mg(model_path: Path, temp_mdegc: np.ndarray, rate_hz: float) -> np.ndarray:
+    model, _ = load_model(model_path)
+    assert isinstance(model, PhysicsCompensator)
+    stream = PhysicsStream(model.model, 1.0 / rate_hz)
+    return np.array([stream.step(t / 1000.0) for t in temp_mdegc.tolist()])
+
+
+def test_codegen_verify_finds_no_mismatch_and_the_error_is_within_budget(
+    fitted: tuple[Path, Path, Recording, LoadedModel],
+) -> None:
+    path, out, valid, loaded = fitted
+    assert isinstance(loaded.quantised, QPhysics)
+    result = verify(path, out, out.parent / "valid.csv", name=NAME, table1=False)
+    assert result.mismatches == 0 and result.state_equal and result.samples == len(valid)
+    assert result.budget.arithmetic_max_abs_mg < BUDGET_MG
+    assert result.budget.max_abs_mg < BUDGET_MG  # the temperature's rounding to mdegC included
+
+
+def test_golden_model_follows_the_float64_stream_within_the_budget(
+    fitted: tuple[Path, Path, Recording, LoadedModel],
+) -> None:
+    """Independent of the trainer's batch formula: the sample-by-sample float64 reference."""
+    path, _, valid, loaded = fitted
+    accel, temp = (v.astype(np.int64) for v in to_step_units(valid))
+    golden_drift = (accel - golden_for(loaded.quantised).run(accel, temp)) / ACCEL_PER_MG
+    reference = _float_drift_mg(path, temp, valid.sample_rate_hz)
+    err = golden_drift - reference
+    assert np.max(np.abs(err)) < BUDGET_MG, np.max(np.abs(err))
+    assert np.sqrt(np.mean(err**2)) < 0.1 * BUDGET_MG
+    assert np.ptp(reference) > 5.0  # the model does something: several mg of drift over the cycle
+
+
+@pytest.mark.parametrize("compiler", ["gcc", "clang"])
+def test_strict_flags_warning_free(
+    fitted: tuple[Path, Path, Recording, LoadedModel], compiler: str, tmp_path: Path
+) -> None:
+    if shutil.which(compiler) is None:
+        pytest.skip(f"{compiler} is not installed")
+    out = fitted[1]
+    for opt in ("-O0", "-O2", "-Os"):
+        cmd = [compiler, *STRICT_FLAGS, "-Wmissing-prototypes", "-Wundef", "-Wcast-qual", "-Wvla", opt]
+        result = subprocess.run(
+            [*cmd, "-c", str(out / f"{NAME}.c"), "-o", str(tmp_path / "m.o")], capture_output=True, text=True
+        )
+        assert result.returncode == 0 and not result.stderr, f"{compiler} {opt}: {result.stderr}"
+
+
+def test_c_equals_golden_under_sanitizers_with_extremes_resets_and_inits(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path
+) -> None:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    _, out, valid, loaded = fitted
+    accel, temp = (v.astype(np.int64) for v in to_step_units(valid.slice(0, 6_000)))
+    rng = np.random.default_rng(4)
+    burst_a = rng.integers(-(2**31), 2**31, 600)
+    burst_t = np.where(np.arange(600) % 3 == 0, 2**31 - 1, rng.integers(-(2**31), 2**31, 600))
+    burst_t[::5] = -(2**31)
+    accel, temp = np.concatenate([accel, burst_a]), np.concatenate([temp, burst_t])
+    commands = np.zeros(accel.size, dtype=np.int64)
+    commands[2_001], commands[4_500], commands[6_100] = CMD_RESET, CMD_INIT, CMD_RESET
+    vectors, outputs = tmp_path / "v.bin", tmp_path / "o.bin"
+    write_vectors(vectors, accel, temp, commands)
+    harness = render_template("harness_vectors.c.j2", loaded.quantised, NAME, loaded.sha256)
+    binary = build_harness(out, NAME, harness, tmp_path / "san", flags=("-O1", *SANITIZER_FLAGS))
+    raw_state = run_harness(binary, vectors, outputs)
+    c_out = np.frombuffer(outputs.read_bytes(), dtype="<i4").astype(np.int64)
+    golden, expected = golden_for(loaded.quantised), []
+    cuts = [0, 2_001, 4_500, 6_100, accel.size]
+    for a, b in itertools.pairwise(cuts):
+        if commands[a] == CMD_RESET:
+            golden.reset()
+        elif commands[a] == CMD_INIT:
+            golden.init()
+        expected.append(golden.run(accel[a:b], temp[a:b]))
+    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    c_state = load_module(out, NAME, flags=("-O0",)).state_from_bytes(raw_state)
+    assert c_state.keys() == golden.state().keys()
+    for key, value in golden.state().items():
+        assert c_state[key] == value, key
+
+
+def test_a_restored_state_continues_exactly_and_a_foreign_one_is_refused(
+    fitted: tuple[Path, Path, Recording, LoadedModel],
+) -> None:
+    """Power cycle: save the struct (bytes), restore into a fresh instance, continue; the branch
+    (play operator) is kept, so the output equals an uninterrupted run, unlike a cold start."""
+    _, out, valid, loaded = fitted
+    accel, temp = to_step_units(valid)
+    host = load_module(out, NAME, flags=("-O1",))
+    whole = host.run(host.new_state(), accel, temp)
+    cut = 2 * len(valid) // 3  # during the second warm ramp: the branch differs from mid-way
+    first = host.new_state()
+    host.run(first, accel[:cut], temp[:cut])
+    saved = bytes(host.ffi.buffer(first))
+    resumed = host.new_state()
+    blob = host.ffi.from_buffer(f"{NAME}_state_t *", bytearray(saved))
+    assert host.lib.tdc_phys_restore(resumed, blob) == 1
+    np.testing.assert_array_equal(host.run(resumed, accel[cut:], temp[cut:]), whole[cut:])
+    cold = host.run(host.new_state(), accel[cut:], temp[cut:])
+    assert np.max(np.abs(cold.astype(np.int64) - whole[cut:])) > 0.1 * ACCEL_PER_MG  # the branch mattered
+    # the golden model's restore agrees, and a state of another model is refused (and initialised)
+    golden = golden_for(loaded.quantised)
+    assert isinstance(golden, GoldenPhysics)
+    assert golden.restore(host.read_state(first))
+    np.testing.assert_array_equal(golden.run(accel[cut:], temp[cut:]), whole[cut:])
+    blob.model_tag = blob.model_tag ^ 1
+    assert host.lib.tdc_phys_restore(resumed, blob) == 0
+    fresh = host.read_state(host.new_state())
+    assert host.read_state(resumed) == fresh
+    # the float64 reference shows the same: a restored StreamState continues exactly
+    model, _ = load_model(fitted[0])
+    assert isinstance(model, PhysicsCompensator)
+    stream = PhysicsStream(model.model, 1.0 / valid.sample_rate_hz)
+    for t in valid.temp_c[:cut]:
+        stream.step(float(t))
+    again = PhysicsStream(model.model, 1.0 / valid.sample_rate_hz)
+    again.restore(StreamState(**vars(stream.state)))
+    assert again.step(float(valid.temp_c[cut])) == stream.step(float(valid.temp_c[cut]))
+
+
+def test_out_of_range_temperature_is_flagged_and_held_at_the_edge(
+    fitted: tuple[Path, Path, Recording, LoadedModel],
+) -> None:
+    _, out, _, loaded = fitted
+    q = loaded.quantised
+    assert isinstance(q, QPhysics)
+    host = load_module(out, NAME, flags=("-O1",))
+    inside = host.new_state()
+    n = 50
+    zeros = np.zeros(n, dtype=np.int32)
+    host.run(inside, zeros, np.full(n, q.limits.valid_hi_mdegc, dtype=np.int32))
+    assert host.read_state(inside)["flags"] & FLAG_TEMP_OUT_OF_RANGE == 0
+    above = host.new_state()
+    y_above = host.run(above, zeros, np.full(n, q.clip_hi_mdegc + 30_000, dtype=np.int32))
+    assert host.read_state(above)["flags"] & FLAG_TEMP_OUT_OF_RANGE
+    y_edge = host.run(host.new_state(), zeros, np.full(n, q.clip_hi_mdegc, dtype=np.int32))
+    np.testing.assert_array_equal(y_above, y_edge)  # the model holds the edge of the training range
+
+
+def test_the_header_carries_the_rate_and_a_compile_time_check(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path
+) -> None:
+    out = fitted[1]
+    header = (out / f"{NAME}.h").read_text()
+    assert "#define TDC_PHYS_SAMPLE_RATE_MILLIHZ 2000u" in header
+    for rate, ok in ((2000, True), (200_000, False)):
+        src = tmp_path / f"r{rate}.c"
+        src.write_text(f'#include "{NAME}.h"\nTDC_PHYS_CHECK_SAMPLE_RATE_MILLIHZ({rate});\n')
+        result = subprocess.run(
+            ["gcc", *STRICT_FLAGS, f"-I{out}", "-c", str(src), "-o", str(tmp_path / "r.o")],
+            capture_output=True,
+            text=True,
+        )
+        assert (result.returncode == 0) == ok, result.stderr
+
+
+def test_warm_up_model_and_missing_rate_are_refused_in_one_line(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    raw = load_checkpoint(fitted[0])
+    effects = {e[0]: e[1] for e in raw["payload"]["effects"]}
+    warm = tm.physics_checkpoint(fitted[2], {**effects, "warmup": {"amp_mg": 0.5, "tau_s": 300.0}})
+    no_rate = {**raw, "train_stats": {}}
+    for checkpoint, message in ((warm, "warm-up"), (no_rate, "sample_rate_hz")):
+        path = tmp_path / "bad.pt"
+        tm.save_checkpoint(checkpoint, path)
+        code = run_cli(codegen_main, ["export", str(path), "-o", str(tmp_path / "never")])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and message in err and "\n" not in err and "Traceback" not in err
+        assert not (tmp_path / "never").exists()
+
+
+def test_export_is_byte_identical_and_ships_the_physics_kernels(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path
+) -> None:
+    path, out, _, _ = fitted
+    export(path, tmp_path / "again", name=NAME)
+    files = sorted(p.name for p in out.iterdir())
+    assert files == sorted(p.name for p in (tmp_path / "again").iterdir())
+    for name in files:
+        assert (out / name).read_bytes() == (tmp_path / "again" / name).read_bytes(), name
+    shipped = REPO_ROOT / "codegen" / "kernels" / "tdc_physics_kernels.h"
+    assert (out / "tdc_physics_kernels.h").read_bytes() == shipped.read_bytes()
+    manifest = json.loads((out / f"{NAME}.manifest.json").read_text())
+    assert manifest["files"]["physics_kernels"] == "tdc_physics_kernels.h"
+    host = load_module(out, NAME, flags=("-O1",))
+    assert host.sizeof_state() == manifest["sizes"]["ram_state_bytes"]  # size target: bench/
+
+
+@st.composite
+def plausible_physics(draw: st.DrawFn) -> tuple[dict[str, dict[str, float]], tuple[float, float], float]:
+    """Any structure, parameters across the catalogue's plausible ranges, training ranges and rates."""
+    sign = st.sampled_from([-1.0, 1.0])
+    effects: dict[str, dict[str, float]] = {
+        "bias_poly": {
+            "c0_mg": draw(st.floats(-50, 50)),
+            "c1_mg_per_c": draw(st.floats(-1, 1)),
+            "c2_mg_per_c2": draw(st.floats(-0.01, 0.01)),
+            "c3_mg_per_c3": draw(st.floats(-1e-4, 1e-4)),
+        }
+    }
+    if draw(st.booleans()):
+        effects["thermal_lag"] = {"tau_s": draw(st.floats(10, 900))}
+    if draw(st.booleans()):
+        k = draw(st.floats(0.01, 2)) * draw(sign)
+        effects["temp_rate"] = {"k_mg_per_c_per_min": k, "tau_s": draw(st.floats(30, 600))}
+    branch = draw(st.sampled_from([None, "hysteresis", "hysteresis_offset"]))
+    if branch is not None:
+        amp = draw(st.floats(0.02, 2 if branch == "hysteresis" else 20)) * draw(sign)
+        width = draw(st.floats(2, 30 if branch == "hysteresis" else 60))
+        effects[branch] = {"amp_mg": amp, "width_c": width}
+    if draw(st.booleans()):
+        gain = draw(st.floats(0.001, 0.05)) * draw(sign)
+        effects["stress_relaxation"] = {"gain_mg_per_c": gain, "tau_s": draw(st.floats(1200, 20000))}
+    lo = round(draw(st.floats(-60, 20)), 3)  # the range's ends are thermometer readings: whole mdegC
+    hi = round(lo + draw(st.floats(5, 150)), 3)
+    return effects, (lo, hi), draw(st.sampled_from([5.0, 50.0, 200.0]))
+
+
+@settings(
+    max_examples=8,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],  # no shrinking: an example costs seconds
+)
+@given(case=plausible_physics(), seed=st.integers(0, 2**32 - 1))
+def test_plausible_models_export_and_the_c_equals_golden_under_sanitizers(
+    case: tuple[dict[str, dict[str, float]], tuple[float, float], float], seed: int, tmp_path: Path
+) -> None:
+    """Every plausible model exports (the bounds hold), the C equals the golden model bit for bit on
+    a stream with slews, clips and int32 extremes (ASan/UBSan: no overflow), and the golden model
+    follows the float64 stream within the budget on the in-range part."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    effects, (lo, hi), rate_hz = case
+    model = PhysicsCompensator()
+    model.effects = tuple(EffectConfig(k, dict(v)) for k, v in effects.items())
+    model.temp_range_c, model.report = (lo, hi), {}
+    checkpoint = tm.checkpoint_dict("physics", model.to_payload(), (lo, hi))
+    checkpoint["train_stats"] = {"sample_rate_hz": rate_hz}
+    tm.save_checkpoint(checkpoint, tmp_path / "model.pt")
+    loaded, _ = export(tmp_path / "model.pt", tmp_path / "out", name=NAME)
+    rng = np.random.default_rng(seed)
+    n = 4_000
+    ramp = lo + (hi - lo) * (0.5 - 0.5 * np.cos(np.linspace(0, 3 * np.pi, n)))  # two warm-ups, a cool-down
+    temp = np.round(1000 * ramp + rng.normal(0, 20, n)).astype(np.int64)
+    accel = rng.integers(-(2**24), 2**24, n)
+    inside = slice(0, n)
+    burst_t = rng.choice([-(2**31), 2**31 - 1, -300_000, 500_000], 300)
+    burst_a = rng.choice([-(2**31), 2**31 - 1, 0], 300)
+    accel, temp = np.concatenate([accel, burst_a]), np.concatenate([temp, burst_t])
+    commands = np.zeros(accel.size, dtype=np.int64)
+    commands[n + 150] = CMD_RESET
+    vectors, outputs = tmp_path / "v.bin", tmp_path / "o.bin"
+    write_vectors(vectors, accel, temp, commands)
+    harness = render_template("harness_vectors.c.j2", loaded.quantised, NAME, loaded.sha256)
+    binary = build_harness(tmp_path / "out", NAME, harness, tmp_path / "san", flags=("-O1", *SANITIZER_FLAGS))
+    run_harness(binary, vectors, outputs)
+    golden = golden_for(loaded.quantised)
+    expected = [golden.run(accel[: n + 150], temp[: n + 150])]
+    golden.reset()
+    expected.append(golden.run(accel[n + 150 :], temp[n + 150 :]))
+    c_out = np.frombuffer(outputs.read_bytes(), dtype="<i4").astype(np.int64)
+    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    stream = PhysicsStream(model.model, 1.0 / rate_hz)
+    reference = np.array([stream.step(t / 1000.0) for t in temp[inside].tolist()])
+    err = (accel[inside] - expected[0][inside]) / ACCEL_PER_MG - reference
+    assert np.max(np.abs(err)) < BUDGET_MG, np.max(np.abs(err))

@@ -1,0 +1,92 @@
+"""One plausibility rule, one story: `trainer fit --method physics` and `trainer diagnose` agree per effect."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from tests.methods.test_greybox import config
+from trainer.cli import main
+from trainer.data.recording_io import write_recording
+from trainer.greybox.compensator import _undetermined
+from trainer.greybox.fit import FittedPhysics
+from trainer.greybox.structure import Structure
+from trainer.physics.catalogue import EFFECTS, PARAMETERS
+from trainer.physics.catalogue.plausibility import implausible
+from trainer.physics.catalogue.stress_relaxation import DEFINITION as CREEP
+from trainer.physics.config import parse_config_text
+from trainer.physics.effects import EffectConfig
+from trainer.physics.simulate import simulate
+
+_RANGE = PARAMETERS[(CREEP.identifier, "gain_mg_per_c")].plausible
+assert _RANGE is not None
+GAIN_RANGE: tuple[float, float] = _RANGE
+GAIN = 10.0 * GAIN_RANGE[1]  # ten times the largest plausible creep gain
+TAU_S = 3000.0  # a plausible creep time constant
+
+
+def test_the_rule_is_the_catalogues_range() -> None:
+    lo, hi = GAIN_RANGE
+    params = {"gain_mg_per_c": -0.5 * (lo + hi), "tau_s": TAU_S}  # |value| is judged: the sign is free
+    assert implausible(CREEP.identifier, params) == {}
+    for bad in (0.5 * lo, 2.0 * hi, -2.0 * hi):
+        why = implausible(CREEP.identifier, {**params, "gain_mg_per_c": bad})
+        assert list(why) == ["gain_mg_per_c"] and f"{lo:g}..{hi:g}" in why["gain_mg_per_c"]
+
+
+def _fitted(
+    compensated: tuple[str, ...], why: dict[str, tuple[str, ...]], rejected: dict[str, str]
+) -> FittedPhysics:
+    structure = Structure(tuple(EffectConfig(n, {}) for n in compensated), rejected=tuple(rejected.items()))
+    return FittedPhysics((), (), {}, (), (), 0, 0.0, structure, why=why)
+
+
+def test_an_effect_the_finder_rejects_is_dropped_even_when_the_refit_looks_plausible() -> None:
+    rejected = {CREEP.identifier: "gain_mg_per_c = 0.5 is outside the catalogue's plausible 0.001..0.05"}
+    fitted = _fitted((CREEP.identifier, "temp_rate"), {}, rejected)
+    drop = _undetermined(fitted, rejected)
+    assert list(drop) == [CREEP.identifier] and rejected[CREEP.identifier] in drop[CREEP.identifier]
+    own: dict[str, tuple[str, ...]] = {
+        "temp_rate": ("tau_s = 600 sits at the end of its search range 0..600",)
+    }
+    drop = _undetermined(replace(fitted, why=own), {})
+    assert list(drop) == ["temp_rate"] and own["temp_rate"][0] in drop["temp_rate"]
+
+
+@pytest.mark.slow  # one diagnose and one physics fit: about 25 s of CPU
+def test_fit_and_diagnose_give_the_same_verdict_per_effect(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    creep = f"[effects.{CREEP.identifier}]\ngain_mg_per_c = {GAIN}\ntau_s = {TAU_S}\n"
+    rec_path = tmp_path / "creep.csv"
+    write_recording(simulate(parse_config_text(config(creep, noise=True)), 5).without_truth(), rec_path)
+    assert main(["diagnose", str(rec_path), "--holdout", "0", "--json", str(tmp_path / "d.json")]) == 0
+    diagnosis = json.loads((tmp_path / "d.json").read_text())
+    capsys.readouterr()
+    assert main(["fit", "--method", "physics", str(rec_path), "-o", str(tmp_path / "m.pt")]) == 0
+    fit_out = capsys.readouterr().out
+
+    named = {e["effect"] for e in diagnosis["left_out"] if not e.get("flags")}
+    called_implausible = {a["best_fit"]["effect"] for a in diagnosis["ambiguous"] if "best_fit" in a}
+    called_implausible |= {e["effect"] for e in diagnosis["left_out"] if e.get("flags")}
+    assert called_implausible == {CREEP.identifier}  # the case this test is about happened
+    kept_line = next(line for line in fit_out.splitlines() if line.strip().startswith("compensates:"))
+    kept = set(kept_line.split(":", 1)[1].split("(")[0].replace("+", " ").split())
+    dropped = {
+        line.split()[1].rstrip(":") for line in fit_out.splitlines() if line.strip().startswith("dropped ")
+    }
+    compensable = {k for k, d in EFFECTS.items() if d.compensable}
+    for effect in compensable:
+        if effect in called_implausible:
+            assert effect not in kept, f"{effect}: diagnose calls it implausible, the fit keeps it"
+        if effect in kept:
+            assert effect not in dropped and effect not in called_implausible
+        if effect in named:
+            assert effect in kept or effect in dropped  # named by the finder: the fit says what it did
+    assert CREEP.identifier in dropped
+    # one story: no line claims to keep what the model does not carry
+    assert "the fit keeps" not in fit_out
+    assert all(f"dropped {effect}" not in fit_out for effect in kept)
