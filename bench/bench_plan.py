@@ -7,6 +7,10 @@ tries the same candidates in the same order with the same seeded draws, so its a
 and is not recomputed. Each report lands in OUT/plan-<hours>h/report.md.
 
     python bench/bench_plan.py [OUT] [--draws N] [--workers N]
+
+``--candidates I,J`` skips the search: the Monte Carlo of candidates I, J (indices into the 6 h
+list, shortest first, as the report's "Candidates tried") beside the standard profiles, one table
+in OUT/candidates.md (what the search would reach only after screening the shorter ones).
 """
 
 from __future__ import annotations
@@ -30,13 +34,60 @@ def plan(out: Path, hours: float, draws: int, workers: int, standard: bool) -> s
     return (out / outputs.REPORT_MD).read_text(encoding="utf-8")
 
 
+def table_of(out: Path, indices: list[int], draws: int, workers: int) -> None:
+    """The Monte Carlo table of chosen candidates and the standard profiles (no search)."""
+    from dataclasses import replace
+    from importlib import resources
+
+    from trainer.physics.config import load_config
+    from trainer.plan import priors
+    from trainer.plan.chamber import validation_program
+    from trainer.plan.limits import ChamberLimits
+    from trainer.plan.montecarlo import DrawTask, runner
+    from trainer.plan.programs import candidates, standard
+    from trainer.plan.summary import Target, summarise
+
+    limits, target, targets = ChamberLimits(), Target(), priors.bundled()
+    base = replace(
+        load_config(str(resources.files("trainer.physics").joinpath("realistic.toml"))), channels=()
+    )
+    validation = validation_program(limits)
+    options = candidates(limits)
+    programs = [options[i] for i in indices] + list(standard(limits))
+    start = time.perf_counter()
+    with runner(workers, None, True) as pool:
+        rows = [
+            summarise(
+                p.name,
+                p.duration_s,
+                pool.map(
+                    [DrawTask(base, targets, p, validation, SEED, i, 1.0) for i in range(draws)], p.name
+                ),
+                targets,
+                target,
+            )
+            for p in programs
+        ]
+    text = outputs.table(rows, targets, target)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "candidates.md").write_text(
+        f"{draws} draws per profile, seed {SEED}, 1 Hz, {time.perf_counter() - start:.0f} s\n\n{text}\n",
+        encoding="utf-8",
+    )
+    print(text)
+
+
 def main_bench() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", nargs="?", default="out/bench_plan")
     parser.add_argument("--draws", type=int, default=20)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--candidates", help="comma-separated candidate indices: their table, no search")
     args = parser.parse_args()
     root = Path(args.out)
+    if args.candidates:
+        table_of(root, [int(i) for i in args.candidates.split(",")], args.draws, args.workers)
+        return
     root.mkdir(parents=True, exist_ok=True)
     six = plan(root / "plan-6h", 6.0, args.draws, args.workers, standard=True)
     chosen_hours = float(six.split("**Planned: ", 1)[1].split(" h**", 1)[0].rsplit(", ", 1)[1])
