@@ -39,6 +39,7 @@ def table_of(out: Path, indices: list[int], draws: int, workers: int) -> None:
     from dataclasses import replace
     from importlib import resources
 
+    from trainer.commands.plan_cmd import DEFAULT_RATE_HZ, SENSOR_CONFIG
     from trainer.physics.config import load_config
     from trainer.plan import priors
     from trainer.plan.chamber import validation_program
@@ -48,9 +49,7 @@ def table_of(out: Path, indices: list[int], draws: int, workers: int) -> None:
     from trainer.plan.summary import Target, summarise
 
     limits, target, targets = ChamberLimits(), Target(), priors.bundled()
-    base = replace(
-        load_config(str(resources.files("trainer.physics").joinpath("realistic.toml"))), channels=()
-    )
+    base = replace(load_config(str(resources.files("trainer.physics").joinpath(SENSOR_CONFIG))), channels=())
     validation = validation_program(limits)
     options = candidates(limits)
     programs = [options[i] for i in indices] + list(standard(limits))
@@ -61,7 +60,8 @@ def table_of(out: Path, indices: list[int], draws: int, workers: int) -> None:
                 p.name,
                 p.duration_s,
                 pool.map(
-                    [DrawTask(base, targets, p, validation, SEED, i, 1.0) for i in range(draws)], p.name
+                    [DrawTask(base, targets, p, validation, SEED, i, DEFAULT_RATE_HZ) for i in range(draws)],
+                    p.name,
                 ),
                 targets,
                 target,

@@ -4,6 +4,7 @@ against the paper's oven, priors, and one-line errors (docs/plan.md)."""
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -231,6 +232,7 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
         (["--channel", "gyro9_x"], "has no [channels.gyro9_x] table"),
         (["--channel", "gyro_q"], "not a channel name"),
         (["--targets", "poly3.pt"], "has no catalogue effects to plan for"),
+        (["--channel", "gyro0_x", "--targets", "physics.pt"], "the --targets model's effects are in mg"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(
@@ -246,7 +248,9 @@ def test_bad_input_is_one_line_and_writes_nothing(
             train_stats=TrainStats(),
             valid_temp_range_c=(0.0, 1.0),
         )
-    argv = [str(inputs / a) if a == "poly3.pt" else a for a in argv]
+    if "physics.pt" in argv:  # a reference model of a one-axis accelerometer (mg)
+        shutil.copy(REPO_ROOT / "tests" / "data" / "ref" / "physics.pt", inputs / "physics.pt")
+    argv = [str(inputs / a) if a in ("poly3.pt", "physics.pt") else a for a in argv]
     out = tmp_path / "plan"
     assert _cli("plan", "-o", str(out), *argv) == 2
     err = capsys.readouterr().err.strip()

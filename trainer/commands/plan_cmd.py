@@ -12,7 +12,6 @@ from trainer.plan.summary import Target
 
 if TYPE_CHECKING:
     from trainer.physics.config import PhysicsConfig
-    from trainer.physics.effects import EffectConfig
     from trainer.plan.priors import FittedModel
 
 LIMITS, TARGET = ChamberLimits(), Target()
@@ -148,16 +147,22 @@ def _channel(args: argparse.Namespace, fitted: FittedModel | None) -> tuple[str 
     from trainer.data.channels import unit_of_channel_name
     from trainer.data.flightlog import parse_channel
     from trainer.errors import UserError
+    from trainer.physics.catalogue.units import CATALOGUE_UNIT
 
     name = args.channel if args.channel is not None else (fitted.channel if fitted is not None else None)
     if name is None:
-        return None, "mg"
+        return None, CATALOGUE_UNIT
     if parse_channel(name) is None:
         raise UserError(f"--channel {name!r}: not a channel name (accel0_z, gyro0_x, baro0)")
     if fitted is not None and fitted.channel is not None and name != fitted.channel:
         raise UserError(f"--channel {name} but the --targets model was fitted on {fitted.channel}; give one")
     unit = unit_of_channel_name(name)
-    return (None if unit == "mg" else name), unit
+    if fitted is not None and fitted.unit != unit:
+        raise UserError(
+            f"--channel {name} is in {unit} but the --targets model's effects are in {fitted.unit} "
+            "(a model of another sensor); give a model fitted on this channel"
+        )
+    return (None if unit == CATALOGUE_UNIT else name), unit
 
 
 def _base(args: argparse.Namespace, channel: str | None, fitted: FittedModel | None) -> PhysicsConfig:
@@ -166,6 +171,7 @@ def _base(args: argparse.Namespace, channel: str | None, fitted: FittedModel | N
 
     from trainer.errors import UserError
     from trainer.physics.config import ChannelConfig, load_config
+    from trainer.plan.montecarlo import merged_effects
 
     path = args.sim or str(resources.files("trainer.physics").joinpath(SENSOR_CONFIG))
     cfg = load_config(path)
@@ -179,17 +185,12 @@ def _base(args: argparse.Namespace, channel: str | None, fitted: FittedModel | N
     if fitted is not None and fitted.bias_poly is not None:
         poly = (fitted.bias_poly,)
         if own is None:
-            cfg = replace(cfg, effects=_without(cfg.effects, poly) + poly)
+            cfg = replace(cfg, effects=merged_effects(cfg.effects, poly))
         else:
             cfg = replace(
-                cfg, channels=(ChannelConfig(own.name, _without(own.effects, poly) + poly, own.noise),)
+                cfg, channels=(ChannelConfig(own.name, merged_effects(own.effects, poly), own.noise),)
             )
     return cfg if args.noise_from is None else _with_noise(cfg, args.noise_from, channel)
-
-
-def _without(effects: tuple[EffectConfig, ...], drop: tuple[EffectConfig, ...]) -> tuple[EffectConfig, ...]:
-    names = {e.identifier for e in drop}
-    return tuple(e for e in effects if e.identifier not in names)
 
 
 def _with_noise(cfg: PhysicsConfig, path: str, channel: str | None) -> PhysicsConfig:

@@ -68,14 +68,18 @@ def sensor(
     exclude): the accelerometer's, or with ``channel`` that channel's alone (the only channel kept)."""
     recording = RecordingConfig(rate_hz, base.recording.sensor)
     if channel is None:
-        merged = _merged(base.effects, effects)
+        merged = merged_effects(base.effects, effects)
         return replace(base, recording=recording, protocol=program.protocol, effects=merged, channels=())
     own = next(c for c in base.channels if c.name == channel)
-    table = ChannelConfig(channel, _merged(own.effects, effects), own.noise)
+    table = ChannelConfig(channel, merged_effects(own.effects, effects), own.noise)
     return replace(base, recording=recording, protocol=program.protocol, channels=(table,))
 
 
-def _merged(current: Sequence[EffectConfig], effects: Sequence[EffectConfig]) -> tuple[EffectConfig, ...]:
+def merged_effects(
+    current: Sequence[EffectConfig], effects: Sequence[EffectConfig]
+) -> tuple[EffectConfig, ...]:
+    """``current`` with ``effects`` in place of the same identifiers and of those they exclude,
+    in the catalogue's order."""
     names = {e.identifier for e in effects}
     kept = [e for e in current if not any(e.identifier == n or excluded(e.identifier, n) for n in names)]
     order = list(EFFECTS)
