@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from trainer.dlstm.network import GATE_ORDER, LstmShape, PopulationDLSTM, forward_flat, split_flat
 from trainer.dlstm.train import (
-    _clip_per_individual,
+    clip_per_individual,
     one_step_ahead,
     per_individual_loss,
     population_loss,
@@ -363,7 +363,7 @@ def test_per_individual_clipping_bounds_each_norm() -> None:
 
     before = norms()
     limit = float(before.median())
-    _clip_per_individual(model.param_list(), limit)
+    clip_per_individual(model.param_list(), limit)
     after = norms()
     torch.testing.assert_close(
         after, torch.minimum(before, torch.tensor(limit, dtype=F64)), rtol=1e-6, atol=0

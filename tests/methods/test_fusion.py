@@ -12,7 +12,7 @@ import torch
 from trainer.checkpoint import load_model, save_model
 from trainer.data.recording import Recording
 from trainer.dlstm.compensators import RecursiveDLSTMWithISSA, TemperatureDLSTM
-from trainer.dlstm.fusion import FusionSettings, _as_batch, refine_stage, train_stage
+from trainer.dlstm.fusion import FusionSettings, as_batch, refine_stage, train_stage
 from trainer.dlstm.network import PopulationDLSTM
 from trainer.dlstm.train import population_loss
 from trainer.train_stats import TrainStats
@@ -30,7 +30,7 @@ def test_fusion_improves_on_its_starting_population(optimiser: str) -> None:
     x, y = _drift_pairs()
     settings = FusionSettings(population=4, iterations=40, cycles=15, seed=3)
     start = PopulationDLSTM(4, 1, seed=3)
-    xb, yb = _as_batch(x, y)
+    xb, yb = as_batch(x, y)
     with torch.no_grad():
         initial = population_loss(start, xb, yb).numpy()
     trained = train_stage(x, y, settings, progress=False)

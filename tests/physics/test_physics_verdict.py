@@ -11,7 +11,7 @@ import pytest
 from tests.methods.test_greybox import config
 from trainer.cli import main
 from trainer.data.recording_io import write_recording
-from trainer.greybox.compensator import _undetermined
+from trainer.greybox.compensator import undetermined_terms
 from trainer.greybox.fit import FittedPhysics
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import EFFECTS, PARAMETERS
@@ -47,12 +47,12 @@ def _fitted(
 def test_an_effect_the_finder_rejects_is_dropped_even_when_the_refit_looks_plausible() -> None:
     rejected = {CREEP.identifier: "gain_mg_per_c = 0.5 is outside the catalogue's plausible 0.001..0.05"}
     fitted = _fitted((CREEP.identifier, "temp_rate"), {}, rejected)
-    drop = _undetermined(fitted, rejected)
+    drop = undetermined_terms(fitted, rejected)
     assert list(drop) == [CREEP.identifier] and rejected[CREEP.identifier] in drop[CREEP.identifier]
     own: dict[str, tuple[str, ...]] = {
         "temp_rate": ("tau_s = 600 sits at the end of its search range 0..600",)
     }
-    drop = _undetermined(replace(fitted, why=own), {})
+    drop = undetermined_terms(replace(fitted, why=own), {})
     assert list(drop) == ["temp_rate"] and own["temp_rate"][0] in drop["temp_rate"]
 
 

@@ -21,7 +21,7 @@ from tests.data_io.test_channels import RATE_HZ, imu_recording
 from trainer.cli import main as trainer_main
 from trainer.data.channels import channel_view, select_channels
 from trainer.data.recording_io import write_recording
-from trainer.fleet.report import _strip_plot
+from trainer.fleet.report import strip_plot
 
 CHANNEL = "gyro0_z"
 UNIT = "deg/s"
@@ -120,7 +120,7 @@ def test_sign_off_plots_label_limits_and_shade_the_held_out_part(
 def test_fleet_strip_plot_says_which_dot_is_which_unit(saved: list[Figure], tmp_path: Path) -> None:
     units = ["SN-3", "SN-1", "SN-2"]  # manifest order, not sorted
     values = {"SN-1": 0.5, "SN-2": 9.0, "SN-3": 0.4}
-    _strip_plot(tmp_path / "strip.png", [("drift left poly3 (mg)", values)], {"SN-2"}, "Drift left", units)
+    strip_plot(tmp_path / "strip.png", [("drift left poly3 (mg)", values)], {"SN-2"}, "Drift left", units)
     (figure,) = saved
     ax = figure.axes[0]
     assert [t.get_text() for t in ax.get_xticklabels()] == units

@@ -80,7 +80,7 @@ class FusionResult:
         }
 
 
-def _as_batch(inputs: np.ndarray, targets: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+def as_batch(inputs: np.ndarray, targets: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     """(T, in), (T,) numpy -> (1, T, in), (1, T, 1) float32 tensors."""
     x = torch.from_numpy(np.ascontiguousarray(inputs, dtype=np.float32)).reshape(1, len(inputs), -1)
     y = torch.from_numpy(np.ascontiguousarray(targets, dtype=np.float32)).reshape(1, len(targets), 1)
@@ -124,7 +124,7 @@ def train_stage(
     inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, *, progress: bool = True
 ) -> TrainedPopulation:
     """Stage 1-2: initialise and gradient-train the population (ending condition one)."""
-    x, y = _as_batch(inputs, targets)
+    x, y = as_batch(inputs, targets)
     model = _initial_population(x.shape[-1], settings)
     start = time.perf_counter()
     history = _train(model, x, y, settings, progress)
@@ -156,7 +156,7 @@ def population_parts(settings: FusionSettings) -> list[range]:
 
 def train_part(inputs: np.ndarray, targets: np.ndarray, settings: FusionSettings, part: range) -> TrainedPart:
     """Stage 1-2 for the individuals ``part`` of the population only (no progress bar)."""
-    x, y = _as_batch(inputs, targets)
+    x, y = as_batch(inputs, targets)
     whole = _initial_population(x.shape[-1], settings)
     model = PopulationDLSTM.from_individuals([whole.individual(k) for k in part])
     history = _train(model, x, y, settings, progress=False)
@@ -188,7 +188,7 @@ def refine_stage(
     progress: bool = True,
 ) -> FusionResult:
     """Stage 3-4: SSA/ISSA over the trained population (or none), export the best vector."""
-    x, y = _as_batch(inputs, targets)
+    x, y = as_batch(inputs, targets)
     model = trained.model
     with torch.no_grad():
         losses = population_loss(model, x, y).double().numpy()

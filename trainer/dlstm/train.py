@@ -135,7 +135,7 @@ def train_population(
             losses = per_individual_loss(y, targets, loss)
             losses.sum().backward()
             if grad_clip is not None:
-                _clip_per_individual(params, grad_clip)
+                clip_per_individual(params, grad_clip)
             optimizer.step()
             current = losses.detach().to(torch.float64)
             rows.append(current)
@@ -155,7 +155,7 @@ def train_population(
 
 
 @torch.no_grad()
-def _clip_per_individual(params: list[torch.nn.Parameter], max_norm: float) -> None:
+def clip_per_individual(params: list[torch.nn.Parameter], max_norm: float) -> None:
     """Scale each individual's gradient (all its tensors together) to L2 norm <= max_norm."""
     grads = [p.grad for p in params if p.grad is not None]
     if not grads:

@@ -151,7 +151,7 @@ def _coverage_lines(units: list[str], results: dict[str, UnitResult]) -> list[st
     return lines
 
 
-def _strip_plot(
+def strip_plot(
     path: Path, columns: list[tuple[str, dict[str, float]]], flagged: set[str], title: str, units: list[str]
 ) -> Path:
     """One panel per column (a feature): every unit a dot at its own x position, labelled with its id
@@ -236,11 +236,11 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResul
     figures = []
     if drift_columns:
         figures.append(
-            _strip_plot(figures_dir / "drift_left.png", drift_columns, flagged, "Drift left per method", ok)
+            strip_plot(figures_dir / "drift_left.png", drift_columns, flagged, "Drift left per method", ok)
         )
     if parameter_columns:
         figures.append(
-            _strip_plot(
+            strip_plot(
                 figures_dir / "parameters.png",
                 parameter_columns,
                 flagged,

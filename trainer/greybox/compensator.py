@@ -133,7 +133,7 @@ class PhysicsCompensator(Compensator):
         return model
 
 
-def _undetermined(fitted: FittedPhysics, rejected: dict[str, str]) -> dict[str, str]:
+def undetermined_terms(fitted: FittedPhysics, rejected: dict[str, str]) -> dict[str, str]:
     """``{effect: why}`` for compensated effects (not the bias polynomial) that the run does not
     determine: a parameter at the end of its search range or outside the plausible range (the
     finder's rule, on the values the compensator would carry), or one the finder itself fitted
@@ -160,7 +160,7 @@ def _only_determined(rec: Recording, fitted: FittedPhysics) -> FittedPhysics:
     rejected = dict(fitted.structure.rejected)
     first = fitted
     dropped: dict[str, str] = {}
-    while drop := _undetermined(fitted, rejected):
+    while drop := undetermined_terms(fitted, rejected):
         dropped |= drop
         final = fitted.structure
         kept = tuple(e for e in final.compensated if e.identifier not in drop)
