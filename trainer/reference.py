@@ -38,7 +38,7 @@ from trainer.errors import UserError
 
 OffsetMode = Literal["relative", "absolute", "absolute-unbounded"]
 OFFSET_MODES: tuple[OffsetMode, ...] = ("relative", "absolute", "absolute-unbounded")
-OFFSET_OPTION = "--offset"  # the one option that chooses the mode (trainer/commands/offset_options.py)
+OFFSET_OPTION = "--offset"  # the one option that chooses the mode (trainer/options/offset.py)
 TREF_OPTION = "--tref"
 OFFSET_LIMIT_MG = 100.0  # a larger constant is gravity or a static offset, not thermal drift
 RECURSIVE_NOTE = (

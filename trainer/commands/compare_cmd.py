@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import Any
 
 from trainer import methods
-from trainer.commands.offset_options import add_offset_options, policy_from_args
 from trainer.data.channels import Channel, method_refusal
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, raise_write_error
 from trainer.options.channels import add_channels_option, run_per_channel
 from trainer.options.dlstm import add_dlstm_options, settings_from_args
+from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.

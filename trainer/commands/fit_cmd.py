@@ -6,9 +6,9 @@ import argparse
 from typing import Any
 
 from trainer import methods
-from trainer.commands.offset_options import add_offset_options, policy_from_args
 from trainer.commands.selection_output import checked_method, print_selection, progress_log
 from trainer.options.channels import add_channels_option
+from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.selection import AUTO, CANDIDATES, candidate_list
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
