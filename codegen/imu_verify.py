@@ -127,21 +127,21 @@ def step_inputs(imu: ImuModel, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return raw, temp
 
 
-def _host_run(
+def host_run(
     out_dir: Path, name: str, raw: np.ndarray, temp: np.ndarray, blob: bytes | None, cc: str | None
 ) -> tuple[np.ndarray, list[int], int]:
     header = (out_dir / f"{name}.h").read_text()
     ffi = cffi.FFI()
     ffi.cdef(cdef_from_header(header))
-    ffi.cdef(f"void {name}_host_run({name}_state_t *, const int32_t *, const int32_t *, int32_t *, size_t);")
+    ffi.cdef(f"void {name}host_run({name}_state_t *, const int32_t *, const int32_t *, int32_t *, size_t);")
     with tempfile.TemporaryDirectory(prefix="imu-host-") as tmp:
-        loop = Path(tmp) / f"{name}_host_run.c"
+        loop = Path(tmp) / f"{name}host_run.c"
         channels, sensors = raw.shape[1], temp.shape[1]
         loop.write_text(
             f'#include "{name}.h"\n'
-            f"void {name}_host_run({name}_state_t *s, const int32_t *raw, const int32_t *temp, int32_t *out,"
+            f"void {name}host_run({name}_state_t *s, const int32_t *raw, const int32_t *temp, int32_t *out,"
             f" size_t n);\n"
-            f"void {name}_host_run({name}_state_t *s, const int32_t *raw, const int32_t *temp, int32_t *out,"
+            f"void {name}host_run({name}_state_t *s, const int32_t *raw, const int32_t *temp, int32_t *out,"
             f" size_t n)\n{{\n    size_t k;\n    for (k = 0u; k < n; ++k) {{\n"
             f"        {name}_step(s, raw + k * {channels}u, temp + k * {sensors}u, out + k * {channels}u);\n"
             f"    }}\n}}\n"
@@ -161,7 +161,7 @@ def _host_run(
     raw_c = np.ascontiguousarray(raw, dtype=np.int32)
     temp_c = np.ascontiguousarray(temp, dtype=np.int32)
     out = np.empty_like(raw_c)
-    getattr(lib, f"{name}_host_run")(
+    getattr(lib, f"{name}host_run")(
         state,
         ffi.from_buffer("int32_t[]", raw_c),
         ffi.from_buffer("int32_t[]", temp_c),
@@ -302,7 +302,7 @@ def verify_imu(
         )
 
     for calibration, blob in sources:
-        record("host", calibration, _host_run(out_dir, name, raw, temp, blob, cc))
+        record("host", calibration, host_run(out_dir, name, raw, temp, blob, cc))
         if cortex_m4:
             with tempfile.TemporaryDirectory(prefix="imu-qemu-") as work:
                 out, flags, samples, cost = target_run(

@@ -18,7 +18,7 @@ from codegen.export import export
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
 from codegen.imu import imu_golden, load_imu
-from codegen.imu_verify import _host_run
+from codegen.imu_verify import host_run
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_TEMP_OUT_OF_RANGE, TEMP_LIMITS_MDEGC
 from tests import testmodels as tm
 from trainer.data.recording import Recording
@@ -96,7 +96,7 @@ def test_imu_module_flags_each_clamped_channel(rec: Recording, tmp_path: Path) -
     imu = load_imu(paths)
     accel, temp = _stream(*_beyond("poly3"))
     raw = np.repeat(accel[:, None], 3, axis=1)
-    out, flags, samples = _host_run(tmp_path / "out", "clampimu", raw, temp[:, None], None, None)
+    out, flags, samples = host_run(tmp_path / "out", "clampimu", raw, temp[:, None], None, None)
     g_out, g_flags, g_samples = imu_golden(imu, raw, temp[:, None])
     np.testing.assert_array_equal(out, g_out)
     assert (flags, samples) == (g_flags, g_samples)

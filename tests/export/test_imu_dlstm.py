@@ -19,7 +19,7 @@ from codegen.cli import main as codegen_main
 from codegen.golden_select import golden_for
 from codegen.hostbuild import SANITIZER_FLAGS, build_harness, load_module, run_harness
 from codegen.imu import KIND_STREAM, load_imu
-from codegen.imu_verify import _host_run, step_inputs, verify_imu
+from codegen.imu_verify import host_run, step_inputs, verify_imu
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_TEMP_OUT_OF_RANGE
 from tests import testmodels as tm
 from tests.export.test_imu_physics import HARNESS
@@ -94,7 +94,7 @@ def test_dlstm_channels_equal_their_one_channel_modules(module: dict[str, Path],
     rec = read_recording(module["rec"])
     imu = load_imu(_models(module))
     raw, temp = step_inputs(imu, rec)
-    out, _, _ = _host_run(module["out"], NAME, raw, temp, None, None)
+    out, _, _ = host_run(module["out"], NAME, raw, temp, None, None)
     for k, (method, channel) in enumerate(FITS):
         if not method.startswith("dlstm"):
             continue

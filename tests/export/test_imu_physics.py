@@ -28,7 +28,7 @@ from codegen.hostbuild import (
     run_harness,
 )
 from codegen.imu import KIND_PHYSICS, imu_golden, load_imu
-from codegen.imu_verify import _host_run, step_inputs, verify_imu
+from codegen.imu_verify import host_run, step_inputs, verify_imu
 from codegen.quantize import QPhysics
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
@@ -127,7 +127,7 @@ def test_physics_channel_equals_the_one_channel_physics_module(
     imu = load_imu(_models(fitted))
     raw, temp = step_inputs(imu, rec)
     single = one.run(one.new_state(), raw[:, 0].astype(np.int32), temp[:, 0].astype(np.int32))
-    out, _, _ = _host_run(fitted["out"], NAME, raw, temp, None, None)
+    out, _, _ = host_run(fitted["out"], NAME, raw, temp, None, None)
     np.testing.assert_array_equal(out[:, 0], single)
     assert np.ptp(out[:, 0] - raw[:, 0]) > 16000 * 5  # the drift removed spans several mg
 

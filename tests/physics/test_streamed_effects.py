@@ -15,7 +15,7 @@ from codegen.export import export
 from codegen.golden_select import golden_for
 from codegen.hostbuild import find_compiler, load_module
 from codegen.imu import export_imu, imu_golden, load_imu
-from codegen.imu_verify import _host_run
+from codegen.imu_verify import host_run
 from codegen.quantize import ACCEL_PER_MG, QPhysics
 from tests import testmodels as tm
 from tests.golden_checks import assert_states_equal
@@ -206,7 +206,7 @@ def test_the_imu_module_carries_a_registered_effect_bit_exactly(
     imu = load_imu(paths)
     accel, temp = _vectors(rec)
     raw = np.column_stack([accel, -accel])
-    out, flags, samples = _host_run(tmp_path / "out", "settleimu", raw, temp[:, None], None, None)
+    out, flags, samples = host_run(tmp_path / "out", "settleimu", raw, temp[:, None], None, None)
     g_out, g_flags, g_samples = imu_golden(imu, raw, temp[:, None])
     np.testing.assert_array_equal(out, g_out)
     assert (flags, samples) == (g_flags, g_samples)

@@ -207,3 +207,18 @@ def test_no_private_name_is_imported_across_packages() -> None:
         )
     ]
     assert not found, "private names imported from another package:\n" + "\n".join(found)
+
+
+def test_tests_and_benches_import_no_private_names() -> None:
+    """What a test or a bench needs of a module is its public interface (rule (d) from outside)."""
+    tree = _tree()
+    modules = set(tree.files)
+    found = [
+        line
+        for folder in ("tests", "bench")
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        for line in private_imports(
+            path.read_text("utf-8"), f"{folder}.{path.stem}", False, modules, tree.packages
+        )
+    ]
+    assert not found, "private names imported by tests or benches:\n" + "\n".join(found)
