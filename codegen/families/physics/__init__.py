@@ -1,9 +1,10 @@
 """The grey-box physics family: a cubic of the clipped temperature plus the streamed effects'
 terms (lag, hysteresis branch, rate, creep). Its stages are modules here: the parser :mod:`.spec`,
 the quantiser :mod:`.quantise`, the golden model :mod:`.golden`, the manifest section
-:mod:`.manifest`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` and their variables,
-state and kernel header ``tdc_physics_kernels.h`` :mod:`.render`. What each streamed effect needs
-of them is its ``FixedPoint`` (trainer/physics/catalogue/)."""
+:mod:`.manifest`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` (and the header's
+paragraph ``_physics.h.j2``) and their variables, state and kernel header ``tdc_physics_kernels.h``
+:mod:`.render`. What each streamed effect needs of them is its ``FixedPoint``
+(trainer/physics/catalogue/)."""
 
 from __future__ import annotations
 

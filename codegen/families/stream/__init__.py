@@ -2,7 +2,8 @@
 persistence front end without a network (``mean-stream``): window means, a decimated network, a
 held estimate. Its stages are modules here: the parser :mod:`.spec`, the quantiser :mod:`.quantise`,
 the golden models :mod:`.golden` and :mod:`.golden_spread` (the spread schedule's), the manifest
-section :mod:`.manifest`, the template ``_stream.c.j2`` and its variables :mod:`.render`."""
+section :mod:`.manifest`, the template ``_stream.c.j2`` (and the header's paragraph ``_stream.h.j2``)
+and its variables :mod:`.render`."""
 
 from __future__ import annotations
 
