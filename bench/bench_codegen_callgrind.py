@@ -27,8 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from codegen.export import export
 from codegen.families.pla import QPla
+from codegen.families.stream.quantise import QStream
 from codegen.hostbuild import STRICT_FLAGS, find_compiler
-from codegen.quantize import QStream
 from codegen.render import render_template
 from tests import testmodels as tm
 from trainer.cli import main as trainer_main

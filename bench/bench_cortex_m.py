@@ -46,11 +46,12 @@ from float_anchor import write_float_module
 from codegen import cortex_m as cm
 from codegen.export import LoadedModel, export
 from codegen.families.cubic import QPoly3
+from codegen.families.physics.quantise import QPhysics
 from codegen.families.pla import QPla
+from codegen.families.stream.quantise import QStream
+from codegen.families.stream.spec import DlstmModelSpec
 from codegen.golden_select import golden_for
 from codegen.hostbuild import write_vectors
-from codegen.quantize import QPhysics, QStream
-from codegen.spec import DlstmModelSpec
 from codegen.verify import to_step_units
 from trainer import methods as registry
 from trainer.cli import main as trainer_main

@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.quantize import ACCEL_PER_MG, QStream
-from codegen.spec import DlstmModelSpec
+from codegen.families.stream.quantise import QStream
+from codegen.families.stream.spec import DlstmModelSpec
+from codegen.quantize import ACCEL_PER_MG
 
 _FAST = """static float act_tanh(float x)
 {

@@ -7,8 +7,8 @@ import json
 import sys
 
 from codegen import __version__
+from codegen.family import schedules
 from codegen.flightparams import EXTENSIONS
-from codegen.quantize import SCHEDULES
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 from trainer.options.channels import add_channels_option
 from trainer.output_lock import command_outputs_locked
@@ -271,7 +271,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     exp.add_argument(
         "--schedule",
-        choices=SCHEDULES,
+        choices=schedules(),
         default="step",
         help="DLSTMs: step runs the network on the sample that ends its window (default); spread splits it "
         "into tasks over the samples of the decimation period (worst sample about 2x the average, the "

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from codegen.family import QuantModel
 from codegen.manifest import build_manifest
-from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, QuantModel, quantise_checkpoint
+from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, quantise_checkpoint
 from codegen.rate import retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint

@@ -86,7 +86,7 @@ class TimeBase:
 @dataclass(frozen=True)
 class ImuForm:
     """A family's channel of the IMU module (codegen/imu.py): ``kind``, its NAME_KIND_ code (the
-    blob's), and ``tables``, the channel's record (codegen.imu.ChannelTables) given the model and
+    blob's), and ``tables``, the channel's record (codegen.imu_record.ChannelTables) given the model and
     the index of the sensor whose temperature it reads."""
 
     kind: int
@@ -100,11 +100,14 @@ def _no_state(model: Any, common: list[Any]) -> list[Any]:
 @dataclass(frozen=True, eq=False)
 class CFamily:
     """One C family. ``template``: its C template (included by ``module.c.j2`` for NAME_init, _reset
-    and _step); ``context``: that template's variables (``family``, the name the shared templates
-    test, defaults to ``name``; ``macros``: its own NAME_ macros); ``state``: the state struct's members given the common ones (flags, samples);
+    and _step); ``context``: that template's variables (``macros``: its own NAME_ macros;
+    ``network_step_field``: the state field that is 0 on the samples where a network steps, for the
+    benchmark harness); ``state``: the state struct's members given the common ones (flags, samples);
     ``schedules``: the ``--schedule`` values it takes; ``kernels``: extra kernel headers shipped with
-    its modules (manifest key -> file); ``restore``: it has NAME_restore; ``time_base``: None for a
-    memoryless family (any rate); ``imu``: None when it has no IMU-module form."""
+    its modules (manifest key -> file; each has a ``#define TDC..._VERSION N`` the module checks);
+    ``restore``: it has NAME_restore; ``usage``: its paragraph of the header's comment (a template
+    beside ``template``; None: a memoryless model's, any rate); ``time_base``: None for a memoryless
+    family (any rate); ``imu``: None when it has no IMU-module form."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
@@ -118,6 +121,7 @@ class CFamily:
     schedules: tuple[str, ...] = ("step",)
     kernels: dict[str, Path] = field(default_factory=dict)
     restore: bool = False
+    usage: Path | None = None
     time_base: TimeBase | None = None
     imu: ImuForm | None = None
 
@@ -157,6 +161,11 @@ def names() -> tuple[str, ...]:
 
 def entries() -> Iterator[CFamily]:
     return iter(tuple(get(name) for name in names()))
+
+
+def schedules() -> tuple[str, ...]:
+    """Every ``--schedule`` value some family takes (its first family's order: "step" first)."""
+    return tuple(dict.fromkeys(s for unit in entries() for s in unit.schedules))
 
 
 def family_of(model: QuantModel | ModelSpec) -> CFamily:

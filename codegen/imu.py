@@ -33,24 +33,22 @@ import numpy as np
 
 from codegen import __version__
 from codegen.export import LoadedModel, load_for_codegen
+from codegen.families.physics.quantise import QLowpass, QPhysics
+from codegen.families.physics.render import KERNEL_FILE as PHYSICS_KERNEL_FILE
+from codegen.families.physics.render import KERNEL_PATH as PHYSICS_KERNEL_HEADER
+from codegen.families.physics.render import physics_snippets
 from codegen.family import QuantModel, family_of
 from codegen.golden_select import golden_for
-from codegen.quantize import (
-    DEFAULT_ACCEL_LIMIT_G,
-    TEMP_LIMITS_MDEGC,
-    QLowpass,
-    QPhysics,
-)
+from codegen.imu_record import KIND_CUBIC, KIND_PHYSICS, KIND_PLA, KIND_STREAM, ChannelTables
+from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, TEMP_LIMITS_MDEGC
 from codegen.rate import declared_rate_millihz
 from codegen.render import (
     FLAGS,
     KERNEL_FILE,
-    PHYSICS_KERNEL_FILE,
-    PHYSICS_KERNEL_HEADER,
     _environment,
+    header_version,
     kernel_header,
     manifest_json,
-    physics_snippets,
     render_sources,
     validate_name,
 )
@@ -61,7 +59,6 @@ from trainer.physics.catalogue.streamed import c_options, c_terms
 from trainer.physics.catalogue.streaming import FixedPoint
 from trainer.train_stats import TrainStats
 
-KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
 BLOB_MAGIC = b"TDCC"
 BLOB_VERSION = 1
 BLOB_HEADER = struct.Struct(
@@ -263,23 +260,6 @@ def physics_layout(name: str) -> dict[str, object]:
     }
 
 
-@dataclass(frozen=True)
-class ChannelTables:
-    """One channel's numbers exactly as ``NAME_channel_t`` holds them."""
-
-    kind: int
-    sensor: int
-    frac: int
-    u_shift: int
-    clip_lo: int
-    clip_hi: int
-    t_ref: int
-    coefficients: tuple[int, ...]  # cubic d0..d3 (zeros for pla)
-    splits: tuple[int, ...]
-    slopes: tuple[int, ...]
-    intercepts: tuple[int, ...]
-
-
 def _tables(q: QuantModel, sensor: int) -> ChannelTables:
     form = family_of(q).imu
     assert form is not None  # load_imu refuses the others
@@ -409,6 +389,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "kind_pla": KIND_PLA,
         "kind_physics": KIND_PHYSICS,
         "kind_stream": KIND_STREAM,
+        "physics_kernels_version": header_version(PHYSICS_KERNEL_HEADER)[1],
         "stream_channels": _stream_modules(imu, name),
         "phys_terms": phys_terms(),
         "phys": physics_layout(name),

@@ -21,11 +21,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from codegen.export import LoadedModel, load_for_codegen, manifest_name
+from codegen.families.physics.quantise import QPhysics
+from codegen.families.stream.golden import GoldenStream
+from codegen.families.stream.quantise import QStream
+from codegen.family import QuantModel
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
-from codegen.golden import GoldenStream
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
-from codegen.quantize import ACCEL_PER_MG, QPhysics, QStream, QuantModel
+from codegen.quantize import ACCEL_PER_MG
 from codegen.rate import declared_rate_millihz, retime_compensator
 from codegen.rate import resample as resample_recording
 from trainer.data.recording import Recording

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from codegen.spec import frontend_kind
+from codegen.families.stream.spec import frontend_kind
 from trainer import __version__ as trainer_version
 from trainer import methods as registry
 from trainer.checkpoint import FORMAT_NAME, FORMAT_VERSION

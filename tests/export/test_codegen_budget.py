@@ -15,7 +15,7 @@ import torch
 
 from codegen.cli import main as codegen_main
 from codegen.export import export
-from codegen.golden import GoldenStream
+from codegen.families.stream.golden import GoldenStream
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
 from codegen.quantize import ACCEL_PER_MG, FLAG_SATURATED

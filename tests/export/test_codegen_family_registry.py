@@ -7,6 +7,7 @@ throwaway method; export and verify then handle it without any other file knowin
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from codegen.fixedpoint import INT32_MAX, round_half_away, rshift_round
 from codegen.golden import GoldenBase
 from codegen.manifest import memoryless_rates
 from codegen.quantize import ACCEL_PER_MG, Limits
+from codegen.render import TEMPLATES
 from codegen.verify import verify
 from tests.methods.test_method_registry import LinearInTemperature
 from trainer import methods
@@ -137,6 +139,8 @@ def test_a_registered_family_exports_and_verifies_bit_exact(
     assert run_cli(codegen_main, ["export", str(model_path), "-o", str(out), "--name", "tdc_line"]) == 0
     source = (out / "tdc_line.c").read_text()
     assert "a line in T (the throwaway family" in source  # its own template, found through the registry
+    header = (out / "tdc_line.h").read_text()
+    assert "memoryless: any rate" in header and "_restore" not in header  # the defaults of CFamily
     manifest = json.loads((out / "tdc_line.manifest.json").read_text())
     assert manifest["method"] == NAME and manifest["quantisation"] == {"frac_bits": FRAC}
 
@@ -156,6 +160,24 @@ def _parse_line(model_path: Path) -> LineSpec:
     spec = parse_checkpoint(load_checkpoint(model_path), str(model_path)).model
     assert isinstance(spec, LineSpec)
     return spec
+
+
+def test_the_one_channel_templates_test_no_family() -> None:
+    """A family supplies data (its template, usage paragraph, kernel headers, restore, context); the
+    shared templates of a one-channel module never branch on which family it is (the IMU module's
+    templates, imu*.j2 and harness_imu.c.j2, lay out each kind of channel by design)."""
+    shared = [p for p in sorted(TEMPLATES.glob("*.j2")) if "imu" not in p.name]
+    names = "|".join(re.escape(name) for name in family.names())
+    family_test = re.compile(rf"""\bfamily\b|["']({names}|stream)["']""")
+    found = [
+        f"{path.name}: {tag}"
+        for path in shared
+        for tag in re.findall(r"{%.*?%}", path.read_text(encoding="utf-8"))
+        if family_test.search(tag)
+    ]
+    assert not found, "templates testing a family:\n" + "\n".join(found)
+    assert {"module.c.j2", "module.h.j2", "harness_bench.c.j2"} <= {p.name for p in shared}
+    assert family_test.search('{% if family == "physics" %}')  # what it is there to find
 
 
 def test_registering_a_built_in_name_is_refused() -> None:

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 
 from codegen.cli import main as codegen_main
 from codegen.export import LoadedModel, export
-from codegen.golden import GoldenPhysics
+from codegen.families.physics.golden import GoldenPhysics
+from codegen.families.physics.quantise import QPhysics
 from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
@@ -30,7 +31,7 @@ from codegen.hostbuild import (
     run_harness,
     write_vectors,
 )
-from codegen.quantize import ACCEL_PER_MG, FLAG_TEMP_OUT_OF_RANGE, QPhysics
+from codegen.quantize import ACCEL_PER_MG, FLAG_TEMP_OUT_OF_RANGE
 from codegen.render import render_template
 from codegen.verify import to_step_units, verify
 from tests import testmodels as tm

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from codegen.export import export
+from codegen.families.stream.quantise import QStream
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
-from codegen.quantize import QStream
 from tests import refvectors as ref
 from trainer import methods as registry
 

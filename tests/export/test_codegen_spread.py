@@ -19,6 +19,7 @@ import pytest
 
 from codegen import cortex_m as cm
 from codegen.export import export
+from codegen.families.stream.quantise import QStream
 from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     CMD_INIT,
@@ -28,7 +29,6 @@ from codegen.hostbuild import (
     run_harness,
     write_vectors,
 )
-from codegen.quantize import QStream
 from codegen.render import render_template
 from tests import refvectors as ref
 from tests.golden_checks import assert_states_equal, replay

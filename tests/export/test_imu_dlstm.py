@@ -18,7 +18,8 @@ import pytest
 from codegen.cli import main as codegen_main
 from codegen.golden_select import golden_for
 from codegen.hostbuild import SANITIZER_FLAGS, build_harness, load_module, run_harness
-from codegen.imu import KIND_STREAM, load_imu
+from codegen.imu import load_imu
+from codegen.imu_record import KIND_STREAM
 from codegen.imu_verify import host_run, step_inputs, verify_imu
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_TEMP_OUT_OF_RANGE
 from tests import testmodels as tm

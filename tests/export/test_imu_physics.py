@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from codegen.cli import main as codegen_main
+from codegen.families.physics.quantise import QPhysics
 from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     FIRMWARE_WARNINGS,
@@ -27,9 +28,9 @@ from codegen.hostbuild import (
     load_module,
     run_harness,
 )
-from codegen.imu import KIND_PHYSICS, imu_golden, load_imu
+from codegen.imu import imu_golden, load_imu
+from codegen.imu_record import KIND_PHYSICS
 from codegen.imu_verify import host_run, step_inputs, verify_imu
-from codegen.quantize import QPhysics
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording

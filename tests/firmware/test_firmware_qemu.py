@@ -22,9 +22,9 @@ import pytest
 
 from codegen import cortex_m as cm
 from codegen.export import LoadedModel, export
+from codegen.family import QuantModel
 from codegen.golden_select import golden_for
 from codegen.hostbuild import CMD_INIT, CMD_RESET, load_module
-from codegen.quantize import QuantModel
 from codegen.verify import to_step_units
 from tests.golden_checks import replay
 from tests.repo import REPO_ROOT

@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from codegen.export import export
+from codegen.families.physics.quantise import QPhysics
 from codegen.golden_select import golden_for
 from codegen.hostbuild import find_compiler, load_module
 from codegen.imu import export_imu, imu_golden, load_imu
 from codegen.imu_verify import host_run
-from codegen.quantize import ACCEL_PER_MG, QPhysics
+from codegen.quantize import ACCEL_PER_MG
 from tests import testmodels as tm
 from tests.golden_checks import assert_states_equal
 from trainer.data.recording import Recording

@@ -1,9 +1,10 @@
 """The grey-box physics family: a cubic of the clipped temperature plus the streamed effects'
-terms (lag, hysteresis branch, rate, creep). Its per-effect stages stay in
-:func:`codegen.spec.parse_physics`, :func:`codegen.quantize.quantise_physics`,
-:class:`codegen.golden.GoldenPhysics`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` (here),
-the kernel header ``tdc_physics_kernels.h`` and :func:`codegen.manifest.physics_manifest`
-(trainer/physics/catalogue/ is to hold what each effect needs of them)."""
+terms (lag, hysteresis branch, rate, creep). Its stages are modules here: the parser :mod:`.spec`,
+the quantiser :mod:`.quantise`, the golden model :mod:`.golden`, the manifest section
+:mod:`.manifest`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` (and the header's
+paragraph ``_physics.h.j2``) and their variables, state and kernel header ``tdc_physics_kernels.h``
+:mod:`.render`. What each streamed effect needs of them is its ``FixedPoint``
+(trainer/physics/catalogue/)."""
 
 from __future__ import annotations
 
@@ -11,23 +12,15 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from codegen.families.physics.golden import GoldenPhysics
+from codegen.families.physics.manifest import physics_manifest
+from codegen.families.physics.quantise import QPhysics, quantise_physics
+from codegen.families.physics.render import KERNEL_PATH, physics_context, physics_state_fields, physics_tables
+from codegen.families.physics.spec import parse_physics
 from codegen.family import CFamily, ImuForm, TimeBase
-from codegen.golden import GoldenPhysics
-from codegen.imu import KIND_PHYSICS, ChannelTables
-from codegen.manifest import physics_manifest
-from codegen.quantize import Limits, QPhysics, quantise_physics
-from codegen.render import PHYSICS_KERNEL_HEADER, physics_context, physics_tables
-from codegen.spec import PhysicsSpec, parse_physics
+from codegen.imu_record import KIND_PHYSICS, ChannelTables
 from trainer.methods import PHYSICS_RENDERER
 from trainer.train_stats import TrainStats
-
-
-def quantise(spec: PhysicsSpec, limits: Limits, schedule: str) -> QPhysics:
-    return quantise_physics(spec, limits)
-
-
-def context(model: QPhysics) -> dict[str, object]:
-    return {**physics_context(model), "macros": [("MODEL_TAG", f"{model.tag}u")]}
 
 
 def retime(raw: dict[str, Any], millihz: int) -> dict[str, Any]:
@@ -62,13 +55,15 @@ def imu_tables(q: QPhysics, sensor: int) -> ChannelTables:
 FAMILY = CFamily(
     name=PHYSICS_RENDERER,
     parse=parse_physics,
-    quantise=quantise,
+    quantise=quantise_physics,
     golden=GoldenPhysics,
     template=Path(__file__).with_name("_physics.c.j2"),
-    context=context,
+    usage=Path(__file__).with_name("_physics.h.j2"),
+    context=physics_context,
     manifest=physics_manifest,
     tables=physics_tables,
-    kernels={"physics_kernels": PHYSICS_KERNEL_HEADER},
+    state=physics_state_fields,
+    kernels={"physics_kernels": KERNEL_PATH},
     restore=True,
     time_base=TIME_BASE,
     imu=ImuForm(KIND_PHYSICS, imu_tables),

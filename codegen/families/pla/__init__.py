@@ -13,7 +13,7 @@ import numpy as np
 from codegen.family import CFamily, ImuForm
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits, round_half_away, rshift_round
 from codegen.golden import GoldenBase
-from codegen.imu import KIND_PLA, ChannelTables
+from codegen.imu_record import KIND_PLA, ChannelTables
 from codegen.manifest import memoryless_rates, six_digits
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
 from codegen.render import c_rows

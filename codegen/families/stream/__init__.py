@@ -1,8 +1,9 @@
 """The streaming DLSTM family (``lstm-stream``: recursive and temperature input) and the
 persistence front end without a network (``mean-stream``): window means, a decimated network, a
-held estimate. Its stages are :func:`codegen.spec.parse_dlstm`, :func:`codegen.quantize.quantise_stream`,
-:class:`codegen.golden.GoldenStream` (and the spread schedule's, :mod:`golden_spread` here), the template
-``_stream.c.j2`` here and the manifest section :func:`codegen.manifest.stream_manifest`."""
+held estimate. Its stages are modules here: the parser :mod:`.spec`, the quantiser :mod:`.quantise`,
+the golden models :mod:`.golden` and :mod:`.golden_spread` (the spread schedule's), the manifest
+section :mod:`.manifest`, the template ``_stream.c.j2`` (and the header's paragraph ``_stream.h.j2``)
+and its variables :mod:`.render`."""
 
 from __future__ import annotations
 
@@ -10,14 +11,15 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+from codegen.families.stream.golden import GoldenStream
 from codegen.families.stream.golden_spread import GoldenStreamSpread
+from codegen.families.stream.manifest import stream_manifest
+from codegen.families.stream.quantise import SCHEDULES, QStream, quantise_stream
+from codegen.families.stream.render import stream_context, stream_state_fields, stream_tables
+from codegen.families.stream.spec import parse_dlstm, parse_persistence
 from codegen.family import CFamily, ImuForm, TimeBase
-from codegen.golden import GoldenBase, GoldenStream
-from codegen.imu import KIND_STREAM, ChannelTables
-from codegen.manifest import stream_manifest
-from codegen.quantize import SCHEDULES, Limits, QStream, quantise_stream
-from codegen.render import stream_context, stream_state_fields, stream_tables
-from codegen.spec import DlstmModelSpec, PersistenceSpec, parse_dlstm, parse_persistence
+from codegen.golden import GoldenBase
+from codegen.imu_record import KIND_STREAM, ChannelTables
 from trainer.dlstm.realtime import FrontEnd
 
 
@@ -42,11 +44,7 @@ def imu_tables(q: QStream, sensor: int) -> ChannelTables:
     return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
 
 
-def quantise(spec: DlstmModelSpec | PersistenceSpec, limits: Limits, schedule: str) -> QStream:
-    return dataclasses.replace(quantise_stream(spec, limits), schedule=schedule)
-
-
-def golden(model: QStream) -> GoldenBase:
+def golden_model(model: QStream) -> GoldenBase:
     """The spread schedule's golden model is its own (golden_spread.py)."""
     return GoldenStreamSpread(model) if model.layers and model.schedule == "spread" else GoldenStream(model)
 
@@ -54,9 +52,10 @@ def golden(model: QStream) -> GoldenBase:
 LSTM = CFamily(
     name="lstm-stream",
     parse=parse_dlstm,
-    quantise=quantise,
-    golden=golden,
+    quantise=quantise_stream,
+    golden=golden_model,
     template=Path(__file__).with_name("_stream.c.j2"),
+    usage=Path(__file__).with_name("_stream.h.j2"),
     context=stream_context,
     manifest=stream_manifest,
     tables=stream_tables,

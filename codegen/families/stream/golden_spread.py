@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from codegen.golden import UINT32_MAX, GoldenStream
+from codegen.families.stream.golden import GoldenStream
+from codegen.families.stream.quantise import UNIT_TASKS, X_SLOTS, QStream
+from codegen.golden import UINT32_MAX
 from codegen.qformats import TANH_FRAC
-from codegen.quantize import UNIT_TASKS, X_SLOTS, QStream
 
 WORD = 1 << 32  # state->acc holds uint32 words
 EXCESS = 1 << 31  # the dot products' sums are in excess-2^31 form

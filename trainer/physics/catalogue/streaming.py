@@ -89,7 +89,7 @@ class IntGain(Protocol):
 
 
 class IntTerm(Protocol):
-    """What the quantiser made of one effect (``codegen.quantize.QTerm``)."""
+    """What the quantiser made of one effect (``codegen.families.physics.quantise.QTerm``)."""
 
     @property
     def filter(self) -> IntLowpass | None: ...

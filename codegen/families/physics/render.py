@@ -1,0 +1,88 @@
+"""The physics family's template variables (``_physics.c.j2``), state struct members, table sizes
+and kernel header (``tdc_physics_kernels.h`` of the kernel library, shipped with its modules)."""
+
+from __future__ import annotations
+
+from string import Template
+
+from codegen.families.physics.quantise import QPhysics, QTerm
+from codegen.qformats import HEADER as KERNEL_HEADER
+from codegen.render import Field, bound_text, c_rows
+from trainer.physics.catalogue.streaming import HI_BITS, FixedPoint, StateWord
+
+KERNEL_FILE = "tdc_physics_kernels.h"
+KERNEL_PATH = KERNEL_HEADER.parent / KERNEL_FILE
+
+
+def physics_state_fields(model: QPhysics, common: list[Field]) -> list[Field]:
+    """The state members: its terms' filter states (int64) and temperatures (int32), then the sample
+    bookkeeping and the model tag, the common ones (flags, samples) last."""
+    wide = f"Q{model.temp_frac + HI_BITS} mdegC about {model.centre_mdegc} mdegC"
+    narrow = f"Q{model.temp_frac} mdegC"
+    words = physics_state_words(model)
+    return [
+        *(Field("int64_t", w.name, (), f"{w.doc}, {wide}") for w in words if w.wide),
+        *(Field("int32_t", w.name, (), f"{w.doc}, {narrow}") for w in words if not w.wide),
+        Field("int32_t", "temp_prev", (), "previous clipped temperature, mdegC"),
+        Field("uint32_t", "started", (), "0 until the first sample after init/reset"),
+        Field("uint32_t", "model_tag", (), "NAME_MODEL_TAG: a restore checks it"),
+        *common,
+    ]
+
+
+def physics_state_words(model: QPhysics) -> list[StateWord]:
+    """The state words a physics model keeps (its terms' filters and play operator), in step order."""
+    return [w for t in model.terms for w in t.fixed.state]
+
+
+def physics_snippets(fixed: FixedPoint, values: dict[str, object]) -> dict[str, str]:
+    """A streamed effect's C step before and after the polynomial, its constants filled in."""
+    return {
+        "before": Template(fixed.before_poly).substitute(values),
+        "after": Template(fixed.after_poly).substitute(values),
+    }
+
+
+def physics_tables(model: QPhysics) -> dict[str, int]:
+    return {"physics_coefficients": 16}
+
+
+def physics_context(model: QPhysics) -> dict[str, object]:
+    tf = model.temp_frac
+
+    def values(t: QTerm) -> dict[str, object]:
+        out: dict[str, object] = {}
+        if t.filter is not None:
+            f = t.filter
+            out |= {"c": f.c_q, "b0": f.b_q, "shift": f"{f.shift}u", "step_scale": 2 ** (tf - f.shift)}
+        if t.gain is not None:
+            out["q"] = t.gain.q
+        if t.margin_q is not None:
+            out |= {"margin": t.margin_q, "margin_text": f"{t.margin_q} (Q{tf} mdegC)"}
+        return out
+
+    return {
+        "rate_hz": f"{model.rate_hz:g}",
+        "tf": tf,
+        "centre": model.centre_mdegc,
+        "frac": model.frac,
+        "bound_text": bound_text(model.bound),
+        "clip_lo": model.clip_lo_mdegc,
+        "clip_hi": model.clip_hi_mdegc,
+        "filters": [
+            {
+                "name": f.name,
+                "tau": f"{f.tau_s:g}",
+                "shift": f.shift,
+                "c_real": f"{f.c_real:.9g}",
+                "b0_real": f"{f.b0_real:.9g}",
+            }
+            for f in model.filters
+        ],
+        "words": physics_state_words(model),
+        "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
+        "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
+        "u_shift": model.u_shift,
+        "coefficients": c_rows(model.coefficients_q, per_line=4),
+        "macros": [("MODEL_TAG", f"{model.tag}u")],
+    }

@@ -1,0 +1,43 @@
+"""The physics family's checkpoint parser: the grey-box model's parameters and its sample rate."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from trainer.errors import UserError
+from trainer.fields import DottedFields as _Fields
+from trainer.greybox.stream import PhysicsModel
+from trainer.physics.catalogue.streamed import STREAMED
+
+
+@dataclass(frozen=True)
+class PhysicsSpec:
+    """The grey-box model's plain parameters and the sample rate its filters are discretised for."""
+
+    method: str
+    model: PhysicsModel
+    rate_hz: float  # the training recording's (train_stats.sample_rate_hz)
+
+
+def parse_physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
+    """Parameters through the trainer's own payload reader (one definition of the layout)."""
+    from trainer.greybox.compensator import PhysicsCompensator
+
+    rate_hz = root.sub("train_stats").number("sample_rate_hz", positive=True)
+    try:
+        model = PhysicsCompensator.from_payload(payload.data).model
+    except (KeyError, TypeError, ValueError, IndexError, UserError) as exc:
+        root.fail(f"field 'payload' is not a physics model ({exc})")
+    for term in model.terms:  # a streamed effect without a C form: refused, or left out when it adds nothing
+        streamed = STREAMED[term.identifier]
+        why = (
+            None
+            if streamed.fixed is not None or streamed.unexported is None
+            else streamed.unexported(term.params)
+        )
+        if why is not None:
+            root.fail(why)
+    lo, hi = model.temp_range_c
+    if not lo < hi:
+        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
+    return PhysicsSpec(method, model, rate_hz)

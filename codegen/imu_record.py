@@ -1,0 +1,29 @@
+"""A channel's record of the IMU module (``NAME_channel_t``) and the channel kinds (``NAME_KIND_``,
+the calibration blob's codes): what a C family's unit gives :mod:`codegen.imu` (its ``ImuForm``).
+
+A module of its own, imported by the units and by codegen/imu.py, so that the IMU module may import
+the units' stages without a loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
+
+
+@dataclass(frozen=True)
+class ChannelTables:
+    """One channel's numbers exactly as ``NAME_channel_t`` holds them."""
+
+    kind: int
+    sensor: int
+    frac: int
+    u_shift: int
+    clip_lo: int
+    clip_hi: int
+    t_ref: int
+    coefficients: tuple[int, ...]  # cubic d0..d3 (zeros for pla)
+    splits: tuple[int, ...]
+    slopes: tuple[int, ...]
+    intercepts: tuple[int, ...]
