@@ -85,12 +85,31 @@ class TimeBase:
 
 @dataclass(frozen=True)
 class ImuForm:
-    """A family's channel of the IMU module (codegen/imu.py): ``kind``, its NAME_KIND_ code (the
-    blob's), and ``tables``, the channel's record (codegen.imu_record.ChannelTables) given the model and
-    the index of the sensor whose temperature it reads."""
+    """A family's channel of the IMU module (codegen/imu.py): ``kind``, its NAME_KIND_ number (the
+    blob's) and ``code`` (the NAME_KIND_ suffix); ``tables``, the channel's record
+    (codegen.imu_record.ChannelTables) given the model and the index of the sensor whose temperature it
+    reads; ``label``: its channels in messages. The rest says what the module holds for it:
+    ``snippets``: its template of macros, each filling one place of imu.h.j2 / imu.c.j2 (the macro of
+    that name; a place it has no macro for gets nothing of it); ``context``: that template's variables
+    given its channels (codegen.imu_record.ImuPart); ``manifest``: its keys of the module's manifest;
+    ``blob``: its record in the calibration blob after the channel header (None: built-in tables only);
+    a family with a blob record is in every module (a blob may put it on any channel), the others only
+    in a module with a channel of theirs; ``slots``: its tables and state are arrays indexed by the
+    record's ``slot``; ``layout_tag``: its channels keep state, so the module id names them under this
+    tag; ``timed``, ``timed_brief``: what the sample rate discretises (empty: memoryless)."""
 
     kind: int
     tables: Callable[[Any, int], Any]
+    code: str
+    label: str
+    snippets: Path | None = None
+    context: Callable[[Any], dict[str, object]] | None = None
+    manifest: Callable[[Any], dict[str, object]] | None = None
+    blob: Callable[[Any], bytes] | None = None
+    slots: bool = False
+    layout_tag: str = ""
+    timed: str = ""
+    timed_brief: str = ""
 
 
 def _no_state(model: Any, common: list[Any]) -> list[Any]:

@@ -8,12 +8,12 @@ a ``NAME_calibration_t`` that is either compiled in (``NAME_builtin()``) or deco
 the module id and a CRC32 (docs/imu-module.md), so a factory flashes per-unit calibration without
 recompiling. The arithmetic is the kernel library's (``tdc_kernels.h``, included as is) in exactly
 the order of the one-channel templates, so each channel is bit-exact against the golden model of
-its own checkpoint (:func:`imu_golden`). Methods: poly3, pla and physics (the grey-box model: its
-filter and branch state per channel in the one state struct, its step the one-channel physics
-module's, rendered from the same template macro, ``_physics_step.c.j2``), and the DLSTMs: a DLSTM
-channel keeps the one-channel module of its checkpoint, named ``NAME_<channel>`` and embedded
-verbatim in ``NAME.h``/``NAME.c`` (one translation unit still), its state a member of the
-caller-owned ``NAME_state_t``; it has no calibration-blob record.
+its own checkpoint (:func:`imu_golden`).
+
+This module and its templates know no family: each C family with an IMU-module form
+(``CFamily.imu``, an ``ImuForm``: poly3, pla, physics, the DLSTMs) gives its channel record, its
+blob record, its template variables and its template of macros, which the IMU templates call at
+their places for every form the module holds (codegen/families/<unit>/imu.py, ``_<unit>_imu.j2``).
 
 Channel units: raw and compensated values are int32 in 1/16000 of the channel's unit (mg -> the
 one-channel modules' 1/16 ug; deg/s; Pa), so the one-channel quantiser applies unchanged.
@@ -29,17 +29,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import jinja2
 import numpy as np
 
 from codegen import __version__
 from codegen.export import LoadedModel, load_for_codegen
-from codegen.families.physics.quantise import QLowpass, QPhysics
-from codegen.families.physics.render import KERNEL_FILE as PHYSICS_KERNEL_FILE
-from codegen.families.physics.render import KERNEL_PATH as PHYSICS_KERNEL_HEADER
-from codegen.families.physics.render import physics_snippets
-from codegen.family import QuantModel, family_of
+from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
-from codegen.imu_record import KIND_CUBIC, KIND_PHYSICS, KIND_PLA, KIND_STREAM, ChannelTables
+from codegen.imu_record import ChannelTables, ImuPart
+from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, TEMP_LIMITS_MDEGC
 from codegen.rate import declared_rate_millihz
 from codegen.render import (
@@ -49,14 +47,11 @@ from codegen.render import (
     header_version,
     kernel_header,
     manifest_json,
-    render_sources,
     validate_name,
 )
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
-from trainer.physics.catalogue.streamed import c_options, c_terms
-from trainer.physics.catalogue.streaming import FixedPoint
 from trainer.train_stats import TrainStats
 
 BLOB_MAGIC = b"TDCC"
@@ -83,10 +78,18 @@ class ImuChannel:
     model: LoadedModel
 
     @property
-    def kind(self) -> int:
-        form = family_of(self.model.quantised).imu
+    def family(self) -> CFamily:
+        return family_of(self.model.quantised)
+
+    @property
+    def form(self) -> ImuForm:
+        form = self.family.imu
         assert form is not None  # load_imu refuses the others
-        return form.kind
+        return form
+
+    @property
+    def kind(self) -> int:
+        return self.form.kind
 
 
 @dataclass(frozen=True)
@@ -95,17 +98,35 @@ class ImuModel:
     sensors: tuple[str, ...]
     valid_mdegc: tuple[tuple[int, int], ...]  # per sensor
     max_intervals: int  # capacity of a piecewise-linear channel's tables (>= 1)
-    rate_millihz: int  # the physics channels' sample rate (one step call for all); 0: memoryless, any
+    rate_millihz: int  # the timed channels' sample rate (one step call for all); 0: memoryless, any
 
-    @property
-    def physics(self) -> tuple[ImuChannel, ...]:
-        """The physics channels, in slot order (their tables and state are NAME_physics[slot])."""
-        return tuple(c for c in self.channels if c.kind == KIND_PHYSICS)
+    def of_form(self, form: ImuForm) -> tuple[ImuChannel, ...]:
+        """The channels of a family's form, in slot order (a slotted family's NAME_<x>[slot])."""
+        return tuple(c for c in self.channels if c.form.kind == form.kind)
 
-    @property
-    def streams(self) -> tuple[ImuChannel, ...]:
-        """The DLSTM channels (each runs its own one-channel module, its state in state->stream)."""
-        return tuple(c for c in self.channels if c.kind == KIND_STREAM)
+    def forms(self) -> list[ImuForm]:
+        """The channel forms the module holds, in kind order: those of its channels and every form
+        with a calibration-blob record (a blob may put it on any channel)."""
+        present = {c.form.kind for c in self.channels}
+        found = {
+            f.imu.kind: f.imu
+            for f in entries()
+            if f.imu is not None and (f.imu.blob is not None or f.imu.kind in present)
+        }
+        return [found[kind] for kind in sorted(found)]
+
+    def kernel_headers(self) -> list[Path]:
+        """The extra kernel headers of the families it holds (CFamily.kernels), each once."""
+        kinds = {form.kind for form in self.forms()}
+        paths = [
+            p for f in entries() if f.imu is not None and f.imu.kind in kinds for p in f.kernels.values()
+        ]
+        return list(dict.fromkeys(paths))
+
+    def part(self, form: ImuForm, name: str) -> ImuPart:
+        """A family's channels in the module ``name`` (what its form's hooks see)."""
+        channels = self.of_form(form)
+        return ImuPart(name, channels, tuple(self.channels.index(c) for c in channels))
 
     @property
     def sha256(self) -> str:
@@ -118,10 +139,10 @@ class ImuModel:
         """CRC32 of the layout (channels, units, sensors, capacity): a blob must be for this layout."""
         text = ";".join(f"{c.name}:{c.unit}:{self.sensors.index(c.sensor)}" for c in self.channels)
         text += f";S={','.join(self.sensors)};I={self.max_intervals}"
-        if self.physics:  # the state holds their filters: a blob must put them on the same channels
-            text += f";P={','.join(c.name for c in self.physics)};R={self.rate_millihz}"
-        if self.streams:
-            text += f";D={','.join(c.name for c in self.streams)};R={self.rate_millihz}"
+        for form in self.forms():  # the state holds theirs: a blob must put them on the same channels
+            channels = self.of_form(form)
+            if form.layout_tag and channels:
+                text += f";{form.layout_tag}={','.join(c.name for c in channels)};R={self.rate_millihz}"
         return zlib.crc32(text.encode())
 
 
@@ -179,85 +200,15 @@ def load_imu(
     )
     rates = {declared_rate_millihz(c.model.quantised) for c in channels} - {0}
     if len(rates) > 1:
+        timed = {c.form.kind: c.form.label for c in channels if c.form.timed}
         raise UserError(
-            f"the timed channels (physics, DLSTM) are for different sample rates ({', '.join(f'{r / 1000:g} Hz' for r in sorted(rates))}); "
+            f"the timed channels ({', '.join(timed[k] for k in sorted(timed))}) are for different sample rates ({', '.join(f'{r / 1000:g} Hz' for r in sorted(rates))}); "
             f"one step call runs them all: export with --rate HZ"
         )
     return ImuModel(tuple(channels), sensors, tuple(valid), capacity, rates.pop() if rates else 0)
 
 
 # ------------------------------------------------------------------------------ tables and blob
-
-
-def phys_terms() -> dict[str, int]:
-    """A physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these): one
-    per C term of the streamed effects' registry, then its options, in step order."""
-    names = [t.name.upper() for t in c_terms()] + c_options()
-    return {name: 1 << k for k, name in enumerate(names)}
-
-
-@dataclass(frozen=True)
-class PhysicsTables:
-    """A physics channel's constants exactly as ``NAME_physics_t`` holds them (its clip range, frac
-    and cubic are in the channel's record: ``ChannelTables``), in the registry's layout
-    (:func:`trainer.physics.catalogue.streamed.c_terms`; zeros for a term the channel lacks)."""
-
-    terms: int  # phys_terms() bits
-    centre: int  # mdegC
-    scale: int  # 2^tf
-    u_scale: int  # 2^u_shift
-    filters: list[tuple[int, int, int, int]]  # per filter: c, b0, step_scale 2^(tf - s), s
-    margins: list[int]  # per margin (the play's half width), Q(tf) mdegC
-    gains: list[int]
-
-
-def physics_tables(q: QPhysics) -> PhysicsTables:
-    def lowpass(f: QLowpass | None) -> tuple[int, int, int, int]:
-        return (0, 0, 0, 0) if f is None else (f.c_q, f.b_q, 1 << (q.temp_frac - f.shift), f.shift)
-
-    present = {t.fixed.name: t for t in q.terms}
-    bits = phys_terms()
-    layout = c_terms()
-    return PhysicsTables(
-        sum(bits[name.upper()] for name in present) + sum(bits[o] for o in q.options),
-        q.centre_mdegc,
-        1 << q.temp_frac,
-        1 << q.u_shift,
-        [lowpass(present[f.name].filter if f.name in present else None) for f in layout if f.tau_s],
-        [(present[f.name].margin_q or 0) if f.name in present else 0 for f in layout if f.margin],
-        [
-            present[f.name].gain.q if f.name in present and present[f.name].gain else 0  # type: ignore[union-attr]
-            for f in layout
-            if f.gain_mg_per_c
-        ],
-    )
-
-
-def physics_layout(name: str) -> dict[str, object]:
-    """What the IMU templates render of the registry's C terms: the tables' and the state's fields
-    and each term's step, reading its constants from ``ph`` and testing its bit at run time."""
-    layout = c_terms()
-    on = {t: f"(ph->terms & {name.upper()}_PHYS_{t}) != 0u" for t in phys_terms()}
-
-    def values(f: FixedPoint) -> dict[str, object]:
-        filt = {k: f"ph->{f.name}.{k}" for k in ("c", "b0", "shift", "step_scale")}
-        margin = f"ph->{f.margin_field}"
-        return {**filt, "q": f"ph->{f.name}_q", "margin": margin, "margin_text": f"{margin} (Q(tf) mdegC)"}
-
-    u_source = "t_pm"
-    for f in reversed(layout):
-        if f.poly_reads is not None and f.option is not None:
-            u_source = f"({on[f.option]} ? state->{f.poly_reads} : {u_source})"
-    words = list({w.name: w for f in layout for w in f.state}.values())
-    return {
-        "filters": [{"field": f.name, "doc": f.filter_doc} for f in layout if f.tau_s],
-        "margins": [{"field": f.margin_field, "doc": f.margin_doc} for f in layout if f.margin],
-        "gains": [{"field": f"{f.name}_q", "text": f.difference_text} for f in layout if f.gain_mg_per_c],
-        "state": [w for w in words if w.wide] + [w for w in words if not w.wide],
-        "words": words,
-        "terms": [{"on": on[f.name.upper()], **physics_snippets(f, values(f))} for f in layout],
-        "u_source": u_source,
-    }
 
 
 def _tables(q: QuantModel, sensor: int) -> ChannelTables:
@@ -274,11 +225,12 @@ def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
 
 def encode_blob(imu: ImuModel) -> bytes:
     """The calibration blob (docs/imu-module.md): header, sensors, channels, CRC32 of all before it."""
-    for channels, what in ((imu.physics, "a physics"), (imu.streams, "a DLSTM")):
-        if channels:
+    for form in imu.forms():
+        channels = imu.of_form(form)
+        if form.blob is None and channels:
             raise UserError(
-                f"channel {channels[0].name}: {what} channel has no calibration-blob record yet; export "
-                f"the module with built-in tables (without --blob / --format calibration-blob)"
+                f"channel {channels[0].name}: a {form.label} channel has no calibration-blob record "
+                f"yet; export the module with built-in tables (without --blob / --format calibration-blob)"
             )
     parts = [
         BLOB_HEADER.pack(
@@ -294,17 +246,14 @@ def encode_blob(imu: ImuModel) -> bytes:
     parts += [SENSOR_RECORD.pack(lo, hi) for lo, hi in imu.valid_mdegc]
     for channel in imu.channels:
         t = channel_tables(imu, channel)
-        intervals = len(t.slopes) if t.kind == KIND_PLA else 0
+        intervals = len(t.slopes)  # a piecewise-linear channel's (the others have none)
         parts.append(
             CHANNEL_HEADER.pack(
                 t.kind, t.sensor, t.frac, t.u_shift, intervals, 0, t.clip_lo, t.clip_hi, t.t_ref
             )
         )
-        if t.kind == KIND_CUBIC:
-            parts.append(struct.pack("<4i", *t.coefficients))
-        else:
-            n = len(t.slopes)
-            parts.append(struct.pack(f"<{n - 1}i{n}i{n}q", *t.splits, *t.slopes, *t.intercepts))
+        assert channel.form.blob is not None  # refused above
+        parts.append(channel.form.blob(t))
     body = b"".join(parts)
     return body + struct.pack("<I", zlib.crc32(body))
 
@@ -329,46 +278,37 @@ def imu_golden(imu: ImuModel, raw: np.ndarray, temp: np.ndarray) -> tuple[np.nda
 # ------------------------------------------------------------------------------ rendering
 
 
-def stream_module_name(name: str, channel: ImuChannel) -> str:
-    """The C name of a DLSTM channel's own module inside the IMU module ``name``."""
-    sub = f"{name}_{channel.name}"
-    try:
-        return validate_name(sub)
-    except UserError as exc:
-        raise UserError(
-            f"--name {name}: the DLSTM channel {channel.name} is the embedded module {sub}, which is not a "
-            f"valid module name ({exc}); choose a shorter --name"
-        ) from None
-
-
-def _stream_modules(imu: ImuModel, name: str) -> list[dict[str, object]]:
-    """Each DLSTM channel's one-channel header and source (codegen/render.py, unchanged), to embed."""
-    modules: list[dict[str, object]] = []
-    for channel in imu.streams:
-        sub = stream_module_name(name, channel)
-        files = render_sources(channel.model.quantised, sub, channel.model.sha256, notes=channel.model.notes)
-        own_include = f'#include "{sub}.h"\n'
-        assert files[f"{sub}.c"].count(own_include) == 1
-        modules.append(
-            {
-                "name": channel.name,
-                "sub": sub,
-                "index": imu.channels.index(channel),
-                "header": files[f"{sub}.h"].rstrip("\n"),
-                "source": files[f"{sub}.c"]
-                .replace(own_include, f"/* {sub}.h: embedded in {name}.h */\n")
-                .rstrip("\n"),
-            }
+def _parts(
+    imu: ImuModel, name: str, env: jinja2.Environment, common: dict[str, object]
+) -> list[dict[str, object]]:
+    """Each channel form the module holds (kind order): its kind, code, label and ``hooks``, its
+    template's macros (ImuForm.snippets) bound to the module's and its own variables."""
+    parts: list[dict[str, object]] = []
+    for form in imu.forms():
+        own = form.context(imu.part(form, name)) if form.context is not None else {}
+        hooks: object = (
+            {}
+            if form.snippets is None
+            else env.get_template(form.snippets.name).make_module(
+                {**common, **own, "kind": form.kind, "code": form.code}
+            )
         )
-    return modules
+        parts.append(
+            {"kind": form.kind, "code": form.code, "label": form.label, "slots": form.slots, "hooks": hooks}
+        )
+    return parts
 
 
 def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
     tables = [channel_tables(imu, c) for c in imu.channels]
     max_splits = max(imu.max_intervals - 1, 1)
+    forms = imu.forms()
 
     def padded(values: tuple[int, ...], size: int) -> list[int]:
         return list(values) + [0] * (size - len(values))
+
+    def slot(channel: ImuChannel) -> int:
+        return imu.of_form(channel.form).index(channel) if channel.form.slots else 0
 
     return {
         "name": name,
@@ -385,21 +325,16 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "max_intervals": imu.max_intervals,
         "max_splits": max_splits,
         "flags": FLAGS,
-        "kind_cubic": KIND_CUBIC,
-        "kind_pla": KIND_PLA,
-        "kind_physics": KIND_PHYSICS,
-        "kind_stream": KIND_STREAM,
-        "physics_kernels_version": header_version(PHYSICS_KERNEL_HEADER)[1],
-        "stream_channels": _stream_modules(imu, name),
-        "phys_terms": phys_terms(),
-        "phys": physics_layout(name),
+        "kernel_headers": [
+            {"file": path.name, "macro": macro, "version": version}
+            for path in imu.kernel_headers()
+            for macro, version in [header_version(path)]
+        ],
+        "slotted": [{"kind": f.kind, "label": f.label} for f in forms if f.slots],
+        "timed": [f.timed for f in forms if f.timed and imu.of_form(f)],
+        "timed_brief": [f.timed_brief for f in forms if f.timed_brief and imu.of_form(f)],
         "rate_millihz": imu.rate_millihz,
         "rate_hz": f"{imu.rate_millihz / 1000:g}",
-        "physics_channels": [
-            {"name": c.name, "t": physics_tables(c.model.quantised)}
-            for c in imu.physics
-            if isinstance(c.model.quantised, QPhysics)
-        ],
         "temp_lo": TEMP_LIMITS_MDEGC[0],
         "temp_hi": TEMP_LIMITS_MDEGC[1],
         "sensors": [
@@ -417,7 +352,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "
                 f"{c.model.checkpoint.valid_temp_range_c[1]:.2f} degC",
                 "t": t,
-                "slot": imu.physics.index(c) if c.kind == KIND_PHYSICS else 0,
+                "slot": slot(c),
                 "splits": padded(t.splits, max_splits),
                 "slopes": padded(t.slopes, imu.max_intervals),
                 "intercepts": padded(t.intercepts, imu.max_intervals),
@@ -429,9 +364,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
     }
 
 
-LOADER = PHYSICS_KERNEL_HEADER.with_name(
-    "tdc_imu_load.c"
-)  # the calibration loader: static C of the kernel library
+LOADER = KERNEL_HEADER.with_name("tdc_imu_load.c")  # the calibration loader: static C of the kernel library
 
 
 def loader_source(name: str) -> str:
@@ -443,16 +376,17 @@ def loader_source(name: str) -> str:
 
 
 def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:
-    """``{NAME.h, NAME.c, tdc_kernels.h, NAME.manifest.json}`` (pure)."""
+    """``{NAME.h, NAME.c, tdc_kernels.h, its families' kernel headers, NAME.manifest.json}`` (pure)."""
     env = _environment()
     ctx = _context(imu, validate_name(name), builtin)
+    ctx["parts"] = _parts(imu, name, env, ctx)
     files = {
         f"{name}.h": env.get_template("imu.h.j2").render(ctx),
         f"{name}.c": env.get_template("imu.c.j2").render(ctx),
         KERNEL_FILE: kernel_header(),
     }
-    if imu.physics:
-        files[PHYSICS_KERNEL_FILE] = PHYSICS_KERNEL_HEADER.read_text(encoding="utf-8")
+    for path in imu.kernel_headers():
+        files[path.name] = path.read_text(encoding="utf-8")
     files[f"{name}.manifest.json"] = manifest_json(_manifest(imu, name, builtin))
     return files
 
@@ -467,11 +401,12 @@ def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "module_id": f"0x{imu.module_id:08x}",
         "blob": {"layout_version": BLOB_VERSION, "max_intervals": imu.max_intervals},
         "rates": {"sample_rate_millihz": imu.rate_millihz, "memoryless": imu.rate_millihz == 0},
-        **(
-            {"embedded_modules": {c.name: stream_module_name(name, c) for c in imu.streams}}
-            if imu.streams
-            else {}
-        ),
+        **{
+            key: value
+            for form in imu.forms()
+            if form.manifest is not None and imu.of_form(form)
+            for key, value in form.manifest(imu.part(form, name)).items()
+        },
         "sensors": [
             {"name": s, "valid_temp_range_mdegc": [lo, hi]}
             for s, (lo, hi) in zip(imu.sensors, imu.valid_mdegc, strict=True)

@@ -1,5 +1,6 @@
 """A channel's record of the IMU module (``NAME_channel_t``) and the channel kinds (``NAME_KIND_``,
-the calibration blob's codes): what a C family's unit gives :mod:`codegen.imu` (its ``ImuForm``).
+the calibration blob's codes): what a C family's unit gives :mod:`codegen.imu` (its ``ImuForm``), and
+a family's channels in a module (``ImuPart``), what its ``ImuForm`` hooks render from.
 
 A module of its own, imported by the units and by codegen/imu.py, so that the IMU module may import
 the units' stages without a loop.
@@ -8,6 +9,7 @@ the units' stages without a loop.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 KIND_CUBIC, KIND_PLA, KIND_PHYSICS, KIND_STREAM = 1, 2, 3, 4  # KIND_STREAM: built-in tables only
 
@@ -27,3 +29,12 @@ class ChannelTables:
     splits: tuple[int, ...]
     slopes: tuple[int, ...]
     intercepts: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class ImuPart:
+    """One family's channels in an IMU module: what its ``ImuForm`` hooks (context, manifest) see."""
+
+    module: str  # the IMU module's C name
+    channels: tuple[Any, ...]  # codegen.imu.ImuChannel, in slot order
+    indices: tuple[int, ...]  # each one's channel index in the module

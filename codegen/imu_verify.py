@@ -260,7 +260,7 @@ def verify_imu(
         raise UserError(f"{out_dir / name}.c was generated from other models (calibration sha256 differs)")
     rate_hz = imu.rate_millihz / 1000
     if rate_hz and abs(rec.sample_rate_hz - rate_hz) > 0.01 * rate_hz:
-        timed = "physics channels' filters" if imu.physics else "DLSTM channels' windows"
+        timed = next(f.timed for f in imu.forms() if f.timed and imu.of_form(f))
         raise UserError(
             f"{rec.source}: sample rate {rec.sample_rate_hz:g} Hz, the {timed} are for "
             f"{rate_hz:g} Hz (export the module with --rate {rec.sample_rate_hz:g})"

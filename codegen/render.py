@@ -216,7 +216,10 @@ ANY_RATE_USAGE = "_any_rate.h.j2"  # the header's paragraph of a family without 
 
 def _environment() -> jinja2.Environment:
     templates = {
-        path for unit in family_entries() for path in (unit.template, unit.usage) if path is not None
+        path
+        for unit in family_entries()
+        for path in (unit.template, unit.usage, unit.imu.snippets if unit.imu else None)
+        if path is not None
     }
     family_dirs = sorted({path.parent for path in templates} - {TEMPLATES})
     env = jinja2.Environment(

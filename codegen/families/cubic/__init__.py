@@ -1,9 +1,10 @@
 """The cubic in temperature (``poly3``): Horner in u = (T - T_ref) / 2^u_shift, T clipped to the
-fitted range. Its C is ``cubic.c.j2`` (one channel) and ``tdcf_cubic`` of the IMU module."""
+fitted range. Its C is ``cubic.c.j2`` (one channel) and ``_cubic_imu.j2`` of the IMU module."""
 
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -123,6 +124,11 @@ def imu_tables(q: QPoly3, sensor: int) -> ChannelTables:
     )  # fmt: skip
 
 
+def imu_blob(t: ChannelTables) -> bytes:
+    """Its blob record: d0..d3."""
+    return struct.pack("<4i", *t.coefficients)
+
+
 FAMILY = CFamily(
     name="cubic",
     parse=parse,
@@ -132,5 +138,12 @@ FAMILY = CFamily(
     context=context,
     manifest=manifest,
     tables=tables,
-    imu=ImuForm(KIND_CUBIC, imu_tables),
+    imu=ImuForm(
+        KIND_CUBIC,
+        imu_tables,
+        code="CUBIC",
+        label="cubic",
+        snippets=Path(__file__).with_name("_cubic_imu.j2"),
+        blob=imu_blob,
+    ),
 )

@@ -3,7 +3,7 @@ terms (lag, hysteresis branch, rate, creep). Its stages are modules here: the pa
 the quantiser :mod:`.quantise`, the golden model :mod:`.golden`, the manifest section
 :mod:`.manifest`, the templates ``_physics.c.j2`` / ``_physics_step.c.j2`` (and the header's
 paragraph ``_physics.h.j2``) and their variables, state and kernel header ``tdc_physics_kernels.h``
-:mod:`.render`. What each streamed effect needs of them is its ``FixedPoint``
+:mod:`.render`, its IMU-module channel :mod:`.imu` and its macros ``_physics_imu.j2``. What each streamed effect needs of them is its ``FixedPoint``
 (trainer/physics/catalogue/)."""
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from codegen.families.physics.golden import GoldenPhysics
+from codegen.families.physics.imu import FORM
 from codegen.families.physics.manifest import physics_manifest
-from codegen.families.physics.quantise import QPhysics, quantise_physics
+from codegen.families.physics.quantise import quantise_physics
 from codegen.families.physics.render import KERNEL_PATH, physics_context, physics_state_fields, physics_tables
 from codegen.families.physics.spec import parse_physics
-from codegen.family import CFamily, ImuForm, TimeBase
-from codegen.imu_record import KIND_PHYSICS, ChannelTables
+from codegen.family import CFamily, TimeBase
 from trainer.methods import PHYSICS_RENDERER
 from trainer.train_stats import TrainStats
 
@@ -44,14 +44,6 @@ TIME_BASE = TimeBase(
 )
 
 
-def imu_tables(q: QPhysics, sensor: int) -> ChannelTables:
-    """Its clip range, frac and cubic (its filters and gains: codegen.imu.physics_tables)."""
-    return ChannelTables(
-        KIND_PHYSICS, sensor, q.frac, q.u_shift, q.clip_lo_mdegc, q.clip_hi_mdegc, 0,
-        tuple(q.coefficients_q), (), (), (),
-    )  # fmt: skip
-
-
 FAMILY = CFamily(
     name=PHYSICS_RENDERER,
     parse=parse_physics,
@@ -66,5 +58,5 @@ FAMILY = CFamily(
     kernels={"physics_kernels": KERNEL_PATH},
     restore=True,
     time_base=TIME_BASE,
-    imu=ImuForm(KIND_PHYSICS, imu_tables),
+    imu=FORM,
 )

@@ -1,9 +1,10 @@
 """The piecewise-linear model (``pla``): slope and intercept of the interval holding T, T clamped
-to the front end's range. Its C is ``pla.c.j2`` (one channel) and ``tdcf_pla`` of the IMU module."""
+to the front end's range. Its C is ``pla.c.j2`` (one channel) and ``_pla_imu.j2`` of the IMU module."""
 
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -119,6 +120,12 @@ def imu_tables(q: QPla, sensor: int) -> ChannelTables:
     )  # fmt: skip
 
 
+def imu_blob(t: ChannelTables) -> bytes:
+    """Its blob record: the split points, slopes and intercepts (their count in the channel header)."""
+    n = len(t.slopes)
+    return struct.pack(f"<{n - 1}i{n}i{n}q", *t.splits, *t.slopes, *t.intercepts)
+
+
 FAMILY = CFamily(
     name=PLA,
     parse=parse,
@@ -128,5 +135,12 @@ FAMILY = CFamily(
     context=context,
     manifest=manifest,
     tables=tables,
-    imu=ImuForm(KIND_PLA, imu_tables),
+    imu=ImuForm(
+        KIND_PLA,
+        imu_tables,
+        code="PLA",
+        label="piecewise-linear",
+        snippets=Path(__file__).with_name("_pla_imu.j2"),
+        blob=imu_blob,
+    ),
 )

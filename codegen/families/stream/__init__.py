@@ -3,7 +3,8 @@ persistence front end without a network (``mean-stream``): window means, a decim
 held estimate. Its stages are modules here: the parser :mod:`.spec`, the quantiser :mod:`.quantise`,
 the golden models :mod:`.golden` and :mod:`.golden_spread` (the spread schedule's), the manifest
 section :mod:`.manifest`, the template ``_stream.c.j2`` (and the header's paragraph ``_stream.h.j2``)
-and its variables :mod:`.render`."""
+and its variables :mod:`.render`, its IMU-module channel :mod:`.imu` (the one-channel module
+embedded) and its macros ``_stream_imu.j2``."""
 
 from __future__ import annotations
 
@@ -13,13 +14,13 @@ from typing import Any
 
 from codegen.families.stream.golden import GoldenStream
 from codegen.families.stream.golden_spread import GoldenStreamSpread
+from codegen.families.stream.imu import FORM
 from codegen.families.stream.manifest import stream_manifest
 from codegen.families.stream.quantise import SCHEDULES, QStream, quantise_stream
 from codegen.families.stream.render import stream_context, stream_state_fields, stream_tables
 from codegen.families.stream.spec import parse_dlstm, parse_persistence
-from codegen.family import CFamily, ImuForm, TimeBase
+from codegen.family import CFamily, TimeBase
 from codegen.golden import GoldenBase
-from codegen.imu_record import KIND_STREAM, ChannelTables
 from trainer.dlstm.realtime import FrontEnd
 
 
@@ -37,11 +38,6 @@ TIME_BASE = TimeBase(
     retime=retime_frontend,
     what="windows and decimation",
 )
-
-
-def imu_tables(q: QStream, sensor: int) -> ChannelTables:
-    """Its numbers are in its own module, embedded in the IMU module: the record names its kind and sensor."""
-    return ChannelTables(KIND_STREAM, sensor, 0, 0, 0, 0, 0, (0, 0, 0, 0), (), (), ())
 
 
 def golden_model(model: QStream) -> GoldenBase:
@@ -62,6 +58,6 @@ LSTM = CFamily(
     state=stream_state_fields,
     schedules=SCHEDULES,
     time_base=TIME_BASE,
-    imu=ImuForm(KIND_STREAM, imu_tables),
+    imu=FORM,
 )
 MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))
