@@ -285,17 +285,12 @@ def _parts(
     template's macros (ImuForm.snippets) bound to the module's and its own variables."""
     parts: list[dict[str, object]] = []
     for form in imu.forms():
-        own = form.context(imu.part(form, name)) if form.context is not None else {}
-        hooks: object = (
-            {}
-            if form.snippets is None
-            else env.get_template(form.snippets.name).make_module(
-                {**common, **own, "kind": form.kind, "code": form.code}
-            )
-        )
-        parts.append(
-            {"kind": form.kind, "code": form.code, "label": form.label, "slots": form.slots, "hooks": hooks}
-        )
+        hooks: object = {}  # a form without macros fills no place
+        if form.snippets is not None:
+            own = form.context(imu.part(form, name)) if form.context is not None else {}
+            variables = {**common, **own, "kind": form.kind, "code": form.code}
+            hooks = env.get_template(form.snippets.name).make_module(variables)
+        parts.append({"kind": form.kind, "code": form.code, "label": form.label, "hooks": hooks})
     return parts
 
 

@@ -2,8 +2,8 @@
 the calibration blob's codes): what a C family's unit gives :mod:`codegen.imu` (its ``ImuForm``), and
 a family's channels in a module (``ImuPart``), what its ``ImuForm`` hooks render from.
 
-A module of its own, imported by the units and by codegen/imu.py, so that the IMU module may import
-the units' stages without a loop.
+A module of its own, imported by the units and by codegen/imu.py, so that no unit imports the IMU
+module (which reaches the units through the family registry only).
 """
 
 from __future__ import annotations
