@@ -11,6 +11,7 @@ from codegen.families.physics.quantise import QLowpass, QPhysics
 from codegen.families.physics.render import physics_snippets
 from codegen.family import ImuForm
 from codegen.imu_record import KIND_PHYSICS, ChannelTables, ImuPart
+from trainer.methods import PHYSICS_RENDERER
 from trainer.physics.catalogue.streamed import c_options, c_terms
 from trainer.physics.catalogue.streaming import FixedPoint
 
@@ -109,7 +110,7 @@ FORM = ImuForm(
     KIND_PHYSICS,
     imu_tables,
     code="PHYSICS",
-    label="physics",
+    label=PHYSICS_RENDERER,
     snippets=Path(__file__).with_name("_physics_imu.j2"),
     context=imu_context,
     slots=True,
