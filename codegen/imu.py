@@ -44,8 +44,8 @@ from codegen.render import (
     FLAGS,
     KERNEL_FILE,
     _environment,
-    header_version,
     kernel_header,
+    kernel_header_checks,
     manifest_json,
     validate_name,
 )
@@ -320,11 +320,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "max_intervals": imu.max_intervals,
         "max_splits": max_splits,
         "flags": FLAGS,
-        "kernel_headers": [
-            {"file": path.name, "macro": macro, "version": version}
-            for path in imu.kernel_headers()
-            for macro, version in [header_version(path)]
-        ],
+        "kernel_headers": kernel_header_checks(imu.kernel_headers()),
         "slotted": [{"kind": f.kind, "label": f.label} for f in forms if f.slots],
         "timed": [f.timed for f in forms if f.timed and imu.of_form(f)],
         "timed_brief": [f.timed_brief for f in forms if f.timed_brief and imu.of_form(f)],

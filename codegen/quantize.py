@@ -21,6 +21,7 @@ from codegen import family
 from codegen.family import QuantModel, family_of
 from codegen.fixedpoint import INT32_MAX
 from codegen.spec import Checkpoint
+from trainer import methods as registry
 from trainer.errors import UserError
 
 ACCEL_FRAC = 4  # the step API's acceleration unit is 2**-4 ug
@@ -74,5 +75,10 @@ def quantise_checkpoint(
         raise UserError(f"--schedule must be one of {', '.join(family.schedules())}, got {schedule!r}")
     unit = family_of(model)
     if schedule not in unit.schedules:
-        raise UserError(f"--schedule {schedule}: only a DLSTM has a network step to spread")
+        renderers = {m: registry.get(m).renderer for m in registry.names()}
+        takers = [m for m, r in renderers.items() if r is not None and schedule in family.get(r).schedules]
+        raise UserError(
+            f"--schedule {schedule}: method {model.method!r} takes only {', '.join(unit.schedules)}; "
+            f"{schedule} is for {', '.join(takers)}"
+        )
     return unit.quantise(model, limits, schedule)

@@ -10,6 +10,7 @@ import json
 import math
 import re
 import textwrap
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -183,11 +184,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
     macros += cast(list[tuple[str, object]], family_ctx.pop("macros", []))  # the family's own NAME_ macros
     ctx.update(family_ctx, family_template=unit.template.name)
     # the family's own kernel headers, each included and its version checked by the module
-    ctx["kernel_headers"] = [
-        {"file": path.name, "macro": macro, "version": version}
-        for path in unit.kernels.values()
-        for macro, version in [header_version(path)]
-    ]
+    ctx["kernel_headers"] = kernel_header_checks(unit.kernels.values())
     ctx.setdefault("network_step_field", None)  # no network: the benchmark harness times one kind of sample
     ctx["usage_template"] = ANY_RATE_USAGE if unit.usage is None else unit.usage.name
     ctx["restore"] = unit.restore
@@ -199,6 +196,15 @@ KERNEL_FILE = "tdc_kernels.h"
 
 
 _VERSION_MACRO = re.compile(r"^#define (TDC\w*_VERSION) (\d+)", re.MULTILINE)
+
+
+def kernel_header_checks(paths: Iterable[Path]) -> list[dict[str, object]]:
+    """What a module includes and version-checks of its extra kernel headers (file, macro, version)."""
+    return [
+        {"file": path.name, "macro": macro, "version": version}
+        for path in paths
+        for macro, version in [header_version(path)]
+    ]
 
 
 def header_version(path: Path) -> tuple[str, int]:

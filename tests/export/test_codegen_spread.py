@@ -175,7 +175,7 @@ def test_report_reads_the_schedule_of_a_verify_json_and_refuses_a_bad_one(tmp_pa
 @pytest.mark.parametrize(
     ("model", "extra", "message"),
     [
-        ("pla", [], "only a DLSTM has a network step to spread"),
+        ("pla", [], "method 'pla' takes only step; spread is for dlstm"),
         ("dlstm", ["--format", "px4-params"], "--schedule applies to the C module"),
     ],
 )
