@@ -16,14 +16,13 @@ import numpy as np
 import pytest
 
 from codegen.cli import main as codegen_main
-from codegen.golden_select import golden_for
-from codegen.hostbuild import SANITIZER_FLAGS, build_harness, load_module, run_harness
+from codegen.hostbuild import load_module
 from codegen.imu import load_imu
 from codegen.imu_record import KIND_STREAM
 from codegen.imu_verify import host_run, step_inputs, verify_imu
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_TEMP_OUT_OF_RANGE
 from tests import testmodels as tm
-from tests.export.test_imu_physics import HARNESS
+from tests.imu_checks import NAME, append_burst, golden_with_resets, sanitized_run_with_resets
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import run_cli
@@ -31,7 +30,6 @@ from trainer.errors import run_cli
 RATE_HZ = 10.0
 N = 6000  # 10 minutes: one heating and one cooling ramp
 FITS = (("dlstm", "accel0_x"), ("poly3", "accel0_y"), ("dlstm-temp", "gyro0_z"))  # the module's order
-NAME = "imu0"
 
 
 def imu_recording() -> Recording:
@@ -115,34 +113,11 @@ def test_under_asan_ubsan_with_resets_extremes_and_out_of_range(
         pytest.skip("gcc is not installed")
     imu = load_imu(_models(module))
     raw, temp = step_inputs(imu, read_recording(module["rec"]).slice(0, 2000))
-    rng = np.random.default_rng(5)
-    burst_raw = rng.integers(-(2**31), 2**31, size=(400, 3)).astype(np.int32)
-    burst_raw[:100:2], burst_raw[1:100:2] = np.iinfo(np.int32).max, np.iinfo(np.int32).min
-    burst_temp = rng.integers(-(2**31), 2**31, size=(400, temp.shape[1])).astype(np.int32)
-    burst_temp[::3] = np.iinfo(np.int32).max
-    raw, temp = np.concatenate([raw, burst_raw]), np.concatenate([temp, burst_temp])
+    raw, temp = append_burst(raw, temp, 400, temp_lows=False)
     cuts = [700, 2000, 2210]  # a reset mid-ramp, one before the burst, one inside it
-    commands = np.zeros((len(raw), 1), dtype=np.int32)
-    commands[cuts] = 1
-    (tmp_path / "vectors.bin").write_bytes(
-        np.concatenate([raw, temp, commands], axis=1).astype("<i4").tobytes()
-    )
-    binary = build_harness(
-        module["out"], NAME, HARNESS, tmp_path / "harness", flags=("-O1", *SANITIZER_FLAGS)
-    )
-    state = np.frombuffer(run_harness(binary, tmp_path / "vectors.bin", tmp_path / "out.bin"), dtype="<u4")
-    c_out = np.fromfile(tmp_path / "out.bin", dtype="<i4").reshape(raw.shape)
-    g_out = np.empty(raw.shape, dtype=np.int64)
-    g_flags = []
-    for k, channel in enumerate(imu.channels):
-        golden = golden_for(channel.model.quantised)
-        sensor = imu.sensors.index(channel.sensor)
-        for a, b in zip([0, *cuts], [*cuts, len(raw)], strict=True):
-            if a:
-                golden.reset()
-            g_out[a:b, k] = golden.run(raw[a:b, k].astype(np.int64), temp[a:b, sensor].astype(np.int64))
-        g_flags.append(golden.flags)
-    np.testing.assert_array_equal(c_out.astype(np.int64), g_out)
+    c_out, state = sanitized_run_with_resets(module["out"], raw, temp, cuts, tmp_path)
+    g_out, g_flags = golden_with_resets(imu, raw, temp, cuts)
+    np.testing.assert_array_equal(c_out, g_out)
     assert list(state[:-1]) == g_flags and state[-1] == len(raw)
     for k, (method, _) in enumerate(FITS):  # what each clamps: the accel input, the temperature
         assert g_flags[k] & FLAG_TEMP_OUT_OF_RANGE and g_flags[k] & FLAG_INPUT_CLAMPED, (method, g_flags[k])

@@ -19,18 +19,15 @@ import pytest
 
 from codegen.cli import main as codegen_main
 from codegen.families.physics.quantise import QPhysics
-from codegen.golden_select import golden_for
 from codegen.hostbuild import (
     FIRMWARE_WARNINGS,
-    SANITIZER_FLAGS,
     STRICT_FLAGS,
-    build_harness,
     load_module,
-    run_harness,
 )
 from codegen.imu import imu_golden, load_imu
 from codegen.imu_record import KIND_PHYSICS
 from codegen.imu_verify import host_run, step_inputs, verify_imu
+from tests.imu_checks import NAME, append_burst, golden_with_resets, sanitized_run_with_resets
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
@@ -50,7 +47,6 @@ PHYSICS = (
     EffectConfig("hysteresis_offset", {"amp_mg": 0.8, "width_c": 6.0}),
 )
 CHANNELS = ("accel0_x", "accel0_y", "gyro0_z")  # the module's order
-NAME = "imu0"
 
 
 def imu_recording(seed: int = 7) -> Recording:
@@ -133,59 +129,6 @@ def test_physics_channel_equals_the_one_channel_physics_module(
     assert np.ptp(out[:, 0] - raw[:, 0]) > 16000 * 5  # the drift removed spans several mg
 
 
-def _golden_with_resets(fitted: dict[str, Path], raw: np.ndarray, temp: np.ndarray, cuts: list[int]):  # type: ignore[no-untyped-def]
-    """Each channel's golden model, reset (not re-initialised) at every cut, as NAME_reset."""
-    imu = load_imu(_models(fitted))
-    outputs = np.empty(raw.shape, dtype=np.int64)
-    flags = []
-    for k, channel in enumerate(imu.channels):
-        golden = golden_for(channel.model.quantised)
-        sensor = imu.sensors.index(channel.sensor)
-        for a, b in zip([0, *cuts], [*cuts, len(raw)], strict=True):
-            if a:
-                golden.reset()
-            outputs[a:b, k] = golden.run(raw[a:b, k], temp[a:b, sensor])
-        flags.append(golden.flags)
-    return outputs, flags
-
-
-HARNESS = r"""
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include "imu0.h"
-/* records: raw[C], temp[S], command (1: imu0_reset before the sample); outputs C int32; stdout: flags, samples */
-int main(int argc, char **argv)
-{
-    FILE *in = fopen(argv[1], "rb");
-    FILE *out = fopen(argv[2], "wb");
-    int32_t record[IMU0_CHANNELS + IMU0_SENSORS + 1u];
-    int32_t y[IMU0_CHANNELS];
-    /* heap copies: AddressSanitizer guards the bounds of the state and of the calibration */
-    imu0_state_t *state = (imu0_state_t *)malloc(sizeof *state);
-    imu0_calibration_t *cal = (imu0_calibration_t *)malloc(sizeof *cal);
-    if (argc != 3 || in == NULL || out == NULL || state == NULL || cal == NULL) {
-        return 2;
-    }
-    memcpy(cal, imu0_builtin(), sizeof *cal);
-    imu0_init(state, cal);
-    while (fread(record, sizeof record[0], IMU0_CHANNELS + IMU0_SENSORS + 1u, in) == IMU0_CHANNELS + IMU0_SENSORS + 1u) {
-        if (record[IMU0_CHANNELS + IMU0_SENSORS] == 1) {
-            imu0_reset(state);
-        }
-        imu0_step(state, record, record + IMU0_CHANNELS, y);
-        fwrite(y, sizeof y[0], IMU0_CHANNELS, out);
-    }
-    fwrite(state->flags, sizeof state->flags[0], IMU0_CHANNELS, stdout);
-    fwrite(&state->samples, sizeof state->samples, 1u, stdout);
-    free(state);
-    free(cal);
-    fclose(in);
-    return fclose(out) == 0 ? 0 : 7;
-}
-"""
-
-
 def test_under_asan_ubsan_with_resets_extremes_and_out_of_range(
     fitted: dict[str, Path], tmp_path: Path
 ) -> None:
@@ -194,26 +137,11 @@ def test_under_asan_ubsan_with_resets_extremes_and_out_of_range(
     rec = read_recording(fitted["rec"])
     imu = load_imu(_models(fitted))
     raw, temp = step_inputs(imu, rec.slice(0, 3000))
-    rng = np.random.default_rng(5)
-    burst_raw = rng.integers(-(2**31), 2**31, size=(600, 3)).astype(np.int32)
-    burst_raw[:100:2], burst_raw[1:100:2] = np.iinfo(np.int32).max, np.iinfo(np.int32).min
-    burst_temp = rng.integers(-(2**31), 2**31, size=(600, temp.shape[1])).astype(np.int32)
-    burst_temp[::3] = np.iinfo(np.int32).max
-    burst_temp[1::5] = np.iinfo(np.int32).min
-    raw, temp = np.concatenate([raw, burst_raw]), np.concatenate([temp, burst_temp])
+    raw, temp = append_burst(raw, temp, 600, temp_lows=True)
     cuts = [1000, 3000, 3300]  # a reset mid-ramp, one before the burst, one inside it
-    commands = np.zeros((len(raw), 1), dtype=np.int32)
-    commands[cuts] = 1
-    (tmp_path / "vectors.bin").write_bytes(
-        np.concatenate([raw, temp, commands], axis=1).astype("<i4").tobytes()
-    )
-    binary = build_harness(
-        fitted["out"], NAME, HARNESS, tmp_path / "harness", flags=("-O1", *SANITIZER_FLAGS)
-    )
-    state = np.frombuffer(run_harness(binary, tmp_path / "vectors.bin", tmp_path / "out.bin"), dtype="<u4")
-    c_out = np.fromfile(tmp_path / "out.bin", dtype="<i4").reshape(raw.shape)
-    g_out, g_flags = _golden_with_resets(fitted, raw.astype(np.int64), temp.astype(np.int64), cuts)
-    np.testing.assert_array_equal(c_out.astype(np.int64), g_out)
+    c_out, state = sanitized_run_with_resets(fitted["out"], raw, temp, cuts, tmp_path)
+    g_out, g_flags = golden_with_resets(imu, raw, temp, cuts)
+    np.testing.assert_array_equal(c_out, g_out)
     assert list(state[:-1]) == g_flags and state[-1] == len(raw)
     assert all(f & 1 and f & 4 for f in g_flags)  # out of range and saturated on every channel
 
