@@ -136,6 +136,26 @@ class MethodCV:
         weights = np.asarray(self.sizes, dtype=np.float64)
         return float(np.sqrt(np.sum(weights * np.square(self.natural())) / np.sum(weights)))
 
+    @property
+    def cv_in_range_rms(self) -> float:
+        """The pooled figure over the held-out samples inside the training range (natural start): where
+        a fold lies outside it every model holds its edge value, so that part scores the clamp, not the
+        model's shape. The whole pooled figure when no fold has a sample inside."""
+        values = np.array(
+            [
+                f.cold_in_range_rms if cold else f.warm_in_range_rms
+                for f, cold in zip(self.folds, self.natural_cold, strict=True)
+            ],
+            dtype=np.float64,
+        )
+        weights = np.asarray(self.sizes, dtype=np.float64) * np.array(
+            [f.in_range_fraction for f in self.folds]
+        )
+        inside = np.isfinite(values) & (weights > 0)
+        if not np.any(inside):
+            return self.cv_rms
+        return float(np.sqrt(np.sum(weights[inside] * np.square(values[inside])) / np.sum(weights[inside])))
+
     def stat(self, what: str, how: Callable[[np.ndarray], float]) -> float:
         values = np.array([getattr(f, what) for f in self.folds], dtype=np.float64)
         values = values[np.isfinite(values)]

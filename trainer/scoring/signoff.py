@@ -107,11 +107,13 @@ class ChannelReport:
         if self.crossval is not None:
             from trainer.selection import cross_validated_figures
 
-            model_cv, raw_cv, segments = cross_validated_figures(self.crossval)
+            cv = cross_validated_figures(self.crossval)
             return Figures(
-                f"cross-validated over {segments} thermal segments",
-                model_cv,
-                raw_cv,
+                f"cross-validated over {cv.segments} thermal segments",
+                cv.model,
+                cv.uncompensated,
+                cv.model_in_range,
+                cv.uncompensated_in_range,
                 noise_floor=part.noise_floor_mg,
                 unit=self.unit,
             )

@@ -1,0 +1,136 @@
+"""``--method auto``'s rule on hand-made cross-validation tables: what a user meets, one held-out
+segment at a time, and no shape judged on less than a cycle."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trainer import methods
+from trainer.data.recording import Recording
+from trainer.scoring.crossval import UNCOMPENSATED, CrossValidation, FoldScore, MethodCV, Segment
+from trainer.selection import (
+    FULL_CYCLE_SEGMENTS,
+    NONE,
+    TOLERANCE,
+    choose,
+    full_cycle,
+    record_lines,
+    select,
+    selection_record,
+    worst_ratio,
+)
+
+CYCLE = ("cooling", "heating", "cooling")  # the bundled real run's segments
+
+
+def table(labels: tuple[str, ...], figures: dict[str, list[float]]) -> CrossValidation:
+    """A cross-validation whose held-out figures (warm = cold, one per segment) are ``figures``."""
+    segments = [Segment(i * 100, (i + 1) * 100, label, 0.0, 0.0, 0.0, 0.0) for i, label in enumerate(labels)]
+    results = {
+        name: MethodCV(
+            name,
+            [FoldScore(v, v, v, v, 1.0) for v in values],
+            [s.start == 0 for s in segments],
+            [s.stop - s.start for s in segments],
+        )
+        for name, values in figures.items()
+    }
+    return CrossValidation("run", "mg", segments, results)
+
+
+def test_on_a_cycle_a_candidate_that_wins_on_average_but_loses_one_segment_is_not_chosen() -> None:
+    figures = {
+        UNCOMPENSATED: [10.0, 10.0, 10.0],
+        "poly2": [1.2, 1.2, 1.2],
+        methods.CUBIC: [1.0, 1.0, 1.0],
+        methods.PLA: [0.2, 0.2, 1.5],  # pooled 0.88: the lowest, but 1.5x the cubic on the last segment
+    }
+    cv = table(CYCLE, figures)
+    assert cv.results[methods.PLA].cv_rms < cv.results[methods.CUBIC].cv_rms  # the old rule's choice
+    assert worst_ratio(cv, methods.PLA) == pytest.approx(1.5)
+    assert choose(cv)[0] == methods.CUBIC
+    figures[methods.PLA][2] = (
+        1.0 + TOLERANCE / 2
+    )  # as good as the cubic at its worst: the simpler cubic stays
+    assert choose(table(CYCLE, figures))[0] == methods.CUBIC
+    figures[methods.PLA][2] = 0.9  # better than the cubic on every segment
+    label, reason = choose(table(CYCLE, figures))
+    assert label == methods.PLA and "at worst 0.9x" in reason
+
+
+def test_the_reference_is_the_better_of_cubic_and_none_on_each_segment() -> None:
+    figures = {
+        UNCOMPENSATED: [0.1, 5.0, 0.1],  # nothing to remove on the coolings, a drift on the heating
+        methods.CUBIC: [0.3, 1.0, 0.3],
+        "poly2": [0.1, 1.0, 0.3],
+    }
+    cv = table(CYCLE, figures)
+    assert worst_ratio(cv, methods.CUBIC) == pytest.approx(3.0)
+    assert worst_ratio(cv, NONE) == pytest.approx(5.0)
+    assert worst_ratio(cv, "poly2") == pytest.approx(3.0)
+    assert choose(cv)[0] == "poly2"  # as good as the cubic at its worst, and simpler
+
+
+def test_on_less_than_a_cycle_only_the_cubic_or_none_is_chosen() -> None:
+    figures = {UNCOMPENSATED: [4.0, 4.0], methods.CUBIC: [1.0, 1.0], methods.PLA: [0.5, 0.5]}
+    two = table(("cooling", "heating"), figures)
+    assert not full_cycle(two.segments) and len(two.segments) < FULL_CYCLE_SEGMENTS
+    label, reason = choose(two)
+    assert label == methods.CUBIC and "less than a cycle" in reason
+    ramp_thirds = table(
+        ("cooling 1/3", "cooling 2/3", "cooling 3/3"), {k: [*v, v[0]] for k, v in figures.items()}
+    )
+    assert not full_cycle(ramp_thirds.segments)  # three parts of one ramp are not a cycle
+    assert choose(ramp_thirds)[0] == methods.CUBIC
+    figures[methods.CUBIC] = [5.0, 4.5]  # the cubic leaves more than no compensation pooled
+    assert choose(table(("cooling", "heating"), figures))[0] == NONE
+
+
+def test_never_a_choice_that_leaves_more_than_no_compensation_pooled() -> None:
+    # the best worst-ratio candidate still leaves more than no compensation pooled
+    figures = {UNCOMPENSATED: [1.0, 1.0, 9.0], methods.CUBIC: [9.0, 9.0, 9.5], methods.PLA: [3.0, 3.0, 9.0]}
+    cv = table(CYCLE, figures)
+    assert worst_ratio(cv, methods.PLA) == pytest.approx(3.0) and worst_ratio(cv, NONE) == pytest.approx(1.0)
+    assert choose(cv)[0] == NONE
+    flat = {UNCOMPENSATED: [1.0, 1.0, 1.0], methods.CUBIC: [1.01, 0.99, 1.03]}
+    label, reason = choose(table(CYCLE, flat))
+    assert (
+        label == NONE
+        and "left uncompensated" in reason
+        and not math.isnan(worst_ratio(table(CYCLE, flat), NONE))
+    )
+
+
+def test_select_on_less_than_a_cycle_judges_only_the_cubic_and_none() -> None:
+    rate_hz = 2.0
+    temp = np.concatenate([np.linspace(50.0, -10.0, 2400), np.linspace(-10.0, 60.0, 2800)])  # cool, heat
+    d = temp - 25.0
+    rng = np.random.default_rng(7)
+    columns = {
+        "time_s": np.arange(temp.size) / rate_hz,
+        "temp_c": temp,
+        "accel_mg": 0.2 * d + 4e-3 * d**2 + rng.normal(0.0, 0.05, temp.size),
+    }
+    rec = Recording(columns, {"sample_rate_hz": str(rate_hz)}, "two-ramps")
+    selection = select(rec, labels=("none", "poly2", methods.CUBIC, methods.PLA))
+    assert [s.label for s in selection.cv.segments] == ["cooling", "heating"]
+    assert set(selection.cv.results) == {UNCOMPENSATED, methods.CUBIC}
+    assert set(selection.cv.skipped) == {"poly2", methods.PLA}
+    assert selection.chosen == methods.CUBIC  # the drift is real: the cubic beats no compensation
+    lines = record_lines(selection_record(selection))
+    assert any(line.startswith("- pla: not judged") for line in lines)
+
+
+def test_a_candidate_worse_than_none_inside_the_training_range_is_never_chosen() -> None:
+    figures = {UNCOMPENSATED: [4.0, 4.0], methods.CUBIC: [1.0, 1.0]}
+    cv = table(("cooling", "heating"), figures)
+    assert choose(cv)[0] == methods.CUBIC
+    # the same whole-segment figures, but inside the training range the cubic leaves more than none
+    cubic = cv.results[methods.CUBIC]
+    cubic.folds = [FoldScore(1.0, 1.0, 5.0, 5.0, 0.5) for _ in cubic.folds]
+    assert cubic.cv_rms < cv.results[UNCOMPENSATED].cv_rms < cubic.cv_in_range_rms
+    label, reason = choose(cv)
+    assert label == NONE and "poly3 left more than no compensation" in reason
