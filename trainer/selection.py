@@ -164,8 +164,8 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
     else:
         label = methods.CUBIC if methods.CUBIC in allowed else NONE
         reason = (
-            f"the run holds {len(cv.segments)} thermal segments, less than a cycle (heating and cooling, "
-            f"{FULL_CYCLE_SEGMENTS} segments), where each fold extrapolates to a branch it was not trained on and "
+            f"the run holds {len(cv.segments)} thermal segments, less than a cycle ({FULL_CYCLE_SEGMENTS} or more, "
+            "heating and cooling among them), where each fold extrapolates to a branch it was not trained on and "
             "cannot judge a shape: auto keeps to the cubic unless it leaves more than no compensation; record a "
             "whole cycle to let it judge the others"
         )
@@ -211,8 +211,8 @@ def select(
     )
     cv.skipped.update(
         {
-            c.label: f"not judged: the run is less than a cycle ({FULL_CYCLE_SEGMENTS} thermal segments, heating "
-            "and cooling), where cross-validation cannot tell a shape from the noise of one fold"
+            c.label: f"not judged: the run is less than a cycle ({FULL_CYCLE_SEGMENTS} or more thermal segments, "
+            "heating and cooling among them), where cross-validation cannot tell a shape from the noise of one fold"
             for c in wanted
             if c not in chosen
         }
@@ -235,6 +235,14 @@ def selection_record(selection: Selection) -> dict[str, Any]:
     }
 
 
+def by_reason(skipped: dict[str, str]) -> dict[str, list[str]]:
+    """The candidates not cross-validated, grouped by their reason (one line each)."""
+    grouped: dict[str, list[str]] = {}
+    for name, why in skipped.items():
+        grouped.setdefault(why, []).append(name)
+    return grouped
+
+
 def record_lines(record: dict[str, Any]) -> list[str]:
     """The lines a user reads of a saved selection: segments, the table, the choice."""
     cv = CrossValidation.from_dict(record["crossval"])
@@ -243,7 +251,7 @@ def record_lines(record: dict[str, Any]) -> list[str]:
         f"auto: cross-validation over {len(cv.segments)} thermal segments of {cv.source}:",
         *segment_lines(cv.segments),
         *table_lines(cv, chosen=chosen),
-        *[f"- {name}: {why}" for name, why in cv.skipped.items()],
+        *[f"- {', '.join(names)}: {why}" for why, names in by_reason(cv.skipped).items()],
         f"auto: chose {record['chosen']}: {record['reason']}",
     ]
 
