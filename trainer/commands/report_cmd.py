@@ -318,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
     from trainer.scoring import signoff
+    from trainer.scoring.rate_coverage import rate_note
     from trainer.scoring.thresholds import load_thresholds
     from trainer.scoring.unit_scores import held_out_rows, score_unit
 
@@ -381,6 +382,11 @@ def run(args: argparse.Namespace) -> int:
             warning = overlap_warning(stats, rec, data_fingerprint(rec))
             if warning:
                 notes.append(f"whole recording: {warning}")
+            faster = rate_note(
+                stats, held if holdout is not None else rec, rec, "held-out part" if holdout else "recording"
+            )
+            if faster:
+                notes.append(faster)
             # an auto model carries the cross-validation that chose it: on its own training run those
             # figures, not an in-sample or single-split one, are what the verdict judges
             crossval = (

@@ -103,6 +103,18 @@ def _same_file(a: str, b: str) -> bool:
         return a == b
 
 
+def training_part(train_stats: TrainStats, rec: Recording) -> Recording | None:
+    """The rows of ``rec`` that are the model's training data, proved by content, or None when
+    ``rec`` does not hold them (another run, or a model without a recorded time range)."""
+    if train_stats.time_range_s is None:
+        return None
+    lo, hi = train_stats.time_range_s
+    if not _trained_on(train_stats, rec, lo, hi):
+        return None
+    start = int(np.searchsorted(rec.time_s, lo, side="left"))
+    return rec.slice(start, int(np.searchsorted(rec.time_s, hi, side="right")))
+
+
 def _trained_on(train_stats: TrainStats, rec: Recording, lo: float, hi: float) -> bool:
     """Whether the rows of ``rec`` in ``[lo, hi]`` s are the training data, by content
     (``data_sha256``): whatever the path, the working directory or a copy of the file."""
