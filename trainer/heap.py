@@ -1,12 +1,14 @@
 """Keep freed heap memory in the process instead of handing it back to the kernel (glibc).
 
-Why: one DLSTM training iteration allocates and frees several oneDNN workspaces of a few MB
+Why: one DLSTM training iteration allocates and frees oneDNN workspaces of several to tens of MB
 (gates and states over the whole sequence), and the scoring makes many temporaries of a
 recording's length. With glibc's defaults such blocks are mmap-ed and unmapped, or trimmed off the
 heap top, so every reuse costs the kernel one page fault per 4 KiB page plus zeroing it: on the
-realistic experiment about 10,000 faults per training iteration of a 3-network group, the main
-job's ~150 s of system time. Keeping up to :data:`TRIM_THRESHOLD_BYTES` of freed memory makes the
-next allocation reuse the same, already-mapped pages.
+realistic experiment about 10,000 faults per training iteration of a 3-network group, most of the
+main job's 46 million page faults and 140 s of system time. Serving every block from the heap and
+keeping up to :data:`TRIM_THRESHOLD_BYTES` of freed memory makes the next allocation reuse the
+same, already-mapped pages (the cost: a process's memory is given back to the system only at exit
+or beyond that threshold).
 
 Only where memory comes from changes, never what is computed: torch aligns every buffer to 64 bytes
 whichever way the allocator serves it, and ``tests/methods/test_heap.py`` checks that a population
@@ -21,10 +23,10 @@ import sys
 # mallopt(3) parameters (glibc's malloc.h).
 M_TRIM_THRESHOLD = -1
 M_TOP_PAD = -2
-M_MMAP_THRESHOLD = -3
-# Blocks up to this size come from the heap (glibc's maximum on 64-bit: HEAP_MAX_SIZE / 2); the
-# largest workspaces of the main job (a 4-network group over 18,400 steps) are below it.
-MMAP_THRESHOLD_BYTES = 32 * 1024 * 1024
+M_MMAP_MAX = -4
+# No block gets its own mapping, whatever its size: glibc's largest mmap threshold (32 MiB) is below
+# the workspaces of a realistic-experiment group (18,400 steps), which would fault afresh each time.
+MMAP_MAX_BLOCKS = 0
 # Freed memory at the heap top kept for reuse; beyond it glibc trims as usual.
 TRIM_THRESHOLD_BYTES = 1024 * 1024 * 1024
 # Each heap extension asks the kernel for this much more, so growth is rare.
@@ -43,7 +45,7 @@ def keep_freed_memory() -> bool:
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     settings = (
-        (M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES),
+        (M_MMAP_MAX, MMAP_MAX_BLOCKS),
         (M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
         (M_TOP_PAD, TOP_PAD_BYTES),
     )
