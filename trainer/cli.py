@@ -8,6 +8,7 @@ import sys
 
 from trainer import __version__
 from trainer.errors import OneLineArgumentParser, run_cli
+from trainer.heap import keep_freed_memory
 from trainer.output_lock import command_outputs_locked
 
 # Sub-command name -> module in trainer.commands that defines add_parser() and run().
@@ -43,6 +44,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
+    keep_freed_memory()  # before any large allocation: the commands' work reuses freed memory
     sys.exit(run_cli(main))
 
 
