@@ -14,8 +14,8 @@ from trainer.dlstm.network import PopulationDLSTM
 
 @pytest.fixture
 def runs(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """Counts the networks built by _run_network, with an empty store of kept runs."""
-    monkeypatch.setattr(compensators, "_network_runs", type(compensators._network_runs)())
+    """Counts the networks built by run_network, with an empty store of kept runs."""
+    monkeypatch.setattr(compensators, "network_runs", type(compensators.network_runs)())
     built: list[int] = []
     original = PopulationDLSTM.from_individuals
 
@@ -33,23 +33,23 @@ def _weights(seed: int) -> dict[str, torch.Tensor]:
 
 def test_a_repeated_run_is_the_fresh_run_without_running_again(runs: list[int]) -> None:
     weights, inputs = _weights(3), np.sin(np.linspace(0.0, 6.0, 200)).reshape(-1, 1)
-    first = compensators._run_network(weights, inputs)
+    first = compensators.run_network(weights, inputs)
     first[:] = np.nan  # a caller's change of its copy does not reach the kept run
-    again = compensators._run_network(weights, inputs)
+    again = compensators.run_network(weights, inputs)
     assert len(runs) == 1
-    compensators._network_runs.clear()
-    fresh = compensators._run_network(weights, inputs)
+    compensators.network_runs.clear()
+    fresh = compensators.run_network(weights, inputs)
     assert len(runs) == 2
     assert np.array_equal(again, fresh) and np.isfinite(fresh).all()
 
 
 def test_a_changed_weight_or_input_runs_the_network_again(runs: list[int]) -> None:
     weights, inputs = _weights(3), np.cos(np.linspace(0.0, 6.0, 200)).reshape(-1, 1)
-    base = compensators._run_network(weights, inputs)
+    base = compensators.run_network(weights, inputs)
     nudged = {name: value.clone() for name, value in weights.items()}
     nudged["w_out"][0, 0] = torch.nextafter(nudged["w_out"][0, 0], torch.tensor(np.inf))
-    other_weights = compensators._run_network(nudged, inputs)
-    other_inputs = compensators._run_network(weights, inputs[::-1].copy())
+    other_weights = compensators.run_network(nudged, inputs)
+    other_inputs = compensators.run_network(weights, inputs[::-1].copy())
     assert len(runs) == 3
     assert not np.array_equal(base, other_weights) and not np.array_equal(base, other_inputs)
 
@@ -57,7 +57,7 @@ def test_a_changed_weight_or_input_runs_the_network_again(runs: list[int]) -> No
 def test_only_the_last_runs_are_kept(runs: list[int]) -> None:
     inputs = np.linspace(-1.0, 1.0, 50).reshape(-1, 1)
     for seed in range(compensators.NETWORK_RUNS_KEPT + 1):
-        compensators._run_network(_weights(seed), inputs)
-    assert len(compensators._network_runs) == compensators.NETWORK_RUNS_KEPT
-    compensators._run_network(_weights(0), inputs)  # the oldest was let go: run again
+        compensators.run_network(_weights(seed), inputs)
+    assert len(compensators.network_runs) == compensators.NETWORK_RUNS_KEPT
+    compensators.run_network(_weights(0), inputs)  # the oldest was let go: run again
     assert len(runs) == compensators.NETWORK_RUNS_KEPT + 2

@@ -49,9 +49,9 @@ WEIGHT_KEYS = ("w_x0", "w_h0", "b0", "w_x1", "w_h1", "b1", "w_out", "b_out")
 MIN_TRAINING_STEPS = 16
 
 
-# Network runs kept by _run_network (each a sequence's outputs, (T,) float64).
+# Network runs kept by run_network, by content (each a sequence's outputs, (T,) float64; tests clear it).
 NETWORK_RUNS_KEPT = 32
-_network_runs: OrderedDict[bytes, np.ndarray] = OrderedDict()
+network_runs: OrderedDict[bytes, np.ndarray] = OrderedDict()
 
 
 def _run_key(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> bytes:
@@ -66,7 +66,7 @@ def _run_key(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> bytes:
     return digest.digest()
 
 
-def _run_network(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> np.ndarray:
+def run_network(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> np.ndarray:
     """The float reference: one network over a (T, in) sequence in float64, outputs (T,).
 
     The outputs are a function of the weights and inputs only, and a comparison asks for the same
@@ -75,18 +75,18 @@ def _run_network(weights: dict[str, torch.Tensor], inputs: np.ndarray) -> np.nda
     """
     inputs = np.asarray(inputs, dtype=np.float64)
     key = _run_key(weights, inputs)
-    if key in _network_runs:
-        _network_runs.move_to_end(key)
-        return _network_runs[key].copy()
+    if key in network_runs:
+        network_runs.move_to_end(key)
+        return network_runs[key].copy()
     individual = {name: tensor.double() for name, tensor in weights.items()}
     net = PopulationDLSTM.from_individuals([individual], dtype=torch.float64)
     x = torch.from_numpy(np.ascontiguousarray(inputs)).reshape(1, 1, len(inputs), -1)
     with torch.no_grad():
         y, _ = net(x)
     outputs = y.reshape(-1).numpy()
-    _network_runs[key] = outputs.copy()
-    while len(_network_runs) > NETWORK_RUNS_KEPT:
-        _network_runs.popitem(last=False)
+    network_runs[key] = outputs.copy()
+    while len(network_runs) > NETWORK_RUNS_KEPT:
+        network_runs.popitem(last=False)
     return outputs
 
 
@@ -155,7 +155,7 @@ class StreamingDLSTM(Compensator):
         """The held estimate ``h_k`` at every network step (mg)."""
         assert self.frontend and self.inputs_norm and self.output_norm, "fit the model first"
         self.frontend.check_rate(rec)
-        y = _run_network(self.weights, self.inputs_norm.apply(self.run_inputs(rec)))
+        y = run_network(self.weights, self.inputs_norm.apply(self.run_inputs(rec)))
         return self.output_norm.invert(y.reshape(-1, 1))[:, 0]
 
     def predict_drift(self, rec: Recording) -> np.ndarray:
