@@ -24,14 +24,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from bench_population import cpu_model  # noqa: E402  (the machine named the same way in every bench)
 
+from trainer import methods  # noqa: E402
+
 ITERATIONS = 500  # FusionSettings' default
 EVALUATIONS = 2 * 201  # SSA and ISSA: the initial population and 200 cycles each
 SAMPLE_ITERATIONS = 4
 POPULATIONS = (  # (experiment, training recording in OUT, method whose population it is)
-    ("paper", "train.npz", "dlstm"),
-    ("paper", "train.npz", "dlstm-temp"),
-    ("realistic", "realistic-train.npz", "dlstm"),
-    ("realistic", "realistic-train.npz", "dlstm-temp"),
+    ("paper", "train.npz", methods.DLSTM),
+    ("paper", "train.npz", methods.DLSTM_TEMP),
+    ("realistic", "realistic-train.npz", methods.DLSTM),
+    ("realistic", "realistic-train.npz", methods.DLSTM_TEMP),
 )
 CHILD = f"""
 import sys, torch
@@ -91,7 +93,7 @@ def main() -> int:
         )
         train_ms, evaluate_ms = primitive_ms(done.stdout)
         train_s = train_ms * ITERATIONS / 1000
-        evaluate_s = evaluate_ms * EVALUATIONS / 1000 if method == "dlstm" else 0.0
+        evaluate_s = evaluate_ms * EVALUATIONS / 1000 if method == methods.DLSTM else 0.0
         total_s += train_s + evaluate_s
         print(
             f"{experiment:<9} {method:<10}: {train_ms:6.1f} ms per iteration of 10 networks -> "

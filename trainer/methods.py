@@ -46,6 +46,8 @@ PHYSICS_RENDERER: Renderer = "physics"  # the grey-box compensator's C (codegen/
 PLA = "pla"
 CUBIC = "poly3"  # the flight stacks' cubic in temperature
 PHYSICS = "physics"
+DLSTM = "dlstm"  # the paper's recursive network
+DLSTM_TEMP = "dlstm-temp"  # the temperature-input network
 
 
 @dataclass(frozen=True)
@@ -175,7 +177,7 @@ def name_of(model: Compensator | type[Compensator]) -> str:
 # -- the methods, in comparison order -------------------------------------------------------------
 register(
     Method(
-        "dlstm",
+        DLSTM,
         "trainer.dlstm.compensators:RecursiveDLSTM",
         RECURSIVE,
         DLSTM_OPTIONS,
@@ -229,7 +231,7 @@ register(
 )
 register(
     Method(
-        "dlstm-temp",
+        DLSTM_TEMP,
         "trainer.dlstm.compensators:TemperatureDLSTM",
         TEMPERATURE_DRIVEN,
         DLSTM_OPTIONS,
