@@ -7,8 +7,9 @@ Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.c
 (:func:`choose`) judges what a user meets, one held-out segment at a time:
 
 - **A whole cycle** (at least :data:`FULL_CYCLE_SEGMENTS` thermal segments, heating and cooling
-  among them, so that a fold trains on more than the one branch it does not hold out): per candidate, its worst ratio, over every held-out segment warm and cold, to
-  the better of (cubic, no compensation) on that segment; the simplest candidate whose worst ratio
+  among them, so that a fold trains on more than the one branch it does not hold out): per
+  candidate, its worst ratio, over every held-out segment warm and cold, to the better of (cubic,
+  no compensation) on that segment; the simplest candidate whose worst ratio
   is within :data:`TOLERANCE` of the smallest wins. A model that wins on average but loses badly
   on one segment is not chosen.
 - **Less than a cycle** (one ramp, or one heating and one cooling): each fold trains on one branch
@@ -27,6 +28,7 @@ What is fitted and saved is the chosen candidate, trained on the whole run; the 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -50,6 +52,7 @@ AUTO = "auto"  # the selector's name on the command line (trainer fit --method a
 NONE = "none"  # the candidate "no compensation" (a polynomial of order 0: zero drift)
 TOLERANCE = 0.02  # a candidate within 2 % of the best counts as as good (the simpler one wins)
 FULL_CYCLE_SEGMENTS = 3  # heating, cooling and one of them again (the bundled run: cooling, heating, cooling)
+CYCLE = f"{FULL_CYCLE_SEGMENTS} or more thermal segments, heating and cooling among them"  # said to the user
 
 
 @dataclass(frozen=True)
@@ -127,12 +130,17 @@ def worst_ratio(cv: CrossValidation, label: str) -> float:
         cv.results[UNCOMPENSATED],
         *([cv.results[methods.CUBIC]] if methods.CUBIC in cv.results else []),
     ]
-    ratios = [
-        getattr(mine_fold, start) / min(getattr(r.folds[i], start) for r in references)
+
+    def ratio(mine_rms: float, reference_rms: float) -> float:
+        if reference_rms > 0.0:
+            return mine_rms / reference_rms
+        return 1.0 if mine_rms <= 0.0 else math.inf  # a segment with nothing to remove (a flat channel)
+
+    return max(
+        ratio(getattr(mine_fold, start), min(getattr(r.folds[i], start) for r in references))
         for i, mine_fold in enumerate(mine.folds)
         for start in ("warm_rms", "cold_rms")
-    ]
-    return max(ratios)
+    )
 
 
 def leaves_more_than_none(cv: CrossValidation, label: str) -> bool:
@@ -164,8 +172,8 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
     else:
         label = methods.CUBIC if methods.CUBIC in allowed else NONE
         reason = (
-            f"the run holds {len(cv.segments)} thermal segments, less than a cycle ({FULL_CYCLE_SEGMENTS} or more, "
-            "heating and cooling among them), where each fold extrapolates to a branch it was not trained on and "
+            f"the run holds {len(cv.segments)} thermal segments, less than a cycle ({CYCLE}), where each fold "
+            "extrapolates to a branch it was not trained on and "
             "cannot judge a shape: auto keeps to the cubic unless it leaves more than no compensation; record a "
             "whole cycle to let it judge the others"
         )
@@ -211,8 +219,7 @@ def select(
     )
     cv.skipped.update(
         {
-            c.label: f"not judged: the run is less than a cycle ({FULL_CYCLE_SEGMENTS} or more thermal segments, "
-            "heating and cooling among them), where cross-validation cannot tell a shape from the noise of one fold"
+            c.label: f"not judged: the run is less than a cycle ({CYCLE}), where cross-validation cannot tell a shape from the noise of one fold"
             for c in wanted
             if c not in chosen
         }

@@ -135,3 +135,11 @@ def test_a_candidate_worse_than_none_inside_the_training_range_is_never_chosen()
     assert cubic.cv_rms < cv.results[UNCOMPENSATED].cv_rms < cubic.cv_in_range_rms
     label, reason = choose(cv)
     assert label == NONE and "poly3 left more than no compensation" in reason
+
+
+def test_a_flat_channel_is_left_uncompensated_without_dividing_by_zero() -> None:
+    # a stuck or perfectly quiet channel: every segment's uncompensated drift left is exactly 0
+    figures = {UNCOMPENSATED: [0.0, 0.0, 0.0], methods.CUBIC: [0.0, 0.0, 0.1], "poly2": [0.0, 0.0, 0.0]}
+    cv = table(CYCLE, figures)
+    assert worst_ratio(cv, methods.CUBIC) == math.inf and worst_ratio(cv, "poly2") == 1.0
+    assert choose(cv)[0] == NONE
