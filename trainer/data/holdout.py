@@ -104,26 +104,17 @@ def _same_file(a: str, b: str) -> bool:
 
 
 def training_part(train_stats: TrainStats, rec: Recording) -> Recording | None:
-    """The rows of ``rec`` that are the model's training data, proved by content, or None when
-    ``rec`` does not hold them (another run, or a model without a recorded time range)."""
+    """The rows of ``rec`` that are the model's training data, proved by content (``data_sha256``):
+    whatever the path, the working directory or a copy of the file. None when ``rec`` does not hold
+    them (another run, or a model without a recorded time range)."""
     if train_stats.time_range_s is None:
         return None
     lo, hi = train_stats.time_range_s
-    if not _trained_on(train_stats, rec, lo, hi):
-        return None
     start = int(np.searchsorted(rec.time_s, lo, side="left"))
-    return rec.slice(start, int(np.searchsorted(rec.time_s, hi, side="right")))
-
-
-def _trained_on(train_stats: TrainStats, rec: Recording, lo: float, hi: float) -> bool:
-    """Whether the rows of ``rec`` in ``[lo, hi]`` s are the training data, by content
-    (``data_sha256``): whatever the path, the working directory or a copy of the file."""
-    start = int(np.searchsorted(rec.time_s, lo, side="left"))
-    stop = int(np.searchsorted(rec.time_s, hi, side="right"))
-    part = rec.slice(start, stop)
+    part = rec.slice(start, int(np.searchsorted(rec.time_s, hi, side="right")))
     if train_stats.n_samples is not None and len(part) != train_stats.n_samples:  # cheap first test
-        return False
-    return data_fingerprint(part) == train_stats.data_sha256
+        return None
+    return part if data_fingerprint(part) == train_stats.data_sha256 else None
 
 
 def overlap_warning(
@@ -154,7 +145,9 @@ def overlap_warning(
     if not np.any(inside):
         return None
     source = train_stats.source or ""
-    if (source and _same_file(source, valid.source)) or _trained_on(train_stats, whole or valid, lo, hi):
+    if (source and _same_file(source, valid.source)) or training_part(
+        train_stats, whole or valid
+    ) is not None:
         return (
             f"warning: {100 * float(np.mean(inside)):.1f} % of the {what} rows are training rows (the "
             f"model was trained on t = {lo:g} .. {hi:g} s of this recording, {source or 'source unnamed'}): "

@@ -114,6 +114,16 @@ class FoldScore:
     in_range_fraction: float
 
 
+def pooled_rms(values: Sequence[float], weights: Sequence[float]) -> float:
+    """RMS pooled over folds: each fold's RMS weighted by its number of samples (folds without a
+    sample or without a figure are left out; NaN when none is left)."""
+    v, w = np.asarray(values, dtype=np.float64), np.asarray(weights, dtype=np.float64)
+    keep = np.isfinite(v) & (w > 0)
+    if not np.any(keep):
+        return math.nan
+    return float(np.sqrt(np.sum(w[keep] * np.square(v[keep])) / np.sum(w[keep])))
+
+
 @dataclass
 class MethodCV:
     """Every fold of one method (in segment order) and the pooled cross-validated figures."""
@@ -133,28 +143,20 @@ class MethodCV:
     @property
     def cv_rms(self) -> float:
         """The cross-validated drift left: RMS pooled over every held-out sample at its natural start."""
-        weights = np.asarray(self.sizes, dtype=np.float64)
-        return float(np.sqrt(np.sum(weights * np.square(self.natural())) / np.sum(weights)))
+        return pooled_rms(self.natural(), self.sizes)
 
     @property
     def cv_in_range_rms(self) -> float:
         """The pooled figure over the held-out samples inside the training range (natural start): where
         a fold lies outside it every model holds its edge value, so that part scores the clamp, not the
         model's shape. The whole pooled figure when no fold has a sample inside."""
-        values = np.array(
-            [
-                f.cold_in_range_rms if cold else f.warm_in_range_rms
-                for f, cold in zip(self.folds, self.natural_cold, strict=True)
-            ],
-            dtype=np.float64,
-        )
-        weights = np.asarray(self.sizes, dtype=np.float64) * np.array(
-            [f.in_range_fraction for f in self.folds]
-        )
-        inside = np.isfinite(values) & (weights > 0)
-        if not np.any(inside):
-            return self.cv_rms
-        return float(np.sqrt(np.sum(weights[inside] * np.square(values[inside])) / np.sum(weights[inside])))
+        values = [
+            f.cold_in_range_rms if cold else f.warm_in_range_rms
+            for f, cold in zip(self.folds, self.natural_cold, strict=True)
+        ]
+        inside = [size * f.in_range_fraction for size, f in zip(self.sizes, self.folds, strict=True)]
+        pooled = pooled_rms(values, inside)
+        return pooled if math.isfinite(pooled) else self.cv_rms
 
     def stat(self, what: str, how: Callable[[np.ndarray], float]) -> float:
         values = np.array([getattr(f, what) for f in self.folds], dtype=np.float64)
