@@ -38,6 +38,7 @@ from trainer.data.recording import Recording
 from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.reference import OffsetPolicy
 from trainer.scoring.crossval import (
+    LABELS,
     UNCOMPENSATED,
     CrossValidation,
     Segment,
@@ -46,6 +47,7 @@ from trainer.scoring.crossval import (
     segment_lines,
     table_lines,
 )
+from trainer.scoring.static import COOLING, HEATING
 from trainer.train_stats import TrainStats
 
 AUTO = "auto"  # the selector's name on the command line (trainer fit --method auto)
@@ -119,7 +121,7 @@ def full_cycle(segments: Sequence[Segment]) -> bool:
     """Whether the folds make a whole cycle: at least :data:`FULL_CYCLE_SEGMENTS` segments, heating
     and cooling among them (not the time thirds of a single ramp)."""
     labels = {s.label for s in segments}
-    return len(segments) >= FULL_CYCLE_SEGMENTS and {"heating", "cooling"} <= labels
+    return len(segments) >= FULL_CYCLE_SEGMENTS and {LABELS[HEATING], LABELS[COOLING]} <= labels
 
 
 def worst_ratio(cv: CrossValidation, label: str) -> float:
