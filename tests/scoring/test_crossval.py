@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -298,3 +299,20 @@ def test_compare_without_validation_cross_validates(
     assert "| uncompensated |" in report and "not cross-validated" in report
     refused = _run(trainer_main, "compare", "run.csv", "--inject", "steps", "--out-dir", "x", capsys=capsys)
     assert refused.returncode == 2 and "Traceback" not in refused.stderr and not (tmp_path / "x").exists()
+
+
+def test_explicit_folds_replace_the_thermal_segments() -> None:
+    rec = chamber_run()
+    (first, *_) = thermal_segments(rec)
+    half = (first.start + first.stop) // 2
+    folds = [replace(first, stop=half), replace(first, start=half)]
+    seen: list[int] = []
+
+    def fit_cubic(train: Recording) -> CubicPolynomial:
+        seen.append(len(train))
+        return CubicPolynomial(median_kernel=1, n_bins=0).fit(train)
+
+    cv = cross_validate(rec, {"poly3": fit_cubic}, stateful=set(), smoothing_s=0.0, folds=folds)
+    assert cv.segments == folds
+    assert seen == [len(rec) - (half - first.start), len(rec) - (first.stop - half)]  # trained on the rest
+    assert len(cv.results["poly3"].folds) == len(cv.results[UNCOMPENSATED].folds) == 2
