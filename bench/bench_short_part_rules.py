@@ -67,7 +67,7 @@ def cubic_cv(train: Recording, folds: list[Segment] | None) -> CrossValidation:
         return fit_compensator(methods.CUBIC, r)
 
     return cross_validate(
-        train, {methods.CUBIC: fit}, stateful=set(), smoothing_s=PAPER_RUN_SMOOTHING_S, folds=folds
+        train, {methods.CUBIC: fit}, stateful=set(), smoothing_s=PAPER_RUN_SMOOTHING_S, fold_segments=folds
     )
 
 

@@ -312,7 +312,7 @@ def test_explicit_folds_replace_the_thermal_segments() -> None:
         seen.append(len(train))
         return CubicPolynomial(median_kernel=1, n_bins=0).fit(train)
 
-    cv = cross_validate(rec, {"poly3": fit_cubic}, stateful=set(), smoothing_s=0.0, folds=folds)
+    cv = cross_validate(rec, {"poly3": fit_cubic}, stateful=set(), smoothing_s=0.0, fold_segments=folds)
     assert cv.segments == folds
     assert seen == [len(rec) - (half - first.start), len(rec) - (first.stop - half)]  # trained on the rest
     assert len(cv.results["poly3"].folds) == len(cv.results[UNCOMPENSATED].folds) == 2

@@ -301,16 +301,16 @@ def cross_validate(
     smoothing_s: float,
     unit: str = "mg",
     log: Callable[[str], None] | None = None,
-    folds: Sequence[Segment] | None = None,
+    fold_segments: Sequence[Segment] | None = None,
 ) -> CrossValidation:
     """Hold out every thermal segment of ``rec`` in turn; ``fitters[name](train_rec)`` returns a fitted
     compensator (anything with ``predict_drift``). ``stateful`` names the methods trained on the
-    imputed whole run (:func:`impute_held_out`) instead of on the training rows alone. ``folds``
+    imputed whole run (:func:`impute_held_out`) instead of on the training rows alone. ``fold_segments``
     replaces :func:`folds_of` (a bench comparing fold schemes)."""
     from trainer.scoring.evaluate import smooth_for_scoring
 
     rec = rec.without_truth()
-    segments = list(folds) if folds is not None else folds_of(rec)
+    segments = list(fold_segments) if fold_segments is not None else folds_of(rec)
     rate = rec.sample_rate_hz
     temp = np.asarray(rec.temp_c, dtype=np.float64)
     branch = thermal_branch(temp, rate)
