@@ -2,7 +2,8 @@
 
 The trained weights (and so the printed tables) come from oneDNN's float32 LSTM (its ``ref``
 training primitives and ``brgemm`` inference primitive, reached through ``torch.lstm``); another
-implementation would round differently. Their execution time is therefore a floor of the main job's
+implementation rounds differently, and the two that need no new code are far slower
+(``bench/bench_lstm_native.py`` measures both). Their execution time is therefore a floor of the main job's
 CPU time as long as the tables must stay the same. For each of the main job's four populations this
 runs a few training iterations and fitness evaluations on the main job's own recordings with
 ``ONEDNN_VERBOSE=1``, sums the primitives' reported times and scales them to 500 iterations and to
