@@ -451,6 +451,7 @@ def _absorbed(
         "effects": [effect, alternative],
         "delta_bic": round(gap, 2),
         "preferred": effect if gap >= 0 else alternative,
+        "absorbed": True,
         "reason": (
             f"{alternative} is absorbed by {effect} on this profile: in its place {alternative} earns "
             f"a BIC improvement of {alone:.1f}, beside it only {beside:.1f} (< {THRESHOLD:g}), so a "
