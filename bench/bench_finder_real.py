@@ -9,7 +9,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   within 25 % (a step's time within two blocks);
 * duplicates: two findings of one effect whose parameters coincide within the data's resolution
   (periods within ``1/duration`` in frequency, step times within two blocks);
-* lost: findings of the clean run that are missing from the case's findings;
+* lost: findings of the clean run that are missing from the case's findings ("said": the case's
+  report names the effect in an ambiguity, e.g. absorbed by a confounder on this profile);
 * ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
   plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
@@ -30,6 +31,7 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -184,6 +186,7 @@ def score(case: Case, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
     unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
     return {
         "ambiguous": sorted(unnamed & reported),
+        "lost_said": [effect for effect in lost if effect in reported],
         "named": named,
         "added": len(case.added),
         "params_ok": params_ok,
@@ -239,7 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous | s | findings |"
     )
     print("|---|--:|--:|--:|---|---|---|--:|---|")
-    totals = {"named": 0, "added": 0, "params_ok": 0, "duplicates": 0, "lost": 0}
+    totals = {"named": 0, "added": 0, "params_ok": 0, "duplicates": 0, "lost": 0, "lost_said": 0}
     for case in chosen:
         started = time.perf_counter()
         d = diagnose(add_effects(rec, case.added), holdout_fraction=0.0)
@@ -248,14 +251,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         for k in ("named", "added", "params_ok", "duplicates"):
             totals[k] += int(s[k])  # type: ignore[call-overload]
         totals["lost"] += len(s["lost"])  # type: ignore[arg-type]
+        totals["lost_said"] += len(s["lost_said"])  # type: ignore[arg-type]
+        said = cast(list[str], s["lost_said"])
+        lost = [f"{e} (said)" if e in said else e for e in cast(list[str], s["lost"])]
         print(
             f"| {case.name} | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
-            f"| {', '.join(s['lost']) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
+            f"| {', '.join(lost) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
             flush=True,
         )
     print(
         f"\ntotal: named {totals['named']}/{totals['added']}, params within 25 % {totals['params_ok']}/"
-        f"{totals['added']}, duplicates {totals['duplicates']}, lost clean findings {totals['lost']}"
+        f"{totals['added']}, duplicates {totals['duplicates']}, lost clean findings {totals['lost']} "
+        f"({totals['lost_said']} of them reported as ambiguous: absorbed by a confounder, said out loud)"
     )
     return 0
 

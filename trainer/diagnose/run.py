@@ -189,7 +189,7 @@ def _diagnose(
         baseline_effects=catalogue_effects(baseline_common),
         selection=selection,
         left_out=left_out,
-        ambiguous=_ambiguous(selection) + implausible,
+        ambiguous=_ambiguous(selection, implausible) + implausible,
         not_identifiable=not_identifiable,
         not_supported=not_supported,
         mismatch=mismatch,
@@ -207,11 +207,15 @@ def _diagnose(
     )
 
 
-def _ambiguous(selection: Selection) -> list[Ambiguity]:
-    """The selection's confounded pairs, typed."""
+def _ambiguous(selection: Selection, implausible: list[Ambiguity]) -> list[Ambiguity]:
+    """The selection's confounded pairs, typed. An absorbed confounder of an implausible best fit
+    that its ambiguity already lists (with its BIC in that fit's place) is not repeated."""
+    listed = {(a.effects[0], other) for a in implausible for other in a.effects[1:]}
     out = []
     for a in selection.ambiguous:
         first, second = cast(list[str], a["effects"])
+        if a.get("absorbed") and (first, second) in listed:
+            continue
         out.append(
             Ambiguity(
                 (first, second),

@@ -23,7 +23,11 @@ a branch offset for a huge one), so only models with their own noise compare fai
    lower final BIC wins.
 4. Every chosen effect is swapped for each effect it is known to be confounded with (thermal_lag
    with temp_rate, hysteresis or stress_relaxation, ...); when the swap costs less than
-   ``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported.
+   ``AMBIGUOUS`` (6) in BIC the data cannot tell them apart and both are reported. When the swap
+   costs more but the confounder, in the chosen effect's place, still earns ``THRESHOLD`` while
+   beside it it earns less, its signature is absorbed by the chosen effect on this profile (the two
+   shapes are nearly collinear: a real one would be merged into the other's fitted term); that is
+   reported as an ambiguity with its reason too, instead of silence.
 """
 
 from __future__ import annotations
@@ -385,17 +389,20 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
         if index is None:
             continue
         for alternative in CONFUSABLE.get(effect, ()):
-            if (
-                alternative not in identifiable
-                or alternative in final.identifiers
-                or alternative in NOISE_EFFECTS
-            ):
+            if alternative not in identifiable or alternative in NOISE_EFFECTS:
                 continue
-            proposals = [p for p in propose(reduced, data, alternative) if p.spectral_evidence is None]
-            if not proposals:
+            present = alternative in final.identifiers
+            if present and alternative not in catalogue.MULTI_INSTANCE:
                 continue
-            best = min((_refit(reduced, p, data)[1] for p in proposals), key=lambda f: f.bic)
+            best = _best_with(reduced, data, alternative)
+            if best is None:
+                continue
             gap = best.bic - final.bic
+            if present or gap >= AMBIGUOUS:
+                absorbed = _absorbed(effect, alternative, final, reduced, best, data)
+                if absorbed is not None:
+                    selection.ambiguous.append(absorbed)
+                continue
             if gap < AMBIGUOUS:
                 selection.ambiguous.append(
                     {
@@ -412,6 +419,47 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
                     }
                 )
     bar.close()
+
+
+def _best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
+    """``base`` plus the best version of ``effect`` (its own ML noise), or ``None``."""
+    proposals = [p for p in propose(base, data, effect) if p.spectral_evidence is None]
+    if not proposals:
+        return None
+    return min((_refit(base, p, data)[1] for p in proposals), key=lambda f: f.bic)
+
+
+def _absorbed(
+    effect: str, alternative: str, final: ModelFit, reduced: ModelFit, swapped: ModelFit, data: BlockData
+) -> dict[str, object] | None:
+    """The ambiguity of a confounder whose signature the chosen ``effect`` absorbs on this profile.
+
+    In ``effect``'s place the ``alternative`` earns ``THRESHOLD`` or more (it describes much of the
+    same residual), but beside it it earns less: the two shapes are nearly collinear here, so a
+    real ``alternative`` (say a hysteresis under an added rate term) would be merged into the fitted
+    ``effect`` and the search could not name it. Said out loud instead of silently left out.
+    """
+    alone = reduced.bic - swapped.bic
+    if alone < THRESHOLD or catalogue.excluded(effect, alternative):
+        return None
+    beside_fit = _best_with(final, data, alternative)
+    beside = final.bic - beside_fit.bic if beside_fit is not None else 0.0
+    if beside >= THRESHOLD:
+        return None
+    gap = swapped.bic - final.bic
+    return {
+        "effects": [effect, alternative],
+        "delta_bic": round(gap, 2),
+        "preferred": effect if gap >= 0 else alternative,
+        "absorbed": True,
+        "reason": (
+            f"{alternative} is absorbed by {effect} on this profile: in its place {alternative} earns "
+            f"a BIC improvement of {alone:.1f}, beside it only {beside:.1f} (< {THRESHOLD:g}), so a "
+            f"{alternative} present in the data would be merged into the fitted {effect} (replacing "
+            f"{effect} by {alternative} costs {gap:+.1f}); what would separate them: "
+            + SEPARATING_SIGNATURE.get(frozenset({effect, alternative}), "a different test profile")
+        ),
+    }
 
 
 def final_indices(selection: Selection) -> dict[tuple[str, int], int | None]:
