@@ -4,8 +4,8 @@ A compensator is fitted on the temperature rates its training run shows. The tem
 clamped and reported (coverage), but a model of thermal lag or of the temperature rate (physics,
 the DLSTM) meets a faster ramp with no clamp: it extrapolates in rate. On the bundled real run,
 physics trained on the last 80 % (ramps of 2-4 degC/min) and scored on the first 20 %, which
-starts with 200 s at 7 degC/min, left 2.45 mg RMS there against the cubic's 0.92 mg
-(docs/real-data.md). The note says so where the reviewer reads the scores.
+starts with 200 s at 7 degC/min, left 2.45 mg RMS over 60-200 s against the cubic's 0.92 mg, and
+1.46 against 0.789 mg over the whole part (docs/real-data.md). The note says so where the reviewer reads the scores.
 """
 
 from __future__ import annotations
