@@ -70,15 +70,15 @@ class PipelineCheck:
     decisive: bool = True
 
 
-def _figures(summary: dict[str, Any], basis: str) -> Figures | None:
-    """A method's figures from ``result.json`` (None: not scored)."""
+def _figures(summary: dict[str, Any], basis: str, unit: str) -> Figures | None:
+    """A method's figures from ``result.json``, in the unit's channel unit (None: not scored)."""
     values = [summary.get(k) for k in DRIFT_LEFT_KEYS]
     if not isinstance(values[0], int | float):
         return None
     model, raw, model_in, raw_in, floor = (
         float(v) if isinstance(v, int | float) else math.nan for v in values
     )
-    return Figures(basis, model, raw, model_in, raw_in, floor)
+    return Figures(basis, model, raw, model_in, raw_in, floor, unit)
 
 
 def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -> Verdict:
@@ -95,7 +95,7 @@ def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -
     figures = {
         f"{uid} / {m}": f
         for m, s in methods.items()
-        if (f := _figures(s, result.evaluated_on or "scored part")) is not None
+        if (f := _figures(s, result.evaluated_on or "scored part", unit_label(result))) is not None
     }
     return verdict(figures, checks, [f.reason for f in findings])
 

@@ -7,6 +7,7 @@ disk of every unit in the manifest (computed now or by an earlier run).
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass, field
@@ -42,9 +43,15 @@ class FleetRun:
     report: Path | None = None
 
 
-def _submit(client: Any, unit: UnitSpec, key: str, settings: FleetSettings, sim_text: str | None) -> Any:
-    """The unit's graph; only the ``assemble`` future is kept (Dask keeps what it needs)."""
-    tag = f"{unit.id}-{key[:12]}"
+def _submit(
+    client: Any, unit: UnitSpec, key: str, settings: FleetSettings, sim_text: str | None, run_tag: str
+) -> Any:
+    """The unit's graph; only the ``assemble`` future is kept (Dask keeps what it needs).
+
+    Task keys carry ``run_tag``, one per run: a scheduler that outlives a run (``--scheduler``, a
+    test's client) would otherwise hand a rerun the previous run's result for the same key, a failed
+    export included, until it has processed the release of the old futures."""
+    tag = f"{unit.id}-{key[:12]}-{run_tag}"
     data = client.submit(stages.load, unit, settings, key=f"load-{tag}")
     diagnosis = client.submit(stages.diagnose, data, settings, sim_text, key=f"diagnose-{tag}")
     outputs = [client.submit(stages.method, data, unit, m, key=f"method-{m}-{tag}") for m in unit.methods]
@@ -126,7 +133,10 @@ def run_fleet(
         from trainer.fleet.cluster import open_client
 
         with nullcontext(client) if client is not None else open_client(scheduler, workers) as active:
-            futures = {_submit(active, unit, key, settings, sim_text): (unit, key) for unit, key in todo}
+            run_tag = uuid.uuid4().hex[:8]
+            futures = {
+                _submit(active, unit, key, settings, sim_text, run_tag): (unit, key) for unit, key in todo
+            }
             bar = tqdm(total=len(futures), unit="unit", desc="fleet", disable=None if progress else True)
             for future in as_completed(futures):
                 unit, key = futures[future]

@@ -71,6 +71,9 @@ class Guard:
 
 # A drift left within this factor of the noise floor is noise: a model that is "worse" only there is not.
 NOISE_MARGIN = 1.2
+# Figures this close are one figure: a model that shifts the output by a constant (a cubic holding its
+# end value beyond the trained range) leaves the uncompensated RMS up to floating-point rounding.
+TIE_RELATIVE = 1e-9
 
 
 def _worse(model: float, uncompensated: float, floor: float) -> bool:
@@ -78,7 +81,7 @@ def _worse(model: float, uncompensated: float, floor: float) -> bool:
         return False
     if math.isfinite(floor) and model <= NOISE_MARGIN * floor:
         return False
-    return model > uncompensated
+    return model > uncompensated and not math.isclose(model, uncompensated, rel_tol=TIE_RELATIVE)
 
 
 def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
