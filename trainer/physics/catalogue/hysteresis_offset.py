@@ -40,8 +40,12 @@ DEFINITION = Effect(
             "heating and cooling branches are offset at the same temperature: a single polynomial splits the "
             "difference; a compensator that tracks the branch (play operator) removes it"
         ),
-        confounders=("hysteresis", "thermal_lag", "temp_rate"),
+        confounders=("hysteresis", "thermal_lag", "temp_rate", "bias_step"),
         separations={
+            "bias_step": (
+                "at a reversal the branch offset switches as a step would; it switches back at the next "
+                "reversal, a step stays (a second reversal after the first separates them)"
+            ),
             "hysteresis": (
                 "both persist in holds; the offset form shifts the whole bias curve by the same amount, the "
                 "catalogue's hysteresis reads the curve at a shifted temperature (the gap scales with its slope)"

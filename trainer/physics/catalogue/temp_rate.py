@@ -90,8 +90,12 @@ DEFINITION = Effect(
             "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "
             "at another; add a dT/dt input or calibrate at the flight's heating rates"
         ),
-        confounders=("thermal_lag", "hysteresis", "stress_relaxation"),
+        confounders=("thermal_lag", "hysteresis", "stress_relaxation", "bias_step"),
         separations={
+            "bias_step": (
+                "at a ramp reversal a dT/dt offset jumps by k times the change of rate, as a step would; a "
+                "step stays when the temperature settles, a dT/dt offset vanishes (a hold after the reversal)"
+            ),
             "hysteresis": (
                 "a dT/dt offset vanishes in a hold and scales with the rate; a hysteresis offset persists"
             ),

@@ -1,0 +1,66 @@
+"""What a ramp reversal can pass for (issue 21: the bundled run's z step at its last reversal).
+
+At a reversal a rate term (``temp_rate``) jumps by k times the change of rate, as a bias step there
+would: with a rate term in the model, a step at the reversal earns nothing beside it and the
+finder must say so (the catalogue declares ``bias_step`` a confounder of ``temp_rate``) rather than
+drop it silently.
+
+Synthetic recordings: a cubic bias, white noise and a small random walk (seeded), 2 Hz.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from trainer.data.recording import Recording
+from trainer.diagnose import diagnose
+from trainer.diagnose.result import Diagnosis
+from trainer.physics.catalogue import bias_step, temp_rate
+from trainer.physics.effects import effect_contribution
+
+STEP = bias_step.DEFINITION.identifier
+RATE = temp_rate.DEFINITION.identifier
+FS_HZ = 2.0
+DURATION_S = 4800.0
+BLOCKS = 300
+
+
+def _reversal_profile(t: np.ndarray) -> np.ndarray:
+    """Hold, heat at 2 degC/min, turn at once, cool at 3 degC/min, hold: three corners, one reversal."""
+    return np.interp(t, [0.0, 600.0, 3000.0, 4000.0, DURATION_S], [-10.0, -10.0, 70.0, 20.0, 20.0])
+
+
+def _diagnose(
+    temp_of: Callable[[np.ndarray], np.ndarray], effects: list[tuple[str, dict[str, float]]], seed: int
+) -> Diagnosis:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, DURATION_S, 1.0 / FS_HZ)
+    temp = temp_of(t)
+    u = (temp - 25.0) / 50.0
+    bias = 1.0 + 3.0 * u - 0.8 * u**2 + 0.5 * u**3
+    added = sum((effect_contribution(e, p, t, temp, temp) for e, p in effects), np.zeros(t.size))
+    columns = {
+        "time_s": t,
+        "temp_c": temp + 0.01 * rng.standard_normal(t.size),
+        "accel_mg": bias
+        + 0.3 * rng.standard_normal(t.size)
+        + np.cumsum(0.004 * rng.standard_normal(t.size))
+        + added,
+    }
+    rec = Recording(columns, {"sample_rate_hz": str(FS_HZ)}, f"synthetic#{seed}")
+    return diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
+
+
+def test_a_step_at_the_reversal_under_a_rate_term_is_said_to_be_absorbed() -> None:
+    k = 0.6  # mg per degC/min: a 3 mg jump where the rate turns from +2 to -3 degC/min
+    d = _diagnose(_reversal_profile, [(RATE, {"k_mg_per_c_per_min": k})], seed=23)
+    named = {e.effect: e.params for e in d.left_out}
+    assert RATE in named, [e.effect for e in d.left_out]
+    assert abs(named[RATE]["k_mg_per_c_per_min"] - k) <= 0.25 * k
+    assert STEP not in named  # the jump at the reversal is the rate term's, not an event
+    absorbed = [a for a in d.ambiguous if set(a.effects) == {RATE, STEP}]
+    assert absorbed, [a.effects for a in d.ambiguous]
+    assert "bias_step is absorbed by temp_rate" in absorbed[0].reason
+    assert "hold after the reversal" in absorbed[0].reason  # what would separate them
