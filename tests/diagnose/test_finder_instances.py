@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, build_blocks
@@ -22,33 +23,6 @@ from trainer.physics.effects import effect_contribution
 
 STEP = bias_step.DEFINITION.identifier
 PERIODIC = periodic.DEFINITION.identifier
-FS_HZ = 2.0
-DURATION_S = 4800.0
-BLOCKS = 300  # 16 s blocks: fast enough for a test, fine enough for the effects below
-
-
-def _temperature(t: np.ndarray) -> np.ndarray:
-    """-10 -> 60 degC -> 20 degC, piecewise linear with holds (a reversal, two rates)."""
-    knots_s = [0.0, 600.0, 2200.0, 2800.0, 4200.0, DURATION_S]
-    knots_c = [-10.0, -10.0, 60.0, 60.0, 20.0, 20.0]
-    return np.interp(t, knots_s, knots_c)
-
-
-def _recording(effects: list[tuple[str, dict[str, float]]], seed: int) -> Recording:
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, DURATION_S, 1.0 / FS_HZ)
-    temp = _temperature(t)
-    u = (temp - 25.0) / 50.0
-    bias = 1.0 + 3.0 * u - 0.8 * u**2 + 0.5 * u**3
-    white = 0.3 * rng.standard_normal(t.size)
-    walk = np.cumsum(0.004 * rng.standard_normal(t.size))
-    added = sum((effect_contribution(e, p, t, temp, temp) for e, p in effects), np.zeros(t.size))
-    columns = {
-        "time_s": t,
-        "temp_c": temp + 0.01 * rng.standard_normal(t.size),
-        "accel_mg": bias + white + walk + added,
-    }
-    return Recording(columns, {"sample_rate_hz": str(FS_HZ)}, f"synthetic#{seed}")
 
 
 def _found(rec: Recording, effect: str, max_blocks: int = BLOCKS) -> list[dict[str, float]]:
@@ -58,7 +32,7 @@ def _found(rec: Recording, effect: str, max_blocks: int = BLOCKS) -> list[dict[s
 
 def test_same_instance_is_the_data_resolution() -> None:
     """Step times within two blocks and frequencies within 1/duration coincide; farther ones do not."""
-    data = build_blocks(_recording([], seed=1), max_blocks=BLOCKS)
+    data = build_blocks(chamber_recording([], seed=1), max_blocks=BLOCKS)
     b = data.block_s
     assert coincides(Term(STEP, (1000.0 + 1.5 * b,)), [Term(STEP, (1000.0,))], data)
     assert not coincides(Term(STEP, (1000.0 + 3.0 * b,)), [Term(STEP, (1000.0,))], data)
@@ -72,7 +46,7 @@ def test_same_instance_is_the_data_resolution() -> None:
 
 def test_no_step_is_proposed_on_an_accepted_one() -> None:
     """With a step in the model at its true time, the next step proposed lies elsewhere."""
-    rec = _recording([(STEP, {"t_s": 3000.0, "step_mg": 2.0})], seed=2)
+    rec = chamber_recording([(STEP, {"t_s": 3000.0, "step_mg": 2.0})], seed=2)
     data = build_blocks(rec, max_blocks=BLOCKS)
     current = fit_model((Term(BACKBONE, ()), Term(STEP, (3000.0,))), (), data)
     for proposal in propose(current, data, STEP):
@@ -83,7 +57,7 @@ def test_no_step_is_proposed_on_an_accepted_one() -> None:
 
 def test_one_periodic_is_named_once() -> None:
     """A single 0.9 mg, 600 s component: one finding, its amplitude and period within 25 %."""
-    rec = _recording([(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7})], seed=3)
+    rec = chamber_recording([(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7})], seed=3)
     found = _found(rec, PERIODIC)
     assert len(found) == 1
     assert found[0]["period_s"] == pytest.approx(600.0, rel=0.05)
@@ -94,7 +68,7 @@ def test_four_steps_are_all_named() -> None:
     """Four steps of both signs (more than the former cap of three): each named once, at its time,
     with its size."""
     truth = [(900.0, -1.5), (1900.0, 1.2), (3100.0, 1.4), (3900.0, -1.2)]
-    rec = _recording([(STEP, {"t_s": t, "step_mg": s}) for t, s in truth], seed=4)
+    rec = chamber_recording([(STEP, {"t_s": t, "step_mg": s}) for t, s in truth], seed=4)
     found = sorted(_found(rec, STEP), key=lambda p: p["t_s"])
     assert len(found) == len(truth)
     for (t_s, step_mg), p in zip(truth, found, strict=True):
@@ -106,7 +80,7 @@ def test_two_periods_are_both_named() -> None:
     """Components at 600 s and 150 s: two findings, one per period, none repeated."""
     truth = [(0.9, 600.0), (0.6, 150.0)]
     effects = [(PERIODIC, {"amp_mg": a, "period_s": p, "phase_rad": 0.3}) for a, p in truth]
-    found = sorted(_found(_recording(effects, seed=5), PERIODIC), key=lambda p: -p["period_s"])
+    found = sorted(_found(chamber_recording(effects, seed=5), PERIODIC), key=lambda p: -p["period_s"])
     assert len(found) == 2
     for (amp_mg, period_s), p in zip(truth, found, strict=True):
         assert p["period_s"] == pytest.approx(period_s, rel=0.05)
