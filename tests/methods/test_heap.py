@@ -1,7 +1,11 @@
-"""trainer/heap.py: keeping freed memory removes the training's page faults and changes no bit.
+"""trainer/heap.py: keeping freed memory changes no bit of the training.
 
 Each case trains the same small DLSTM population in a fresh process (the allocator's settings are
 per process), once with glibc's defaults and once after :func:`trainer.heap.keep_freed_memory`.
+What the setting buys (page faults, time) depends on the machine and its load, so it is measured
+in ``bench/bench_pipeline.py`` (its page-fault column), not asserted here: on one machine the
+defaults' 8 iterations took 2,477 to 20,546 faults against 66 to 1,735 kept, on another, loaded,
+1,513 against 1,739.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 STEPS = 6000  # long enough that every workspace is served by mmap under glibc's defaults
 
 CHILD = f"""
-import hashlib, json, resource, sys
+import hashlib, json, sys
 import numpy as np, torch
 from trainer.heap import keep_freed_memory
 from trainer.dlstm.fusion import FusionSettings, train_stage
@@ -28,11 +32,9 @@ t = np.linspace(0.0, 1.0, {STEPS} + 1)
 series = np.sin(6.0 * t) + 0.5 * t
 x, y = series[:-1].reshape(-1, 1), series[1:]
 train_stage(x, y, FusionSettings(population=3, iterations=2), progress=False)  # warm-up
-before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
 trained = train_stage(x, y, FusionSettings(population=3, iterations=8), progress=False)
-faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
 digest = hashlib.sha256(trained.model.flatten().numpy().tobytes()).hexdigest()
-print(json.dumps({{"kept": kept, "faults": faults, "weights": digest}}))
+print(json.dumps({{"kept": kept, "weights": digest}}))
 """
 
 
@@ -48,12 +50,7 @@ def _train(mode: str) -> dict[str, object]:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
-def test_kept_memory_trains_the_same_bits_without_the_page_faults() -> None:
+def test_kept_memory_trains_the_same_bits() -> None:
     default, kept = _train("default"), _train("keep")
-    assert kept["kept"] is True
+    assert default["kept"] is None and kept["kept"] is True  # the setting took effect in one only
     assert kept["weights"] == default["weights"]
-    # glibc's defaults map and unmap each workspace: hundreds of faults per iteration at least
-    assert isinstance(default["faults"], int) and default["faults"] > 1000
-    # kept: the warm-up's pages serve the 8 measured iterations (66 to 1,735 faults over 15 runs here,
-    # against 2,477 to 20,546 with the defaults: a factor 4 leaves room for one-time allocations)
-    assert isinstance(kept["faults"], int) and kept["faults"] < default["faults"] / 4
