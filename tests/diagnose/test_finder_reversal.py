@@ -1,9 +1,12 @@
-"""What a ramp reversal can pass for (issue 21: the bundled run's z step at its last reversal).
+"""What a ramp reversal can pass for (issue 21: the bundled run's z step at its last reversal), and a
+rate term seen through a thermal filter.
 
 At a reversal a rate term (``temp_rate``) jumps by k times the change of rate, as a bias step there
 would: with a rate term in the model, a step at the reversal earns nothing beside it and the
 finder must say so (the catalogue declares ``bias_step`` a confounder of ``temp_rate``) rather than
-drop it silently.
+drop it silently. Through a filter (``tau_s`` 20-60 s) the same rate term used to come out at a
+quarter of its size beside a hysteresis and corner steps (the search proposed it instantaneous
+only); it is now proposed with its filter freed (``candidates._propose_linear``).
 
 Synthetic recordings: ``tests.synthetic_chamber`` on a cycle with an instant reversal.
 """
@@ -49,3 +52,13 @@ def test_a_step_at_the_reversal_under_a_rate_term_is_said_to_be_absorbed(seed: i
     assert absorbed, [a.effects for a in d.ambiguous]
     assert "bias_step is absorbed by temp_rate" in absorbed[0].reason
     assert "hold after the reversal" in absorbed[0].reason  # what would separate them
+
+
+@pytest.mark.parametrize(("tau_s", "seed"), [(20.0, 21), (60.0, 22)])
+def test_a_rate_term_through_a_filter_is_named_with_its_filter(tau_s: float, seed: int) -> None:
+    k = 0.6
+    d = _diagnose(_reversal_profile, [(RATE, {"k_mg_per_c_per_min": k, "tau_s": tau_s})], seed=seed)
+    named = {e.effect: e.params for e in d.left_out}
+    assert set(named) == {RATE}, named  # no hysteresis or corner steps standing in for its corners
+    assert abs(named[RATE]["k_mg_per_c_per_min"] - k) <= 0.25 * k
+    assert abs(named[RATE]["tau_s"] - tau_s) <= 0.25 * tau_s

@@ -31,6 +31,8 @@ from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, n
 from trainer.physics.catalogue.base import catalogue_params
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
+FREED_GRID_POINTS = 6  # log grid of a linear search's optional nonlinear parameter, freed (one block up)
+FREED_MAX_S = 120.0  # ... up to a short filter: a rate term through a longer one is a thermal lag
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
 
 
@@ -215,12 +217,23 @@ def _propose_profile(current: ModelFit, data: BlockData, effect: str) -> list[Pr
 
 
 def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
-    """Linear columns only; optional nonlinear parameters held at their catalogue defaults."""
-    fit = polish(
-        (*current.terms, Term(effect, nonlinear_defaults(effect), fixed=bool(nonlinear_defaults(effect)))),
-        data,
-        current.gls,
-    )
+    """Linear columns with optional nonlinear parameters held at their catalogue defaults, or, when
+    the BIC (which charges the freed parameter) prefers it, freed up to FREED_MAX_S: a rate term seen
+    through a thermal filter (``temp_rate`` with ``tau_s`` 60 s) fitted instantaneously leaves its
+    corners to a hysteresis and steps and comes out at half its size."""
+    defaults = nonlinear_defaults(effect)
+    fit = polish((*current.terms, Term(effect, defaults, fixed=bool(defaults))), data, current.gls)
+    if len(defaults) == 1:
+        ((lo, hi),) = search_bounds(effect, data)
+        grid = _log_grid(max(lo, data.block_s), min(hi, FREED_MAX_S), FREED_GRID_POINTS)
+        start = max(
+            (evaluate((*current.terms, Term(effect, (float(v),))), data, current.gls) for v in grid),
+            key=lambda f: f.loglik,
+        )
+        freed = polish(start.terms, data, current.gls)
+        # below a block the blocks cannot resolve the filter: the instantaneous form stands
+        if freed.bic < fit.bic and data.block_s <= freed.terms[len(current.terms)].nl[0] <= FREED_MAX_S:
+            fit = freed
     return [Proposal(effect, fit.terms, current.noise.terms, fit)]
 
 
