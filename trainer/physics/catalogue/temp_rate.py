@@ -77,8 +77,9 @@ DEFINITION = Effect(
     summary="k * LP(dT_die/dt, tau_s) (thermal-gradient stress, dT/dt in degC/min; tau_s = 0: instantaneous)",
     contribution=_contribution,
     finder=Finder(
-        # Proposed instantaneous (tau_s held at 0, linear); a configured or compensator-refined
-        # tau_s is searched on a linear scale, so that 0 stays reachable.
+        # Proposed instantaneous (tau_s held at 0, linear) and with tau_s freed (one block to
+        # candidates.FREED_MAX_S), the better by BIC; a configured or compensator-refined tau_s is
+        # searched on a linear scale, so that 0 stays reachable.
         search="linear",
         nonlinear=(("tau_s", False),),
         bounds=lambda data: ((0.0, 600.0),),
