@@ -220,7 +220,7 @@ def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Pro
     """Linear columns with optional nonlinear parameters held at their catalogue defaults, or, when
     the BIC (which charges the freed parameter) prefers it, freed up to FREED_MAX_S: a rate term seen
     through a thermal filter (``temp_rate`` with ``tau_s`` 60 s) fitted instantaneously leaves its
-    corners to a hysteresis and steps and comes out at half its size."""
+    corners to a hysteresis and steps and comes out at a quarter to a half of its size."""
     defaults = nonlinear_defaults(effect)
     fit = polish((*current.terms, Term(effect, defaults, fixed=bool(defaults))), data, current.gls)
     if len(defaults) == 1:
