@@ -31,8 +31,6 @@ from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, n
 from trainer.physics.catalogue.base import catalogue_params
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
-FREED_GRID_POINTS = 6  # log grid of a linear search's optional nonlinear parameter, freed (one block up)
-FREED_MAX_S = 120.0  # ... up to a short filter: a rate term through a longer one is a thermal lag
 FAST_PERIOD_BLOCKS = 4.0  # periods shorter than this many blocks are scored on the fine grid
 
 
@@ -73,9 +71,12 @@ def _log_grid(lo: float, hi: float, n: int) -> np.ndarray:
     return np.logspace(math.log10(lo), math.log10(hi), n)
 
 
-def _profile_1d(current: ModelFit, data: BlockData, new: Term) -> ModelFit:
-    """Grid over the new term's single nonlinear parameter, then a joint polish."""
-    ((lo, hi),) = search_bounds(new.identifier, data)
+def _profile_1d(
+    current: ModelFit, data: BlockData, new: Term, bounds: tuple[float, float] | None = None
+) -> ModelFit:
+    """Log grid over the new term's single nonlinear parameter within ``bounds`` (default: its
+    search bounds), then a joint polish."""
+    ((lo, hi),) = (bounds,) if bounds is not None else search_bounds(new.identifier, data)
     grid = _log_grid(lo, hi, GRID_POINTS[new.identifier])
     best: ModelFit | None = None
     for value in grid:
@@ -218,21 +219,17 @@ def _propose_profile(current: ModelFit, data: BlockData, effect: str) -> list[Pr
 
 def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     """Linear columns with optional nonlinear parameters held at their catalogue defaults, or, when
-    the BIC (which charges the freed parameter) prefers it, freed up to FREED_MAX_S: a rate term seen
-    through a thermal filter (``temp_rate`` with ``tau_s`` 60 s) fitted instantaneously leaves its
-    corners to a hysteresis and steps and comes out at a quarter to a half of its size."""
+    the definition declares ``freed_bounds`` and the BIC (which charges the freed parameter) prefers
+    it, freed within them: a rate term seen through a thermal filter (``temp_rate`` with ``tau_s``
+    60 s) fitted instantaneously leaves its corners to a hysteresis and steps and comes out at a
+    quarter to a half of its size."""
     defaults = nonlinear_defaults(effect)
     fit = polish((*current.terms, Term(effect, defaults, fixed=bool(defaults))), data, current.gls)
-    if len(defaults) == 1:
-        ((lo, hi),) = search_bounds(effect, data)
-        grid = _log_grid(max(lo, data.block_s), min(hi, FREED_MAX_S), FREED_GRID_POINTS)
-        start = max(
-            (evaluate((*current.terms, Term(effect, (float(v),))), data, current.gls) for v in grid),
-            key=lambda f: f.loglik,
-        )
-        freed = polish(start.terms, data, current.gls)
-        # below a block the blocks cannot resolve the filter: the instantaneous form stands
-        if freed.bic < fit.bic and data.block_s <= freed.terms[len(current.terms)].nl[0] <= FREED_MAX_S:
+    freed_bounds = DEFINITIONS[effect].finder.freed_bounds
+    if freed_bounds is not None:
+        ((lo, hi),) = freed_bounds(data)
+        freed = _profile_1d(current, data, Term(effect, defaults), (lo, hi))
+        if freed.bic < fit.bic and lo <= freed.terms[len(current.terms)].nl[0] <= hi:
             fit = freed
     return [Proposal(effect, fit.terms, current.noise.terms, fit)]
 

@@ -247,8 +247,9 @@ class Finder:
     ``to_params`` maps a term's nonlinear values and fitted linear values back to catalogue
     parameters. ``search`` names the strategy in ``trainer.diagnose.candidates`` (``profile``: a
     log grid of ``grid_points`` over the single nonlinear parameter within ``bounds(data)``;
-    ``linear``; ``lattice``; ``step``; ``sinusoid``; ``noise``), ``None`` when the finder never
-    proposes it. ``noise_role`` for noise terms: ``white`` (always fitted, from the full rate),
+    ``linear``: the nonlinear parameter held at its default or, with ``freed_bounds(data)``, also
+    profiled freed over that range on a log grid of ``grid_points``, the better by BIC;
+    ``lattice``; ``step``; ``sinusoid``; ``noise``), ``None`` when the finder never proposes it. ``noise_role`` for noise terms: ``white`` (always fitted, from the full rate),
     ``covariance`` (a correlated term of the block covariance, ``covariance(n, block_s,
     duration_s)`` for unit coefficient), ``trend`` (a deterministic column) or ``None`` (not
     modelled: the user's value is kept in the augmented simulation). Hooks for special cases:
@@ -264,6 +265,7 @@ class Finder:
     nonlinear: tuple[tuple[str, bool], ...] = ()
     bounds: Callable[[FinderData], Bounds] = _no_bounds
     grid_points: int = 0
+    freed_bounds: Callable[[FinderData], Bounds] | None = None  # ``linear``: also tried freed here
     max_terms: int = 1  # how many instances the finder may add
     # (term, term, block data): two instances coincide within the data's resolution (one instance)
     same_instance: Callable[[FinderTerm, FinderTerm, FinderData], bool] | None = None

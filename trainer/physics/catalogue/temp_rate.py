@@ -27,6 +27,8 @@ from trainer.physics.catalogue.base import (
 )
 from trainer.physics.thermal import lowpass
 
+FREED_MAX_S = 120.0  # the longest filter the finder proposes freed (see ``finder.freed_bounds``)
+
 
 def rate_term(rate_c_per_min: np.ndarray, k_mg_per_c_per_min: float) -> np.ndarray:
     return k_mg_per_c_per_min * np.asarray(rate_c_per_min, dtype=np.float64)
@@ -77,12 +79,17 @@ DEFINITION = Effect(
     summary="k * LP(dT_die/dt, tau_s) (thermal-gradient stress, dT/dt in degC/min; tau_s = 0: instantaneous)",
     contribution=_contribution,
     finder=Finder(
-        # Proposed instantaneous (tau_s held at 0, linear) and with tau_s freed (one block to
-        # candidates.FREED_MAX_S), the better by BIC; a configured or compensator-refined tau_s is
-        # searched on a linear scale, so that 0 stays reachable.
+        # Proposed instantaneous (tau_s held at 0, linear) and with tau_s freed, the better by BIC;
+        # a configured or compensator-refined tau_s is searched on a linear scale, so that 0 stays
+        # reachable.
         search="linear",
         nonlinear=(("tau_s", False),),
         bounds=lambda data: ((0.0, 600.0),),
+        # Freed: from one block (the blocks cannot resolve a shorter filter: the instantaneous form
+        # stands) to FREED_MAX_S (through a longer filter a rate term takes the run's own loop, as
+        # a thermal lag would: without the cap the bundled run's bench lost 9 findings, not 8).
+        freed_bounds=lambda data: ((data.block_s, FREED_MAX_S),),
+        grid_points=6,
         columns=_columns,
         to_params=_to_params,
         from_config=_from_config,
