@@ -73,6 +73,15 @@ def save_model(
 def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read and validate the checkpoint dict; every failure is a one-line :class:`UserError`."""
     p = Path(path)
+    if p.is_dir():
+        from trainer.options.channels import INDEX_FILE  # trainer fit --channels: one model per channel
+
+        raise UserError(
+            f"{p}: a directory, not a model file; for the per-channel models 'trainer fit --channels' wrote "
+            "there, add --channels all (or a list such as accel0_z,gyro0_x)"
+            if (p / INDEX_FILE).is_file()
+            else f"{p}: a directory, not a model file (model.pt, written by 'trainer fit')"
+        )
     if not p.is_file():
         raise UserError(f"{p}: no such model file")
     try:

@@ -164,6 +164,45 @@ def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     assert code == 2 and len(err.splitlines()) == 1 and "available: gyro0_x, gyro0_y, baro0" in err
 
 
+def test_all_says_when_the_files_own_accel_mg_is_left_out(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A simulated IMU carries its accelerometer as accel_mg beside gyro0_x_dps: ``all`` (the named
+    channels) must not drop it silently; an imported file's accel_mg, a copy of a channel, is no news."""
+    rec = read_recording(imu["rec"])
+    assert trainer_main(["fit", "--method", "poly3", str(imu["rec"]), "--channels", "all", "-o",
+                         str(tmp_path / "copy")]) == 0  # fmt: skip
+    assert "left out" not in capsys.readouterr().err
+    columns = {k: v for k, v in rec.columns.items() if k in ("time_s", "temp_c", "gyro0_x_dps")}
+    columns["accel_mg"] = rec.columns["accel0_x_mg"] + 1.0  # its own column, no named channel equals it
+    own = tmp_path / "sim.npz"
+    write_recording(Recording(columns, dict(rec.meta), "sim"), own)
+    assert (
+        trainer_main(["fit", "--method", "poly3", str(own), "--channels", "all", "-o", str(tmp_path / "own")])
+        == 0
+    )
+    notes = [x for x in capsys.readouterr().err.splitlines() if "left out" in x]
+    assert len(notes) == 1 and "accel_mg" in notes[0] and "without --channels" in notes[0]
+    assert [
+        c["channel"] for c in json.loads((tmp_path / "own" / "channels.json").read_text())["channels"]
+    ] == ["gyro0_x"]
+
+
+def test_a_model_directory_without_channels_says_what_to_add(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    models = str(imu["root"] / "poly3")
+    for cli, args in (
+        (codegen_main, ["export", models, "--format", "px4-params", "-o", str(tmp_path / "p")]),
+        (trainer_main, ["evaluate", models, str(imu["rec"])]),
+    ):
+        code = run_cli(cli, args)
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1
+        assert "a directory, not a model file" in err and "--channels all" in err
+    assert not (tmp_path / "p").exists()
+
+
 def test_refusals_say_why(imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = run_cli(trainer_main, ["fit", "--method", "dlstm", str(imu["rec"]), "--channels", "baro0", "-o",
                                   str(tmp_path / "d")])  # fmt: skip

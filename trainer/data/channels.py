@@ -17,6 +17,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+import numpy as np
+
 from trainer.data.flightlog import SENSOR_UNITS, parse_channel
 from trainer.data.recording import Recording
 from trainer.errors import UserError
@@ -81,6 +83,25 @@ def recording_channels(rec: Recording) -> dict[str, Channel]:
         temp = f"{sensor}{instance}_temp_c"
         found[name] = Channel(name, column, temp if temp in rec.columns else "temp_c", unit)
     return dict(sorted(found.items(), key=lambda item: sort_key(item[0])))
+
+
+def one_axis_left_out(rec: Recording, channels: list[Channel]) -> str | None:
+    """What ``--channels all`` says when the file's own ``accel_mg`` is not one of its named channels.
+
+    A multi-channel recording may carry ``accel_mg`` as a copy of the axis a one-channel command
+    compensates (``trainer import`` writes it so); a simulated IMU carries it as its accelerometer
+    beside ``gyro0_x_dps``. In the second case ``all`` (named channels only) would drop it silently.
+    """
+    if ONE_AXIS_CHANNEL not in rec.columns:
+        return None
+    data = rec.columns[ONE_AXIS_CHANNEL]
+    if any(c.column in rec.columns and np.array_equal(rec.columns[c.column], data) for c in channels):
+        return None
+    return (
+        f"note: {rec.source}: --channels all compensates the named channels ({names_text([c.name for c in channels])}); "
+        f"the file's own {ONE_AXIS_CHANNEL} column is none of them and is left out: run the command without "
+        "--channels to compensate it (or name it accel0_<axis>_mg)"
+    )
 
 
 def parse_channels_option(text: str) -> tuple[str, ...]:

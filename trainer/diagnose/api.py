@@ -10,8 +10,9 @@ from __future__ import annotations
 
 from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import BlockData, build_blocks
-from trainer.diagnose.candidates import propose
+from trainer.diagnose.candidates import propose, propose_freed_wide
 from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
+from trainer.diagnose.profile import analyse_profile
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.run import channel_scale, diagnose
 from trainer.diagnose.threads import single_blas_thread
@@ -23,6 +24,7 @@ __all__ = [
     "ModelFit",
     "Term",
     "ambiguity_line",
+    "analyse_profile",
     "build_baseline",
     "build_blocks",
     "build_design",
@@ -32,6 +34,7 @@ __all__ = [
     "fit_model",
     "implausible_effects",
     "propose",
+    "propose_freed_wide",
     "search_bounds",
     "single_blas_thread",
 ]

@@ -234,6 +234,25 @@ def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Pro
     return [Proposal(effect, fit.terms, current.noise.terms, fit)]
 
 
+def propose_freed_wide(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
+    """A term with ``freed_bounds`` freed over its whole search range instead (``temp_rate``: up to
+    600 s, not :data:`~trainer.physics.catalogue.temp_rate.FREED_MAX_S`). Not for naming: through
+    a long filter a rate term takes a real run's own loop. The physics compensator's
+    cross-validated stage tries it, where a term must predict blocks it was not fitted on: a
+    gyroscope's rate term through 330 s (the realistic experiment) is otherwise never placed."""
+    definition = DEFINITIONS[effect]
+    if definition.finder.search != "linear" or definition.finder.freed_bounds is None:
+        return []
+    if any(excluded(effect, present) for present in current.identifiers):
+        return []
+    ((lo, _),) = definition.finder.freed_bounds(data)
+    ((_, hi),) = search_bounds(effect, data)
+    if not hi > lo:
+        return []
+    fit = _profile_1d(current, data, Term(effect, nonlinear_defaults(effect)), (lo, hi))
+    return [Proposal(effect, fit.terms, current.noise.terms, fit)]
+
+
 def _propose_lattice(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     """The thermometer's lattice LSB is read off the data, not searched."""
     if data.lattice_lsb_c is None:

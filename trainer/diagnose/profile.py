@@ -122,17 +122,28 @@ def _segments(data: BlockData, meta: dict[str, str], codes: np.ndarray) -> tuple
     return segments, "temperature"
 
 
-def analyse_profile(data: BlockData, meta: dict[str, str], known_input_varies: bool = False) -> Profile:
-    """Branches, segments and identifiability from the block temperatures."""
+def analyse_profile(
+    data: BlockData, meta: dict[str, str], known_input_varies: bool = False, *, seen_only: bool = False
+) -> Profile:
+    """Branches, segments and identifiability from the block temperatures.
+
+    ``seen_only``: reversals and the range seen both heating and cooling count only the blocks an
+    outer cross-validation does not hold out (``data.held_out``: their output is imputed), so that
+    a fold holding out the only heating run identifies no branch term from what its coolings show.
+    """
     temp = data.temperature(True)
     rate = data.rate(True)
     codes = classify_branches(rate, data.block_s)
     segments, source = _segments(data, meta, codes)
     runs = _runs(codes)
     moving = [(code, a, b) for code, a, b in runs if code != 0]
-    reversals = sum(1 for r0, r1 in itertools.pairwise(moving) if r0[0] != r1[0])
-    heat = temp[codes == 1]
-    cool = temp[codes == -1]
+    seen = np.ones(codes.size, dtype=bool)
+    if seen_only and data.held_out is not None:
+        seen = ~data.held_out
+    shown = [(code, a, b) for code, a, b in moving if np.mean(seen[a:b]) > 0.5]
+    reversals = sum(1 for r0, r1 in itertools.pairwise(shown) if r0[0] != r1[0])
+    heat = temp[(codes == 1) & seen]
+    cool = temp[(codes == -1) & seen]
     overlap = None
     if heat.size and cool.size:
         lo = max(float(heat.min()), float(cool.min()))

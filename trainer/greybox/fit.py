@@ -26,6 +26,7 @@ from trainer.diagnose.api import (
     BlockData,
     ModelFit,
     Term,
+    analyse_profile,
     build_baseline,
     build_blocks,
     build_design,
@@ -33,6 +34,7 @@ from trainer.diagnose.api import (
     evaluate,
     fit_model,
     propose,
+    propose_freed_wide,
     search_bounds,
     single_blas_thread,
 )
@@ -43,7 +45,7 @@ from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS
 from trainer.physics.catalogue.base import catalogue_params
 from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.streamed import STREAMED
-from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name
 from trainer.physics.effects import EffectConfig
 
 BOUND_MARGIN = 0.01  # a nonlinear value within 1 % of its search range's end sits at the bound
@@ -91,6 +93,50 @@ def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
     if not fits:
         raise UserError(f"--effects: the finder cannot place {effect.identifier} on this recording")
     return max(fits, key=lambda f: f.loglik)
+
+
+def _add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
+    """The cross-validated stage's placement of a candidate: the finder's, or, for a filtered term,
+    its filter searched over the whole range when that fits better (:func:`propose_freed_wide`);
+    the stage then keeps it only if it predicts held-out blocks."""
+    placed = _add(current, data, effect)
+    if _start_term(effect) is not None:
+        return placed
+    wide = [p.fit_fixed_noise for p in propose_freed_wide(current, data, effect.identifier)]
+    return max([placed, *(f for f in wide if f is not None)], key=lambda f: f.loglik)
+
+
+def _at_bound(term: Term, data: BlockData) -> dict[str, tuple[float, float, float]]:
+    """``{nonlinear parameter: (value, search range low, high)}`` for each free one within
+    :data:`BOUND_MARGIN` of an end of its search range (the run does not determine it)."""
+    if term.fixed:
+        return {}
+    names = [name for name, _ in DEFINITIONS[term.identifier].finder.nonlinear]
+    if not names:
+        return {}
+    out = {}
+    for name, (lo, hi), value in zip(names, search_bounds(term.identifier, data), term.nl, strict=False):
+        if value - lo < BOUND_MARGIN * (hi - lo) or hi - value < BOUND_MARGIN * (hi - lo):
+            out[name] = (value, lo, hi)
+    return out
+
+
+def _undetermined(trial: ModelFit, data: BlockData, identifier: str, scale: ChannelScale | None) -> str:
+    """Why the trial's last ``identifier`` term is not determined by the run ("" when it is): a
+    nonlinear value at an end of its search range or a parameter outside the plausible range, the
+    rule the finished fit applies (:func:`_only_determined` of the compensator drops such a term,
+    so the cross-validated stage must not choose it over one that is determined)."""
+    index = max(i for i, t in enumerate(trial.terms) if t.identifier == identifier)
+    term = trial.terms[index]
+    definition = DEFINITIONS[identifier]
+    for name, (value, lo, hi) in _at_bound(term, data).items():
+        return f"{name} = {value:.4g} at the end of its search range {lo:g}..{hi:g}"
+    design = build_design(trial.terms, data)
+    weighted = slice(None) if data.held_out is None else ~data.held_out
+    beta, *_ = np.linalg.lstsq(design.X[weighted], (data.accel - design.offset)[weighted], rcond=None)
+    linear = {role: float(b) for (owner, role), b in zip(design.roles, beta, strict=True) if owner == index}
+    outside = implausible(identifier, catalogue_params(definition, term, linear), scale)
+    return "; ".join(outside.values())
 
 
 def _min_filter_s(identifier: str) -> float | None:
@@ -156,8 +202,26 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     for effect in (*structure.compensated, *structure.nuisance):
         current = _add(current, data, effect)
     notes: list[str] = []
+    if structure.candidates and data.held_out is not None:
+        # a cross-validation fold: the compensator's own test adds only what the rows it trains on
+        # identify (the finder's naming may also read the held-out segment's temperature history)
+        seen = analyse_profile(data, rec.meta, seen_only=True).identifiability
+        unseen = [name for name in structure.candidates if not (name in seen and seen[name].identifiable)]
+        notes += [
+            f"cross-validation: {name} not tried: the rows this fold trains on do not identify it"
+            for name in unseen
+        ]
+        structure = replace(structure, candidates=tuple(n for n in structure.candidates if n not in unseen))
     if structure.candidates:
-        current, structure, notes = extend(current, data, structure, _add)
+        current, structure, decided = extend(
+            current,
+            data,
+            structure,
+            _add_trial,
+            unit=unit,
+            undetermined=lambda trial, name: _undetermined(trial, data, name, scale),
+        )
+        notes += decided
     terms = _rate_filter(current.terms)
     fit = _clamp_rate(fit_model(terms, noise_terms, data, start=current.noise), data, noise_terms)
 
@@ -190,26 +254,17 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         }
         nonlinear = [name for name, _ in definition.finder.nonlinear]
         sd = {k: abs(v) for k, v in catalogue_params(definition, term, sd_lin).items() if k not in nonlinear}
-        bounds = search_bounds(term.identifier, data) if nonlinear else ()
         judged = term.identifier in keep
         reasons: list[str] = []
         for j, name in enumerate(nonlinear[: len(term.nl)]):
+            if name in params and not term.fixed:
+                sd[name] = _nonlinear_std(fit, data, index, j)
+        for name, (_, lo, hi) in _at_bound(term, data).items() if judged else ():
             if name not in params:
                 continue
-            if not term.fixed:
-                sd[name] = _nonlinear_std(fit, data, index, j)
-            lo, hi = bounds[j]
-            span = hi - lo
-            if (
-                judged
-                and not term.fixed
-                and (term.nl[j] - lo < BOUND_MARGIN * span or hi - term.nl[j] < BOUND_MARGIN * span)
-            ):
-                shown = channel_param_name(name, unit)
-                at_bound.append(f"{term.identifier}.{shown}")
-                reasons.append(
-                    f"{shown} = {params[name]:.4g} sits at the end of its search range {lo:g}..{hi:g}"
-                )
+            shown = channel_param_name(name, unit)
+            at_bound.append(f"{term.identifier}.{shown}")
+            reasons.append(f"{shown} = {params[name]:.4g} sits at the end of its search range {lo:g}..{hi:g}")
         outside = implausible(term.identifier, params, scale) if judged else {}
         flagged += [f"{term.identifier}.{channel_param_name(name, unit)}" for name in outside]
         reasons += outside.values()

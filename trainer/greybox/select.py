@@ -26,9 +26,11 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import chi2
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose.api import BlockData, ModelFit, Term, build_design
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import excluded
+from trainer.physics.catalogue.units import CATALOGUE_UNIT
 from trainer.physics.effects import EffectConfig
 
 FOLDS = 5
@@ -43,17 +45,23 @@ def beats_noise(trial: ModelFit, current: ModelFit) -> bool:
 
 
 def cv_rms(terms: tuple[Term, ...], data: BlockData, folds: int = FOLDS) -> float:
-    """Pooled RMS (mean removed) of each contiguous fold predicted by least squares on the others."""
+    """Pooled RMS (mean removed) of each contiguous fold predicted by least squares on the others.
+
+    Blocks without weight (``data.held_out``: a segment an outer cross-validation holds out, its
+    output imputed by the cubic) neither train nor score: a term would otherwise be judged on how
+    well it predicts the cubic."""
     design = build_design(terms, data)
     y = data.accel - design.offset
     X = design.X
+    counted = np.ones(data.n, dtype=bool) if data.held_out is None else ~data.held_out
     edges = np.linspace(0, data.n, folds + 1).astype(int)
     residual = np.empty(data.n)
     for k in range(folds):
         test = np.zeros(data.n, dtype=bool)
         test[edges[k] : edges[k + 1]] = True
-        beta, *_ = np.linalg.lstsq(X[~test], y[~test], rcond=None)
+        beta, *_ = np.linalg.lstsq(X[~test & counted], y[~test & counted], rcond=None)
         residual[test] = y[test] - X[test] @ beta
+    residual = residual[counted]
     residual -= residual.mean()
     return float(np.sqrt(np.mean(residual**2)))
 
@@ -63,12 +71,19 @@ def extend(
     data: BlockData,
     structure: Structure,
     add: Callable[[ModelFit, BlockData, EffectConfig], ModelFit],
+    *,
+    unit: str = CATALOGUE_UNIT,
+    undetermined: Callable[[ModelFit, str], str] | None = None,
 ) -> tuple[ModelFit, Structure, list[str]]:
     """Add candidates while one lowers the cross-validated RMS by ``MIN_GAIN`` and beats the noise.
 
     ``add(fit, data, effect)`` places one effect (the finder's profile search); returns the
-    extended fit, the structure with the accepted effects, and one note per decision.
+    extended fit, the structure with the accepted effects, and one note per decision (figures in
+    the channel's unit, ``unit`` its suffix). ``undetermined(trial, effect)``: why the run does not
+    determine the placed term ("" when it does); such a trial is not chosen (the fit would drop it),
+    so that a determined one (a rate term beside a creep at the end of its range) can be.
     """
+    label = UNIT_LABELS[unit]
     notes: list[str] = []
     current = cv_rms(fit.terms, data)
     remaining = list(structure.candidates)
@@ -83,22 +98,28 @@ def extend(
         if not trials:
             break
         passing = [item for item in trials if beats_noise(item[2], fit)]
+        if undetermined is not None:
+            why = {name: undetermined(trial, name) for _, name, trial in passing}
+            notes += [
+                f"cross-validation: {name} not added, undetermined: {w}" for name, w in why.items() if w
+            ]
+            passing = [item for item in passing if not why[item[1]]]
         if not passing:
             best = min(trials, key=lambda item: item[0])
             notes.append(
                 f"cross-validation: no further term beats the noise model at p < {LR_LEVEL:g} "
-                f"(best held out: {best[1]}, {current:.4g} -> {best[0]:.4g} mg)"
+                f"(best held out: {best[1]}, {current:.4g} -> {best[0]:.4g} {label})"
             )
             break
         score, name, trial = min(passing, key=lambda item: item[0])
         if score > (1.0 - MIN_GAIN) * current:
             notes.append(
                 f"cross-validation: no further term lowers the held-out block RMS by {MIN_GAIN:.0%} "
-                f"(best: {name}, {current:.4g} -> {score:.4g} mg)"
+                f"(best: {name}, {current:.4g} -> {score:.4g} {label})"
             )
             break
         notes.append(
-            f"cross-validation: {name} lowers the held-out block RMS {current:.4g} -> {score:.4g} mg"
+            f"cross-validation: {name} lowers the held-out block RMS {current:.4g} -> {score:.4g} {label}"
         )
         fit, current = trial, score
         accepted.append(EffectConfig(name, {}))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -86,12 +87,15 @@ def run_per_channel(
     ``<dir>/<channel>.pt``. Text the command prints or writes (.md, .txt, .json) says the
     channel's unit instead of mg (:func:`trainer.data.channels.relabel_units`).
     """
-    from trainer.data.channels import select_channels
+    from trainer.data.channels import ALL, one_axis_left_out, select_channels
     from trainer.data.recording_io import read_recording
 
     given = {attr: getattr(args, attr) for attr in recordings if getattr(args, attr) is not None}
     recs = {attr: read_recording(path) for attr, path in given.items()}
-    channels = select_channels(next(iter(recs.values())), args.channels)
+    first = next(iter(recs.values()))
+    channels = select_channels(first, args.channels)
+    if args.channels == (ALL,) and (note := one_axis_left_out(first, channels)) is not None:
+        print(note, file=sys.stderr, flush=True)
     for channel in channels:
         reason = refuse(channel) if refuse is not None else None
         if reason is not None:
