@@ -30,7 +30,7 @@ from trainer.data.channels import channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.scoring.crossval import UNCOMPENSATED
-from trainer.selection import NONE, select
+from trainer.selection import row_name, select
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 
@@ -59,7 +59,7 @@ def main() -> int:
             + ", ".join(f"{n} {r.fit_seconds:.1f}" for n, r in cv.results.items() if n != UNCOMPENSATED),
             "",
         ]
-        chosen = UNCOMPENSATED if selection.chosen == NONE else selection.chosen
+        chosen = row_name(selection.chosen)
         raw, cubic, auto = cv.results[UNCOMPENSATED], cv.results[methods.CUBIC], cv.results[chosen]
         for mode in ("warm_rms", "cold_rms"):
             ref = np.minimum([getattr(f, mode) for f in raw.folds], [getattr(f, mode) for f in cubic.folds])

@@ -109,6 +109,11 @@ def candidate_list(text: str) -> tuple[str, ...]:
     return labels
 
 
+def row_name(label: str) -> str:
+    """A candidate's row in the cross-validation (no compensation is the uncompensated row)."""
+    return UNCOMPENSATED if label == NONE else label
+
+
 @dataclass
 class Selection:
     """The cross-validation of every candidate and the one chosen, with the reason in one line."""
@@ -122,7 +127,7 @@ class Selection:
         return candidate(self.chosen)
 
     def table(self) -> list[str]:
-        return table_lines(self.cv, chosen=UNCOMPENSATED if self.chosen == NONE else self.chosen)
+        return table_lines(self.cv, chosen=row_name(self.chosen))
 
 
 def full_cycle(segments: Sequence[Segment]) -> bool:
@@ -135,7 +140,7 @@ def full_cycle(segments: Sequence[Segment]) -> bool:
 def worst_ratio(cv: CrossValidation, label: str) -> float:
     """The candidate's largest ratio, over every held-out segment started warm and cold, to the better
     of (cubic, no compensation) there: 1.0 is as good as the better of the two everywhere."""
-    mine = cv.results[UNCOMPENSATED if label == NONE else label]
+    mine = cv.results[row_name(label)]
     references = [
         cv.results[UNCOMPENSATED],
         *([cv.results[methods.CUBIC]] if methods.CUBIC in cv.results else []),
@@ -176,7 +181,7 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
         worst = {label: worst_ratio(cv, label) for label in allowed}
         best = min(worst.values())
         safest = [x for x in allowed if worst[x] <= best * (1.0 + TOLERANCE)]
-        pooled = {x: cv.results[UNCOMPENSATED if x == NONE else x].cv_rms for x in safest}
+        pooled = {x: cv.results[row_name(x)].cv_rms for x in safest}
         least = min(pooled.values())
         label = next(x for x in safest if pooled[x] <= least * (1.0 + POOLED_GAIN))
         reason = (
@@ -194,7 +199,7 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
         )
     if unsafe:
         reason += f"; {', '.join(unsafe)} left more than no compensation cross-validated"
-    mine, raw = cv.results[UNCOMPENSATED if label == NONE else label], cv.results[UNCOMPENSATED]
+    mine, raw = cv.results[row_name(label)], cv.results[UNCOMPENSATED]
     if label == NONE:
         return NONE, f"{reason}: the channel is left uncompensated ({raw.cv_rms:.4g} {unit} cross-validated)"
     return (
@@ -269,7 +274,7 @@ def by_reason(skipped: dict[str, str]) -> dict[str, list[str]]:
 def record_lines(record: dict[str, Any]) -> list[str]:
     """The lines a user reads of a saved selection: segments, the table, the choice."""
     cv = CrossValidation.from_dict(record["crossval"])
-    chosen = UNCOMPENSATED if record["chosen"] == NONE else str(record["chosen"])
+    chosen = row_name(str(record["chosen"]))
     return [
         f"auto: cross-validation over {len(cv.segments)} thermal segments of {cv.source}:",
         *segment_lines(cv.segments),
@@ -306,7 +311,7 @@ class CrossValidatedFigures:
 def cross_validated_figures(record: dict[str, Any]) -> CrossValidatedFigures:
     """The chosen model's and the uncompensated pooled cross-validated drift left of a saved selection."""
     cv = CrossValidation.from_dict(record["crossval"])
-    mine = cv.results[UNCOMPENSATED if record["chosen"] == NONE else str(record["chosen"])]
+    mine = cv.results[row_name(str(record["chosen"]))]
     raw = cv.results[UNCOMPENSATED]
     return CrossValidatedFigures(
         mine.cv_rms, raw.cv_rms, mine.cv_in_range_rms, raw.cv_in_range_rms, len(cv.segments)

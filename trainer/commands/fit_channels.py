@@ -17,7 +17,6 @@ from typing import Any
 from trainer import methods
 from trainer.atomic_dir import atomic_directory, check_output_directory
 from trainer.data.channels import (
-    ALL,
     channel_view,
     method_refusal,
     one_axis_left_out,
@@ -41,7 +40,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     check_output_directory(args.output)  # before a possibly long fit
     train = read_recording(args.train)
     channels = select_channels(train, args.channels)
-    if args.channels == (ALL,) and (note := one_axis_left_out(train, channels)) is not None:
+    if (note := one_axis_left_out(train, args.channels, channels)) is not None:
         print(note, file=sys.stderr, flush=True)
     for channel in channels:  # refuse before the first (possibly long) fit
         refusal = method_refusal(method.name, method.family, channel)

@@ -85,14 +85,15 @@ def recording_channels(rec: Recording) -> dict[str, Channel]:
     return dict(sorted(found.items(), key=lambda item: sort_key(item[0])))
 
 
-def one_axis_left_out(rec: Recording, channels: list[Channel]) -> str | None:
-    """What ``--channels all`` says when the file's own ``accel_mg`` is not one of its named channels.
+def one_axis_left_out(rec: Recording, wanted: tuple[str, ...], channels: list[Channel]) -> str | None:
+    """What ``--channels all`` (``wanted``) says when the file's own ``accel_mg`` is not one of its
+    named channels (``channels``, what it selected); None for a list of names or no such column.
 
     A multi-channel recording may carry ``accel_mg`` as a copy of the axis a one-channel command
     compensates (``trainer import`` writes it so); a simulated IMU carries it as its accelerometer
     beside ``gyro0_x_dps``. In the second case ``all`` (named channels only) would drop it silently.
     """
-    if ONE_AXIS_CHANNEL not in rec.columns:
+    if wanted != (ALL,) or ONE_AXIS_CHANNEL not in rec.columns:
         return None
     data = rec.columns[ONE_AXIS_CHANNEL]
     if any(c.column in rec.columns and np.array_equal(rec.columns[c.column], data) for c in channels):

@@ -11,7 +11,7 @@ from __future__ import annotations
 from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import BlockData, build_blocks
 from trainer.diagnose.candidates import propose, propose_freed_wide
-from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model, search_bounds
+from trainer.diagnose.model import Design, ModelFit, Term, build_design, evaluate, fit_model, search_bounds
 from trainer.diagnose.profile import analyse_profile
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.run import channel_scale, diagnose
@@ -20,6 +20,7 @@ from trainer.diagnose.verdict import ambiguity_line, implausible_effects
 
 __all__ = [
     "BlockData",
+    "Design",
     "Diagnosis",
     "ModelFit",
     "Term",

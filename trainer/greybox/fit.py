@@ -24,6 +24,7 @@ from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
 from trainer.diagnose.api import (
     BlockData,
+    Design,
     ModelFit,
     Term,
     analyse_profile,
@@ -121,6 +122,19 @@ def _at_bound(term: Term, data: BlockData) -> dict[str, tuple[float, float, floa
     return out
 
 
+def _least_squares(design: Design, data: BlockData) -> np.ndarray:
+    """Linear coefficients by least squares, as the compensator runs (no noise model), on the
+    training blocks (a cross-validation fold's held-out blocks have no weight)."""
+    weighted = slice(None) if data.held_out is None else ~data.held_out
+    beta, *_ = np.linalg.lstsq(design.X[weighted], (data.accel - design.offset)[weighted], rcond=None)
+    return np.asarray(beta)
+
+
+def _owned(design: Design, values: np.ndarray, index: int) -> dict[str, float]:
+    """``{role: value}`` of the design columns that term ``index`` owns."""
+    return {role: float(v) for (owner, role), v in zip(design.roles, values, strict=True) if owner == index}
+
+
 def _undetermined(trial: ModelFit, data: BlockData, identifier: str, scale: ChannelScale | None) -> str:
     """Why the trial's last ``identifier`` term is not determined by the run ("" when it is): a
     nonlinear value at an end of its search range or a parameter outside the plausible range, the
@@ -132,9 +146,7 @@ def _undetermined(trial: ModelFit, data: BlockData, identifier: str, scale: Chan
     for name, (value, lo, hi) in _at_bound(term, data).items():
         return f"{name} = {value:.4g} at the end of its search range {lo:g}..{hi:g}"
     design = build_design(trial.terms, data)
-    weighted = slice(None) if data.held_out is None else ~data.held_out
-    beta, *_ = np.linalg.lstsq(design.X[weighted], (data.accel - design.offset)[weighted], rcond=None)
-    linear = {role: float(b) for (owner, role), b in zip(design.roles, beta, strict=True) if owner == index}
+    linear = _owned(design, _least_squares(design, data), index)
     outside = implausible(identifier, catalogue_params(definition, term, linear), scale)
     return "; ".join(outside.values())
 
@@ -226,9 +238,7 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
     fit = _clamp_rate(fit_model(terms, noise_terms, data, start=current.noise), data, noise_terms)
 
     design = build_design(fit.terms, data)
-    y = data.accel - design.offset
-    weighted = slice(None) if data.held_out is None else ~data.held_out  # cross-validation: training blocks
-    beta_ols, *_ = np.linalg.lstsq(design.X[weighted], y[weighted], rcond=None)
+    beta_ols = _least_squares(design, data)
     Xw = fit.gls.whiten(design.X)
     dof = max(data.n - design.X.shape[1], 1)
     cov = (fit.rss / dof) * np.linalg.pinv(Xw.T @ Xw)
@@ -245,13 +255,8 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         definition = DEFINITIONS[term.identifier]
         if term.identifier not in EFFECTS:
             continue  # a noise trend column (rate_ramp) is part of the fit, not of the drift
-        linear = {
-            role: float(b) for (owner, role), b in zip(design.roles, beta_ols, strict=True) if owner == index
-        }
-        params = catalogue_params(definition, term, linear)
-        sd_lin = {
-            role: float(s) for (owner, role), s in zip(design.roles, sd_linear, strict=True) if owner == index
-        }
+        params = catalogue_params(definition, term, _owned(design, beta_ols, index))
+        sd_lin = _owned(design, sd_linear, index)
         nonlinear = [name for name, _ in definition.finder.nonlinear]
         sd = {k: abs(v) for k, v in catalogue_params(definition, term, sd_lin).items() if k not in nonlinear}
         judged = term.identifier in keep

@@ -87,14 +87,14 @@ def run_per_channel(
     ``<dir>/<channel>.pt``. Text the command prints or writes (.md, .txt, .json) says the
     channel's unit instead of mg (:func:`trainer.data.channels.relabel_units`).
     """
-    from trainer.data.channels import ALL, one_axis_left_out, select_channels
+    from trainer.data.channels import one_axis_left_out, select_channels
     from trainer.data.recording_io import read_recording
 
     given = {attr: getattr(args, attr) for attr in recordings if getattr(args, attr) is not None}
     recs = {attr: read_recording(path) for attr, path in given.items()}
     first = next(iter(recs.values()))
     channels = select_channels(first, args.channels)
-    if args.channels == (ALL,) and (note := one_axis_left_out(first, channels)) is not None:
+    if (note := one_axis_left_out(first, args.channels, channels)) is not None:
         print(note, file=sys.stderr, flush=True)
     for channel in channels:
         reason = refuse(channel) if refuse is not None else None
