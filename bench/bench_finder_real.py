@@ -14,6 +14,15 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
 * ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
   plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
+* size / limit: each added instance's size over the clean run's detection limit for its own shape
+  (``diagnose.detection.shape_limit``: the size at which the criterion would name it beside the
+  clean model, at the clean run's noise; optimistic, the finder re-estimates the noise);
+* silent: an added effect neither named nor reported (ambiguity, not identifiable, or the
+  report's "smallest size this run names");
+* not scored: the clean run already carries the effect or is unsettled about it (a found
+  hysteresis excludes a branch offset, an ambiguity lists it: the sizes merge), or the effect is
+  weakly identifiable on this profile and smaller than its limit (the report must say so: silent
+  counts it). The totals are given for the scored and the other cases apart;
 * time per diagnosis.
 
     trainer import ../shared/data/real/tofupilot_imu_chamber_cycle.tsv --preset tofupilot \\
@@ -39,9 +48,18 @@ from trainer.data.channels import channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
+from trainer.diagnose.detection import shape_limit
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
-from trainer.physics.catalogue import bias_step, hysteresis_offset, periodic, temp_rate, warmup
+from trainer.physics.catalogue import (
+    DEFINITIONS,
+    bias_step,
+    excluded,
+    hysteresis_offset,
+    periodic,
+    temp_rate,
+    warmup,
+)
 from trainer.physics.effects import EffectConfig, effect_contribution
 
 STEP = bias_step.DEFINITION.identifier
@@ -147,7 +165,35 @@ def within(true: dict[str, float], found: dict[str, float], names: Sequence[str]
     return all(abs(found[n] - true[n]) <= TOLERANCE * abs(true[n]) for n in names)
 
 
-def score(case: Case, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
+def carried(clean: Diagnosis) -> set[str]:
+    """Effects the clean run already carries or is unsettled about: an added instance merges with the
+    run's own (a found hysteresis, an ambiguity), so its size cannot be scored. Steps and periodics
+    are instances of their own and are always scored."""
+    own = {e for e, p in findings(clean) if key_of(e, p) is None}
+    unsettled = {x for a in clean.ambiguous for x in a.effects}
+    return {
+        effect
+        for effect in CHECKED
+        if effect in own | unsettled or any(excluded(effect, other) for other in own)
+    }
+
+
+def limit_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
+    """The clean run's detection limit for the shape of ``added``: the amplitude at which the
+    criterion would name it beside the clean model, at the clean run's noise."""
+    amp_name = CHECKED[added.identifier][0]
+    unit = {**added.params, amp_name: 1.0}
+    shape = effect_contribution(added.identifier, unit, rec.time_s - rec.time_s[0], rec.temp_c, rec.temp_c)
+    nl = tuple(added.params[name] for name, _ in DEFINITIONS[added.identifier].finder.nonlinear)
+    return shape_limit(clean.selection.final, added.identifier, shape, nl).amplitude
+
+
+def weak(effect: str, clean: Diagnosis) -> bool:
+    """Weakly identifiable on this profile (the report gives its detection limit when not named)."""
+    return any(t.effect == effect and t.note for t in clean.tested)
+
+
+def score(case: Case, d: Diagnosis, clean: Diagnosis, rec: Recording) -> dict[str, object]:
     found = findings(d)
     used: set[int] = set()
     named = params_ok = 0
@@ -182,9 +228,29 @@ def score(case: Case, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         if k not in used
         and not any(e == effect and same_instance(effect, p, q, d) for e, q in findings(clean))
     ]
-    reported = {x for a in d.ambiguous for x in a.effects} | {n.effect for n in d.not_identifiable}
+    reported = (
+        {x for a in d.ambiguous for x in a.effects}
+        | {n.effect for n in d.not_identifiable}
+        | {u.effect for u in d.undetected}
+    )
     unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
+    limits = [limit_of(a, clean, rec) for a in case.added]
+    unscored = [
+        f"{a.identifier}: weak, below the run's limit"
+        for a, limit in zip(case.added, limits, strict=True)
+        if weak(a.identifier, clean) and abs(a.params[CHECKED[a.identifier][0]]) < limit
+    ] + [
+        f"{a.identifier}: the run's own (found or unsettled)"
+        for a in case.added
+        if a.identifier in carried(clean)
+    ]
     return {
+        "scored": not unscored,
+        "size_to_limit": [
+            abs(a.params[CHECKED[a.identifier][0]]) / lim for a, lim in zip(case.added, limits, strict=True)
+        ],
+        "unscored": unscored,
+        "silent": sorted(unnamed - reported),
         "ambiguous": sorted(unnamed & reported),
         "lost_said": [effect for effect in lost if effect in reported],
         "named": named,
@@ -239,30 +305,43 @@ def main(argv: Sequence[str] | None = None) -> int:
     wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
     chosen = [c for c in cases(clean.data.duration_s) if not wanted or any(w in c.name for w in wanted)]
     print(
-        "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous | s | findings |"
+        "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous "
+        "| size / limit | silent | not scored | s | findings |"
     )
-    print("|---|--:|--:|--:|---|---|---|--:|---|")
-    totals = {"named": 0, "added": 0, "params_ok": 0, "duplicates": 0, "lost": 0, "lost_said": 0}
+    print("|---|--:|--:|--:|---|---|---|--:|---|---|--:|---|")
+    keys = ("named", "added", "params_ok", "duplicates", "lost", "lost_said", "silent")
+    totals = {group: dict.fromkeys(keys, 0) for group in ("scored", "not scored")}
     for case in chosen:
         started = time.perf_counter()
         d = diagnose(add_effects(rec, case.added), holdout_fraction=0.0)
         seconds = time.perf_counter() - started
-        s = score(case, d, clean)
+        s = score(case, d, clean, rec)
+        total = totals["scored" if s["scored"] else "not scored"]
         for k in ("named", "added", "params_ok", "duplicates"):
-            totals[k] += int(s[k])  # type: ignore[call-overload]
-        totals["lost"] += len(s["lost"])  # type: ignore[arg-type]
-        totals["lost_said"] += len(s["lost_said"])  # type: ignore[arg-type]
+            total[k] += int(s[k])  # type: ignore[call-overload]
+        for k in ("lost", "lost_said", "silent"):
+            total[k] += len(s[k])  # type: ignore[arg-type]
         said = cast(list[str], s["lost_said"])
+        ratios = cast(list[float], s["size_to_limit"])
         lost = [f"{e} (said)" if e in said else e for e in cast(list[str], s["lost"])]
         print(
             f"| {case.name} | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
-            f"| {', '.join(lost) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
+            f"| {', '.join(lost) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} "  # type: ignore[arg-type]
+            f"| {' / '.join(f'{r:.2f}' for r in ratios)} | {', '.join(s['silent']) or '-'} "  # type: ignore[arg-type]
+            f"| {'; '.join(s['unscored']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
             flush=True,
         )
+    for group, t in totals.items():
+        print(
+            f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']}, "
+            f"duplicates {t['duplicates']}, lost clean findings {t['lost']} ({t['lost_said']} of them "
+            f"reported as ambiguous: absorbed by a confounder, said out loud), added effects neither named "
+            f"nor reported {t['silent']}"
+        )
     print(
-        f"\ntotal: named {totals['named']}/{totals['added']}, params within 25 % {totals['params_ok']}/"
-        f"{totals['added']}, duplicates {totals['duplicates']}, lost clean findings {totals['lost']} "
-        f"({totals['lost_said']} of them reported as ambiguous: absorbed by a confounder, said out loud)"
+        "\nnot scored: an added effect the clean run already carries or is unsettled about (its size merges "
+        "with the run's own), or a weakly identifiable one below the clean run's detection limit at its "
+        "parameters (the report's 'smallest size this run names')"
     )
     return 0
 

@@ -95,6 +95,7 @@ def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
     from trainer.diagnose.verdict import ambiguity_line
+    from trainer.physics.catalogue.units import channel_param_name
 
     before, after = result.before, result.after
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
@@ -116,6 +117,12 @@ def summary(result: Diagnosis) -> str:
             lines.append(
                 f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}{result.label}', 1)}"
             )
+    for u in result.undetected:
+        amp = channel_param_name(u.amp_name, result.unit)
+        lines.append(
+            f"not named: {u.effect}{result.label}: this run names it from {amp} = "
+            + ", ".join(f"{lim.amplitude:.3g} ({u.nl_name} {lim.nl_value:.4g})" for lim in u.limits)
+        )
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"

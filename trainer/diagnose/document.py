@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from trainer.data.channels import UNIT_LABELS
+from trainer.diagnose.detection import DetectionLimit
 from trainer.diagnose.fit_summary import FitSummary
 from trainer.diagnose.holdout import Holdout, HoldoutScore
 from trainer.diagnose.locate import AllanComparison
@@ -186,6 +187,24 @@ def ambiguity(a: Ambiguity) -> dict[str, Any]:
     return out
 
 
+def undetected(u: DetectionLimit) -> dict[str, Any]:
+    """A weakly identifiable effect not named, and the smallest amplitude named along its time
+    constant (catalogue names; the channel's own unit is applied with the rest of the document)."""
+    return {
+        "effect": u.effect,
+        "reason": u.reason,
+        "recommended_test": u.recommended_test,
+        "smallest_named": [
+            {
+                u.nl_name: sig(lim.nl_value, 4),
+                u.amp_name: sig(lim.amplitude, 4),
+                "absorbed": round(lim.absorbed, 3),
+            }
+            for lim in u.limits
+        ],
+    }
+
+
 def tested(t: Tested) -> dict[str, Any]:
     if t.delta_bic is None:
         return {"effect": t.effect, "note": t.note}
@@ -261,6 +280,7 @@ def _document(d: Diagnosis) -> dict[str, Any]:
             {"effect": n.effect, "delta_bic": round(n.delta_bic, 2), "reason": n.reason}
             for n in d.not_supported
         ],
+        "undetected": [undetected(u) for u in d.undetected],
         "tested": [tested(t) for t in d.tested],
         "fit": {"before": fit_summary(d.before), "after": fit_summary(d.after)},
         "unexplained": [region(r) for r in d.unexplained],

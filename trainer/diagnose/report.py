@@ -16,6 +16,7 @@ import numpy as np
 
 from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose import document
+from trainer.diagnose.detection import DetectionLimit
 from trainer.diagnose.document import json_text
 from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
 from trainer.diagnose.next_steps import next_steps
@@ -115,6 +116,9 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         + (f" Test that would identify it: {n.recommended_test}." if n.recommended_test else "")
         for n in d.not_identifiable
     ] or ["None."]
+    if d.undetected:
+        lines += ["", "## Weakly identifiable, not named: the smallest size this run names", ""]
+        lines += [_undetected_line(u, d.unit) for u in d.undetected]
     if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
         lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]
@@ -163,6 +167,30 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += ["", "## Files", ""] + [f"- `{name}`: {what}" for name, what in files.items()]
     lines += ["", *next_steps_lines(next_steps(d))]
     return "\n".join(lines) + "\n"
+
+
+def _value(x: float) -> str:
+    return f"{x:.0f}" if abs(x) >= 1000 else f"{x:.4g}"
+
+
+def _undetected_line(u: DetectionLimit, unit: str) -> str:
+    """One weakly identifiable effect: the amplitude the criterion needs along its time constant."""
+    amp = channel_param_name(u.amp_name, unit)
+    sizes = ", ".join(f"{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits)
+    absorbed = [100 * lim.absorbed for lim in u.limits]
+    beyond = [lim.nl_value for lim in u.limits if lim.amplitude > u.plausible_amp[1]]
+    out = (
+        f"- {u.effect}: {u.reason}. Named from `{amp}` = {sizes} (`{u.nl_name}`); "
+        f"{min(absorbed):.0f}..{max(absorbed):.0f} % of its shape is absorbed by the temperature "
+        "polynomial, the terms found and the noise model. A smaller one can be present unseen."
+    )
+    if beyond:
+        where = _value(beyond[0]) if len(beyond) == 1 else f"{_value(min(beyond))}..{_value(max(beyond))}"
+        out += (
+            f" Beyond the catalogue's plausible {u.plausible_amp[1]:g} at `{u.nl_name}` {where}: not "
+            "identifiable there at a plausible size."
+        )
+    return out + (f" Test that would identify it: {u.recommended_test}." if u.recommended_test else "")
 
 
 def _region_line(r: Region) -> str:

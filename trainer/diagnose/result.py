@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from trainer.data.channels import ONE_AXIS_CHANNEL, UNIT_LABELS, Signal
 from trainer.diagnose.baseline import Baseline
 from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.detection import DetectionLimit
 from trainer.diagnose.fit_summary import FitSummary
 from trainer.diagnose.holdout import Holdout
 from trainer.diagnose.model import ModelFit
@@ -104,6 +105,7 @@ class Diagnosis:
     left_out: list[LeftOut]
     ambiguous: list[Ambiguity]
     not_identifiable: list[NotIdentifiable]
+    undetected: list[DetectionLimit]  # weakly identifiable, not named: the smallest size named
     not_supported: list[NotSupported]
     mismatch: list[Region]
     unexplained: list[Region]

@@ -20,6 +20,7 @@ from trainer.data.recording import Recording
 from trainer.diagnose.augmented import augmented_config
 from trainer.diagnose.baseline import build_baseline
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
+from trainer.diagnose.detection import detection_limit
 from trainer.diagnose.fit_summary import FitSummary, summarise
 from trainer.diagnose.holdout import holdout_check
 from trainer.diagnose.implausible import resolve_implausible
@@ -161,9 +162,15 @@ def _diagnose(
         and not DEFINITIONS[effect].finder.absent_when_unidentifiable
     ]
     tested = [Tested(t.effect, delta_bic=t.delta_bic, how=t.note) for t in selection.tested_first_round]
+    named = {e.effect for e in left_out}
+    undetected = []
     for effect, info in ident.items():
         if info.identifiable and info.weak and effect in candidates:
             tested.append(Tested(effect, note=f"weakly identifiable: {info.reason}; {info.test}"))
+            if effect not in named and (
+                limit := detection_limit(final, effect, info.reason, info.test, scale)
+            ):
+                undetected.append(limit)
     not_supported = [
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))
         for n in baseline_support(baseline_common, data)
@@ -191,6 +198,7 @@ def _diagnose(
         left_out=left_out,
         ambiguous=_ambiguous(selection, implausible) + implausible,
         not_identifiable=not_identifiable,
+        undetected=undetected,
         not_supported=not_supported,
         mismatch=mismatch,
         unexplained=unexplained,

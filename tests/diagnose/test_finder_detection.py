@@ -1,0 +1,98 @@
+"""Detection limits (issue 21, item 3): a weakly identifiable effect that is not named is reported
+with the smallest size this run names, instead of silence.
+
+A generated chamber run that starts on a ramp (no soak at power-on: a warm-up is only weakly
+identifiable there). The closed-form limit is checked against the finder's own BIC (``evaluate``,
+``count_params``): data built to hold the effect at exactly the limit make the BIC drop exactly by
+the threshold. Then the finder itself: a warm-up well below the limit is not named and is reported
+with a limit above its size; one well above is named.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
+from trainer.diagnose import diagnose
+from trainer.diagnose.detection import limit_at, shape_limit
+from trainer.diagnose.model import Term, build_design, evaluate
+from trainer.diagnose.report import markdown
+from trainer.diagnose.select import THRESHOLD
+from trainer.physics.catalogue import warmup
+
+WARMUP = warmup.DEFINITION.identifier
+TAU_S = 400.0
+
+
+def ramp_start(t: np.ndarray) -> np.ndarray:
+    """50 -> -10 degC from power-on (no soak), back up to 60 degC, down to 30 degC."""
+    return np.interp(t, [0.0, 1500.0, 3300.0, DURATION_S], [50.0, -10.0, 60.0, 30.0])
+
+
+@pytest.fixture(scope="module")
+def clean():  # type: ignore[no-untyped-def]
+    return diagnose(
+        chamber_recording([], seed=31, temperature_c=ramp_start), holdout_fraction=0.0, max_blocks=BLOCKS
+    )
+
+
+def test_limit_is_where_the_criterion_names_the_effect(clean) -> None:  # type: ignore[no-untyped-def]
+    """Block means = the model's prediction + its residual made orthogonal to the warm-up column (its
+    norm kept) +
+    the warm-up at the stated limit: the model with the warm-up (its time constant held, charged as
+    the search charges it) is better by exactly the threshold."""
+    fit = clean.selection.final
+    data = fit.data
+    limit = limit_at(fit, WARMUP, TAU_S)
+    terms = [*fit.terms, Term(WARMUP, (TAU_S,))]
+    design = build_design(terms, data)
+    own = np.array([owner == len(terms) - 1 for owner, _ in design.roles])
+    column = design.X[:, own][:, 0]
+    # the residual, whitened, without its component along the whitened column beyond the model's
+    white_residual = fit.gls.whiten(fit.residual)
+    white_others = fit.gls.whiten(design.X[:, ~own])
+    white_column = fit.gls.whiten(column)
+    beta, *_ = np.linalg.lstsq(white_others, white_column, rcond=None)
+    direction = white_column - white_others @ beta
+    rss = float(white_residual @ white_residual)
+    white_residual = white_residual - direction * float(direction @ white_residual) / float(
+        direction @ direction
+    )
+    white_residual *= np.sqrt(rss / float(white_residual @ white_residual))  # the model's rss kept
+    residual = fit.gls.chol @ white_residual
+    accel = fit.prediction + residual + limit.amplitude * column
+    shifted = replace(data, accel=accel)
+    without = evaluate(list(fit.terms), shifted, fit.gls)
+    with_it = evaluate(terms, shifted, fit.gls)
+    assert without.bic - with_it.bic == pytest.approx(THRESHOLD, abs=1e-6)
+    assert 0.0 <= limit.absorbed <= 1.0
+
+
+def test_a_warmup_below_the_limit_is_said_and_one_above_is_named(clean) -> None:  # type: ignore[no-untyped-def]
+    limit = limit_at(clean.selection.final, WARMUP, TAU_S).amplitude
+    assert [u.effect for u in clean.undetected].count(WARMUP) == 1  # weak, not named, reported
+    small = 0.4 * limit
+    rec = chamber_recording([(WARMUP, {"amp_mg": small, "tau_s": TAU_S})], seed=31, temperature_c=ramp_start)
+    d = diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
+    assert WARMUP not in [e.effect for e in d.left_out]
+    said = [u for u in d.undetected if u.effect == WARMUP]
+    assert said and limit_at(d.selection.final, WARMUP, TAU_S).amplitude > small
+    assert "smallest size this run names" in markdown(d) and "- warmup:" in markdown(d)
+    large = 4.0 * limit
+    rec = chamber_recording([(WARMUP, {"amp_mg": large, "tau_s": TAU_S})], seed=31, temperature_c=ramp_start)
+    d = diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
+    named = [e.params for e in d.left_out if e.effect == WARMUP]
+    assert named and named[0]["amp_mg"] == pytest.approx(large, rel=0.25)
+    assert WARMUP not in [u.effect for u in d.undetected]
+
+
+def test_an_instance_shape_has_the_limit_of_its_effect(clean) -> None:  # type: ignore[no-untyped-def]
+    """The limit of a warm-up's own full-rate shape (block means taken here) is the effect's limit at
+    its time constant (the finder's exact block-mean column): one criterion, two ways in."""
+    fit = clean.selection.final
+    t = fit.data.full_t
+    shaped = shape_limit(fit, WARMUP, np.exp(-t / TAU_S), (TAU_S,))
+    assert shaped.amplitude == pytest.approx(limit_at(fit, WARMUP, TAU_S).amplitude, rel=0.01)

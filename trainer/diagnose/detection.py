@@ -1,0 +1,130 @@
+"""The smallest size of an effect this run would name: a weakly identifiable effect's detection limit.
+
+An effect the finder does not name is either absent or too small for this run to see: its signature
+is partly absorbed by the temperature polynomial, the terms found and the noise model (a warm-up on a
+run that starts with a monotone ramp looks like the polynomial on that ramp). Silence cannot tell the
+two apart; a detection limit can. For an effect with one amplitude column at fixed nonlinear
+parameters, under the final model's noise covariance (whitened), adding the column with amplitude
+``a`` lowers the residual sum of squares by ``a^2 q``, ``q`` the squared norm of the whitened column
+orthogonal to the model's columns. With ``n`` weighted blocks, the scale profiled (``rss / n``), and
+``k`` parameters the effect adds, the criterion (``BIC`` drop >= ``THRESHOLD``) names it when
+
+    n ln(1 + a^2 q / rss) >= THRESHOLD + k ln(n),   i.e.   a >= sqrt(rss / q (exp((THRESHOLD + k ln n) / n) - 1)).
+
+The noise is held at the final model's; the finder re-estimates it, so a limit is optimistic where
+the random walk can take up part of the effect.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from trainer.diagnose.blocks import block_means
+from trainer.diagnose.model import PLAUSIBLE, ModelFit, Term, build_design, search_bounds
+from trainer.diagnose.select import THRESHOLD
+from trainer.physics.catalogue import DEFINITIONS, flagged_range
+from trainer.physics.catalogue.units import ChannelScale
+
+GRID_POINTS = 5  # nonlinear values over the plausible range at which a limit is reported
+
+
+@dataclass(frozen=True)
+class Limit:
+    """At ``nl_value`` of the effect's nonlinear parameter: the smallest amplitude named, and the
+    share of the effect's shape (beyond a constant) that the model's columns absorb."""
+
+    nl_value: float
+    amplitude: float
+    absorbed: float
+
+
+@dataclass(frozen=True)
+class DetectionLimit:
+    """A weakly identifiable effect not named: why it is weak and the smallest size named."""
+
+    effect: str
+    nl_name: str
+    amp_name: str
+    plausible_amp: tuple[float, float]
+    limits: tuple[Limit, ...]
+    reason: str
+    recommended_test: str
+
+
+def single_amplitude(effect: str) -> tuple[str, str] | None:
+    """(nonlinear name, amplitude name) of an effect with one nonlinear parameter and one amplitude
+    column; None for any other shape (a periodic's two columns, a polynomial)."""
+    finder = DEFINITIONS[effect].finder
+    amplitudes = [p.name for p in DEFINITIONS[effect].params if p.name not in dict(finder.nonlinear)]
+    if len(finder.nonlinear) != 1 or len(amplitudes) != 1:
+        return None
+    return finder.nonlinear[0][0], amplitudes[0]
+
+
+def limit_at(fit: ModelFit, effect: str, nl_value: float) -> Limit:
+    """The detection limit of ``effect`` at ``nl_value`` added to ``fit`` (see the module docstring)."""
+    term = Term(effect, (float(nl_value),))
+    design = build_design([*fit.terms, term], fit.data)
+    own = np.array([owner == len(fit.terms) for owner, _ in design.roles])
+    return _limit(fit, design.X[:, ~own], design.X[:, own][:, 0], 1 + term.n_free_nl, float(nl_value))
+
+
+def shape_limit(fit: ModelFit, effect: str, shape: np.ndarray, nl: tuple[float, ...]) -> Limit:
+    """The detection limit of one instance's own shape: ``shape`` its contribution per unit of
+    amplitude at full rate (a periodic at its phase, a step at its time; ``nl`` its nonlinear
+    parameters), charged as the search charges the effect (its columns and nonlinear parameters). Below it this run cannot be asked to
+    name the instance."""
+    data = fit.data
+    column = block_means(shape, data.samples_per_block, data.n)
+    term = Term(effect, nl)
+    design = build_design([*fit.terms, term], data)
+    own = np.array([owner == len(fit.terms) for owner, _ in design.roles])
+    added = int(own.sum()) + term.n_free_nl
+    return _limit(fit, design.X[:, ~own], column, added, float("nan"))
+
+
+def _limit(
+    fit: ModelFit, model_columns: np.ndarray, column: np.ndarray, added: int, nl_value: float
+) -> Limit:
+    others = fit.gls.whiten(model_columns)
+    white = fit.gls.whiten(column)
+    coefficients, *_ = np.linalg.lstsq(others, white, rcond=None)
+    orthogonal = white - others @ coefficients
+    constant = fit.gls.whiten(np.ones(fit.data.n))
+    beyond_constant = white - constant * float(constant @ white) / float(constant @ constant)
+    q = float(orthogonal @ orthogonal)
+    n = fit.gls.n_weighted
+    needed = math.expm1((THRESHOLD + added * math.log(n)) / n)
+    amplitude = math.sqrt(fit.rss / q * needed) if q > 0 else math.inf
+    shape = float(beyond_constant @ beyond_constant)
+    return Limit(nl_value, amplitude, 1.0 - q / shape if shape > 0 else 1.0)
+
+
+def detection_limit(
+    fit: ModelFit, effect: str, reason: str, recommended_test: str, scale: ChannelScale | None = None
+) -> DetectionLimit | None:
+    """Limits of ``effect`` over its nonlinear parameter's plausible range (log-spaced); the plausible
+    amplitude is the channel's (``scale``: a gyroscope's in deg/s, bounded by its drift span)."""
+    names = single_amplitude(effect)
+    if names is None:
+        return None
+    nl_name, amp_name = names
+    # the plausible range where the search looks (a rate term's plausible 0 s is one block here)
+    (search_lo, search_hi), *_ = search_bounds(effect, fit.data)
+    plausible_lo, plausible_hi = PLAUSIBLE[(effect, nl_name)]
+    lo, hi = max(plausible_lo, search_lo), min(plausible_hi, search_hi)
+    if not 0.0 < lo <= hi:
+        return None
+    grid = np.geomspace(lo, hi, GRID_POINTS)
+    return DetectionLimit(
+        effect,
+        nl_name,
+        amp_name,
+        flagged_range(effect, amp_name, scale) or PLAUSIBLE[(effect, amp_name)],
+        tuple(limit_at(fit, effect, float(v)) for v in grid),
+        reason,
+        recommended_test,
+    )
