@@ -162,12 +162,13 @@ def _diagnose(
         and not DEFINITIONS[effect].finder.absent_when_unidentifiable
     ]
     tested = [Tested(t.effect, delta_bic=t.delta_bic, how=t.note) for t in selection.tested_first_round]
-    named = {e.effect for e in left_out}
+    ambiguous = _ambiguous(selection, implausible) + implausible
+    said = {e.effect for e in left_out} | {x for a in ambiguous for x in a.effects}
     undetected = []
     for effect, info in ident.items():
         if info.identifiable and info.weak and effect in candidates:
             tested.append(Tested(effect, note=f"weakly identifiable: {info.reason}; {info.test}"))
-            if effect not in named and (
+            if effect not in said and (
                 limit := detection_limit(final, effect, info.reason, info.test, scale)
             ):
                 undetected.append(limit)
@@ -196,7 +197,7 @@ def _diagnose(
         baseline_effects=catalogue_effects(baseline_common),
         selection=selection,
         left_out=left_out,
-        ambiguous=_ambiguous(selection, implausible) + implausible,
+        ambiguous=ambiguous,
         not_identifiable=not_identifiable,
         undetected=undetected,
         not_supported=not_supported,
