@@ -129,11 +129,16 @@ def cases(duration_s: float) -> list[Case]:
     return out
 
 
+def contribution(rec: Recording, effect: EffectConfig) -> np.ndarray:
+    """One instance's catalogue contribution on the recording's time axis and temperature."""
+    return effect_contribution(
+        effect.identifier, effect.params, rec.time_s - rec.time_s[0], rec.temp_c, rec.temp_c
+    )
+
+
 def add_effects(rec: Recording, added: Sequence[EffectConfig]) -> Recording:
     """The recording with the catalogue contribution of every ``added`` instance on its channel."""
-    t = rec.time_s - rec.time_s[0]
-    temp = rec.temp_c
-    extra = sum((effect_contribution(e.identifier, e.params, t, temp, temp) for e in added), np.zeros(len(t)))
+    extra = sum((contribution(rec, e) for e in added), np.zeros(rec.time_s.size))
     columns = dict(rec.columns)
     columns["accel_mg"] = rec.accel_mg + extra
     return Recording(columns, dict(rec.meta), rec.source)
@@ -181,16 +186,16 @@ def carried(clean: Diagnosis) -> set[str]:
 def limit_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
     """The clean run's detection limit for the shape of ``added``: the amplitude at which the
     criterion would name it beside the clean model, at the clean run's noise."""
-    amp_name = CHECKED[added.identifier][0]
-    unit = {**added.params, amp_name: 1.0}
-    shape = effect_contribution(added.identifier, unit, rec.time_s - rec.time_s[0], rec.temp_c, rec.temp_c)
+    unit = EffectConfig(added.identifier, {**added.params, CHECKED[added.identifier][0]: 1.0})
+    shape = contribution(rec, unit)
     nl = tuple(added.params[name] for name, _ in DEFINITIONS[added.identifier].finder.nonlinear)
     return shape_limit(clean.selection.final, added.identifier, shape, nl).amplitude
 
 
 def weak(effect: str, clean: Diagnosis) -> bool:
     """Weakly identifiable on this profile (the report gives its detection limit when not named)."""
-    return any(t.effect == effect and t.note for t in clean.tested)
+    info = clean.profile.identifiability.get(effect)
+    return info is not None and info.identifiable and info.weak
 
 
 def score(case: Case, d: Diagnosis, clean: Diagnosis, rec: Recording) -> dict[str, object]:
@@ -339,9 +344,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"nor reported {t['silent']}"
         )
     print(
-        "\nnot scored: an added effect the clean run already carries or is unsettled about (its size merges "
+        "\n(not scored: an added effect the clean run already carries or is unsettled about (its size merges "
         "with the run's own), or a weakly identifiable one below the clean run's detection limit at its "
-        "parameters (the report's 'smallest size this run names')"
+        "parameters (the report's 'smallest size this run names'))"
     )
     return 0
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
-from trainer.diagnose import diagnose
+from trainer.diagnose import Diagnosis, diagnose
 from trainer.diagnose.detection import limit_at, shape_limit
 from trainer.diagnose.model import Term, build_design, evaluate
 from trainer.diagnose.report import markdown
@@ -33,13 +33,13 @@ def ramp_start(t: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def clean():  # type: ignore[no-untyped-def]
+def clean() -> Diagnosis:
     return diagnose(
         chamber_recording([], seed=31, temperature_c=ramp_start), holdout_fraction=0.0, max_blocks=BLOCKS
     )
 
 
-def test_limit_is_where_the_criterion_names_the_effect(clean) -> None:  # type: ignore[no-untyped-def]
+def test_limit_is_where_the_criterion_names_the_effect(clean: Diagnosis) -> None:
     """Block means = the model's prediction + its residual made orthogonal to the warm-up column (its
     norm kept) +
     the warm-up at the stated limit: the model with the warm-up (its time constant held, charged as
@@ -71,7 +71,7 @@ def test_limit_is_where_the_criterion_names_the_effect(clean) -> None:  # type: 
     assert 0.0 <= limit.absorbed <= 1.0
 
 
-def test_a_warmup_below_the_limit_is_said_and_one_above_is_named(clean) -> None:  # type: ignore[no-untyped-def]
+def test_a_warmup_below_the_limit_is_said_and_one_above_is_named(clean: Diagnosis) -> None:
     limit = limit_at(clean.selection.final, WARMUP, TAU_S).amplitude
     assert [u.effect for u in clean.undetected].count(WARMUP) == 1  # weak, not named, reported
     small = 0.4 * limit
@@ -89,7 +89,7 @@ def test_a_warmup_below_the_limit_is_said_and_one_above_is_named(clean) -> None:
     assert WARMUP not in [u.effect for u in d.undetected]
 
 
-def test_an_instance_shape_has_the_limit_of_its_effect(clean) -> None:  # type: ignore[no-untyped-def]
+def test_an_instance_shape_has_the_limit_of_its_effect(clean: Diagnosis) -> None:
     """The limit of a warm-up's own full-rate shape (block means taken here) is the effect's limit at
     its time constant (the finder's exact block-mean column): one criterion, two ways in."""
     fit = clean.selection.final

@@ -94,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
+    from trainer.diagnose.report import limit_sizes
     from trainer.diagnose.verdict import ambiguity_line
     from trainer.physics.catalogue.units import channel_param_name
 
@@ -119,10 +120,7 @@ def summary(result: Diagnosis) -> str:
             )
     for u in result.undetected:
         amp = channel_param_name(u.amp_name, result.unit)
-        lines.append(
-            f"not named: {u.effect}{result.label}: this run names it from {amp} = "
-            + ", ".join(f"{lim.amplitude:.3g} ({u.nl_name} {lim.nl_value:.4g})" for lim in u.limits)
-        )
+        lines.append(f"not named: {u.effect}{result.label}: this run names it from {amp} = {limit_sizes(u)}")
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"

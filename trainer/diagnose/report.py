@@ -173,16 +173,21 @@ def _value(x: float) -> str:
     return f"{x:.0f}" if abs(x) >= 1000 else f"{x:.4g}"
 
 
+def limit_sizes(u: DetectionLimit) -> str:
+    """``1.33 at 60, 2.06 at 140.4, ... (tau_s)``: the smallest amplitude named along the time
+    constant (the report's and the terminal's one wording)."""
+    return ", ".join(f"{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits) + f" ({u.nl_name})"
+
+
 def _undetected_line(u: DetectionLimit, unit: str) -> str:
     """One weakly identifiable effect: the amplitude the criterion needs along its time constant."""
     amp = channel_param_name(u.amp_name, unit)
-    sizes = ", ".join(f"{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits)
     absorbed = [100 * lim.absorbed for lim in u.limits]
     beyond = [lim.nl_value for lim in u.limits if lim.amplitude > u.plausible_amp[1]]
     out = (
-        f"- {u.effect}: {u.reason}. Named from `{amp}` = {sizes} (`{u.nl_name}`); "
-        f"{min(absorbed):.0f}..{max(absorbed):.0f} % of its shape is absorbed by the temperature "
-        "polynomial, the terms found and the noise model. A smaller one can be present unseen."
+        f"- {u.effect}: {u.reason}. Named from `{amp}` = {limit_sizes(u)}; weighted by the fitted "
+        f"noise, {min(absorbed):.0f}..{max(absorbed):.0f} % of its shape is taken by the model's other "
+        "columns (the temperature polynomial and the terms found). A smaller one can be present unseen."
     )
     if beyond:
         where = _value(beyond[0]) if len(beyond) == 1 else f"{_value(min(beyond))}..{_value(max(beyond))}"
