@@ -144,6 +144,24 @@ def test_evaluate_per_channel_reports_in_the_channel_unit(
         assert f" {unit}" in report and (unit == "mg" or " mg" not in report)
 
 
+def test_evaluate_one_channel_model_on_the_multi_channel_file_scores_its_own_channel(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A gyro0_x model given the whole IMU file (no --channels) scores gyro0_x in deg/s, exactly as
+    on a file holding that channel alone, never the file's accel_mg (it did: mg figures of accel z)."""
+    rec = read_recording(imu["rec"])
+    model = str(imu["root"] / "poly3" / "gyro0_x.pt")
+    single = tmp_path / "gyro0_x.npz"
+    write_recording(one_axis(rec, "gyro0_x"), single)
+    lines = []
+    for source, out in ((imu["rec"], "multi"), (single, "single")):
+        assert trainer_main(["evaluate", model, str(source), "--out-dir", str(tmp_path / out),
+                             "--smoothing", "0"]) == 0  # fmt: skip
+        lines.append(next(x for x in capsys.readouterr().out.splitlines() if x.startswith("drift left")))
+    assert " deg/s" in lines[0] and " mg" not in lines[0].replace("true_drift_mg", "")
+    assert lines[0] == lines[1]
+
+
 def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

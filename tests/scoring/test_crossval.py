@@ -227,6 +227,9 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     index = json.loads((tmp_path / "m" / "channels.json").read_text())
     chosen = {c["channel"]: c["auto_chose"] for c in index["channels"]}
     assert chosen["gyro0_x"] == NONE and chosen["accel0_z"] != NONE
+    # each line names what was chosen, not the class that loads it (a degree-0 poly3 is "none")
+    assert f"{NONE} gyro0_x: fitted on" in fit.stdout and "poly3 gyro0_x" not in fit.stdout
+    assert f"{chosen['accel0_z']} accel0_z: fitted on" in fit.stdout
     out = _run(
         codegen_main,
         "export",
@@ -260,6 +263,7 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     text = (tmp_path / "so" / "report.md").read_text()
     assert text.count("### Cross-validation") == 2 and "cross-validated over 3 thermal segments" in text
     assert "worse than uncompensated" not in text  # auto never ships a channel CV says is made worse
+    assert f"gyro0_x / {NONE}" in text and "method `none`" in text
     bad = _run(
         trainer_main,
         "fit",

@@ -76,8 +76,8 @@ def drift_lines(result: Any) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
-    from trainer.checkpoint import load_model
-    from trainer.data.channels import relabel_units, signal_of
+    from trainer.checkpoint import load_model, shown_method
+    from trainer.data.channels import model_view, relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
@@ -92,7 +92,9 @@ def run(args: argparse.Namespace) -> int:
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     model, checkpoint = load_model(args.model)
-    rec = whole = check_scored(read_recording(args.recording))
+    stats = TrainStats.of_checkpoint(checkpoint)
+    # the model's own channel (gyro0_x of a multi-channel file), never the file's accel_mg
+    rec = whole = check_scored(model_view(read_recording(args.recording), stats.channel, args.model))
     lead_in = None
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
@@ -100,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         # a held-out end part is scored with the state run through the part before it (firmware that
         # has run since power-on); a held-out start part starts cold, as at power-on
         lead_in = train_part.without_truth() if holdout.side == "last" else None
-    name = checkpoint["method"]
+    name = shown_method(checkpoint)
     compensated = compensate_after(model, rec.without_truth(), lead_in)
     lo, hi = checkpoint["valid_temp_range_c"]
     outside = (rec.temp_c < lo) | (rec.temp_c > hi)
@@ -113,7 +115,6 @@ def run(args: argparse.Namespace) -> int:
         references=references,
     )
 
-    stats = TrainStats.of_checkpoint(checkpoint)
     signal = signal_of(rec, stats.channel)
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -277,42 +277,11 @@ def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] |
     return None if item is None else (item[0], label)
 
 
-def model_view(rec: Any, channel: str | None, model_path: Path) -> Any:
-    """The part of ``rec`` the model compensates: the recording itself (``accel_mg``) when the model
-    has no channel, the recording has no channel columns or its ``accel_mg`` is the model's channel
-    (metadata ``channel``: a one-axis import), else the channel's one-channel view; a missing
-    channel is a UserError."""
-    from trainer.data.channels import (
-        channel_unit,
-        channel_view,
-        names_text,
-        recording_channels,
-        select_channels,
-        unit_of_channel_name,
-    )
-
-    available = recording_channels(rec)
-    if channel and available and rec.meta.get("channel") != channel:
-        if channel not in available:
-            raise UserError(
-                f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); available: "
-                f"{names_text(available)}"
-            )
-        (found,) = select_channels(rec, (channel,))
-        return channel_view(rec, found)
-    if channel and unit_of_channel_name(channel) != channel_unit(rec):
-        raise UserError(
-            f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); the recording holds "
-            f"one channel in {channel_unit(rec)} (accel_mg)"
-        )
-    return rec
-
-
 def run(args: argparse.Namespace) -> int:
     from trainer import __version__
-    from trainer.checkpoint import load_model
+    from trainer.checkpoint import load_model, shown_method
     from trainer.commands.compare_cmd import publish
-    from trainer.data.channels import UNIT_LABELS, channel_unit
+    from trainer.data.channels import UNIT_LABELS, channel_unit, model_view
     from trainer.data.holdout import overlap_warning, parse_holdout
     from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
@@ -353,10 +322,10 @@ def run(args: argparse.Namespace) -> int:
             stats = TrainStats.of_checkpoint(ckpt)
             rec = model_view(loaded[rec_path], stats.channel or "", model_path)
             channel = stats.channel or model_path.stem
-            label = f"{channel} / {ckpt['method']}"
+            label = f"{channel} / {shown_method(ckpt)}"
             if label in seen:
                 raise UserError(
-                    f"{model_path}: a second {ckpt['method']} model for channel {channel} (the channel is the "
+                    f"{model_path}: a second {shown_method(ckpt)} model for channel {channel} (the channel is the "
                     "training recording's 'channel' metadata: check the import)"
                 )
             seen.add(label)
@@ -408,6 +377,7 @@ def run(args: argparse.Namespace) -> int:
                 model_path=str(model_path),
                 model_id=model_id,
                 method=str(ckpt["method"]),
+                shown=shown_method(ckpt),
                 trained_range_c=(lo, hi),
                 recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
                 scores=scores,

@@ -271,3 +271,25 @@ def relabel_units(text: str, unit: str) -> str:
         return text
     sensor = next(name for name, suffix in SENSOR_UNITS.items() if suffix == unit)
     return _SENSOR_WORD.sub(sensor, _UNIT_TOKEN.sub(UNIT_LABELS[unit], text))
+
+
+def model_view(rec: Recording, channel: str | None, model_path: object) -> Recording:
+    """The part of ``rec`` the model compensates: the recording itself (``accel_mg``) when the model
+    has no channel, the recording has no channel columns or its ``accel_mg`` is the model's channel
+    (metadata ``channel``: a one-axis import), else the channel's one-channel view; a missing
+    channel is a UserError."""
+    available = recording_channels(rec)
+    if channel and available and rec.meta.get("channel") != channel:
+        if channel not in available:
+            raise UserError(
+                f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); available: "
+                f"{names_text(available)}"
+            )
+        (found,) = select_channels(rec, (channel,))
+        return channel_view(rec, found)
+    if channel and unit_of_channel_name(channel) != channel_unit(rec):
+        raise UserError(
+            f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); the recording holds "
+            f"one channel in {channel_unit(rec)} (accel_mg)"
+        )
+    return rec

@@ -73,7 +73,7 @@ class ChannelReport:
     unit: str  # the channel's unit as printed: mg, deg/s, Pa
     model_path: str
     model_id: str
-    method: str
+    method: str  # the registered method (what loads it)
     trained_range_c: tuple[float, float]
     recording_range_c: tuple[float, float]
     scores: UnitScores
@@ -84,15 +84,20 @@ class ChannelReport:
     cost: Cost = field(default_factory=Cost)
     notes: list[str] = field(default_factory=list)
     figures: list[str] = field(default_factory=list)
+    shown: str = ""  # the name the reader knows it by (auto's candidate: poly2, physics-branch), else method
+
+    @property
+    def name(self) -> str:
+        return self.shown or self.method
 
     @property
     def label(self) -> str:
-        return f"{self.channel} / {self.method}"
+        return f"{self.channel} / {self.name}"
 
     @property
     def stem(self) -> str:
         """File-name stem of the channel's figures."""
-        return f"{self.channel}_{self.method}".replace("/", "_")
+        return f"{self.channel}_{self.name}".replace("/", "_")
 
     @property
     def coverage(self) -> float:
@@ -257,9 +262,9 @@ def write_figures(
     _by_branch(ax, temp, measured - constant, branch, "measured")
     if registry.REGISTRY[report.method].family == registry.MEMORYLESS:
         order = np.argsort(temp, kind="stable")
-        ax.plot(temp[order], predicted[order], color="black", linewidth=1.0, label=f"{report.method} fit")
+        ax.plot(temp[order], predicted[order], color="black", linewidth=1.0, label=f"{report.name} fit")
     else:  # a function of the temperature history: one point per sample
-        ax.scatter(temp, predicted, s=1, color="black", label=f"{report.method} fit")
+        ax.scatter(temp, predicted, s=1, color="black", label=f"{report.name} fit")
     _shade_held_out(ax, held_temp, held_time, "temperature")
     _finish(
         ax, lo, hi, f"drift ({report.unit}, measured minus its constant)", f"{report.label}: drift and fit"
@@ -411,7 +416,7 @@ def _channel_section(r: ChannelReport) -> list[str]:
     lines = [
         f"## Channel {r.label}",
         "",
-        f"- Model: `{r.model_path}`, method `{r.method}`, id `{r.model_id}`",
+        f"- Model: `{r.model_path}`, method `{r.name}`, id `{r.model_id}`",
         f"- Coverage: trained {lo:.2f} .. {hi:.2f} degC; recording {rlo:.2f} .. {rhi:.2f} degC; "
         f"{100 * r.coverage:.1f} % of the recording's span inside the trained range",
     ]
