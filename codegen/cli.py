@@ -202,8 +202,10 @@ def _verify(args: argparse.Namespace) -> int:
         table1=not args.no_table,
         resample=args.resample,
     )
+    from trainer.data.channels import relabel_units
+
     for line in report_lines(result):
-        print(line)
+        print(relabel_units(line, result.unit))
     if args.json:
         write_json(result, args.out_dir, args.json)
     if result.mismatches or not result.state_equal:

@@ -84,6 +84,7 @@ class VerifyResult:
     rate_millihz: int = 0  # the module's NAME_SAMPLE_RATE_MILLIHZ (0: any rate)
     resampled_from_hz: float | None = None  # the recording's own rate when --resample interpolated it
     schedule: ScheduleCheck | None = None  # a spread module: against the step schedule
+    unit: str = "mg"  # the model's channel unit (deg/s, Pa): the report's "mg" reads as it
 
 
 def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
@@ -274,8 +275,10 @@ def verify(
     resample: bool = False,
 ) -> VerifyResult:
     from trainer.checkpoint import load_model
+    from trainer.data.channels import channel_unit, model_view
     from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
+    from trainer.train_stats import TrainStats
 
     out = Path(out_dir)
     name, manifest = find_manifest(out, name)
@@ -296,7 +299,10 @@ def verify(
         raise UserError(
             f"{out / name}.c was generated from another model (sha256 {stamped}, not {model.sha256})"
         )
-    rec = check_scored(read_recording(recording))
+    float_model, raw = load_model(model_path)
+    # the model's own channel of a multi-channel file (gyro0_x), never the file's accel_mg
+    channel = TrainStats.of_checkpoint(raw).channel
+    rec = check_scored(model_view(read_recording(recording), channel, model_path))
     q = model.quantised
     rate_hz = declared_rate_millihz(q) / 1000
     resampled_from = None
@@ -334,7 +340,6 @@ def verify(
         np.array_equal(np.asarray(c_state[k]), np.asarray(g_state[k])) for k in c_state
     )
     step_out = step_golden.run(accel, temp) if spread else g_out
-    float_model, _ = load_model(model_path)
     offset = float_model.offset
     t_ref = offset.t_ref_c if offset is not None and offset.relative else None
     retime_compensator(float_model, declared_rate_millihz(q))
@@ -362,6 +367,7 @@ def verify(
         rate_millihz=declared_rate_millihz(q),
         resampled_from_hz=resampled_from,
         schedule=schedule_check(q, rec, accel, g_out, step_out, t_ref),
+        unit=channel_unit(rec),
     )
 
 

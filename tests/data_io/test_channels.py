@@ -162,6 +162,24 @@ def test_evaluate_one_channel_model_on_the_multi_channel_file_scores_its_own_cha
     assert lines[0] == lines[1]
 
 
+def test_verify_of_one_channel_module_on_the_multi_channel_file_reads_its_own_channel(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """codegen verify of a gyro0_x module given the whole IMU file streams gyro0_x: its error budget
+    (sensor noise included) is the one-axis file's, in deg/s (it used the accel_mg column's noise)."""
+    rec = read_recording(imu["rec"])
+    model = str(imu["root"] / "poly3" / "gyro0_x.pt")
+    single = tmp_path / "gyro0_x.npz"
+    write_recording(one_axis(rec, "gyro0_x"), single)
+    assert codegen_main(["export", model, "-o", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    budgets = []
+    for source in (imu["rec"], single):
+        assert codegen_main(["verify", model, str(tmp_path / "c"), str(source), "--no-table"]) == 0
+        budgets.append(next(x for x in capsys.readouterr().out.splitlines() if x.startswith("error budget")))
+    assert budgets[0] == budgets[1] and " deg/s" in budgets[0] and " mg" not in budgets[0]
+
+
 def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -72,7 +72,7 @@ def test_a_fold_fit_places_the_rate_term_seen_through_330_s(
 ) -> None:
     (channel,) = [c for c in config.channels if c.name == "gyro0_x"]
     (truth,) = [e.params for e in channel.effects if e.identifier == "temp_rate"]
-    assert truth["tau_s"] > FREED_MAX_S  # beyond what the finder names: the stage must place it
+    assert truth["tau_s"] > FREED_MAX_S  # beyond the finder's cap on continuous ramps: the stage places it
     segment = next(s for s in folds_of(gyro) if s.label == label)
     model = fit_compensator("physics", impute_held_out(gyro, training_rows(len(gyro), segment)))
     params = {e.identifier: e.params for e in model.effects}  # type: ignore[attr-defined]

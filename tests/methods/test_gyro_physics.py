@@ -21,11 +21,13 @@ from trainer.data.channels import channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
 from trainer.diagnose import diagnose
+from trainer.diagnose.blocks import build_blocks
 from trainer.diagnose.document import document
 from trainer.errors import UserError
 from trainer.greybox.compensator import PhysicsCompensator
+from trainer.physics.catalogue.temp_rate import FREED_MAX_S, freed_max_s
 from trainer.physics.catalogue.units import channel_param_name
-from trainer.physics.config import PhysicsConfig, parse_config_text, save_config, with_overrides
+from trainer.physics.config import PhysicsConfig, load_config, parse_config_text, save_config, with_overrides
 from trainer.physics.simulate import simulate
 
 TOLERANCE = 0.25
@@ -106,6 +108,39 @@ def test_diagnose_names_the_concealed_gyro_physics_and_physics_halves_the_cubics
     left_physics = _drift_left_rms(valid, physics.compensate(blind))
     left_cubic = _drift_left_rms(valid, cubic.compensate(blind))
     assert left_physics <= 0.5 * left_cubic, f"physics {left_physics:.4g} vs cubic {left_cubic:.4g} deg/s"
+
+
+REALISTIC = Path(__file__).resolve().parents[2] / "trainer" / "physics" / "realistic.toml"
+
+
+def test_the_realistic_gyroscopes_rate_term_through_330_s_is_named_with_its_filter() -> None:
+    """The main job's realistic gyroscope: a rate term through a 330 s filter beside a 60 s lag and a
+    branch offset. Its holds after ramps (17-25 min) show the filtered rate decaying, so the finder
+    searches the filter that far and names all three within 25 % (with the 120 s cap of a run without
+    holds it named an implausible creep in the rate term's place)."""
+    config = load_config(REALISTIC)
+    rec = simulate(config, 11)  # the main job's realistic training run
+    data = build_blocks(_view(rec, "gyro0_x").without_truth())
+    assert freed_max_s(data.hold_after_ramp_s) > 1.25 * 330.0
+    truth = {e.identifier: e.params for e in config.channels[0].effects}
+    doc = document(diagnose(_view(rec, "gyro0_x"), holdout_fraction=0.0, max_blocks=BLOCKS))
+    named = {e["effect"]: e["params"] for e in doc["left_out"]}
+    assert set(CONCEALED) <= set(named), f"named {sorted(named)}"
+    for identifier in CONCEALED:
+        for name, true in truth[identifier].items():
+            got = named[identifier][channel_param_name(name, "dps")]
+            assert abs(got - true) <= TOLERANCE * abs(true), f"{identifier}.{name}: {got:.4g} vs {true:.4g}"
+
+
+def test_without_a_hold_after_a_ramp_the_rate_filter_search_keeps_its_cap() -> None:
+    """A run of continuous ramps (the bundled real run's kind) cannot tell a long rate filter from its
+    own loop: the finder's freed filter stops at FREED_MAX_S there."""
+    t = np.arange(0.0, 4200.0, 0.5)
+    temp = 50.0 - 70.0 * np.abs((t / 1400.0) % 2.0 - 1.0)  # down, up, down at 3 degC/min: no hold
+    noise = np.random.default_rng(3).normal(0.0, 0.01, t.size)
+    data = build_blocks(Recording({"time_s": t, "temp_c": temp, "accel_mg": noise}, {}, "triangle"))
+    assert data.hold_after_ramp_s == 0.0
+    assert freed_max_s(data.hold_after_ramp_s) == FREED_MAX_S
 
 
 def _cli_json(rec: Recording, channel: str, tmp_path: Path) -> dict:

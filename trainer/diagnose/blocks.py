@@ -17,6 +17,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.signal import savgol_filter
 
 from trainer.data.recording import Recording
+from trainer.diagnose.branches import longest_hold_after_ramp_s
 from trainer.errors import UserError
 
 DEFAULT_MAX_BLOCKS = 600  # dense GLS: Cholesky cost ~ N^3, a few ms at 600
@@ -202,6 +203,12 @@ class BlockData:
 
     def rate(self, dequantized: bool) -> np.ndarray:
         return self._rates[dequantized]
+
+    @cached_property
+    def hold_after_ramp_s(self) -> float:
+        """The longest hold after a ramp (s): where a filtered term's decay shows (temp_rate's
+        search range for a filter, ``trainer.physics.catalogue.temp_rate.freed_max_s``)."""
+        return longest_hold_after_ramp_s(self.rate(True), self.block_s)
 
     def subset(self, stop: int) -> BlockData:
         """The first ``stop`` blocks (the held-out check fits on a leading part of the run)."""

@@ -227,7 +227,7 @@ def _propose_linear(current: ModelFit, data: BlockData, effect: str) -> list[Pro
     fit = polish((*current.terms, Term(effect, defaults, fixed=bool(defaults))), data, current.gls)
     freed_bounds = DEFINITIONS[effect].finder.freed_bounds
     if freed_bounds is not None:
-        ((lo, hi),) = freed_bounds(data)
+        ((lo, hi),) = freed_bounds(data, current.identifiers)
         freed = _profile_1d(current, data, Term(effect, defaults), (lo, hi))
         if freed.bic < fit.bic and lo <= freed.terms[len(current.terms)].nl[0] <= hi:
             fit = freed
@@ -245,7 +245,7 @@ def propose_freed_wide(current: ModelFit, data: BlockData, effect: str) -> list[
         return []
     if any(excluded(effect, present) for present in current.identifiers):
         return []
-    ((lo, _),) = definition.finder.freed_bounds(data)
+    ((lo, _),) = definition.finder.freed_bounds(data, current.identifiers)
     ((_, hi),) = search_bounds(effect, data)
     if not hi > lo:
         return []

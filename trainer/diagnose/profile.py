@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from trainer.diagnose.blocks import BlockData
+from trainer.diagnose.branches import classify_branches, runs_of
 from trainer.physics.catalogue import CANDIDATE_ORDER, DEFINITIONS
 from trainer.physics.catalogue.base import Identifiability, Region
 from trainer.physics.profiles import parse_segments
@@ -72,39 +73,6 @@ class Profile:
         }
 
 
-def _runs(codes: np.ndarray) -> list[tuple[int, int, int]]:
-    """(code, start, stop) of runs of equal values."""
-    if codes.size == 0:
-        return []
-    edges = np.flatnonzero(np.diff(codes)) + 1
-    starts = np.concatenate(([0], edges))
-    stops = np.concatenate((edges, [codes.size]))
-    return [(int(codes[a]), int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
-
-
-def classify_branches(rate: np.ndarray, block_s: float) -> np.ndarray:
-    """+1/-1/0 per block; runs shorter than ~2 min (or 2 % of the run) merge into a neighbour."""
-    scale = float(np.percentile(np.abs(rate), 95)) if rate.size else 0.0
-    threshold = max(0.05, 0.1 * scale)
-    codes = np.where(rate > threshold, 1, np.where(rate < -threshold, -1, 0)).astype(np.int64)
-    min_len = max(2, round(max(120.0, 0.02 * rate.size * block_s) / block_s))
-    for _ in range(4):
-        runs = _runs(codes)
-        if len(runs) <= 1:
-            break
-        changed = False
-        for index, (_, a, b) in enumerate(runs):
-            if b - a >= min_len:
-                continue
-            neighbours = [runs[k] for k in (index - 1, index + 1) if 0 <= k < len(runs)]
-            longest = max(neighbours, key=lambda run: run[2] - run[1])
-            codes[a:b] = longest[0]
-            changed = True
-        if not changed:
-            break
-    return codes
-
-
 def _segments(data: BlockData, meta: dict[str, str], codes: np.ndarray) -> tuple[list[Segment], str]:
     text = meta.get("segments")
     if text:
@@ -115,7 +83,7 @@ def _segments(data: BlockData, meta: dict[str, str], codes: np.ndarray) -> tuple
     segments = []
     starts = data.starts
     end = data.t[-1] + 0.5 * data.block_s
-    for index, (code, a, b) in enumerate(_runs(codes)):
+    for index, (code, a, b) in enumerate(runs_of(codes)):
         label = {1: "ramp_up", -1: "ramp_down"}.get(code, "soak" if index == 0 else "hold")
         stop = starts[b] if b < codes.size else end
         segments.append(Segment(label, float(starts[a]), float(stop)))
@@ -135,7 +103,7 @@ def analyse_profile(
     rate = data.rate(True)
     codes = classify_branches(rate, data.block_s)
     segments, source = _segments(data, meta, codes)
-    runs = _runs(codes)
+    runs = runs_of(codes)
     moving = [(code, a, b) for code, a, b in runs if code != 0]
     seen = np.ones(codes.size, dtype=bool)
     if seen_only and data.held_out is not None:
@@ -151,7 +119,6 @@ def analyse_profile(
         if hi > lo:
             overlap = (lo, hi)
     hold_lengths = [(b - a) * data.block_s for code, a, b in runs if code == 0]
-    after_ramp = [(b - a) * data.block_s for k, (code, a, b) in enumerate(runs) if code == 0 and k > 0]
     ramp_rates: list[float] = []
     for _, a, b in moving:
         core = np.abs(rate[a:b])
@@ -173,7 +140,7 @@ def analyse_profile(
         reversals=reversals,
         overlap_c=overlap,
         hold_s=max(hold_lengths, default=0.0),
-        holds_after_ramp_s=max(after_ramp, default=0.0),
+        holds_after_ramp_s=data.hold_after_ramp_s,
         corners=corners,
         ramp_rates=sorted(ramp_rates),
         starts_from_rest=starts_from_rest,

@@ -10,7 +10,7 @@ read, so the type checker sees through every hook.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Protocol
@@ -95,6 +95,8 @@ class FinderData(Protocol):
     def lattice_lsb_c(self) -> float | None: ...
     @property
     def plateaus(self) -> list[tuple[float, float]]: ...
+    @property
+    def hold_after_ramp_s(self) -> float: ...  # the longest hold after a ramp (s)
 
 
 class FinderTerm(Protocol):
@@ -265,7 +267,8 @@ class Finder:
     nonlinear: tuple[tuple[str, bool], ...] = ()
     bounds: Callable[[FinderData], Bounds] = _no_bounds
     grid_points: int = 0
-    freed_bounds: Callable[[FinderData], Bounds] | None = None  # ``linear``: also tried freed here
+    # ``linear``: also tried freed here, given the block data and the effects already in the model
+    freed_bounds: Callable[[FinderData, Collection[str]], Bounds] | None = None
     max_terms: int = 1  # how many instances the finder may add
     # (term, term, block data): two instances coincide within the data's resolution (one instance)
     same_instance: Callable[[FinderTerm, FinderTerm, FinderData], bool] | None = None
