@@ -180,6 +180,30 @@ def test_verify_of_one_channel_module_on_the_multi_channel_file_reads_its_own_ch
     assert budgets[0] == budgets[1] and " deg/s" in budgets[0] and " mg" not in budgets[0]
 
 
+def test_a_channel_model_on_a_recording_without_its_channel_is_refused_in_one_line(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """evaluate and verify of a gyro0_x model on an accelerometer-only recording: one line naming the
+    model's channel, exit 2, nothing written (they scored the accel_mg column)."""
+    rec = read_recording(imu["rec"])
+    accel = tmp_path / "accel.npz"
+    write_recording(one_axis(rec, "accel0_x"), accel)
+    model = str(imu["root"] / "poly3" / "gyro0_x.pt")
+    assert codegen_main(["export", model, "-o", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    for cli, args in (
+        (trainer_main, ["evaluate", model, str(accel), "--out-dir", str(tmp_path / "ev")]),
+        (
+            codegen_main,
+            ["verify", model, str(tmp_path / "c"), str(accel), "--json", str(tmp_path / "v.json")],
+        ),
+    ):
+        code = run_cli(cli, args)
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1 and "no channel 'gyro0_x'" in err, err
+    assert not (tmp_path / "ev").exists() and not (tmp_path / "v.json").exists()
+
+
 def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
