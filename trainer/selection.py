@@ -53,6 +53,7 @@ from trainer.scoring.crossval import (
     table_lines,
 )
 from trainer.scoring.static import COOLING, HEATING
+from trainer.scoring.verdict import SegmentFigures
 from trainer.train_stats import TrainStats
 
 AUTO = "auto"  # the selector's name on the command line (trainer fit --method auto)
@@ -316,6 +317,7 @@ class CrossValidatedFigures:
     model_in_range: float
     uncompensated_in_range: float
     segments: int
+    per_segment: tuple[SegmentFigures, ...] = ()  # each held-out segment at its natural start
 
 
 def cross_validated_figures(record: dict[str, Any]) -> CrossValidatedFigures:
@@ -323,8 +325,12 @@ def cross_validated_figures(record: dict[str, Any]) -> CrossValidatedFigures:
     cv = CrossValidation.from_dict(record["crossval"])
     mine = cv.results[row_name(str(record["chosen"]))]
     raw = cv.results[UNCOMPENSATED]
+    per_segment = tuple(
+        SegmentFigures(segment.name, m, u)
+        for segment, m, u in zip(cv.segments, mine.natural(), raw.natural(), strict=True)
+    )
     return CrossValidatedFigures(
-        mine.cv_rms, raw.cv_rms, mine.cv_in_range_rms, raw.cv_in_range_rms, len(cv.segments)
+        mine.cv_rms, raw.cv_rms, mine.cv_in_range_rms, raw.cv_in_range_rms, len(cv.segments), per_segment
     )
 
 

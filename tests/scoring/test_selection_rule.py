@@ -11,12 +11,14 @@ import pytest
 from trainer import methods
 from trainer.data.recording import Recording
 from trainer.scoring.crossval import UNCOMPENSATED, CrossValidation, FoldScore, MethodCV, Segment
+from trainer.scoring.verdict import NOISE_MARGIN, REVIEW, verdict, worse_on_a_segment
 from trainer.selection import (
     FULL_CYCLE_SEGMENTS,
     NONE,
     POOLED_GAIN,
     TOLERANCE,
     choose,
+    cross_validated_figures,
     full_cycle,
     record_lines,
     select,
@@ -170,3 +172,26 @@ def test_a_flat_channel_is_left_uncompensated_without_dividing_by_zero() -> None
     cv = table(CYCLE, figures)
     assert worst_ratio(cv, methods.CUBIC) == math.inf and worst_ratio(cv, "poly2") == 1.0
     assert choose(cv)[0] == NONE
+
+
+def test_a_model_better_pooled_but_worse_on_one_segment_asks_for_a_review() -> None:
+    """The bundled run's gyro x: poly2 leaves less than none pooled but 1.86x none on the last
+    cooling; the sign-off's guard passes it (pooled) and the review reason names that segment."""
+    figures = {UNCOMPENSATED: [0.1571, 0.3304, 0.1064], "poly2": [0.1375, 0.1667, 0.1983]}
+    cv = table(CYCLE, figures)
+    record = {"chosen": "poly2", "crossval": cv.to_dict()}
+    pooled = cross_validated_figures(record)
+    assert pooled.model < pooled.uncompensated  # the guard's figure: better
+    assert [s.model_rms for s in pooled.per_segment] == figures["poly2"]
+    reason = worse_on_a_segment("gyro0_x / poly2", pooled.per_segment, 0.014, "deg/s")
+    assert reason is not None and cv.segments[2].name in reason and f"{0.1983 / 0.1064:.2f}x" in reason
+    # none worse: no reason; worse only within the noise margin of the floor: no reason either
+    assert worse_on_a_segment("x", pooled.per_segment[:2], 0.014, "deg/s") is None
+    assert worse_on_a_segment("x", pooled.per_segment, 0.1983 / NOISE_MARGIN, "deg/s") is None
+    assert verdict({}, [_Passed()], [reason]).status == REVIEW
+
+
+class _Passed:
+    ok = True
+    decisive = True
+    name = "a threshold met"

@@ -31,7 +31,14 @@ from trainer.scoring.plots import new_figure, save_figure
 from trainer.scoring.static import COOLING, HEATING, DriftLeft, thermal_branch
 from trainer.scoring.thresholds import THRESHOLDS, passes
 from trainer.scoring.unit_scores import PartScores, UnitScores, coverage
-from trainer.scoring.verdict import NO_VERDICT, Figures, Verdict, verdict, worse_than_uncompensated
+from trainer.scoring.verdict import (
+    NO_VERDICT,
+    Figures,
+    Verdict,
+    verdict,
+    worse_on_a_segment,
+    worse_than_uncompensated,
+)
 
 NOT_MEASURED = "not measured"
 
@@ -132,6 +139,20 @@ class ChannelReport:
             self.unit,
         )
 
+    @property
+    def review(self) -> list[str]:
+        """Why a human should look (the verdict's REVIEW): a model that cross-validation found better
+        than no compensation pooled but worse on one held-out segment."""
+        if self.crossval is None:
+            return []
+        from trainer.selection import cross_validated_figures
+
+        floor = self.scores.headline.noise_floor_mg
+        reason = worse_on_a_segment(
+            self.label, cross_validated_figures(self.crossval).per_segment, floor, self.unit
+        )
+        return [] if reason is None else [reason]
+
 
 def drift_left(rec: Recording, compensated: np.ndarray, smoothing_s: float) -> np.ndarray:
     """The smoothed compensated output minus its mean (the residual figure's points)."""
@@ -206,7 +227,9 @@ def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
 def unit_verdict(reports: Sequence[ChannelReport], thresholds: dict[str, float]) -> Verdict:
     """The unit's verdict: every channel's threshold checks and its guard against uncompensated."""
     return verdict(
-        {r.label: r.figures_for_verdict for r in reports}, [c for r in reports for c in checks(r, thresholds)]
+        {r.label: r.figures_for_verdict for r in reports},
+        [c for r in reports for c in checks(r, thresholds)],
+        [reason for r in reports for reason in r.review],
     )
 
 
@@ -383,6 +406,7 @@ def render(
     lines += [
         f"- {r.label}: {worse_than_uncompensated(r.label, r.figures_for_verdict).detail}" for r in reports
     ]
+    lines += [f"- review: {reason}" for reason in decided.review]
     lines.append("")
     if all_checks:
         rows = [
@@ -522,4 +546,5 @@ def _status(decided: Verdict) -> str:
 def summary_line(unit: str, reports: Sequence[ChannelReport], thresholds: dict[str, float]) -> str:
     decided = unit_verdict(reports, thresholds)
     failed = f" (failed: {', '.join(decided.failed)})" if decided.failed else ""
-    return f"{unit}: {_status(decided)}{failed}"
+    review = f" (review: {'; '.join(decided.review)})" if decided.review else ""
+    return f"{unit}: {_status(decided)}{failed}{review}"

@@ -107,6 +107,32 @@ def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
 
 
 @dataclass(frozen=True)
+class SegmentFigures:
+    """One held-out segment of a cross-validation: the model's drift left there (at the segment's
+    natural start) beside the uncompensated output's, in the channel's unit."""
+
+    name: str  # e.g. "cooling 3134-4245 s (73.9 -> 36.3 degC)"
+    model_rms: float
+    uncompensated_rms: float
+
+
+def worse_on_a_segment(
+    subject: str, segments: Sequence[SegmentFigures], noise_floor: float, unit: str
+) -> str | None:
+    """A reason for a human look when the model leaves more than no compensation on one held-out
+    segment (beyond the noise), though not pooled (the guard's figure): a user meets one segment at a
+    time. None when no segment is worse."""
+    worse = [s for s in segments if _worse(s.model_rms, s.uncompensated_rms, noise_floor)]
+    if not worse:
+        return None
+    s = max(worse, key=lambda x: x.model_rms / x.uncompensated_rms)
+    return (
+        f"{subject}: on the held-out {s.name} it leaves {s.model_rms:.4g} {unit}, "
+        f"{s.model_rms / s.uncompensated_rms:.2f}x uncompensated ({s.uncompensated_rms:.4g} {unit})"
+    )
+
+
+@dataclass(frozen=True)
 class Verdict:
     status: str  # PASS | REVIEW | FAIL | NO VERDICT
     failed: tuple[str, ...] = ()  # the failed checks' names
