@@ -117,16 +117,6 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 # No fitted number (a coefficient, temperature, time constant, pressure, network weight) comes near
 # this; a payload number beyond it overflows float64 on evaluation (a cube of 1e103 is inf).
-def shown_method(checkpoint: dict[str, Any]) -> str:
-    """The name a user reads for a checkpoint's model: the candidate ``trainer fit --method auto``
-    chose (``poly2``, ``physics-branch``, ``none``), else the registered method (``method``, which
-    names the class that loads it: a parabola is a ``poly3`` of degree 2)."""
-    stats = checkpoint.get("train_stats")
-    selection = stats.get("selection") if isinstance(stats, dict) else None
-    chosen = selection.get("chosen") if isinstance(selection, dict) else None
-    return chosen if isinstance(chosen, str) and chosen else str(checkpoint["method"])
-
-
 PAYLOAD_MAGNITUDE_LIMIT = 1e12
 
 

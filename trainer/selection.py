@@ -38,7 +38,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from trainer import methods
-from trainer.compensator import Compensator
 from trainer.data.recording import Recording
 from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.reference import OffsetPolicy
@@ -132,13 +131,11 @@ class Selection:
         return table_lines(self.cv, chosen=row_name(self.chosen))
 
 
-def shipped_name(model: Compensator, stats: TrainStats) -> str:
+def shown_name(method: str, stats: TrainStats) -> str:
     """The name a user reads for a fitted model: the candidate ``auto`` chose (``poly2``,
-    ``physics-branch``, ``none``: each a registered method with options, which the registry's name
-    alone would misreport as ``poly3`` or ``physics``), else the registered method's name."""
-    if stats.selection is not None:
-        return str(stats.selection["chosen"])
-    return methods.name_of(model)
+    ``physics-branch``, ``none``: each a registered method with options, which ``method``, the
+    registered name that loads it, would misreport as ``poly3`` or ``physics``), else ``method``."""
+    return str(stats.selection["chosen"]) if stats.selection is not None else method
 
 
 def full_cycle(segments: Sequence[Segment]) -> bool:

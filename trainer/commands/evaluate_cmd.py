@@ -76,7 +76,7 @@ def drift_lines(result: Any) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
-    from trainer.checkpoint import load_model, shown_method
+    from trainer.checkpoint import load_model
     from trainer.data.channels import model_view, relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
     from trainer.data.plausibility import check_scored
@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.scoring.evaluate import evaluate
     from trainer.scoring.inject import injected_input, input_kept
     from trainer.scoring.plots import plot_series
+    from trainer.selection import shown_name
     from trainer.train_stats import TrainStats
 
     if args.smoothing < 0:
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         # a held-out end part is scored with the state run through the part before it (firmware that
         # has run since power-on); a held-out start part starts cold, as at power-on
         lead_in = train_part.without_truth() if holdout.side == "last" else None
-    name = shown_method(checkpoint)
+    name = shown_name(str(checkpoint["method"]), stats)
     compensated = compensate_after(model, rec.without_truth(), lead_in)
     lo, hi = checkpoint["valid_temp_range_c"]
     outside = (rec.temp_c < lo) | (rec.temp_c > hi)

@@ -34,7 +34,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.reference import RECURSIVE_NOTE
-    from trainer.selection import fit_with_selection, shipped_name
+    from trainer.selection import fit_with_selection, shown_name
 
     method = checked_method(args.method)
     check_output_directory(args.output)  # before a possibly long fit
@@ -81,10 +81,10 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             print(f"== {channel.name} [{channel.label}]")
             print_selection(stats)
         print(
-            f"{shipped_name(model, stats)} {channel.name}: fitted on {stats.n_samples} samples "
+            f"{shown_name(methods.name_of(model), stats)} {channel.name}: fitted on {stats.n_samples} samples "
             f"({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} degC), fit residual RMS "
             f"{stats.fit_residual_rms_mg:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
         )
         note = relabel_units(model.offset.describe() if model.offset else RECURSIVE_NOTE, channel.unit)
-        print(f"{shipped_name(model, stats)} {channel.name}: {note}")
+        print(f"{shown_name(methods.name_of(model), stats)} {channel.name}: {note}")
     return 0

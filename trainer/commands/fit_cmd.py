@@ -9,7 +9,7 @@ from trainer import methods
 from trainer.commands.selection_output import checked_method, print_selection, progress_log
 from trainer.options.channels import add_channels_option
 from trainer.options.offset import add_offset_options, policy_from_args
-from trainer.selection import AUTO, CANDIDATES, candidate_list, shipped_name
+from trainer.selection import AUTO, CANDIDATES, candidate_list, shown_name
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     checks.print_warnings()
     print_selection(stats)
     save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
-    name = shipped_name(model, stats)
+    name = shown_name(methods.name_of(model), stats)
     unit = channel_unit(train)  # a gyro or baro recording holds its own unit in the accel_mg column
     print(
         relabel_units(

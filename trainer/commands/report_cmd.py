@@ -279,7 +279,7 @@ def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] |
 
 def run(args: argparse.Namespace) -> int:
     from trainer import __version__
-    from trainer.checkpoint import load_model, shown_method
+    from trainer.checkpoint import load_model
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit, model_view
     from trainer.data.holdout import overlap_warning, parse_holdout
@@ -290,6 +290,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.scoring.rate_coverage import rate_note
     from trainer.scoring.thresholds import load_thresholds
     from trainer.scoring.unit_scores import held_out_rows, score_unit
+    from trainer.selection import shown_name
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
@@ -322,10 +323,11 @@ def run(args: argparse.Namespace) -> int:
             stats = TrainStats.of_checkpoint(ckpt)
             rec = model_view(loaded[rec_path], stats.channel or "", model_path)
             channel = stats.channel or model_path.stem
-            label = f"{channel} / {shown_method(ckpt)}"
+            shown = shown_name(str(ckpt["method"]), stats)
+            label = f"{channel} / {shown}"
             if label in seen:
                 raise UserError(
-                    f"{model_path}: a second {shown_method(ckpt)} model for channel {channel} (the channel is the "
+                    f"{model_path}: a second {shown} model for channel {channel} (the channel is the "
                     "training recording's 'channel' metadata: check the import)"
                 )
             seen.add(label)
@@ -377,7 +379,7 @@ def run(args: argparse.Namespace) -> int:
                 model_path=str(model_path),
                 model_id=model_id,
                 method=str(ckpt["method"]),
-                shown=shown_method(ckpt),
+                shown=shown,
                 trained_range_c=(lo, hi),
                 recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
                 scores=scores,
