@@ -95,6 +95,7 @@ def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
     from trainer.diagnose.report import limit_sizes
+    from trainer.diagnose.select import THRESHOLD
     from trainer.diagnose.verdict import ambiguity_line
     from trainer.physics.catalogue.units import channel_param_name
 
@@ -121,6 +122,12 @@ def summary(result: Diagnosis) -> str:
     for u in result.undetected:
         amp = channel_param_name(u.amp_name, result.unit)
         lines.append(f"not named: {u.effect}{result.label}: this run names it from {amp} = {limit_sizes(u)}")
+    for m in result.suggestive:
+        params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(m.params).items())
+        lines.append(
+            f"near miss (not named): {m.effect} [{params}] BIC -{m.delta_bic:.1f}{result.label}, "
+            f"below the criterion's {THRESHOLD:g}"
+        )
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "
         f"BIC {before.bic:.1f} -> {after.bic:.1f}"

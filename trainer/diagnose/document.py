@@ -16,7 +16,7 @@ from trainer.diagnose.holdout import Holdout, HoldoutScore
 from trainer.diagnose.locate import AllanComparison
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Ambiguity, Diagnosis, LeftOut, Tested
-from trainer.diagnose.select import AMBIGUOUS, THRESHOLD
+from trainer.diagnose.select import AMBIGUOUS, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import MULTI_INSTANCE, EffectConfig
@@ -268,6 +268,7 @@ def _document(d: Diagnosis) -> dict[str, Any]:
             "rms_note": RMS_NOTE,
             "add_threshold": THRESHOLD,
             "ambiguous_below": AMBIGUOUS,
+            "suggestive_from": SUGGESTIVE,
         },
         "mismatch": [region(r) for r in d.mismatch],
         "left_out": [left_out(e) for e in d.left_out],
@@ -281,6 +282,11 @@ def _document(d: Diagnosis) -> dict[str, Any]:
             for n in d.not_supported
         ],
         "undetected": [undetected(u) for u in d.undetected],
+        "suggestive": [
+            {"effect": m.effect, "params": params(m.params), "delta_bic_when_added": round(m.delta_bic, 2)}
+            | ({"flags": m.flags} if m.flags else {})
+            for m in d.suggestive
+        ],
         "tested": [tested(t) for t in d.tested],
         "fit": {"before": fit_summary(d.before), "after": fit_summary(d.after)},
         "unexplained": [region(r) for r in d.unexplained],

@@ -22,7 +22,7 @@ from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
 from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut
-from trainer.diagnose.select import THRESHOLD
+from trainer.diagnose.select import SUGGESTIVE, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
 from trainer.physics.catalogue.units import channel_param_name
@@ -119,6 +119,15 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     if d.undetected:
         lines += ["", "## Weakly identifiable, not named: the smallest size this run names", ""]
         lines += [_undetected_line(u, d.unit) for u in d.undetected]
+    if d.suggestive:
+        lines += ["", "## Near misses: strong evidence, below the criterion (not named)", ""]
+        lines += [
+            f"- {m.effect}{d.label}: {_fmt_params(d.params(m.params))}. BIC -{m.delta_bic:.1f} when added to "
+            f"the final model ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a spurious "
+            "component is possible at this evidence, or a named effect shares part of its signature. Not in "
+            "the compensator." + (f" Note: {'; '.join(m.flags)}." if m.flags else "")
+            for m in d.suggestive
+        ]
     if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
         lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]

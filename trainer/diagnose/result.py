@@ -66,6 +66,17 @@ class Ambiguity:
 
 
 @dataclass(frozen=True)
+class Suggestive:
+    """A candidate below the criterion beside the final model, but with strong evidence (a near
+    miss, :func:`trainer.diagnose.select.near_misses`): listed, not named, not in the compensator."""
+
+    effect: str
+    params: dict[str, float]
+    delta_bic: float  # BIC drop when added to the final model
+    flags: list[str] = field(default_factory=list)  # parameters outside the plausible range
+
+
+@dataclass(frozen=True)
 class NotIdentifiable:
     effect: str
     reason: str
@@ -116,6 +127,7 @@ class Diagnosis:
     holdout: Holdout | None
     seconds: float
     notes: list[str] = field(default_factory=list)
+    suggestive: list[Suggestive] = field(default_factory=list)  # near misses, strongest first
     channel: str | None = None  # the channel of a one-channel view (None: a one-axis recording)
     unit: str = "mg"  # the unit suffix of the recording's values (mg, dps, pa): names every amplitude
     scale: ChannelScale | None = None  # what a non-mg channel's amplitudes were judged against

@@ -37,13 +37,16 @@ from trainer.diagnose.result import (
     LeftOut,
     NotIdentifiable,
     NotSupported,
+    Suggestive,
     Tested,
 )
 from trainer.diagnose.select import (
+    NearMiss,
     Selection,
     baseline_support,
     final_indices,
     forward_select,
+    near_misses,
     resolve,
 )
 from trainer.diagnose.threads import single_blas_thread
@@ -60,6 +63,7 @@ from trainer.physics.catalogue import (  # the finder's order and advice, per ef
     CANDIDATE_ORDER,
     DEFINITIONS,
     EFFECTS,
+    MULTI_INSTANCE,
 )
 from trainer.physics.catalogue.base import catalogue_params
 from trainer.physics.catalogue.plausibility import implausible
@@ -91,19 +95,33 @@ def diagnose(
     holdout_fraction: float = 0.25,
     max_blocks: int = DEFAULT_MAX_BLOCKS,
     progress: bool = False,
+    near_misses_wanted: bool = True,
 ) -> Diagnosis:
     """Find what the user's simulation ``sim`` leaves out of recording ``rec``.
 
     ``rec`` may contain ``true_*`` columns; they are removed before anything is read.
+    ``near_misses_wanted``: list the candidates below the criterion (a report's; a caller that
+    reads only the named structure, the physics compensator, skips the extra round).
     """
     with single_blas_thread():
         return _diagnose(
-            rec, sim, holdout_fraction=holdout_fraction, max_blocks=max_blocks, progress=progress
+            rec,
+            sim,
+            holdout_fraction=holdout_fraction,
+            max_blocks=max_blocks,
+            progress=progress,
+            near_misses_wanted=near_misses_wanted,
         )
 
 
 def _diagnose(
-    rec: Recording, sim: PhysicsConfig | None, *, holdout_fraction: float, max_blocks: int, progress: bool
+    rec: Recording,
+    sim: PhysicsConfig | None,
+    *,
+    holdout_fraction: float,
+    max_blocks: int,
+    progress: bool,
+    near_misses_wanted: bool,
 ) -> Diagnosis:
     started = time.perf_counter()
     rec = rec.without_truth()
@@ -172,6 +190,8 @@ def _diagnose(
                 limit := detection_limit(final, effect, info.reason, info.test, scale)
             ):
                 undetected.append(limit)
+    misses = near_misses(final, data, candidates) if near_misses_wanted else []
+    suggestive = _suggestive(misses, said, flags)
     not_supported = [
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))
         for n in baseline_support(baseline_common, data)
@@ -210,10 +230,25 @@ def _diagnose(
         holdout=holdout,
         seconds=time.perf_counter() - started,
         notes=notes,
+        suggestive=suggestive,
         channel=rec.meta.get("channel"),
         unit=channel_unit(rec),
         scale=scale,
     )
+
+
+def _suggestive(
+    misses: list[NearMiss], said: set[str], param_flags: Callable[[EffectConfig], list[str]]
+) -> list[Suggestive]:
+    """The near misses as the report lists them; an effect the report already names or lists as
+    ambiguous is not repeated, unless the catalogue allows another instance of it (a second step)."""
+    out = []
+    for miss in misses:
+        if miss.effect in said and miss.effect not in MULTI_INSTANCE:
+            continue
+        effect = [e for e in catalogue_effects(miss.fit) if e.identifier == miss.effect][-1]
+        out.append(Suggestive(miss.effect, dict(effect.params), miss.delta_bic, param_flags(effect)))
+    return out
 
 
 def _ambiguous(selection: Selection, implausible: list[Ambiguity]) -> list[Ambiguity]:

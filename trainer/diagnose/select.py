@@ -28,6 +28,11 @@ a branch offset for a huge one), so only models with their own noise compare fai
    beside it it earns less, its signature is absorbed by the chosen effect on this profile (the two
    shapes are nearly collinear: a real one would be merged into the other's fitted term); that is
    reported as an ambiguity with its reason too, instead of silence.
+5. Near misses: every candidate is scored once more beside the final model; one that earns between
+   ``SUGGESTIVE`` (6, "strong" on the Kass-Raftery scale) and ``THRESHOLD`` is listed as suggestive,
+   not named. A finding of a run can fall just below the criterion when another effect is added
+   that shares part of its signature (a step at a heating/cooling reversal beside a filtered rate
+   term, which switches sign there): the report still shows it, with its evidence.
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ MAX_ADDED = 6  # deterministic terms: several instances (steps, periods) beside 
 MAX_ROUNDS = 3  # forward/backward passes of the stepwise search
 REPROFILE_GAIN = 0.5  # BIC a re-searched effect must gain to replace its accepted version
 TOP_REFIT = 4
+SUGGESTIVE = 6.0  # BIC a candidate earns beside the final model to be listed as a near miss
 NOISE_EFFECTS = catalogue.NOISE_EFFECTS
 # Known confounders of each effect, and what separates each pair (in the effects' definitions).
 CONFUSABLE: dict[str, tuple[str, ...]] = catalogue.CONFUSABLE
@@ -355,6 +361,35 @@ def forward_select(
             best_first[item.effect] = item
     tested = sorted(best_first.values(), key=lambda t: -t.delta_bic) + path.dropped
     return Selection(steps, current, current, tested, current.noise)
+
+
+@dataclass(frozen=True)
+class NearMiss:
+    """A candidate that earns ``SUGGESTIVE`` or more beside the final model, but less than ``THRESHOLD``."""
+
+    effect: str
+    delta_bic: float
+    fit: ModelFit  # the final model with it (its term last)
+
+
+def near_misses(final: ModelFit, data: BlockData, candidates: Sequence[str]) -> list[NearMiss]:
+    """Step 5 of the module docstring: the best version of every deterministic candidate, refitted
+    with its own noise like a forward round (the ``TOP_REFIT`` most promising and every spectral
+    proposal), kept when its evidence is suggestive but below the criterion; strongest first."""
+    proposals = [
+        p for effect in candidates if effect not in NOISE_EFFECTS for p in propose(final, data, effect)
+    ]
+    ranked = sorted(proposals, key=lambda p: -_fixed_score(final, p))
+    best: dict[str, NearMiss] = {}
+    for rank, proposal in enumerate(ranked):
+        if rank >= TOP_REFIT and proposal.spectral_evidence is None:
+            continue
+        delta, fit, _ = _refit(final, proposal, data)
+        if SUGGESTIVE <= delta < THRESHOLD and delta > getattr(
+            best.get(proposal.effect), "delta_bic", -math.inf
+        ):
+            best[proposal.effect] = NearMiss(proposal.effect, delta, fit)
+    return sorted(best.values(), key=lambda m: -m.delta_bic)
 
 
 def drop_term(final: ModelFit, index: int | None, effect: str, data: BlockData) -> ModelFit:
