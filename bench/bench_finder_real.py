@@ -10,19 +10,26 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
 * duplicates: two findings of one effect whose parameters coincide within the data's resolution
   (periods within ``1/duration`` in frequency, step times within two blocks);
 * lost: findings of the clean run that are missing from the case's findings ("said": the case's
-  report names the effect in an ambiguity, e.g. absorbed by a confounder on this profile);
+  report names the effect in an ambiguity, e.g. absorbed by a confounder on this profile, or as a
+  near miss below the criterion);
 * ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
   plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
 * size / limit: each added instance's size over the clean run's detection limit for its own shape
   (``diagnose.detection.shape_limit``: the size at which the criterion would name it beside the
-  clean model, at the clean run's noise; optimistic, the finder re-estimates the noise);
+  clean model, at the clean run's noise; optimistic, the finder re-estimates the noise). Every
+  case is sized by it: ``--multiples`` (default 2 and 4) times the limit, so that a case asks the
+  same of a quiet run and a noisy one, and a fixed size does not sit at the edge of detection on
+  one channel and far above it on another (at the limit the criterion names an instance half of
+  the time);
 * silent: an added effect neither named nor reported (ambiguity, not identifiable, or the
   report's "smallest size this run names");
 * not scored: the clean run already carries the effect or is unsettled about it (a found
-  hysteresis excludes a branch offset, an ambiguity lists it: the sizes merge), or the effect is
-  weakly identifiable on this profile and smaller than its limit (the report must say so: silent
-  counts it). The totals are given for the scored and the other cases apart;
+  hysteresis excludes a branch offset, an ambiguity lists it: the sizes merge), or the smallest
+  multiple of its limit is above the catalogue's plausible maximum (this run cannot be asked to
+  name it at a plausible size; it runs at that maximum). A larger multiple above the maximum runs
+  at the maximum and is scored. The totals are given for the scored and
+  the other cases apart;
 * time per diagnosis.
 
     trainer import ../shared/data/real/tofupilot_imu_chamber_cycle.tsv --preset tofupilot \\
@@ -36,6 +43,7 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -49,6 +57,7 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.detection import shape_limit
+from trainer.diagnose.model import PLAUSIBLE
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
 from trainer.physics.catalogue import (
@@ -80,53 +89,109 @@ STEP_BLOCKS = 2.0  # step times closer than this many blocks are one instant
 
 @dataclass(frozen=True)
 class Case:
+    """Instances added together; each amplitude is a multiple of the clean run's detection limit for
+    the instance's own shape (its sign carried by ``added``), so that a case asks the same of a quiet
+    run and a noisy one."""
+
     name: str
     added: tuple[EffectConfig, ...]
+    multiple: float
 
 
-def cases(duration_s: float) -> list[Case]:
-    """Additive effects the run can identify, at two sizes, and pairs of instances of one effect.
+MULTIPLES = (2.0, 4.0)  # sizes over the detection limit: the limit names an instance half of the time
 
-    The larger size is twice the smaller; the rate term reads the temperature through a 60 s filter
-    (the measured thermometer's first samples jump by 0.5 degC, a raw derivative would be a spike); step times and periods lie away from the bundled run's own
-    findings (steps at 1022 s and 4199 s on z, 1446 s on x).
+
+def cases(duration_s: float, multiples: Sequence[float] = MULTIPLES) -> list[Case]:
+    """Additive effects the run can identify, at each of ``multiples`` of their detection limits, and
+    pairs of instances of one effect (at the smallest multiple).
+
+    Amplitudes here are signs only (sized by :func:`sized`). The rate term reads the temperature
+    through a 60 s filter (the measured thermometer's first samples jump by 0.5 degC, a raw derivative
+    would be a spike); step times and periods lie away from the bundled run's own findings (steps at
+    1022 s and 4199 s on z, 1446 s on x).
     """
     d = duration_s
     out = []
-    for size, label in ((1.0, "small"), (2.0, "large")):
+    for multiple in multiples:
+        label = f"{multiple:g}x"
         out += [
-            Case(f"step {label}", (EffectConfig(STEP, {"t_s": 0.55 * d, "step_mg": 1.2 * size}),)),
+            Case(f"step {label}", (EffectConfig(STEP, {"t_s": 0.55 * d, "step_mg": 1.0}),), multiple),
             Case(
-                f"periodic {label}",
-                (EffectConfig(PERIODIC, {"amp_mg": 0.45 * size, "period_s": 300.0, "phase_rad": 0.7}),),
+                f"periodic 300 s {label}",
+                (EffectConfig(PERIODIC, {"amp_mg": 1.0, "period_s": 300.0, "phase_rad": 0.7}),),
+                multiple,
             ),
-            Case(f"warmup {label}", (EffectConfig(WARMUP, {"amp_mg": 2.0 * size, "tau_s": 400.0}),)),
             Case(
-                f"temp_rate {label}", (EffectConfig(RATE, {"k_mg_per_c_per_min": 0.3 * size, "tau_s": 60.0}),)
+                f"periodic 600 s {label}",
+                (EffectConfig(PERIODIC, {"amp_mg": 1.0, "period_s": 600.0, "phase_rad": 0.7}),),
+                multiple,
             ),
-            Case(f"branch offset {label}", (EffectConfig(BRANCH, {"amp_mg": 0.8 * size, "width_c": 10.0}),)),
+            Case(f"warmup {label}", (EffectConfig(WARMUP, {"amp_mg": 1.0, "tau_s": 400.0}),), multiple),
+            Case(
+                f"temp_rate {label}",
+                (EffectConfig(RATE, {"k_mg_per_c_per_min": 1.0, "tau_s": 60.0}),),
+                multiple,
+            ),
+            Case(
+                f"branch offset {label}", (EffectConfig(BRANCH, {"amp_mg": 1.0, "width_c": 10.0}),), multiple
+            ),
         ]
+    pair = min(multiples)
     out += [
-        Case(
-            "periodic 600 s",
-            (EffectConfig(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7}),),
-        ),
         Case(
             "two steps",
             (
-                EffectConfig(STEP, {"t_s": 0.4 * d, "step_mg": 1.5}),
-                EffectConfig(STEP, {"t_s": 0.7 * d, "step_mg": -1.2}),
+                EffectConfig(STEP, {"t_s": 0.4 * d, "step_mg": 1.0}),
+                EffectConfig(STEP, {"t_s": 0.7 * d, "step_mg": -1.0}),
             ),
+            pair,
         ),
         Case(
             "two periodics",
             (
-                EffectConfig(PERIODIC, {"amp_mg": 0.9, "period_s": 600.0, "phase_rad": 0.7}),
-                EffectConfig(PERIODIC, {"amp_mg": 0.6, "period_s": 150.0, "phase_rad": -1.0}),
+                EffectConfig(PERIODIC, {"amp_mg": 1.0, "period_s": 600.0, "phase_rad": 0.7}),
+                EffectConfig(PERIODIC, {"amp_mg": 1.0, "period_s": 150.0, "phase_rad": -1.0}),
             ),
+            pair,
         ),
     ]
     return out
+
+
+def amplitude_name(effect: str) -> str:
+    return CHECKED[effect][0]
+
+
+def plausible_max(effect: str) -> float:
+    return PLAUSIBLE[(effect, amplitude_name(effect))][1]
+
+
+@dataclass(frozen=True)
+class Sized:
+    """A case at its sizes: each instance's limit, and whether its plausible maximum keeps it below
+    the smallest multiple of that limit the bench asks (then this run cannot be asked to name it)."""
+
+    case: Case
+    limits: tuple[float, ...]
+    unaskable: tuple[bool, ...]
+    floor: float
+
+
+def sized(case: Case, clean: Diagnosis, rec: Recording, floor: float) -> Sized:
+    """``case`` with every amplitude set to ``multiple`` x its clean-run limit, at most the catalogue's
+    plausible maximum (a larger one would be reported as implausible, not named); an instance held
+    below ``floor`` x its limit by that maximum is not asked of this run."""
+    added, limits, unaskable = [], [], []
+    for effect in case.added:
+        name = amplitude_name(effect.identifier)
+        limit = limit_of(effect, clean, rec)
+        size = min(case.multiple * limit, plausible_max(effect.identifier))
+        added.append(
+            EffectConfig(effect.identifier, {**effect.params, name: math.copysign(size, effect.params[name])})
+        )
+        limits.append(limit)
+        unaskable.append(size < floor * limit * (1.0 - 1e-9))
+    return Sized(Case(case.name, tuple(added), case.multiple), tuple(limits), tuple(unaskable), floor)
 
 
 def contribution(rec: Recording, effect: EffectConfig) -> np.ndarray:
@@ -192,13 +257,8 @@ def limit_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
     return shape_limit(clean.selection.final, added.identifier, shape, nl).amplitude
 
 
-def weak(effect: str, clean: Diagnosis) -> bool:
-    """Weakly identifiable on this profile (the report gives its detection limit when not named)."""
-    info = clean.profile.identifiability.get(effect)
-    return info is not None and info.identifiable and info.weak
-
-
-def score(case: Case, d: Diagnosis, clean: Diagnosis, rec: Recording) -> dict[str, object]:
+def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
+    case = at.case
     found = findings(d)
     used: set[int] = set()
     named = params_ok = 0
@@ -237,13 +297,13 @@ def score(case: Case, d: Diagnosis, clean: Diagnosis, rec: Recording) -> dict[st
         {x for a in d.ambiguous for x in a.effects}
         | {n.effect for n in d.not_identifiable}
         | {u.effect for u in d.undetected}
+        | {m.effect for m in d.suggestive}
     )
     unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
-    limits = [limit_of(a, clean, rec) for a in case.added]
     unscored = [
-        f"{a.identifier}: weak, below the run's limit"
-        for a, limit in zip(case.added, limits, strict=True)
-        if weak(a.identifier, clean) and abs(a.params[CHECKED[a.identifier][0]]) < limit
+        f"{a.identifier}: {at.floor:g}x its limit ({limit:.3g}) is above the plausible {plausible_max(a.identifier):g}"
+        for a, limit, unaskable in zip(case.added, at.limits, at.unaskable, strict=True)
+        if unaskable
     ] + [
         f"{a.identifier}: the run's own (found or unsettled)"
         for a in case.added
@@ -252,7 +312,8 @@ def score(case: Case, d: Diagnosis, clean: Diagnosis, rec: Recording) -> dict[st
     return {
         "scored": not unscored,
         "size_to_limit": [
-            abs(a.params[CHECKED[a.identifier][0]]) / lim for a, lim in zip(case.added, limits, strict=True)
+            abs(a.params[amplitude_name(a.identifier)]) / lim
+            for a, lim in zip(case.added, at.limits, strict=True)
         ],
         "unscored": unscored,
         "silent": sorted(unnamed - reported),
@@ -293,6 +354,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--channel", default="accel0_z")
     parser.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
+    parser.add_argument(
+        "--multiples",
+        default=",".join(f"{m:g}" for m in MULTIPLES),
+        help="sizes over each instance's detection limit on the clean run (default: %(default)s)",
+    )
     args = parser.parse_args(argv)
     if args.simulated is not None:
         hidden = tuple(h for h in args.hidden.split(",") if h)
@@ -308,7 +374,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     clean_s = time.perf_counter() - started
     print(f"clean {args.channel}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
     wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
-    chosen = [c for c in cases(clean.data.duration_s) if not wanted or any(w in c.name for w in wanted)]
+    multiples = [float(m) for m in args.multiples.split(",") if m.strip()]
+    chosen = [
+        c for c in cases(clean.data.duration_s, multiples) if not wanted or any(w in c.name for w in wanted)
+    ]
     print(
         "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous "
         "| size / limit | silent | not scored | s | findings |"
@@ -318,9 +387,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     totals = {group: dict.fromkeys(keys, 0) for group in ("scored", "not scored")}
     for case in chosen:
         started = time.perf_counter()
-        d = diagnose(add_effects(rec, case.added), holdout_fraction=0.0)
+        at = sized(case, clean, rec, min(multiples))
+        d = diagnose(add_effects(rec, at.case.added), holdout_fraction=0.0)
         seconds = time.perf_counter() - started
-        s = score(case, d, clean, rec)
+        s = score(at, d, clean)
         total = totals["scored" if s["scored"] else "not scored"]
         for k in ("named", "added", "params_ok", "duplicates"):
             total[k] += int(s[k])  # type: ignore[call-overload]
@@ -329,8 +399,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         said = cast(list[str], s["lost_said"])
         ratios = cast(list[float], s["size_to_limit"])
         lost = [f"{e} (said)" if e in said else e for e in cast(list[str], s["lost"])]
+        sizes = ", ".join(f"{abs(a.params[amplitude_name(a.identifier)]):.3g}" for a in at.case.added)
         print(
-            f"| {case.name} | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
+            f"| {case.name} ({sizes}) | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
             f"| {', '.join(lost) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} "  # type: ignore[arg-type]
             f"| {' / '.join(f'{r:.2f}' for r in ratios)} | {', '.join(s['silent']) or '-'} "  # type: ignore[arg-type]
             f"| {'; '.join(s['unscored']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
@@ -340,13 +411,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(
             f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']}, "
             f"duplicates {t['duplicates']}, lost clean findings {t['lost']} ({t['lost_said']} of them "
-            f"reported as ambiguous: absorbed by a confounder, said out loud), added effects neither named "
+            f"said out loud: in an ambiguity, e.g. absorbed by a confounder, or as a near miss), added effects neither named "
             f"nor reported {t['silent']}"
         )
     print(
         "\n(not scored: an added effect the clean run already carries or is unsettled about (its size merges "
-        "with the run's own), or a weakly identifiable one below the clean run's detection limit at its "
-        "parameters (the report's 'smallest size this run names'))"
+        "with the run's own), or one whose plausible maximum is below the smallest multiple of its "
+        "detection limit on this run (it runs at that maximum))"
     )
     return 0
 
