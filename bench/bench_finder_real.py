@@ -24,7 +24,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   the time);
 * silent: an added effect neither named nor reported (ambiguity, not identifiable, or the
   report's "smallest size this run names");
-* not scored: the clean run already carries the effect or is unsettled about it (a found
+* not scored: the profile cannot identify the effect (a branch offset without a reversal), the
+  clean run already carries the effect or is unsettled about it (a found
   hysteresis excludes a branch offset, an ambiguity lists it: the sizes merge), or the smallest
   multiple of its limit is above the catalogue's plausible maximum (this run cannot be asked to
   name it at a plausible size; it runs at that maximum). A larger multiple above the maximum runs
@@ -300,15 +301,23 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         | {m.effect for m in d.suggestive}
     )
     unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
-    unscored = [
-        f"{a.identifier}: {at.floor:g}x its limit ({limit:.3g}) is above the plausible {plausible_max(a.identifier):g}"
-        for a, limit, unaskable in zip(case.added, at.limits, at.unaskable, strict=True)
-        if unaskable
-    ] + [
-        f"{a.identifier}: the run's own (found or unsettled)"
-        for a in case.added
-        if a.identifier in carried(clean)
-    ]
+    unscored = (
+        [
+            f"{a.identifier}: {at.floor:g}x its limit ({limit:.3g}) is above the plausible {plausible_max(a.identifier):g}"
+            for a, limit, unaskable in zip(case.added, at.limits, at.unaskable, strict=True)
+            if unaskable
+        ]
+        + [
+            f"{a.identifier}: the run's own (found or unsettled)"
+            for a in case.added
+            if a.identifier in carried(clean)
+        ]
+        + [
+            f"{a.identifier}: not identifiable on this profile ({info.reason})"
+            for a in case.added
+            if (info := clean.profile.identifiability.get(a.identifier)) is not None and not info.identifiable
+        ]
+    )
     return {
         "scored": not unscored,
         "size_to_limit": [
@@ -415,7 +424,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"nor reported {t['silent']}"
         )
     print(
-        "\n(not scored: an added effect the clean run already carries or is unsettled about (its size merges "
+        "\n(not scored: an added effect the profile cannot identify, one the clean run already carries or is unsettled about (its size merges "
         "with the run's own), or one whose plausible maximum is below the smallest multiple of its "
         "detection limit on this run (it runs at that maximum))"
     )

@@ -27,7 +27,13 @@ from trainer.diagnose.model import (
     polish,
     search_bounds,
 )
-from trainer.physics.catalogue import COVARIANCE_NOISE, DEFINITIONS, excluded, nonlinear_defaults
+from trainer.physics.catalogue import (
+    COVARIANCE_NOISE,
+    DEFINITIONS,
+    MULTI_INSTANCE,
+    excluded,
+    nonlinear_defaults,
+)
 from trainer.physics.catalogue.base import catalogue_params
 
 GRID_POINTS = {k: d.finder.grid_points for k, d in DEFINITIONS.items() if d.finder.grid_points}
@@ -96,17 +102,43 @@ def _whitened_base(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.n
     return q, yw - q @ (q.T @ yw)
 
 
-def scan_steps(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray]:
-    """Step times (block boundaries) and the RSS after adding a step at each (GLS, vectorised)."""
+def _step_columns(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Step times (block boundaries), the whitened step columns orthogonal to the current design,
+    and the whitened residual."""
     n = data.n
     q, r = _whitened_base(current, data)
     j = np.arange(2, n - 1)
     steps = (np.arange(n)[:, None] >= j[None, :]).astype(np.float64)
     zw = current.gls.whiten(steps)
-    zp = zw - q @ (q.T @ zw)
+    return data.starts[j], zw - q @ (q.T @ zw), r
+
+
+def scan_steps(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray]:
+    """Step times (block boundaries) and the RSS after adding a step at each (GLS, vectorised)."""
+    times, zp, r = _step_columns(current, data)
     norms = np.einsum("ij,ij->j", zp, zp)
     gain = (r @ zp) ** 2 / np.maximum(norms, 1e-300)
-    return data.starts[j], float(r @ r) - gain
+    return times, float(r @ r) - gain
+
+
+def scan_step_pairs(current: ModelFit, data: BlockData) -> tuple[np.ndarray, np.ndarray]:
+    """Step times and the RSS after adding two steps at every pair of them, both fitted jointly
+    (GLS, vectorised: the 2x2 normal equations of each pair from one Gram matrix). Two steps that
+    nearly cancel (a level that leaves and comes back) explain little one at a time: a forward
+    search adding one step per round would stop before either."""
+    times, zp, r = _step_columns(current, data)
+    gram = zp.T @ zp
+    b = r @ zp
+    diag = np.diag(gram)
+    det = diag[:, None] * diag[None, :] - gram**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = (
+            diag[None, :] * b[:, None] ** 2
+            - 2 * gram * b[:, None] * b[None, :]
+            + diag[:, None] * b[None, :] ** 2
+        ) / det
+    gain = np.where(det > 1e-12 * np.outer(diag, diag), gain, 0.0)
+    return times, float(r @ r) - gain
 
 
 def scan_periods(current: ModelFit, data: BlockData, periods: np.ndarray) -> np.ndarray:
@@ -140,6 +172,22 @@ def propose_step(current: ModelFit, data: BlockData, effect: str) -> Proposal:
     start = Term(effect, (float(times[k]),))
     fit = polish((*current.terms, start), data, current.gls)
     return Proposal(effect, fit.terms, current.noise.terms, fit)
+
+
+def propose_step_pair(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
+    """Two instances of a step-like ``effect`` at the best pair of block boundaries (not within two
+    blocks of each other or of a step in the model), then polished; ``None`` when no pair is left."""
+    times, rss = scan_step_pairs(current, data)
+    taken = _taken(effect, times, current, data)
+    k = np.arange(times.size)
+    allowed = (k[None, :] - k[:, None] > 2) & ~taken[:, None] & ~taken[None, :]
+    rss = np.where(allowed, rss, np.inf)
+    if not np.isfinite(rss).any():
+        return None
+    first, second = np.unravel_index(int(np.argmin(rss)), rss.shape)
+    start = (Term(effect, (float(times[first]),)), Term(effect, (float(times[second]),)))
+    fit = polish((*current.terms, *start), data, current.gls)
+    return Proposal(effect, fit.terms, current.noise.terms, fit, note="a pair of steps, placed jointly")
 
 
 def propose_slow_periodic(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
@@ -288,6 +336,28 @@ SEARCHES = {
     "sinusoid": _propose_sinusoid,
     "noise": _propose_noise,
 }
+
+
+def propose_pair(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
+    """Two instances of ``effect`` placed jointly, for an effect whose instances the catalogue allows
+    several of and that is searched as a step (``None`` otherwise, without room for two, or beside a
+    term declared confusable with it)."""
+    definition = DEFINITIONS[effect]
+    if definition.finder.search != "step" or effect not in MULTI_INSTANCE:
+        return None
+    if sum(1 for i in current.identifiers if i == effect) + 2 > definition.finder.max_terms:
+        return None
+    if any(excluded(effect, present) for present in current.identifiers):
+        return None
+    confused = set(DEFINITIONS[effect].finder.confounders) | {
+        k for k in current.identifiers if k in DEFINITIONS and effect in DEFINITIONS[k].finder.confounders
+    }
+    if confused & set(current.identifiers):
+        # a term in the model whose signature a step shares (a rate term's jump at a corner, a branch
+        # offset's switch at a reversal): a pair of steps there would redescribe it, not add to it
+        return None
+    proposal = propose_step_pair(current, data, effect)
+    return None if proposal is None or has_duplicates(proposal.terms, data) else proposal
 
 
 def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 from tqdm import tqdm
 
 from trainer.diagnose.blocks import BlockData
-from trainer.diagnose.candidates import Proposal, propose
+from trainer.diagnose.candidates import Proposal, propose, propose_pair
 from trainer.diagnose.gls import NoiseState
 from trainer.diagnose.model import ModelFit, fit_model
 from trainer.physics import catalogue
@@ -90,12 +90,6 @@ class Selection:
     # (effect, occurrence) -> (BIC lost when the effect is dropped from the final model, that model)
     drop_one: dict[tuple[str, int], tuple[float, ModelFit]] = field(default_factory=dict)
     ambiguous: list[dict[str, object]] = field(default_factory=list)
-
-
-def _new_term_index(before: ModelFit, after: ModelFit) -> int | None:
-    if len(after.terms) == len(before.terms):
-        return None
-    return len(after.terms) - 1
 
 
 def noise_steps(
@@ -191,8 +185,23 @@ def _forward(
             break
         delta, fit, text, proposal = max(scored, key=lambda item: item[0])
         if delta < THRESHOLD:
-            break
-        steps.append(Step(proposal.effect, fit, delta, text, _new_term_index(current, fit)))
+            # nothing single passes: two instances placed jointly (a level that leaves and comes
+            # back explains little one edge at a time); only here, so every path a single
+            # candidate takes is unchanged
+            pairs = [
+                (*_refit(current, p, data), p) for e in deterministic if (p := propose_pair(current, data, e))
+            ]
+            if not pairs:
+                break
+            delta, fit, text, proposal = max(pairs, key=lambda item: item[0])
+            if delta < THRESHOLD:
+                break
+        # one step per new term (a pair of instances adds two, with their joint evidence)
+        steps += [
+            Step(proposal.effect, fit, delta, text, k) for k in range(len(current.terms), len(fit.terms))
+        ]
+        if len(fit.terms) == len(current.terms):  # a noise term
+            steps.append(Step(proposal.effect, fit, delta, text, None))
         current = fit
     return current
 
