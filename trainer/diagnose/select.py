@@ -156,8 +156,10 @@ def _forward(
     steps: list[Step],
     first: list[Tested] | None,
     bar: tqdm,
+    pairs: bool = True,
 ) -> ModelFit:
-    """Add the best deterministic effect while the BIC improves by ``THRESHOLD`` or more.
+    """Add the best deterministic effect while the BIC improves by ``THRESHOLD`` or more (``pairs``:
+    when none does, two steps placed jointly, :func:`~trainer.diagnose.candidates.propose_pair`).
 
     Every round re-profiles every candidate against the current model (all accepted nonlinear
     parameters polished jointly with the new one), scores it at the current noise (cheap), then
@@ -184,16 +186,18 @@ def _forward(
         if not scored:
             break
         delta, fit, text, proposal = max(scored, key=lambda item: item[0])
+        if delta < THRESHOLD and not pairs:
+            break
         if delta < THRESHOLD:
             # nothing single passes: two instances placed jointly (a level that leaves and comes
             # back explains little one edge at a time); only here, so every path a single
             # candidate takes is unchanged
-            pairs = [
+            joint = [
                 (*_refit(current, p, data), p) for e in deterministic if (p := propose_pair(current, data, e))
             ]
-            if not pairs:
+            if not joint:
                 break
-            delta, fit, text, proposal = max(pairs, key=lambda item: item[0])
+            delta, fit, text, proposal = max(joint, key=lambda item: item[0])
             if delta < THRESHOLD:
                 break
         # one step per new term (a pair of instances adds two, with their joint evidence)
@@ -276,7 +280,13 @@ class _Path:
 
 
 def _stepwise(
-    baseline: ModelFit, data: BlockData, candidates: Sequence[str], bar: tqdm, *, noise_last: bool = False
+    baseline: ModelFit,
+    data: BlockData,
+    candidates: Sequence[str],
+    bar: tqdm,
+    *,
+    noise_last: bool = False,
+    pairs: bool = True,
 ) -> _Path:
     """Noise terms, forward search, backward elimination and re-search, repeated while anything
     changes. ``noise_last``: the first pass tests the missing noise terms after the deterministic
@@ -289,14 +299,14 @@ def _stepwise(
         offered = [c for c in candidates if c not in gone]
         first = path.first if pass_index == 0 else None
         if noise_last and pass_index == 0:
-            current = _forward(current, data, deterministic, path.steps, first, bar)
+            current = _forward(current, data, deterministic, path.steps, first, bar, pairs)
         noise, tested_now, _ = noise_steps(current, data, offered)
         if pass_index == 0:
             path.noise_tested = tested_now
         path.steps += noise
         current = noise[-1].fit if noise else current
         if not (noise_last and pass_index == 0):
-            current = _forward(current, data, deterministic, path.steps, first, bar)
+            current = _forward(current, data, deterministic, path.steps, first, bar, pairs)
         changed = False
         while path.steps:
             retested = _retest(current, path.steps, data)
@@ -324,7 +334,12 @@ def _stepwise(
 
 
 def forward_select(
-    baseline: ModelFit, data: BlockData, candidates: Sequence[str], *, progress: bool = False
+    baseline: ModelFit,
+    data: BlockData,
+    candidates: Sequence[str],
+    *,
+    progress: bool = False,
+    pairs: bool = True,
 ) -> Selection:
     """Stepwise selection: forward search, then every accepted term re-tested against the final model.
 
@@ -340,9 +355,9 @@ def forward_select(
        deterministic candidate its margin, and then nothing can drop it); the lower final BIC wins.
     """
     bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
-    path = _stepwise(baseline, data, candidates, bar)
+    path = _stepwise(baseline, data, candidates, bar, pairs=pairs)
     if any(t.delta_bic >= THRESHOLD for t in path.noise_tested):
-        other = _stepwise(baseline, data, candidates, bar, noise_last=True)
+        other = _stepwise(baseline, data, candidates, bar, noise_last=True, pairs=pairs)
         if other.current.bic < path.current.bic:
             accepted = {s.effect for s in other.steps}
             first_noise = {t.effect for t in path.noise_tested if t.delta_bic >= THRESHOLD}

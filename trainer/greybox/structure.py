@@ -69,7 +69,7 @@ def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Str
     """What the mismatch finder names on the training recording itself (no user simulation)."""
     from trainer.diagnose.api import ambiguity_line, diagnose, implausible_effects  # heavy: on use
 
-    diagnosis = diagnose(rec, None, holdout_fraction=0.0, progress=progress, near_misses_wanted=False)
+    diagnosis = diagnose(rec, None, holdout_fraction=0.0, progress=progress, report_search=False)
     rejected = implausible_effects(diagnosis)
     found = [
         EffectConfig(e.effect, dict(e.params))
