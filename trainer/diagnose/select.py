@@ -12,7 +12,9 @@ a branch offset for a huge one), so only models with their own noise compare fai
    the refitted gain), refits the ``TOP_REFIT`` most promising with their own noise estimate and adds the
    best if it lowers the BIC by at least ``THRESHOLD`` (12: "very strong" on the Kass-Raftery
    scale is 10; on 40 clean generated recordings the best candidate never exceeded 4.2, while a
-   second, spurious effect after a true one reached 11); this repeats until nothing passes.
+   second, spurious effect after a true one reached 11); this repeats until nothing passes. When
+   nothing single passes, two steps placed jointly may (``pairs``, the report's search): a level
+   that leaves and nearly comes back explains little one edge at a time.
 3. Backward elimination: every accepted term, noise terms included, is re-tested against the
    final model by the same criterion, and the weakest is dropped while it earns less than
    ``THRESHOLD`` (against the starting model any structured residual looks like a random walk;
@@ -186,7 +188,8 @@ def _forward(
         if not scored:
             break
         delta, fit, text, proposal = max(scored, key=lambda item: item[0])
-        if delta < THRESHOLD and not pairs:
+        added = sum(1 for s in steps if s.term_index is not None)
+        if delta < THRESHOLD and (not pairs or added + 2 > MAX_ADDED):
             break
         if delta < THRESHOLD:
             # nothing single passes: two instances placed jointly (a level that leaves and comes
