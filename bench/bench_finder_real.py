@@ -159,6 +159,17 @@ def cases(duration_s: float, multiples: Sequence[float] = MULTIPLES) -> list[Cas
     return out
 
 
+def multiples_list(text: str) -> tuple[float, ...]:
+    """``--multiples``: comma-separated positive numbers (argparse turns the error into one line)."""
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated numbers, e.g. 2,4") from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: positive multiples of the detection limit, e.g. 2,4")
+    return values
+
+
 def amplitude_name(effect: str) -> str:
     return CHECKED[effect][0]
 
@@ -365,8 +376,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
     parser.add_argument(
         "--multiples",
-        default=",".join(f"{m:g}" for m in MULTIPLES),
-        help="sizes over each instance's detection limit on the clean run (default: %(default)s)",
+        type=multiples_list,
+        default=MULTIPLES,
+        help=f"sizes over each instance's detection limit on the clean run (default: {','.join(f'{m:g}' for m in MULTIPLES)})",
     )
     args = parser.parse_args(argv)
     if args.simulated is not None:
@@ -383,7 +395,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     clean_s = time.perf_counter() - started
     print(f"clean {args.channel}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
     wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
-    multiples = [float(m) for m in args.multiples.split(",") if m.strip()]
+    multiples = args.multiples
     chosen = [
         c for c in cases(clean.data.duration_s, multiples) if not wanted or any(w in c.name for w in wanted)
     ]

@@ -338,21 +338,35 @@ SEARCHES = {
 }
 
 
+def _room(current: ModelFit, effect: str, instances: int) -> bool:
+    """Whether ``instances`` more of ``effect`` may enter the model: within its ``max_terms``, and
+    nothing in the model describes the same physics."""
+    present = sum(1 for i in current.identifiers if i == effect)
+    return present + instances <= DEFINITIONS[effect].finder.max_terms and not any(
+        excluded(effect, other) for other in current.identifiers
+    )
+
+
+def _confusable(first: str, second: str) -> bool:
+    """Whether either effect declares the other a confounder."""
+    return any(
+        b in DEFINITIONS[a].finder.confounders
+        for a, b in ((first, second), (second, first))
+        if a in DEFINITIONS
+    )
+
+
 def propose_pair(current: ModelFit, data: BlockData, effect: str) -> Proposal | None:
     """Two instances of ``effect`` placed jointly, for an effect whose instances the catalogue allows
     several of and that is searched as a step (``None`` otherwise, without room for two, or beside a
     term declared confusable with it)."""
-    definition = DEFINITIONS[effect]
-    if definition.finder.search != "step" or effect not in MULTI_INSTANCE:
+    if (
+        DEFINITIONS[effect].finder.search != "step"
+        or effect not in MULTI_INSTANCE
+        or not _room(current, effect, 2)
+    ):
         return None
-    if sum(1 for i in current.identifiers if i == effect) + 2 > definition.finder.max_terms:
-        return None
-    if any(excluded(effect, present) for present in current.identifiers):
-        return None
-    confused = set(DEFINITIONS[effect].finder.confounders) | {
-        k for k in current.identifiers if k in DEFINITIONS and effect in DEFINITIONS[k].finder.confounders
-    }
-    if confused & set(current.identifiers):
+    if any(_confusable(effect, present) for present in current.identifiers):
         # a term in the model whose signature a step shares (a rate term's jump at a corner, a branch
         # offset's switch at a reversal): a pair of steps there would redescribe it, not add to it
         return None
@@ -366,9 +380,7 @@ def propose(current: ModelFit, data: BlockData, effect: str) -> list[Proposal]:
     search = None if definition is None else definition.finder.search
     if definition is None or search is None:
         raise ValueError(f"no search for {effect!r}")
-    if sum(1 for i in current.identifiers if i == effect) >= definition.finder.max_terms:
-        return []
-    if any(excluded(effect, present) for present in current.identifiers):
+    if not _room(current, effect, 1):
         return []
     # a polished instance that lands on one already in the model is that instance, not a new one
     return [p for p in SEARCHES[search](current, data, effect) if not has_duplicates(p.terms, data)]

@@ -151,6 +151,22 @@ def _refit(current: ModelFit, proposal: Proposal, data: BlockData) -> tuple[floa
     return delta, fit, f"BIC improvement {delta:.1f} (GLS, noise re-estimated by ML)"
 
 
+def _score_round(
+    current: ModelFit, data: BlockData, proposals: Sequence[Proposal]
+) -> tuple[list[tuple[float, ModelFit, str, Proposal]], list[Proposal]]:
+    """One round's scores: (delta BIC, fit, evidence, proposal) of the ``TOP_REFIT`` most promising
+    at the current noise and of every spectral proposal, each refitted with its own noise; and the
+    proposals not refitted."""
+    ranked = sorted(proposals, key=lambda p: -_fixed_score(current, p))
+    scored, rest = [], []
+    for rank, proposal in enumerate(ranked):
+        if rank < TOP_REFIT or proposal.spectral_evidence is not None:
+            scored.append((*_refit(current, proposal, data), proposal))
+        else:
+            rest.append(proposal)
+    return scored, rest
+
+
 def _forward(
     current: ModelFit,
     data: BlockData,
@@ -173,15 +189,11 @@ def _forward(
         if sum(1 for s in steps if s.term_index is not None) >= MAX_ADDED:
             break
         proposals = [p for effect in deterministic for p in propose(current, data, effect)]
-        ranked = sorted(proposals, key=lambda p: -_fixed_score(current, p))
-        scored = []
-        for rank, proposal in enumerate(ranked):
-            if rank < TOP_REFIT or proposal.spectral_evidence is not None:
-                scored.append((*_refit(current, proposal, data), proposal))
-            elif first is not None and round_index == 0:
-                first.append(
-                    Tested(proposal.effect, _fixed_score(current, proposal), "BIC at the current noise")
-                )
+        scored, not_refitted = _score_round(current, data, proposals)
+        if first is not None and round_index == 0:
+            first += [
+                Tested(p.effect, _fixed_score(current, p), "BIC at the current noise") for p in not_refitted
+            ]
         bar.update()
         if first is not None and round_index == 0:
             first += [Tested(p.effect, delta, text) for delta, _, text, p in scored]
@@ -406,12 +418,8 @@ def near_misses(final: ModelFit, data: BlockData, candidates: Sequence[str]) -> 
     proposals = [
         p for effect in candidates if effect not in NOISE_EFFECTS for p in propose(final, data, effect)
     ]
-    ranked = sorted(proposals, key=lambda p: -_fixed_score(final, p))
     best: dict[str, NearMiss] = {}
-    for rank, proposal in enumerate(ranked):
-        if rank >= TOP_REFIT and proposal.spectral_evidence is None:
-            continue
-        delta, fit, _ = _refit(final, proposal, data)
+    for delta, fit, _, proposal in _score_round(final, data, proposals)[0]:
         if SUGGESTIVE <= delta < THRESHOLD and delta > getattr(
             best.get(proposal.effect), "delta_bic", -math.inf
         ):
