@@ -351,7 +351,7 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
 def describe(d: Diagnosis) -> str:
     parts = []
     for effect, p in findings(d):
-        shown = ", ".join(f"{k} {v:.4g}" for k, v in p.items() if k != "phase_rad")
+        shown = ", ".join(f"{k} {v:.4g}" for k, v in d.params(p).items() if k != "phase_rad")  # channel names
         parts.append(f"{effect} ({shown})")
     return "; ".join(parts) or "-"
 

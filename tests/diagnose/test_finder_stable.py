@@ -92,3 +92,24 @@ def test_a_finding_displaced_below_the_criterion_is_listed_as_a_near_miss(real_r
     assert "Near misses" in markdown(d) and f"BIC -{miss.delta_bic:.1f}" in markdown(d)
     listed = [m for m in document(d)["suggestive"] if m["effect"] == STEP]
     assert any(abs(m["params"]["t_s"] - miss.params["t_s"]) < 1.0 for m in listed)
+
+
+def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
+    """A noise term's deterministic trend (``rate_ramp``) is a model column but not a catalogue effect;
+    as a near miss it is listed with its slope in the catalogue's unit, as a finding would be (it once
+    raised IndexError: the gyroscope z axis of the bundled run with two periodics added)."""
+    from trainer.diagnose.blocks import build_blocks
+    from trainer.diagnose.run import _suggestive
+    from trainer.diagnose.select import NearMiss
+    from trainer.physics.catalogue import BACKBONE, rate_ramp
+
+    ramp = rate_ramp.DEFINITION.identifier
+    slope_mg_per_s = 1e-3  # 4.8 mg over the run, well above its random walk
+    rec = chamber_recording([], seed=5)
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + slope_mg_per_s * rec.time_s
+    data = build_blocks(Recording(columns, dict(rec.meta), rec.source), max_blocks=BLOCKS)
+    fit = fit_model((Term(BACKBONE), Term(ramp)), (), data)
+    (listed,) = _suggestive([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [])
+    assert listed.effect == ramp and listed.delta_bic == 8.0
+    assert listed.params["r_mg_per_s"] == pytest.approx(slope_mg_per_s, rel=0.2)

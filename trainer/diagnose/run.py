@@ -248,7 +248,8 @@ def _suggestive(
     for miss in misses:
         if miss.effect in said and miss.effect not in MULTI_INSTANCE:
             continue
-        effect = [e for e in catalogue_effects(miss.fit) if e.identifier == miss.effect][-1]
+        index = max(k for k, term in enumerate(miss.fit.terms) if term.identifier == miss.effect)
+        effect = _term_effect(miss.fit, index)
         out.append(Suggestive(miss.effect, dict(effect.params), miss.delta_bic, param_flags(effect)))
     return out
 
@@ -306,7 +307,7 @@ def _left_out(
             params = dict(noise_params.get(step.effect, {}))
             where = list(noise_where(step.effect, noise_params, data, profile, before.allan))
         else:
-            effect = effects_by_index.get(index) or _trend_effect(final, index)
+            effect = effects_by_index.get(index) or _term_effect(final, index)
             params = dict(effect.params)
             visible = final.prediction - reduced.prediction
             special = special_where(effect, data, profile, baseline_fit.residual, cov, step.evidence)
@@ -336,9 +337,11 @@ def _left_out(
     return out
 
 
-def _trend_effect(final: ModelFit, index: int) -> EffectConfig:
-    """A model term that is a noise term's deterministic trend (``rate_ramp``), reported like an effect."""
-    term = final.terms[index]
+def _term_effect(fit: ModelFit, index: int) -> EffectConfig:
+    """One model term as an effect with its catalogue parameters: a catalogue effect, or a noise
+    term's deterministic trend (``rate_ramp``, which :func:`catalogue_effects` leaves out) reported
+    like one."""
+    term = fit.terms[index]
     return EffectConfig(
-        term.identifier, catalogue_params(DEFINITIONS[term.identifier], term, final.linear(index))
+        term.identifier, catalogue_params(DEFINITIONS[term.identifier], term, fit.linear(index))
     )
