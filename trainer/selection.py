@@ -16,7 +16,7 @@ Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.c
   that leaves far less (on a run with dwells every candidate ties the cubic on a dwell, so the
   worst ratio alone would always keep to it: the realistic experiment's gyroscope, physics 0.013
   against 0.079 deg/s cross-validated).
-- **Less than a cycle** (one ramp, or one heating and one cooling): each fold trains on one branch
+- **Less than a cycle** (a run that does not reverse, or one heating and one cooling): each fold trains on one branch
   and extrapolates to the other, which separates the shapes by the noise of one fold (on the
   bundled real run, `bench/bench_real_splits.py`: such choices lost to the cubic held out at most
   of the splits where they differed from it). The choice is then between the flight stacks' cubic
@@ -140,7 +140,7 @@ def shown_name(method: str, stats: TrainStats) -> str:
 
 def full_cycle(segments: Sequence[Segment]) -> bool:
     """Whether the folds make a whole cycle: at least :data:`FULL_CYCLE_SEGMENTS` segments, heating
-    and cooling among them (not the time thirds of a single ramp)."""
+    and cooling among them (not the thirds of a run that does not reverse)."""
     labels = {s.label for s in segments}
     return len(segments) >= FULL_CYCLE_SEGMENTS and {LABELS[HEATING], LABELS[COOLING]} <= labels
 

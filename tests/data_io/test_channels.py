@@ -23,7 +23,7 @@ from trainer.checkpoint import load_checkpoint, load_model
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
-from trainer.errors import run_cli
+from trainer.errors import UserError, run_cli
 
 RATE_HZ = 2.0
 N = 1200  # 10 minutes at 2 Hz: one heating and one cooling ramp
@@ -532,3 +532,56 @@ def test_channel_map_of_a_delimited_file_converts_each_sensor_unit(tmp_path: Pat
     np.testing.assert_allclose(rec.columns["accel0_x_mg"], ax * 1000.0, rtol=1e-12)
     np.testing.assert_allclose(rec.columns["gyro0_x_dps"], np.degrees(gx), rtol=1e-12)
     np.testing.assert_allclose(rec.columns["baro0_pa"], p * 100.0, rtol=1e-12)
+
+
+def _without(rec: Recording, *names: str, temps: dict[str, np.ndarray] | None = None) -> Recording:
+    columns = {k: v for k, v in rec.columns.items() if k not in names}
+    return Recording({**columns, **(temps or {})}, dict(rec.meta), rec.source)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_a_multi_channel_file_may_leave_out_the_one_axis_columns(
+    imu: dict[str, Path], tmp_path: Path, suffix: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The contract's "Several channels": ``accel_mg`` and ``temp_c`` are optional beside named
+    channels (each channel then reads its own ``<sensor><instance>_temp_c``). Such a file is fitted
+    per channel exactly as the file with them; a one-channel command without ``--channels`` says
+    which channels there are, in one line, and writes nothing."""
+    rec = read_recording(imu["rec"])
+    own = {f"{sensor}0_temp_c": rec.temp_c for sensor in ("accel", "gyro")}
+    path = tmp_path / f"channels{suffix}"
+    write_recording(_without(rec, "accel_mg", "temp_c", temps=own), path)
+    assert (
+        trainer_main(["fit", "--method", "poly3", str(path), "--channels", "all", "-o", str(tmp_path / "m")])
+        == 0
+    )
+    for channel in (*CHANNELS, "baro0"):
+        mine, _ = load_model(tmp_path / "m" / f"{channel}.pt")
+        theirs, _ = load_model(imu["root"] / "poly3" / f"{channel}.pt")
+        view = one_axis(rec, channel, "baro0_temp_c" if channel == "baro0" else "temp_c")
+        np.testing.assert_array_equal(mine.predict_drift(view), theirs.predict_drift(view))
+    capsys.readouterr()
+    assert run_cli(trainer_main, ["fit", "--method", "poly3", str(path), "-o", str(tmp_path / "one.pt")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no column 'accel_mg'" in err and "--channels" in err, err
+    assert "gyro0_x" in err and not (tmp_path / "one.pt").exists()
+
+
+def test_a_channel_without_any_temperature_is_refused_naming_it(imu: dict[str, Path], tmp_path: Path) -> None:
+    """Without ``temp_c``, a channel that has no temperature column of its own cannot be read."""
+    rec = read_recording(imu["rec"])
+    path = tmp_path / "no-temp.csv"
+    columns = {k: v for k, v in rec.columns.items() if k != "temp_c"}
+    columns["accel0_temp_c"] = rec.temp_c  # the gyroscope keeps none
+    text = "\n".join(
+        [
+            f"# sample_rate_hz={RATE_HZ:g}",
+            ",".join(columns),
+            *(",".join(f"{v:.6f}" for v in row) for row in zip(*columns.values(), strict=True)),
+        ]
+    )
+    path.write_text(text + "\n")
+    with pytest.raises(
+        UserError, match=r"line 2 \(header\), column 'temp_c': missing: channel gyro0_x has no"
+    ):
+        read_recording(path)

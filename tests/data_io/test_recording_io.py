@@ -237,7 +237,7 @@ CSV_ERRORS = {
     "duplicate-header": ({3: "time_s,temp_c,time_s"}, ["line 3", "column 3", "duplicate", "'time_s'"]),
     "empty-header-name": ({3: "time_s,,accel_mg"}, ["line 3", "column 2", "empty column name"]),
     "missing-required": (
-        {3: "time_s,temp_c,accel_x_mg"},
+        {3: "time_s,temp_c,acc_mg"},  # accel_x_mg would be a channel (accel0_x), which needs no accel_mg
         ["line 3", "column 'accel_mg'", "missing required"],
     ),
     "time-repeats": ({6: "0.005,20.1,1.2"}, ["line 6", "column 'time_s'", "not greater"]),

@@ -17,11 +17,13 @@ from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
+from trainer.diagnose.blocks import build_blocks
 from trainer.diagnose.document import document
 from trainer.diagnose.model import Term, fit_model
 from trainer.diagnose.report import markdown
-from trainer.diagnose.select import SUGGESTIVE, THRESHOLD
-from trainer.physics.catalogue import bias_step, hysteresis, periodic, temp_rate
+from trainer.diagnose.run import listed_near_misses
+from trainer.diagnose.select import SUGGESTIVE, THRESHOLD, NearMiss
+from trainer.physics.catalogue import BACKBONE, bias_step, hysteresis, periodic, rate_ramp, temp_rate
 from trainer.physics.effects import effect_contribution
 
 STEP = bias_step.DEFINITION.identifier
@@ -98,11 +100,6 @@ def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
     """A noise term's deterministic trend (``rate_ramp``) is a model column but not a catalogue effect;
     as a near miss it is listed with its slope in the catalogue's unit, as a finding would be (it once
     raised IndexError: the gyroscope z axis of the bundled run with two periodics added)."""
-    from trainer.diagnose.blocks import build_blocks
-    from trainer.diagnose.run import _suggestive
-    from trainer.diagnose.select import NearMiss
-    from trainer.physics.catalogue import BACKBONE, rate_ramp
-
     ramp = rate_ramp.DEFINITION.identifier
     slope_mg_per_s = 1e-3  # 4.8 mg over the run, well above its random walk
     rec = chamber_recording([], seed=5)
@@ -110,6 +107,6 @@ def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
     columns["accel_mg"] = rec.accel_mg + slope_mg_per_s * rec.time_s
     data = build_blocks(Recording(columns, dict(rec.meta), rec.source), max_blocks=BLOCKS)
     fit = fit_model((Term(BACKBONE), Term(ramp)), (), data)
-    (listed,) = _suggestive([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [])
+    (listed,) = listed_near_misses([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [])
     assert listed.effect == ramp and listed.delta_bic == 8.0
     assert listed.params["r_mg_per_s"] == pytest.approx(slope_mg_per_s, rel=0.2)

@@ -23,6 +23,7 @@ from trainer.fitting import fit_compensator
 from trainer.scoring.crossval import (
     UNCOMPENSATED,
     cross_validate,
+    folds_of,
     impute_held_out,
     thermal_segments,
     training_rows,
@@ -141,7 +142,10 @@ def test_a_monotone_ramp_is_cross_validated_in_thirds() -> None:
     rec = _ramp(4000)
     (segment,) = thermal_segments(rec)
     cv = cross_validate(rec, {}, stateful=set(), smoothing_s=0.0)
-    assert [(s.start, s.stop) for s in cv.segments] == [(0, 1333), (1333, 2667), (2667, 4000)]
+    # thirds of the temperature span: each part starts at the first sample at or above its level
+    first, second = (int(np.argmax(rec.temp_c >= -20.0 + 80.0 * k / 3)) for k in (1, 2))
+    assert [(s.start, s.stop) for s in cv.segments] == [(0, first), (first, second), (second, 4000)]
+    assert abs(first - 4000 / 3) <= 1 and abs(second - 8000 / 3) <= 1  # on a linear ramp, thirds in time
     assert all(s.label.startswith(segment.label) for s in cv.segments)
 
     def polynomial(degree: int) -> Callable[[Recording], object]:
@@ -154,9 +158,31 @@ def test_a_monotone_ramp_is_cross_validated_in_thirds() -> None:
     # the outer thirds lie outside the training range, where every model holds its edge value
     assert results["poly2"].folds[0].warm_rms == pytest.approx(results[UNCOMPENSATED].folds[0].warm_rms)
     with pytest.raises(
-        UserError, match=r"ramp\.csv: cross-validation needs at least 2 thermal segments or 48 rows"
+        UserError, match=r"ramp\.csv: cross-validation needs a run that heats and cools, or 48 rows"
     ):
         cross_validate(_ramp(40), {}, stateful=set(), smoothing_s=0.0)
+
+
+def test_a_warm_up_is_cross_validated_in_thirds_of_its_temperature_span() -> None:
+    """A fridge-to-room run (exponential approach, its slow end a dwell): the parts cover equal
+    temperature spans, so the middle one interpolates over a third of the range and the cubic beats
+    no compensation there (held out as its two thermal segments, each lay outside the other's range
+    and the cubic left exactly what no compensation leaves)."""
+    t = np.arange(0.0, 4 * 3600.0, 1.0)
+    temp = 24.0 - 20.0 * np.exp(-t / 2400.0)
+    rec = Recording(
+        {"time_s": t, "temp_c": temp, "accel_mg": 0.01 * (temp + 30.0) ** 2},
+        {"sample_rate_hz": "1.0"},
+        "fridge.csv",
+    )
+    assert {s.label for s in thermal_segments(rec)} == {"heating", "dwell"}
+    folds = folds_of(rec)
+    assert [s.label for s in folds] == ["heating 1/3", "heating 2/3", "heating 3/3"]
+    spans = [s.temp_to_c - s.temp_from_c for s in folds]
+    assert spans == pytest.approx([20.0 / 3] * 3, abs=0.05)
+    cubic = {"poly3": lambda train: fit_compensator(methods.CUBIC, train, {"degree": 3})}
+    results = cross_validate(rec, cubic, stateful=set(), smoothing_s=0.0).results
+    assert results["poly3"].folds[1].warm_rms < 0.01 * results[UNCOMPENSATED].folds[1].warm_rms
 
 
 def test_auto_chooses_none_where_nothing_helps_and_a_polynomial_where_one_does() -> None:

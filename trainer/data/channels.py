@@ -15,6 +15,7 @@ names the available channels.
 from __future__ import annotations
 
 import re
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,8 +63,13 @@ def recording_channels(rec: Recording) -> dict[str, Channel]:
 
     ``accel_x_mg`` etc. count as ``accel0_x`` unless ``accel0_x_mg`` is present too.
     """
+    return channels_in(rec.columns)
+
+
+def channels_in(names: Collection[str]) -> dict[str, Channel]:
+    """:func:`recording_channels` from the column names alone (a file's header, before its data)."""
     found: dict[str, Channel] = {}
-    for column in rec.columns:
+    for column in names:
         match = _DATA_COLUMN.fullmatch(column)
         if match is not None:
             sensor = match.group(1) or match.group(5)
@@ -78,10 +84,10 @@ def recording_channels(rec: Recording) -> dict[str, Channel]:
             if legacy is None:
                 continue
             sensor, instance, unit, name = "accel", "0", "mg", f"accel0_{legacy.group(1)}"
-            if f"{name}_mg" in rec.columns:
+            if f"{name}_mg" in names:
                 continue
         temp = f"{sensor}{instance}_temp_c"
-        found[name] = Channel(name, column, temp if temp in rec.columns else "temp_c", unit)
+        found[name] = Channel(name, column, temp if temp in names else "temp_c", unit)
     return dict(sorted(found.items(), key=lambda item: sort_key(item[0])))
 
 

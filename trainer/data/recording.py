@@ -14,7 +14,8 @@ import numpy as np
 
 from trainer.errors import UserError
 
-REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")  # of a one-axis recording
+ONE_AXIS_COLUMNS: tuple[str, ...] = ("temp_c", "accel_mg")  # optional beside named channels
 MIN_ROWS = 2  # one time step: the least that defines a sample rate (and a drift)
 TRUTH_PREFIX = "true_"
 
@@ -45,11 +46,23 @@ class Recording:
 
     @property
     def temp_c(self) -> np.ndarray:
-        return self.columns["temp_c"]
+        return self._one_axis("temp_c")
 
     @property
     def accel_mg(self) -> np.ndarray:
-        return self.columns["accel_mg"]
+        return self._one_axis("accel_mg")
+
+    def _one_axis(self, name: str) -> np.ndarray:
+        """A one-axis column; a multi-channel recording may leave it out (the contract's "Several
+        channels"), and a one-channel command then asks for a channel in one line."""
+        values = self.columns.get(name)
+        if values is None:
+            raise UserError(
+                f"{self.source}: no column {name!r}: a multi-channel recording without a one-axis column "
+                f"is read a channel at a time: name them with --channels (all, or a list such as "
+                f"accel0_z,gyro0_x; columns: {', '.join(self.columns)})"
+            )
+        return values
 
     @property
     def sample_rate_hz(self) -> float:
@@ -92,5 +105,6 @@ def data_fingerprint(rec: Recording) -> str:
     with the scored data's."""
     digest = hashlib.sha256()
     for name in REQUIRED_COLUMNS:
-        digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
+        if name in rec.columns:  # a multi-channel recording may carry no one-axis column
+            digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
     return digest.hexdigest()

@@ -16,15 +16,16 @@ from __future__ import annotations
 import math
 import os
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
 from trainer.budget import FLOAT_BYTES, check_memory
+from trainer.data.channels import channels_in
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
-from trainer.data.recording import REQUIRED_COLUMNS, Recording, require_rows
+from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
@@ -87,6 +88,30 @@ def first_non_finite(columns: dict[str, np.ndarray]) -> tuple[str, int] | None:
         if bad.size and (best is None or (int(bad[0]), order) < best[:2]):
             best = (int(bad[0]), order, name)
     return None if best is None else (best[2], best[0])
+
+
+def missing_required(names: Sequence[str]) -> tuple[str, str] | None:
+    """(column, why) of the first required column ``names`` lack, or None.
+
+    ``time_s`` always. ``temp_c`` and ``accel_mg`` are the one-axis recording's; beside named
+    channels (``accel0_x_mg``, ``gyro0_x_dps``, ...) the contract makes them optional: ``accel_mg``
+    then only serves the commands run without ``--channels``, and ``temp_c`` is needed only by a
+    channel without its own ``<sensor><instance>_temp_c``.
+    """
+    if "time_s" not in names:
+        return "time_s", "missing required column"
+    channels = channels_in(names)
+    if not channels:
+        missing = [name for name in ONE_AXIS_COLUMNS if name not in names]
+        return (missing[0], "missing required column") if missing else None
+    if "temp_c" not in names:
+        shared = [c.name for c in channels.values() if c.temp_column == "temp_c"]
+        if shared:
+            return "temp_c", (
+                f"missing: channel {shared[0]} has no temperature column of its own "
+                f"({shared[0].split('_')[0]}_temp_c) and the file has no temp_c"
+            )
+    return None
 
 
 def check_recording(
@@ -158,11 +183,11 @@ def read_recording(path: str | os.PathLike[str]) -> Recording:
 
 def _read_csv(path: str | Path) -> Recording:
     table = read_table(path, delimiter=",")
-    missing = [name for name in REQUIRED_COLUMNS if name not in table.columns]
+    missing = missing_required(table.names)
     if missing:
         raise UserError(
-            f"{table.source}: line {table.header_line} (header), column {missing[0]!r}: missing required "
-            f"column (columns: {', '.join(table.names)})"
+            f"{table.source}: line {table.header_line} (header), column {missing[0]!r}: {missing[1]} "
+            f"(columns: {', '.join(table.names)})"
         )
     if len(table) == 0:
         raise UserError(f"{table.source}: no data rows after the header on line {table.header_line}")
@@ -279,11 +304,9 @@ def _read_npz(path: str | Path) -> Recording:
             if array.dtype.kind not in "iuf":
                 raise UserError(f"{source}: column {name!r}: dtype {array.dtype} is not a real number type")
             columns[name] = array.astype(np.float64)
-    missing = [name for name in REQUIRED_COLUMNS if name not in columns]
+    missing = missing_required(list(columns))
     if missing:
-        raise UserError(
-            f"{source}: column {missing[0]!r}: missing required column (arrays: {', '.join(columns)})"
-        )
+        raise UserError(f"{source}: column {missing[0]!r}: {missing[1]} (arrays: {', '.join(columns)})")
     expected = len(columns["time_s"])
     for name, values in columns.items():
         if len(values) != expected:
@@ -318,9 +341,9 @@ def csv_time_decimals(time: np.ndarray) -> int:
 
 def _check_recording_writable(rec: Recording) -> None:
     """Structural rules a writer must not break (a bug in the caller, hence ValueError)."""
-    for name in REQUIRED_COLUMNS:
-        if name not in rec.columns:
-            raise ValueError(f"{rec.source}: cannot write a recording without column {name!r}")
+    missing = missing_required(list(rec.columns))
+    if missing:
+        raise ValueError(f"{rec.source}: cannot write a recording without column {missing[0]!r}")
     for name, values in rec.columns.items():
         if not name or name != name.strip() or name.startswith("#") or any(c in name for c in ",\r\n"):
             raise ValueError(f"{rec.source}: column name {name!r} cannot be written")

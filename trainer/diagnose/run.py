@@ -193,7 +193,7 @@ def _diagnose(
             ):
                 undetected.append(limit)
     misses = near_misses(final, data, candidates) if report_search else []
-    suggestive = _suggestive(misses, said, flags)
+    suggestive = listed_near_misses(misses, said, flags)
     not_supported = [
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))
         for n in baseline_support(baseline_common, data)
@@ -239,7 +239,7 @@ def _diagnose(
     )
 
 
-def _suggestive(
+def listed_near_misses(
     misses: list[NearMiss], said: set[str], param_flags: Callable[[EffectConfig], list[str]]
 ) -> list[Suggestive]:
     """The near misses as the report lists them; an effect the report already names or lists as

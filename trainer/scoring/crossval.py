@@ -4,7 +4,8 @@ A single split of one chamber run says little: which end is held out decides the
 physics compensator won by 72 % at one split of the bundled run and lost by 23 % at another).
 Here every thermal segment of the run (each heating, cooling and dwell; :func:`thermal_segments`)
 is held out in turn, the method is trained on the rest, and the held-out segment is scored (a run
-of one segment, a single ramp, is cut into thirds in time; :func:`folds_of`):
+that does not reverse, a single ramp or a warm-up, is cut into thirds of its temperature span;
+:func:`folds_of`):
 
 - **warm**: the model runs from the recording's start, through the training rows, and is scored
   on the segment, as firmware running since power-on;
@@ -49,7 +50,7 @@ from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left,
 MIN_SEGMENT_FRACTION = 0.05  # a thermal run shorter than 5 % of the recording joins its neighbour
 MIN_SEGMENT_S = 300.0  # ... and so does one shorter than 5 minutes
 MIN_SEGMENTS = 2
-RAMP_PARTS = 3  # a run of one thermal segment (one ramp) is cut into this many parts in time
+RAMP_PARTS = 3  # a run that does not reverse is cut into this many parts (folds_of)
 UNCOMPENSATED = "uncompensated"
 LABELS = {HEATING: "heating", COOLING: "cooling", NEITHER: "dwell"}
 
@@ -212,29 +213,39 @@ def cross_validatable(method: str) -> bool:
 
 
 def folds_of(rec: Recording) -> list[Segment]:
-    """The segments to hold out: the thermal segments, or, on a run of one (a single ramp or
-    dwell), :data:`RAMP_PARTS` equal parts of it in time, each held out in turn (the first and last
-    then extrapolate in temperature, the middle one interpolates); a one-line error when even that
-    leaves too few rows."""
+    """The segments to hold out: the thermal segments of a run that reverses (heats and cools);
+    else (one ramp, a fridge-to-room warm-up whose slow end is a dwell, a dwell alone)
+    :data:`RAMP_PARTS` parts, each held out in turn: the first and last then extrapolate in
+    temperature, the middle ones interpolate. A ramp's parts cover equal spans of temperature (on
+    an exponential warm-up, equal times would leave the middle part a degree or two); a dwell's
+    are equal in time. A one-line error when that leaves too few rows.
+
+    Held out whole, the two segments of a warm-up each lie outside the other's range, where every
+    model holds its edge value: the cubic left exactly what no compensation leaves, and ``auto``
+    shipped nothing on a PX4-style calibration run."""
     segments = thermal_segments(rec)
-    if len(segments) >= MIN_SEGMENTS:
+    labels = {s.label for s in segments}
+    if len(segments) >= MIN_SEGMENTS and {LABELS[HEATING], LABELS[COOLING]} <= labels:
         return segments
     n = len(rec)
     if n < RAMP_PARTS * MIN_ROWS:
         raise UserError(
-            f"{rec.source}: cross-validation needs at least {MIN_SEGMENTS} thermal segments or "
+            f"{rec.source}: cross-validation needs a run that heats and cools, or "
             f"{RAMP_PARTS * MIN_ROWS} rows to cut one into {RAMP_PARTS} parts; this run has {n} rows; score it "
             "on another recording (VALID) or give --holdout"
         )
-    (only,) = segments
     temp = np.asarray(rec.temp_c, dtype=np.float64)
     t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
-    edges = [round(k * n / RAMP_PARTS) for k in range(RAMP_PARTS + 1)]
+    ramps = [s.label for s in segments if s.label != LABELS[NEITHER]]
+    label = ramps[0] if ramps else LABELS[NEITHER]
+    edges = _temperature_parts(temp, rising=label == LABELS[HEATING]) if ramps else None
+    if edges is None:
+        edges = [round(k * n / RAMP_PARTS) for k in range(RAMP_PARTS + 1)]
     return [
         Segment(
             a,
             b,
-            f"{only.label} {k + 1}/{RAMP_PARTS}",
+            f"{label} {k + 1}/{RAMP_PARTS}",
             float(t[a]),
             float(t[b - 1]),
             float(temp[a]),
@@ -242,6 +253,16 @@ def folds_of(rec: Recording) -> list[Segment]:
         )
         for k, (a, b) in enumerate(itertools.pairwise(edges))
     ]
+
+
+def _temperature_parts(temp: np.ndarray, *, rising: bool) -> list[int] | None:
+    """Row edges of :data:`RAMP_PARTS` parts of a run that only heats (or only cools) covering equal
+    spans of its temperature (of the running maximum, or minimum: the thermometer's noise does not
+    move an edge back); None when a part would hold fewer than ``MIN_ROWS`` rows."""
+    envelope = np.maximum.accumulate(temp) if rising else -np.minimum.accumulate(temp)
+    levels = envelope[0] + (envelope[-1] - envelope[0]) * np.arange(1, RAMP_PARTS) / RAMP_PARTS
+    edges = [0, *np.searchsorted(envelope, levels, side="left").tolist(), temp.size]
+    return edges if all(b - a >= MIN_ROWS for a, b in itertools.pairwise(edges)) else None
 
 
 def training_rows(n: int, segment: Segment) -> np.ndarray:
