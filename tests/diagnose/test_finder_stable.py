@@ -17,6 +17,7 @@ from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
+from trainer.diagnose import select as select_module
 from trainer.diagnose.blocks import build_blocks
 from trainer.diagnose.document import document
 from trainer.diagnose.model import Term, fit_model
@@ -110,3 +111,20 @@ def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
     (listed,) = listed_near_misses([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [])
     assert listed.effect == ramp and listed.delta_bic == 8.0
     assert listed.params["r_mg_per_s"] == pytest.approx(slope_mg_per_s, rel=0.2)
+
+
+def test_an_effect_the_search_has_no_room_for_is_listed_not_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three clear steps, a search limited to two effects: the third earns the criterion beside the
+    full model and is listed as a near miss at its own time, worded as the limit (at the former
+    limit of 6 the bundled run's gyro x left a branch offset out unsaid)."""
+    monkeypatch.setattr(select_module, "MAX_ADDED", 2)
+    times = (1000.0, 2500.0, 3800.0)
+    rec = chamber_recording([(STEP, {"t_s": t, "step_mg": 2.0}) for t in times], seed=7)
+    d = diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
+    named = [e.params["t_s"] for e in d.left_out if e.effect == STEP]
+    assert len(named) == 2
+    (left,) = [t for t in times if all(abs(t - n) > 2 * DURATION_S / BLOCKS for n in named)]
+    listed = [m for m in d.suggestive if m.effect == STEP]
+    assert listed and abs(listed[0].params["t_s"] - left) <= 2 * DURATION_S / BLOCKS, d.suggestive
+    assert listed[0].delta_bic >= THRESHOLD
+    assert "the search adds: above the criterion" in markdown(d)

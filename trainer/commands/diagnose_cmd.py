@@ -95,7 +95,7 @@ def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
     from trainer.diagnose.report import limit_sizes
-    from trainer.diagnose.select import THRESHOLD
+    from trainer.diagnose.select import MAX_ADDED, THRESHOLD
     from trainer.diagnose.verdict import ambiguity_line
     from trainer.physics.catalogue.units import channel_param_name
 
@@ -126,7 +126,11 @@ def summary(result: Diagnosis) -> str:
         params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(m.params).items())
         lines.append(
             f"near miss (not named): {m.effect} [{params}] BIC -{m.delta_bic:.1f}{result.label}, "
-            f"below the criterion's {THRESHOLD:g}"
+            + (
+                f"below the criterion's {THRESHOLD:g}"
+                if m.delta_bic < THRESHOLD
+                else f"the search stopped at its {MAX_ADDED} effects"
+            )
         )
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "

@@ -16,7 +16,7 @@ from trainer.diagnose.holdout import Holdout, HoldoutScore
 from trainer.diagnose.locate import AllanComparison
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Ambiguity, Diagnosis, LeftOut, Tested
-from trainer.diagnose.select import AMBIGUOUS, SUGGESTIVE, THRESHOLD
+from trainer.diagnose.select import AMBIGUOUS, MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 from trainer.physics.effects import MULTI_INSTANCE, EffectConfig
@@ -269,6 +269,7 @@ def _document(d: Diagnosis) -> dict[str, Any]:
             "add_threshold": THRESHOLD,
             "ambiguous_below": AMBIGUOUS,
             "suggestive_from": SUGGESTIVE,
+            "max_added": MAX_ADDED,  # a suggestive entry at or above add_threshold: the search was full
         },
         "mismatch": [region(r) for r in d.mismatch],
         "left_out": [left_out(e) for e in d.left_out],

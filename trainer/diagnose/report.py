@@ -22,7 +22,7 @@ from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
 from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut
-from trainer.diagnose.select import SUGGESTIVE, THRESHOLD
+from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
 from trainer.physics.catalogue.units import channel_param_name
@@ -123,9 +123,15 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += ["", "## Near misses: strong evidence, below the criterion (not named)", ""]
         lines += [
             f"- {m.effect}{d.label}: {_fmt_params(d.params(m.params))}. BIC -{m.delta_bic:.1f} when added to "
-            f"the final model ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a spurious "
-            "component is possible at this evidence, or a named effect shares part of its signature. Not in "
-            "the compensator." + (f" Note: {'; '.join(m.flags)}." if m.flags else "")
+            + (
+                f"the final model, which already holds the {MAX_ADDED} effects the search adds: above the "
+                f"criterion ({THRESHOLD:g}), not named. Not in the compensator."
+                if m.delta_bic >= THRESHOLD
+                else f"the final model ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a "
+                "spurious component is possible at this evidence, or a named effect shares part of its "
+                "signature. Not in the compensator."
+            )
+            + (f" Note: {'; '.join(m.flags)}." if m.flags else "")
             for m in d.suggestive
         ]
     if d.not_supported:

@@ -61,7 +61,8 @@ DEFINITION = Effect(
         search="step",
         nonlinear=(("t_s", False),),
         bounds=lambda data: ((data.starts[2], data.starts[-2]),),
-        max_terms=5,  # a run can hold several events (shocks, mode hops) at distinct times
+        max_terms=8,  # a run can hold several events (shocks, mode hops) at distinct times (the bundled
+        # run's gyro x holds four; at 5, two steps added to it left one of the four out unsaid)
         same_instance=_same_instance,
         # a step time found by an exhaustive scan counts twice (modified BIC for change points,
         # Zhang & Siegmund 2007): its look-elsewhere effect is far larger than a time constant's
