@@ -120,7 +120,9 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += ["", "## Weakly identifiable, not named: the smallest size this run names", ""]
         lines += [_undetected_line(u, d.unit) for u in d.undetected]
     if d.suggestive:
-        lines += ["", "## Near misses: strong evidence, below the criterion (not named)", ""]
+        full = any(m.delta_bic >= THRESHOLD for m in d.suggestive)  # the search stopped at its limit
+        heading = "strong evidence, not named" if full else "strong evidence, below the criterion (not named)"
+        lines += ["", f"## Near misses: {heading}", ""]
         lines += [
             f"- {m.effect}{d.label}: {_fmt_params(d.params(m.params))}. BIC -{m.delta_bic:.1f} when added to "
             + (

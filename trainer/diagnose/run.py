@@ -48,6 +48,7 @@ from trainer.diagnose.select import (
     forward_select,
     near_misses,
     resolve,
+    stopped_full,
 )
 from trainer.diagnose.threads import single_blas_thread
 from trainer.diagnose.where import (
@@ -192,7 +193,7 @@ def _diagnose(
                 limit := detection_limit(final, effect, info.reason, info.test, scale)
             ):
                 undetected.append(limit)
-    misses = near_misses(final, data, candidates) if report_search else []
+    misses = near_misses(final, data, candidates, full=stopped_full(selection)) if report_search else []
     suggestive = listed_near_misses(misses, said, flags)
     not_supported = [
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))

@@ -414,16 +414,19 @@ class NearMiss:
     fit: ModelFit  # the final model with it (its term last)
 
 
-def near_misses(final: ModelFit, data: BlockData, candidates: Sequence[str]) -> list[NearMiss]:
+def stopped_full(selection: Selection) -> bool:
+    """Whether the search added its ``MAX_ADDED`` deterministic terms (it stops there)."""
+    return sum(1 for step in selection.steps if step.term_index is not None) >= MAX_ADDED
+
+
+def near_misses(
+    final: ModelFit, data: BlockData, candidates: Sequence[str], *, full: bool = False
+) -> list[NearMiss]:
     """Step 5 of the module docstring: the best version of every deterministic candidate, refitted
     with its own noise like a forward round (the ``TOP_REFIT`` most promising and every spectral
     proposal), kept when its evidence is suggestive but below the criterion, or above it when the
-    model already holds ``MAX_ADDED`` terms (the search stopped there: said, not silently left out);
+    search added its ``MAX_ADDED`` terms (``full``: it stopped there; said, not silently left out);
     strongest first."""
-    full = (
-        sum(1 for i in final.identifiers if i in catalogue.DEFINITIONS and i != catalogue.BACKBONE)
-        >= MAX_ADDED
-    )
     ceiling = math.inf if full else THRESHOLD
     proposals = [
         p for effect in candidates if effect not in NOISE_EFFECTS for p in propose(final, data, effect)
