@@ -53,7 +53,7 @@ from typing import cast
 
 import numpy as np
 
-from trainer.data.channels import channel_view, select_channels
+from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
@@ -61,6 +61,7 @@ from trainer.diagnose.detection import shape_limit
 from trainer.diagnose.model import PLAUSIBLE
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
+from trainer.errors import run_cli
 from trainer.physics.catalogue import (
     DEFINITIONS,
     bias_step,
@@ -372,7 +373,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="EFFECTS",
         help="with --simulated: effects concealed in the generated 'clean' run (its own findings)",
     )
-    parser.add_argument("--channel", default="accel0_z")
+    parser.add_argument(
+        "--channel",
+        default="accel0_z",
+        help="a channel, a comma-separated list, or all (a summary over them at the end)",
+    )
     parser.add_argument("--cases", default="", help="comma-separated substrings of case names (default: all)")
     parser.add_argument(
         "--multiples",
@@ -383,19 +388,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.simulated is not None:
         hidden = tuple(h for h in args.hidden.split(",") if h)
-        rec = make_scenario(hidden, args.simulated).recording().without_truth()
-        args.channel = f"simulated #{args.simulated} ({'+'.join(hidden) or 'nothing'} concealed)"
+        generated = make_scenario(hidden, args.simulated).recording().without_truth()
+        runs = [(f"simulated #{args.simulated} ({'+'.join(hidden) or 'nothing'} concealed)", generated)]
     elif args.recording:
         full = read_recording(args.recording)
-        rec = channel_view(full, select_channels(full, (args.channel,))[0])
+        wanted_channels = (ALL,) if args.channel == ALL else tuple(args.channel.split(","))
+        runs = [(c.name, channel_view(full, c)) for c in select_channels(full, wanted_channels)]
     else:
         parser.error("give a recording or --simulated SEED")
+    wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
+    grand = {group: dict.fromkeys(TOTAL_KEYS, 0) for group in GROUPS}
+    for label, rec in runs:
+        totals = bench_channel(label, rec, wanted, args.multiples)
+        for group in GROUPS:
+            for k in TOTAL_KEYS:
+                grand[group][k] += totals[group][k]
+    if len(runs) > 1:
+        print(f"\nall {len(runs)} channels ({', '.join(label for label, _ in runs)}):")
+        print_totals(grand)
+    print(
+        "\n(not scored: an added effect the profile cannot identify, one the clean run already carries or is unsettled about (its size merges "
+        "with the run's own), or one whose plausible maximum is below the smallest multiple of its "
+        "detection limit on this run (it runs at that maximum))"
+    )
+    return 0
+
+
+GROUPS = ("scored", "not scored")
+TOTAL_KEYS = ("named", "added", "params_ok", "duplicates", "lost", "lost_said", "silent")
+
+
+def bench_channel(
+    label: str, rec: Recording, wanted: Sequence[str], multiples: Sequence[float]
+) -> dict[str, dict[str, int]]:
+    """The clean diagnosis and every case of one channel, a table row each; the totals per group."""
     started = time.perf_counter()
     clean = diagnose(rec, holdout_fraction=0.0)
     clean_s = time.perf_counter() - started
-    print(f"clean {args.channel}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
-    wanted = [w.strip() for w in args.cases.split(",") if w.strip()]
-    multiples = args.multiples
+    print(f"\nclean {label}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
     chosen = [
         c for c in cases(clean.data.duration_s, multiples) if not wanted or any(w in c.name for w in wanted)
     ]
@@ -404,8 +434,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "| size / limit | silent | not scored | s | findings |"
     )
     print("|---|--:|--:|--:|---|---|---|--:|---|---|--:|---|")
-    keys = ("named", "added", "params_ok", "duplicates", "lost", "lost_said", "silent")
-    totals = {group: dict.fromkeys(keys, 0) for group in ("scored", "not scored")}
+    totals = {group: dict.fromkeys(TOTAL_KEYS, 0) for group in GROUPS}
     for case in chosen:
         started = time.perf_counter()
         at = sized(case, clean, rec, min(multiples))
@@ -428,6 +457,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"| {'; '.join(s['unscored']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
             flush=True,
         )
+    print_totals(totals)
+    return totals
+
+
+def print_totals(totals: dict[str, dict[str, int]]) -> None:
     for group, t in totals.items():
         print(
             f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']}, "
@@ -435,13 +469,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"said out loud: in an ambiguity, e.g. absorbed by a confounder, or as a near miss), added effects neither named "
             f"nor reported {t['silent']}"
         )
-    print(
-        "\n(not scored: an added effect the profile cannot identify, one the clean run already carries or is unsettled about (its size merges "
-        "with the run's own), or one whose plausible maximum is below the smallest multiple of its "
-        "detection limit on this run (it runs at that maximum))"
-    )
-    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_cli(main, sys.argv[1:]))  # a bad recording or channel: one line, not a traceback
