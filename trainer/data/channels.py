@@ -86,9 +86,16 @@ def channels_in(names: Collection[str]) -> dict[str, Channel]:
             sensor, instance, unit, name = "accel", "0", "mg", f"accel0_{legacy.group(1)}"
             if f"{name}_mg" in names:
                 continue
-        temp = f"{sensor}{instance}_temp_c"
+        temp = own_temp_column(name)
         found[name] = Channel(name, column, temp if temp in names else "temp_c", unit)
     return dict(sorted(found.items(), key=lambda item: sort_key(item[0])))
+
+
+def own_temp_column(channel: str) -> str:
+    """The temperature column of a channel's instance (``gyro0_x`` -> ``gyro0_temp_c``)."""
+    parsed = parse_channel(channel)
+    assert parsed is not None, "only a parsed channel name has an instance temperature"
+    return parsed.temp_column
 
 
 def one_axis_left_out(rec: Recording, wanted: tuple[str, ...], channels: list[Channel]) -> str | None:

@@ -63,6 +63,11 @@ class ChannelName:
     def unit(self) -> str:
         return SENSOR_UNITS[self.sensor]
 
+    @property
+    def temp_column(self) -> str:
+        """``accel0_temp_c``: the temperature column the instance's channels share."""
+        return f"{self.sensor}{self.instance}_temp_c"
+
 
 def parse_channel(name: str) -> ChannelName | None:
     """The parts of a channel name of the recording format, or None when it is not one."""
@@ -102,7 +107,7 @@ class LogChannel:
 
     @property
     def temp_column(self) -> str:
-        return f"{self.sensor_instance}_temp_c"
+        return ChannelName(self.sensor, self.instance, self.axis).temp_column
 
     @property
     def sensor_instance(self) -> str:

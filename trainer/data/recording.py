@@ -14,8 +14,8 @@ import numpy as np
 
 from trainer.errors import UserError
 
-REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "temp_c", "accel_mg")  # of a one-axis recording
 ONE_AXIS_COLUMNS: tuple[str, ...] = ("temp_c", "accel_mg")  # optional beside named channels
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", *ONE_AXIS_COLUMNS)  # of a one-axis recording
 MIN_ROWS = 2  # one time step: the least that defines a sample rate (and a drift)
 TRUTH_PREFIX = "true_"
 

@@ -23,7 +23,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from trainer.budget import FLOAT_BYTES, check_memory
-from trainer.data.channels import channels_in
+from trainer.data.channels import channels_in, own_temp_column
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
 from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
@@ -109,7 +109,7 @@ def missing_required(names: Sequence[str]) -> tuple[str, str] | None:
         if shared:
             return "temp_c", (
                 f"missing: channel {shared[0]} has no temperature column of its own "
-                f"({shared[0].split('_')[0]}_temp_c) and the file has no temp_c"
+                f"({own_temp_column(shared[0])}) and the file has no temp_c"
             )
     return None
 

@@ -170,6 +170,11 @@ def _score_round(
     return scored, rest
 
 
+def _added(steps: Sequence[Step]) -> int:
+    """Deterministic terms the search has added (what ``MAX_ADDED`` limits; noise terms have none)."""
+    return sum(1 for step in steps if step.term_index is not None)
+
+
 def _forward(
     current: ModelFit,
     data: BlockData,
@@ -189,7 +194,7 @@ def _forward(
     ``first`` collects the first round's scores (``None``: not recorded).
     """
     for round_index in range(MAX_ADDED):
-        if sum(1 for s in steps if s.term_index is not None) >= MAX_ADDED:
+        if _added(steps) >= MAX_ADDED:
             break
         proposals = [p for effect in deterministic for p in propose(current, data, effect)]
         scored, not_refitted = _score_round(current, data, proposals)
@@ -203,7 +208,7 @@ def _forward(
         if not scored:
             break
         delta, fit, text, proposal = max(scored, key=lambda item: item[0])
-        added = sum(1 for s in steps if s.term_index is not None)
+        added = _added(steps)
         if delta < THRESHOLD and (not pairs or added + 2 > MAX_ADDED):
             break
         if delta < THRESHOLD:
@@ -416,7 +421,7 @@ class NearMiss:
 
 def stopped_full(selection: Selection) -> bool:
     """Whether the search added its ``MAX_ADDED`` deterministic terms (it stops there)."""
-    return sum(1 for step in selection.steps if step.term_index is not None) >= MAX_ADDED
+    return _added(selection.steps) >= MAX_ADDED
 
 
 def near_misses(
