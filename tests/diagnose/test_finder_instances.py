@@ -16,9 +16,11 @@ from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, build_blocks
 from trainer.diagnose.candidates import coincides, has_duplicates, propose, scan_step_pairs
+from trainer.diagnose.document import document
 from trainer.diagnose.model import Term, build_design, fit_model
+from trainer.diagnose.report import markdown
 from trainer.diagnose.scenarios import make_scenario
-from trainer.diagnose.select import THRESHOLD
+from trainer.diagnose.select import SUGGESTIVE, THRESHOLD
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS, bias_step, periodic
 from trainer.physics.effects import effect_contribution
 
@@ -166,6 +168,44 @@ def test_two_steps_that_nearly_cancel_are_both_named() -> None:
     for (t_s, step_mg), p in zip(truth, found, strict=True):
         assert abs(p["t_s"] - t_s) <= 2.0 * block_s
         assert p["step_mg"] == pytest.approx(step_mg, rel=0.25)
+
+
+def test_two_steps_below_the_criterion_are_listed_as_a_pair_near_miss() -> None:
+    """The same run with both steps at 0.8 of those sizes: placed jointly they earn strong evidence
+    but less than the criterion, one at a time less still. The report lists both edges as near
+    misses, each at its time and size with their joint evidence (it once listed nothing: the single
+    step earned less than the near-miss bar). The evidence printed is the BIC the final model gains
+    with both steps held at the listed instants (refitted here, charged as the search charges them)."""
+    rec = make_scenario(("hysteresis",), 3001).recording().without_truth()
+    t = rec.time_s - rec.time_s[0]
+    duration = float(t[-1])
+    truth = [(0.4 * duration, 0.24), (0.7 * duration, -0.192)]
+    extra = sum(
+        (
+            effect_contribution(STEP, {"t_s": t_s, "step_mg": s}, t, rec.temp_c, rec.temp_c)
+            for t_s, s in truth
+        ),
+        np.zeros(t.size),
+    )
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    d = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    assert not any(e.effect == STEP for e in d.left_out)  # the premise: below the criterion
+    misses = sorted((m for m in d.suggestive if m.effect == STEP), key=lambda m: m.params["t_s"])
+    assert len(misses) == 2, d.suggestive
+    for (t_s, step_mg), miss in zip(truth, misses, strict=True):
+        assert miss.joint == 2
+        assert abs(miss.params["t_s"] - t_s) <= 2.0 * d.data.block_s
+        assert miss.params["step_mg"] == pytest.approx(step_mg, rel=0.25)
+    assert misses[0].delta_bic == misses[1].delta_bic
+    assert SUGGESTIVE <= misses[0].delta_bic < THRESHOLD
+    final = d.selection.final
+    held = tuple(Term(STEP, (m.params["t_s"],), fixed=True) for m in misses)
+    with_pair = fit_model((*final.terms, *held), final.noise.terms, d.data, start=final.noise)
+    assert final.bic - with_pair.bic == pytest.approx(misses[0].delta_bic, abs=0.5)
+    listed = [m for m in document(d)["suggestive"] if m["effect"] == STEP]
+    assert [m["joint_instances"] for m in listed] == [2, 2]
+    assert markdown(d).count("other instance placed jointly with it") == 2
 
 
 @pytest.mark.slow

@@ -125,7 +125,9 @@ def summary(result: Diagnosis) -> str:
     for m in result.suggestive:
         params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(m.params).items())
         lines.append(
-            f"near miss (not named): {m.effect} [{params}] BIC -{m.delta_bic:.1f}{result.label}, "
+            f"near miss (not named): {m.effect} [{params}] BIC -{m.delta_bic:.1f}{result.label}"
+            + (f" (one of {m.joint} placed jointly; the BIC is theirs together)" if m.joint > 1 else "")
+            + ", "
             + (
                 f"below the criterion's {THRESHOLD:g}"
                 if m.delta_bic < THRESHOLD

@@ -286,6 +286,7 @@ def _document(d: Diagnosis) -> dict[str, Any]:
         "suggestive": [
             {"effect": m.effect, "params": params(m.params), "delta_bic_when_added": round(m.delta_bic, 2)}
             | ({"flags": m.flags} if m.flags else {})
+            | ({"joint_instances": m.joint} if m.joint > 1 else {})
             for m in d.suggestive
         ],
         "tested": [tested(t) for t in d.tested],

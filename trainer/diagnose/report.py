@@ -21,7 +21,7 @@ from trainer.diagnose.document import json_text
 from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
 from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
-from trainer.diagnose.result import Diagnosis, LeftOut
+from trainer.diagnose.result import Diagnosis, LeftOut, Suggestive
 from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
@@ -123,19 +123,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         full = any(m.delta_bic >= THRESHOLD for m in d.suggestive)  # the search stopped at its limit
         heading = "strong evidence, not named" if full else "strong evidence, below the criterion (not named)"
         lines += ["", f"## Near misses: {heading}", ""]
-        lines += [
-            f"- {m.effect}{d.label}: {_fmt_params(d.params(m.params))}. BIC -{m.delta_bic:.1f} when added to "
-            + (
-                f"the final model, which already holds the {MAX_ADDED} effects the search adds: above the "
-                f"criterion ({THRESHOLD:g}), not named. Not in the compensator."
-                if m.delta_bic >= THRESHOLD
-                else f"the final model ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a "
-                "spurious component is possible at this evidence, or a named effect shares part of its "
-                "signature. Not in the compensator."
-            )
-            + (f" Note: {'; '.join(m.flags)}." if m.flags else "")
-            for m in d.suggestive
-        ]
+        lines += [_near_miss_line(m, d) for m in d.suggestive]
     if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
         lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]
@@ -194,6 +182,27 @@ def limit_sizes(u: DetectionLimit) -> str:
     """``1.33 at 60, 2.06 at 140.4, ... (tau_s)``: the smallest amplitude named along the time
     constant (the report's and the terminal's one wording)."""
     return ", ".join(f"{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits) + f" ({u.nl_name})"
+
+
+def _near_miss_line(m: Suggestive, d: Diagnosis) -> str:
+    """One near miss: what it is, its evidence against the criterion, and that it is not used."""
+    added = "the final model" + (
+        f" together with the {m.joint - 1} other instance{'s' if m.joint > 2 else ''} placed jointly with it"
+        if m.joint > 1
+        else ""
+    )
+    verdict = (
+        f"{added}, which already holds the {MAX_ADDED} effects the search adds: above the criterion "
+        f"({THRESHOLD:g}), not named."
+        if m.delta_bic >= THRESHOLD
+        else f"{added} ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a spurious "
+        "component is possible at this evidence, or a named effect shares part of its signature."
+    )
+    note = f" Note: {'; '.join(m.flags)}." if m.flags else ""
+    return (
+        f"- {m.effect}{d.label}: {_fmt_params(d.params(m.params))}. BIC -{m.delta_bic:.1f} when added to "
+        f"{verdict} Not in the compensator.{note}"
+    )
 
 
 def _undetected_line(u: DetectionLimit, unit: str) -> str:

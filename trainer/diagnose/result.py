@@ -74,6 +74,7 @@ class Suggestive:
     params: dict[str, float]
     delta_bic: float  # BIC drop when added to the final model
     flags: list[str] = field(default_factory=list)  # parameters outside the plausible range
+    joint: int = 1  # instances listed together that share this evidence (a pair of steps: 2)
 
 
 @dataclass(frozen=True)

@@ -243,15 +243,21 @@ def _diagnose(
 def listed_near_misses(
     misses: list[NearMiss], said: set[str], param_flags: Callable[[EffectConfig], list[str]]
 ) -> list[Suggestive]:
-    """The near misses as the report lists them; an effect the report already names or lists as
-    ambiguous is not repeated, unless the catalogue allows another instance of it (a second step)."""
+    """The near misses as the report lists them, one entry per instance (a pair of steps: both,
+    with their joint evidence); an effect the report already names or lists as ambiguous is not
+    repeated, unless the catalogue allows another instance of it (a second step)."""
     out = []
     for miss in misses:
         if miss.effect in said and miss.effect not in MULTI_INSTANCE:
             continue
-        index = max(k for k, term in enumerate(miss.fit.terms) if term.identifier == miss.effect)
-        effect = _term_effect(miss.fit, index)
-        out.append(Suggestive(miss.effect, dict(effect.params), miss.delta_bic, param_flags(effect)))
+        indices = [k for k, term in enumerate(miss.fit.terms) if term.identifier == miss.effect]
+        for index in indices[-miss.instances :]:
+            effect = _term_effect(miss.fit, index)
+            out.append(
+                Suggestive(
+                    miss.effect, dict(effect.params), miss.delta_bic, param_flags(effect), miss.instances
+                )
+            )
     return out
 
 

@@ -416,7 +416,8 @@ class NearMiss:
 
     effect: str
     delta_bic: float
-    fit: ModelFit  # the final model with it (its term last)
+    fit: ModelFit  # the final model with it (its terms last)
+    instances: int = 1  # terms added together, with one joint evidence (two steps placed jointly)
 
 
 def stopped_full(selection: Selection) -> bool:
@@ -431,17 +432,24 @@ def near_misses(
     with its own noise like a forward round (the ``TOP_REFIT`` most promising and every spectral
     proposal), kept when its evidence is suggestive but below the criterion, or above it when the
     search added its ``MAX_ADDED`` terms (``full``: it stopped there; said, not silently left out);
-    strongest first."""
+    strongest first. Two steps placed jointly, as the forward search offers them when no single
+    candidate passes, replace the single step when their joint evidence is stronger: a level that
+    leaves and comes back is listed as its two edges, not as one step of the wrong size."""
     ceiling = math.inf if full else THRESHOLD
-    proposals = [
-        p for effect in candidates if effect not in NOISE_EFFECTS for p in propose(final, data, effect)
+    deterministic = [effect for effect in candidates if effect not in NOISE_EFFECTS]
+    proposals = [p for effect in deterministic for p in propose(final, data, effect)]
+    scored = [
+        (delta, fit, proposal, 1) for delta, fit, _, proposal in _score_round(final, data, proposals)[0]
     ]
+    if not full:
+        pairs = [p for effect in deterministic if (p := propose_pair(final, data, effect))]
+        scored += [(*_refit(final, p, data)[:2], p, 2) for p in pairs]
     best: dict[str, NearMiss] = {}
-    for delta, fit, _, proposal in _score_round(final, data, proposals)[0]:
+    for delta, fit, proposal, instances in scored:
         if SUGGESTIVE <= delta < ceiling and delta > getattr(
             best.get(proposal.effect), "delta_bic", -math.inf
         ):
-            best[proposal.effect] = NearMiss(proposal.effect, delta, fit)
+            best[proposal.effect] = NearMiss(proposal.effect, delta, fit, instances)
     return sorted(best.values(), key=lambda m: -m.delta_bic)
 
 
