@@ -22,6 +22,11 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   same of a quiet run and a noisy one, and a fixed size does not sit at the edge of detection on
   one channel and far above it on another (at the limit the criterion names an instance half of
   the time);
+* run's own / limit: the clean run's own amplitude of each instance's shape beyond the clean model
+  (``diagnose.detection.shape_content``, signed as the instance is; below the limit, so not named),
+  over the limit. The case holds the sum, so the finder is also scored against it ("within 25 % of
+  size + own"): a miss there is the finder's, a miss only against the added size is the run's own
+  content of that shape;
 * silent: an added effect neither named nor reported (ambiguity, not identifiable, or the
   report's "smallest size this run names");
 * not scored: the profile cannot identify the effect (a branch offset without a reversal), the
@@ -57,7 +62,7 @@ from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
-from trainer.diagnose.detection import shape_limit
+from trainer.diagnose.detection import shape_content, shape_limit
 from trainer.diagnose.model import PLAUSIBLE
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
@@ -188,13 +193,14 @@ class Sized:
     limits: tuple[float, ...]
     unaskable: tuple[bool, ...]
     floor: float
+    owns: tuple[float, ...]  # the clean run's own amplitude of each instance's shape (:func:`own_of`)
 
 
 def sized(case: Case, clean: Diagnosis, rec: Recording, floor: float) -> Sized:
     """``case`` with every amplitude set to ``multiple`` x its clean-run limit, at most the catalogue's
     plausible maximum (a larger one would be reported as implausible, not named); an instance held
     below ``floor`` x its limit by that maximum is not asked of this run."""
-    added, limits, unaskable = [], [], []
+    added, limits, unaskable, owns = [], [], [], []
     for effect in case.added:
         name = amplitude_name(effect.identifier)
         limit = limit_of(effect, clean, rec)
@@ -204,7 +210,10 @@ def sized(case: Case, clean: Diagnosis, rec: Recording, floor: float) -> Sized:
         )
         limits.append(limit)
         unaskable.append(size < floor * limit * (1.0 - 1e-9))
-    return Sized(Case(case.name, tuple(added), case.multiple), tuple(limits), tuple(unaskable), floor)
+        owns.append(own_of(effect, clean, rec))
+    return Sized(
+        Case(case.name, tuple(added), case.multiple), tuple(limits), tuple(unaskable), floor, tuple(owns)
+    )
 
 
 def contribution(rec: Recording, effect: EffectConfig) -> np.ndarray:
@@ -261,21 +270,35 @@ def carried(clean: Diagnosis) -> set[str]:
     }
 
 
+def unit_shape(added: EffectConfig, rec: Recording) -> tuple[np.ndarray, tuple[float, ...]]:
+    """The contribution of ``added`` per unit of its amplitude, and its nonlinear parameters."""
+    unit = EffectConfig(added.identifier, {**added.params, amplitude_name(added.identifier): 1.0})
+    nl = tuple(added.params[name] for name, _ in DEFINITIONS[added.identifier].finder.nonlinear)
+    return contribution(rec, unit), nl
+
+
 def limit_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
     """The clean run's detection limit for the shape of ``added``: the amplitude at which the
     criterion would name it beside the clean model, at the clean run's noise."""
-    unit = EffectConfig(added.identifier, {**added.params, CHECKED[added.identifier][0]: 1.0})
-    shape = contribution(rec, unit)
-    nl = tuple(added.params[name] for name, _ in DEFINITIONS[added.identifier].finder.nonlinear)
+    shape, nl = unit_shape(added, rec)
     return shape_limit(clean.selection.final, added.identifier, shape, nl).amplitude
+
+
+def own_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
+    """The clean run's own amplitude of the shape of ``added`` beyond the clean model (below its
+    limit, so not named): the case's data hold the sum of this and the added size."""
+    shape, nl = unit_shape(added, rec)
+    return shape_content(clean.selection.final, added.identifier, shape, nl)[0]
 
 
 def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
     case = at.case
     found = findings(d)
     used: set[int] = set()
-    named = params_ok = 0
-    for added in case.added:
+    named = params_ok = params_ok_own = 0
+    for added, own in zip(case.added, at.owns, strict=True):
+        name = amplitude_name(added.identifier)
+        with_own = {**added.params, name: added.params[name] + own}
         matches = [
             k
             for k, (effect, p) in enumerate(found)
@@ -289,6 +312,7 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
             used.add(matches[0])
             named += 1
             params_ok += within(added.params, found[matches[0]][1], CHECKED[added.identifier])
+            params_ok_own += within(with_own, found[matches[0]][1], CHECKED[added.identifier])
     duplicates = sum(
         1
         for i, (ei, pi) in enumerate(found)
@@ -343,6 +367,8 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         "named": named,
         "added": len(case.added),
         "params_ok": params_ok,
+        "params_ok_own": params_ok_own,
+        "own_to_limit": [own / lim for own, lim in zip(at.owns, at.limits, strict=True)],
         "duplicates": duplicates,
         "lost": lost,
         "extra": extra,
@@ -415,7 +441,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 GROUPS = ("scored", "not scored")
-TOTAL_KEYS = ("named", "added", "params_ok", "duplicates", "lost", "lost_said", "silent")
+TOTAL_KEYS = ("named", "added", "params_ok", "params_ok_own", "duplicates", "lost", "lost_said", "silent")
 
 
 def bench_channel(
@@ -431,9 +457,9 @@ def bench_channel(
     ]
     print(
         "| case | named | params within 25 % | duplicates | lost clean findings | extra | ambiguous "
-        "| size / limit | silent | not scored | s | findings |"
+        "| size / limit | run's own / limit | within 25 % of size + own | silent | not scored | s | findings |"
     )
-    print("|---|--:|--:|--:|---|---|---|--:|---|---|--:|---|")
+    print("|---|--:|--:|--:|---|---|---|--:|--:|--:|---|---|--:|---|")
     totals = {group: dict.fromkeys(TOTAL_KEYS, 0) for group in GROUPS}
     for case in chosen:
         started = time.perf_counter()
@@ -442,7 +468,7 @@ def bench_channel(
         seconds = time.perf_counter() - started
         s = score(at, d, clean)
         total = totals["scored" if s["scored"] else "not scored"]
-        for k in ("named", "added", "params_ok", "duplicates"):
+        for k in ("named", "added", "params_ok", "params_ok_own", "duplicates"):
             total[k] += int(s[k])  # type: ignore[call-overload]
         for k in ("lost", "lost_said", "silent"):
             total[k] += len(s[k])  # type: ignore[arg-type]
@@ -453,7 +479,9 @@ def bench_channel(
         print(
             f"| {case.name} ({sizes}) | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
             f"| {', '.join(lost) or '-'} | {', '.join(s['extra']) or '-'} | {', '.join(s['ambiguous']) or '-'} "  # type: ignore[arg-type]
-            f"| {' / '.join(f'{r:.2f}' for r in ratios)} | {', '.join(s['silent']) or '-'} "  # type: ignore[arg-type]
+            f"| {' / '.join(f'{r:.2f}' for r in ratios)} "
+            f"| {' / '.join(f'{r:+.2f}' for r in cast(list[float], s['own_to_limit']))} "
+            f"| {s['params_ok_own']}/{s['added']} | {', '.join(s['silent']) or '-'} "  # type: ignore[arg-type]
             f"| {'; '.join(s['unscored']) or '-'} | {seconds:.0f} | {describe(d)} |",  # type: ignore[arg-type]
             flush=True,
         )
@@ -464,7 +492,8 @@ def bench_channel(
 def print_totals(totals: dict[str, dict[str, int]]) -> None:
     for group, t in totals.items():
         print(
-            f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']}, "
+            f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']} "
+            f"(of the added size plus the run's own content of its shape: {t['params_ok_own']}/{t['added']}), "
             f"duplicates {t['duplicates']}, lost clean findings {t['lost']} ({t['lost_said']} of them "
             f"said out loud: in an ambiguity, e.g. absorbed by a confounder, or as a near miss), added effects neither named "
             f"nor reported {t['silent']}"

@@ -17,7 +17,7 @@ import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.diagnose import Diagnosis, diagnose
-from trainer.diagnose.detection import limit_at, shape_limit
+from trainer.diagnose.detection import limit_at, shape_content, shape_limit
 from trainer.diagnose.model import Term, build_design, evaluate
 from trainer.diagnose.report import markdown
 from trainer.diagnose.select import THRESHOLD
@@ -96,3 +96,23 @@ def test_an_instance_shape_has_the_limit_of_its_effect(clean: Diagnosis) -> None
     t = fit.data.full_t
     shaped = shape_limit(fit, WARMUP, np.exp(-t / TAU_S), (TAU_S,))
     assert shaped.amplitude == pytest.approx(limit_at(fit, WARMUP, TAU_S).amplitude, rel=0.01)
+
+
+def test_a_shape_content_is_its_coefficient_beside_the_model(clean: Diagnosis) -> None:
+    """The run's own amplitude of a warm-up shape (what the bench scores an added instance against,
+    beside the added size) is the warm-up's GLS coefficient when the model is refitted with it at the
+    same noise; adding ``a`` of the shape to the data adds exactly ``a``."""
+    fit = clean.selection.final
+    data = fit.data
+    shape = np.exp(-data.full_t / TAU_S)
+    amplitude, error = shape_content(fit, WARMUP, shape, (TAU_S,))
+    terms = [*fit.terms, Term(WARMUP, (TAU_S,))]
+    with_it = evaluate(terms, data, fit.gls)
+    (index,) = [k for k, (owner, _) in enumerate(with_it.roles) if owner == len(terms) - 1]
+    assert amplitude == pytest.approx(float(with_it.beta[index]), rel=1e-6, abs=1e-9)
+    assert 0.0 < error < limit_at(fit, WARMUP, TAU_S).amplitude
+    design = build_design(terms, data)
+    column = design.X[:, [owner == len(terms) - 1 for owner, _ in design.roles]][:, 0]
+    shifted = replace(data, accel=data.accel + 0.3 * column)
+    refit = evaluate(list(fit.terms), shifted, fit.gls)
+    assert shape_content(refit, WARMUP, shape, (TAU_S,))[0] == pytest.approx(amplitude + 0.3, rel=1e-6)

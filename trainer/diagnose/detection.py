@@ -72,18 +72,44 @@ def limit_at(fit: ModelFit, effect: str, nl_value: float) -> Limit:
     return _limit(fit, design.X[:, ~own], design.X[:, own][:, 0], 1 + term.n_free_nl, float(nl_value))
 
 
-def shape_limit(fit: ModelFit, effect: str, shape: np.ndarray, nl: tuple[float, ...]) -> Limit:
-    """The detection limit of one instance's own shape: ``shape`` its contribution per unit of
-    amplitude at full rate (a periodic at its phase, a step at its time; ``nl`` its nonlinear
-    parameters), charged as the search charges the effect (its columns and nonlinear parameters). Below it this run cannot be asked to
-    name the instance."""
+def _shape_columns(
+    fit: ModelFit, effect: str, shape: np.ndarray, nl: tuple[float, ...]
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """(the model's columns, the block means of ``shape``, parameters the instance adds as the
+    search charges them: its columns and free nonlinear parameters)."""
     data = fit.data
     column = block_means(shape, data.samples_per_block, data.n)
     term = Term(effect, nl)
     design = build_design([*fit.terms, term], data)
     own = np.array([owner == len(fit.terms) for owner, _ in design.roles])
-    added = int(own.sum()) + term.n_free_nl
-    return _limit(fit, design.X[:, ~own], column, added, float("nan"))
+    return design.X[:, ~own], column, int(own.sum()) + term.n_free_nl
+
+
+def shape_limit(fit: ModelFit, effect: str, shape: np.ndarray, nl: tuple[float, ...]) -> Limit:
+    """The detection limit of one instance's own shape: ``shape`` its contribution per unit of
+    amplitude at full rate (a periodic at its phase, a step at its time; ``nl`` its nonlinear
+    parameters), charged as the search charges the effect (its columns and nonlinear parameters). Below it this run cannot be asked to
+    name the instance."""
+    model_columns, column, added = _shape_columns(fit, effect, shape, nl)
+    return _limit(fit, model_columns, column, added, float("nan"))
+
+
+def shape_content(
+    fit: ModelFit, effect: str, shape: np.ndarray, nl: tuple[float, ...]
+) -> tuple[float, float]:
+    """(amplitude, standard error) of one instance's shape in what ``fit`` leaves unexplained: its
+    GLS coefficient beside the model's columns, at the model's noise. A run's own content of a shape
+    below its limit: an instance of that shape added to the run is found at the sum of the two."""
+    model_columns, column, _ = _shape_columns(fit, effect, shape, nl)
+    others = fit.gls.whiten(model_columns)
+    white = fit.gls.whiten(column)
+    coefficients, *_ = np.linalg.lstsq(others, white, rcond=None)
+    orthogonal = white - others @ coefficients
+    q = float(orthogonal @ orthogonal)
+    if q <= 0.0:
+        return 0.0, math.inf
+    amplitude = float(orthogonal @ fit.gls.whiten(fit.residual)) / q
+    return amplitude, math.sqrt(fit.rss / fit.gls.n_weighted / q)
 
 
 def _limit(
