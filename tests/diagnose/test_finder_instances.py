@@ -13,7 +13,7 @@ import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.data.recording import Recording
-from trainer.diagnose import diagnose
+from trainer.diagnose import Diagnosis, diagnose
 from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, build_blocks
 from trainer.diagnose.candidates import coincides, has_duplicates, propose, scan_step_pairs
 from trainer.diagnose.document import document
@@ -135,16 +135,13 @@ def test_the_pair_scan_is_the_least_squares_of_each_pair() -> None:
         assert rss[j, i] == pytest.approx(direct, rel=1e-9)
 
 
-def test_two_steps_that_nearly_cancel_are_both_named() -> None:
-    """Seed 3001 of the generated runs (a hysteresis concealed) plus +0.30 mg at 0.4 and -0.24 mg at
-    0.7 of the run (about twice each one's detection limit there): a level that leaves and nearly
-    comes back. One at a time neither step earns the criterion beside the clean model; placed
-    jointly both are named, each at its time and size (issue 21: "a second instance is lost, and
-    takes the first with it")."""
+def _two_steps_on_3001(scale: float) -> tuple[list[tuple[float, float]], Diagnosis]:
+    """(truth, diagnosis): seed 3001 of the generated runs (a hysteresis concealed) plus
+    ``scale`` x (+0.30 mg at 0.4 and -0.24 mg at 0.7 of the run)."""
     rec = make_scenario(("hysteresis",), 3001).recording().without_truth()
     t = rec.time_s - rec.time_s[0]
     duration = float(t[-1])
-    truth = [(0.4 * duration, 0.30), (0.7 * duration, -0.24)]
+    truth = [(0.4 * duration, 0.30 * scale), (0.7 * duration, -0.24 * scale)]
     extra = sum(
         (
             effect_contribution(STEP, {"t_s": t_s, "step_mg": s}, t, rec.temp_c, rec.temp_c)
@@ -154,8 +151,16 @@ def test_two_steps_that_nearly_cancel_are_both_named() -> None:
     )
     columns = dict(rec.columns)
     columns["accel_mg"] = rec.accel_mg + extra
-    with_steps = Recording(columns, dict(rec.meta), rec.source)
-    d = diagnose(with_steps, holdout_fraction=0.0)
+    return truth, diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+
+
+def test_two_steps_that_nearly_cancel_are_both_named() -> None:
+    """Seed 3001 of the generated runs (a hysteresis concealed) plus +0.30 mg at 0.4 and -0.24 mg at
+    0.7 of the run (about twice each one's detection limit there): a level that leaves and nearly
+    comes back. One at a time neither step earns the criterion beside the clean model; placed
+    jointly both are named, each at its time and size (issue 21: "a second instance is lost, and
+    takes the first with it")."""
+    truth, d = _two_steps_on_3001(1.0)
     block_s = d.data.block_s
     # the premise: beside the final model without the steps, the best single step is below 12
     others = tuple(term for term in d.selection.final.terms if term.identifier != STEP)
@@ -176,20 +181,7 @@ def test_two_steps_below_the_criterion_are_listed_as_a_pair_near_miss() -> None:
     misses, each at its time and size with their joint evidence (it once listed nothing: the single
     step earned less than the near-miss bar). The evidence printed is the BIC the final model gains
     with both steps held at the listed instants (refitted here, charged as the search charges them)."""
-    rec = make_scenario(("hysteresis",), 3001).recording().without_truth()
-    t = rec.time_s - rec.time_s[0]
-    duration = float(t[-1])
-    truth = [(0.4 * duration, 0.24), (0.7 * duration, -0.192)]
-    extra = sum(
-        (
-            effect_contribution(STEP, {"t_s": t_s, "step_mg": s}, t, rec.temp_c, rec.temp_c)
-            for t_s, s in truth
-        ),
-        np.zeros(t.size),
-    )
-    columns = dict(rec.columns)
-    columns["accel_mg"] = rec.accel_mg + extra
-    d = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    truth, d = _two_steps_on_3001(0.8)
     assert not any(e.effect == STEP for e in d.left_out)  # the premise: below the criterion
     misses = sorted((m for m in d.suggestive if m.effect == STEP), key=lambda m: m.params["t_s"])
     assert len(misses) == 2, d.suggestive
