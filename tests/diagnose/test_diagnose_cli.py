@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.synthetic_chamber import chamber_recording
 from trainer.cli import main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
@@ -196,3 +197,28 @@ def test_real_chamber_run(real_run: Path) -> None:
     assert any(abs(e["params"]["t_s"] - t_jump) < 15.0 for e in steps)
     assert doc["holdout"]["improvement_percent"] > 0 and doc["holdout"]["improvement_percent_ols"] > 0
     assert doc["fit"]["after"]["bic"] < doc["fit"]["before"]["bic"]
+
+
+def test_a_named_noise_trend_runs_through_every_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run that drifts linearly in time (3e-3 mg/s) beside its temperature cycle: the finder names
+    the noise term's trend ``rate_ramp``, which is a model column, not a catalogue effect. The
+    terminal summary, the report and the JSON take it (the next-steps section once raised KeyError
+    on it: the bundled run's gyro z with a 600 s periodic added), and the compensator it suggests
+    leaves it out: a slow wander in time is not temperature drift."""
+    rec = chamber_recording([], seed=5)
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + 3e-3 * rec.time_s
+    path = tmp_path / "trend.csv"
+    write_recording(Recording(columns, dict(rec.meta), rec.source), path)
+    out, report = tmp_path / "d.json", tmp_path / "report"
+    assert cli("diagnose", str(path), "--json", str(out), "--report", str(report)) == 0
+    printed = capsys.readouterr().out
+    (trend,) = [e for e in json.loads(out.read_text())["left_out"] if e["effect"] == "rate_ramp"]
+    assert trend["params"]["r_mg_per_s"] == pytest.approx(3e-3, rel=0.2)
+    compensator = next(line for line in printed.splitlines() if line.startswith("next: physics compensator"))
+    assert "rate_ramp" not in compensator
+    assert "rate_ramp" in next(line for line in printed.splitlines() if "not for the compensator" in line)
+    text = (report / "report.md").read_text()
+    assert "rate_ramp" in text.split("## What to do next")[1]

@@ -39,9 +39,16 @@ class NextSteps:
     unit: str = "mg"  # the diagnosed channel's unit as printed (the residuals are in it)
 
 
+def compensable(identifier: str) -> bool:
+    """Whether a finding belongs in a temperature compensator: a catalogue effect marked so, not an
+    event or set-up effect, nor a noise term's trend in time (``rate_ramp``, a slow wander of the run)."""
+    effect = EFFECTS.get(identifier)
+    return effect is not None and effect.compensable
+
+
 def next_steps(d: Diagnosis) -> NextSteps:
     named = [e.effect for e in d.left_out if e.peak_visible_mg is not None]
-    compensated = [e for e in named if EFFECTS[e].compensable]
+    compensated = [e for e in named if compensable(e)]
     lagged = any(EFFECTS[e].proof_mass is not None for e in compensated)
     temperature = "the lagged (proof-mass) temperature" if lagged else "the die temperature"
     terms = [f"{BACKBONE} (bias polynomial) in {temperature}", *compensated]
@@ -82,7 +89,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
         if info.test and (effect in unsettled or info.weak) and (not info.identifiable or info.weak):
             profile.append(f"{effect}: {info.test}")
     profile.append(GENERIC_PROFILE)
-    not_compensated = list(dict.fromkeys(e for e in named if not EFFECTS[e].compensable))
+    not_compensated = list(dict.fromkeys(e for e in named if not compensable(e)))
     return NextSteps(structure, not_compensated, branches, list(dict.fromkeys(profile)), d.signal.label)
 
 
@@ -90,7 +97,7 @@ def markdown_lines(steps: NextSteps) -> list[str]:
     lines = ["## What to do next", "", f"Compensator: {steps.structure}.", ""]
     if steps.not_compensated:
         lines += [
-            f"Not for the compensator (events or the test set-up; check the recording and the rig): "
+            f"Not for the compensator (events, the test set-up or a slow trend in time; check the recording and the rig): "
             f"{', '.join(steps.not_compensated)}.",
             "",
         ]
@@ -117,7 +124,9 @@ def markdown_lines(steps: NextSteps) -> list[str]:
 def terminal_lines(steps: NextSteps) -> list[str]:
     per_branch = ", ".join(f"{b.branch} {b.before_mg:.3g} -> {b.after_mg:.3g}" for b in steps.branches)
     check = (
-        [f"next: not for the compensator (events or the test set-up): {', '.join(steps.not_compensated)}"]
+        [
+            f"next: not for the compensator (events, the test set-up or a trend in time): {', '.join(steps.not_compensated)}"
+        ]
         if steps.not_compensated
         else []
     )
