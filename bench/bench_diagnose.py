@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from trainer.commands.diagnose_cmd import every_output
 from trainer.diagnose import diagnose
 from trainer.diagnose.document import document
 from trainer.diagnose.scenarios import CHECKED_PARAMS, HIDDEN_EFFECTS, make_scenario
@@ -131,6 +132,7 @@ def run_case(effects: tuple[str, ...], seed: int, sim_mode: str = "truth") -> di
     started = time.perf_counter()
     result = diagnose(rec, sim)
     seconds = time.perf_counter() - started
+    every_output(result)  # a finding an output cannot take fails here
     doc = document(result)
     hidden = [{"effect": h.identifier, "params": dict(h.params)} for h in scenario.hidden]
     found = [{"effect": e["effect"], "params": e["params"]} for e in doc["left_out"]]

@@ -58,15 +58,13 @@ from typing import cast
 
 import numpy as np
 
-from trainer.commands.diagnose_cmd import summary
+from trainer.commands.diagnose_cmd import every_output
 from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.detection import shape_content, shape_limit
-from trainer.diagnose.document import json_text
 from trainer.diagnose.model import PLAUSIBLE
-from trainer.diagnose.report import markdown
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
 from trainer.errors import run_cli
@@ -378,13 +376,6 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
     }
 
 
-def rendered(d: Diagnosis) -> str:
-    """Every text a user reads of ``d`` (terminal summary, report, JSON), built here so that findings
-    an output cannot take fail the bench, not the user (a noise trend among the findings once broke
-    the next steps of the terminal and the report, unseen by a bench that read only the findings)."""
-    return "\n".join((summary(d), markdown(d), json_text(d)))
-
-
 def describe(d: Diagnosis) -> str:
     parts = []
     for effect, p in findings(d):
@@ -461,7 +452,7 @@ def bench_channel(
     started = time.perf_counter()
     clean = diagnose(rec, holdout_fraction=0.0)
     clean_s = time.perf_counter() - started
-    rendered(clean)
+    every_output(clean)
     print(f"\nclean {label}: {describe(clean)} ({clean_s:.1f} s)\n", flush=True)
     chosen = [
         c for c in cases(clean.data.duration_s, multiples) if not wanted or any(w in c.name for w in wanted)
@@ -477,7 +468,7 @@ def bench_channel(
         at = sized(case, clean, rec, min(multiples))
         d = diagnose(add_effects(rec, at.case.added), holdout_fraction=0.0)
         seconds = time.perf_counter() - started
-        rendered(d)
+        every_output(d)  # a finding an output cannot take fails here
         s = score(at, d, clean)
         total = totals["scored" if s["scored"] else "not scored"]
         for k in ("named", "added", "params_ok", "params_ok_own", "duplicates"):

@@ -91,6 +91,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def every_output(result: Diagnosis) -> str:
+    """The terminal summary, the report's Markdown and the JSON of one diagnosis, built in memory:
+    the benches build them for every case, so that a finding one of them cannot take fails there,
+    not for the user (a named noise trend once broke the next steps of the terminal and the report,
+    unseen by benches that read only the findings)."""
+    from trainer.diagnose.document import json_text
+    from trainer.diagnose.report import markdown
+
+    return "\n".join((summary(result), markdown(result), json_text(result)))
+
+
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
