@@ -443,7 +443,7 @@ def near_misses(
     ]
     if not full:
         pairs = [p for effect in deterministic if (p := propose_pair(final, data, effect))]
-        scored += [(*_refit(final, p, data)[:2], p, 2) for p in pairs]
+        scored += [(*_refit(final, p, data)[:2], p, len(p.terms) - len(final.terms)) for p in pairs]
     best: dict[str, NearMiss] = {}
     for delta, fit, proposal, instances in scored:
         if SUGGESTIVE <= delta < ceiling and delta > getattr(
