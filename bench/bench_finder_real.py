@@ -64,7 +64,6 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.detection import shape_content, shape_limit
-from trainer.diagnose.model import PLAUSIBLE
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
 from trainer.errors import run_cli
@@ -72,6 +71,7 @@ from trainer.physics.catalogue import (
     DEFINITIONS,
     bias_step,
     excluded,
+    flagged_range,
     hysteresis_offset,
     periodic,
     temp_rate,
@@ -181,8 +181,11 @@ def amplitude_name(effect: str) -> str:
     return CHECKED[effect][0]
 
 
-def plausible_max(effect: str) -> float:
-    return PLAUSIBLE[(effect, amplitude_name(effect))][1]
+def plausible_max(effect: str, clean: Diagnosis) -> float:
+    """The largest plausible amplitude of ``effect`` on the clean run's channel, as the finder flags
+    it (in mg the catalogue's; on a gyroscope or barometer bounded by the channel's drift span)."""
+    bounds = flagged_range(effect, amplitude_name(effect), clean.scale)
+    return math.inf if bounds is None else bounds[1]
 
 
 @dataclass(frozen=True)
@@ -205,7 +208,7 @@ def sized(case: Case, clean: Diagnosis, rec: Recording, floor: float) -> Sized:
     for effect in case.added:
         name = amplitude_name(effect.identifier)
         limit = limit_of(effect, clean, rec)
-        size = min(case.multiple * limit, plausible_max(effect.identifier))
+        size = min(case.multiple * limit, plausible_max(effect.identifier, clean))
         added.append(
             EffectConfig(effect.identifier, {**effect.params, name: math.copysign(size, effect.params[name])})
         )
@@ -340,7 +343,7 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
     unnamed = {a.identifier for a in case.added} - {e for e, _ in found}
     unscored = (
         [
-            f"{a.identifier}: {at.floor:g}x its limit ({limit:.3g}) is above the plausible {plausible_max(a.identifier):g}"
+            f"{a.identifier}: {at.floor:g}x its limit ({limit:.3g}) is above the plausible {plausible_max(a.identifier, clean):.3g}"
             for a, limit, unaskable in zip(case.added, at.limits, at.unaskable, strict=True)
             if unaskable
         ]
