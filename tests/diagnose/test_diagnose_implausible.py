@@ -6,16 +6,23 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from tests.synthetic_chamber import BLOCKS, DURATION_S, FS_HZ, cycle_with_holds
 from trainer.commands.diagnose_cmd import summary
+from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.document import document
 from trainer.diagnose.report import markdown
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
+from trainer.physics.catalogue import PARAMETERS
+from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.physics.catalogue.stress_relaxation import DEFINITION as CREEP
-from trainer.physics.effects import EffectConfig
+from trainer.physics.effects import EffectConfig, effect_contribution
+
+BRANCH = BRANCH_OFFSET.identifier
 
 _PLAUSIBLE = CREEP.params[0].plausible
 assert _PLAUSIBLE is not None
@@ -73,3 +80,26 @@ def test_real_run_names_no_implausible_effect(real_run: Path) -> None:
     text = summary(d)
     assert "weakly identifiable: " in text and "ambiguous (not named)" in text
     assert "least squares, bare" not in text
+
+
+def test_a_small_effect_on_a_quiet_sensor_is_named_not_implausible() -> None:
+    """A branch offset of 0.012 mg, below the catalogue's typical 0.02 mg, on a sensor with 0.01 mg
+    of white noise: the evidence is there, and an amplitude below the catalogue's range is no reason
+    to doubt the physics (it was reported as an implausible best fit and not named)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, DURATION_S, 1.0 / FS_HZ)
+    temp = cycle_with_holds(t)
+    u = (temp - 25.0) / 50.0
+    offset = effect_contribution(BRANCH, {"amp_mg": 0.012, "width_c": 10.0}, t, temp, temp)
+    columns = {
+        "time_s": t,
+        "temp_c": temp + 0.01 * rng.standard_normal(t.size),
+        "accel_mg": 1.0 + 3.0 * u - 0.8 * u**2 + 0.5 * u**3 + 0.01 * rng.standard_normal(t.size) + offset,
+    }
+    d = diagnose(
+        Recording(columns, {"sample_rate_hz": str(FS_HZ)}, "quiet"), holdout_fraction=0.0, max_blocks=BLOCKS
+    )
+    (found,) = [e for e in d.left_out if e.effect == BRANCH]
+    assert found.params["amp_mg"] == pytest.approx(0.012, rel=0.1)
+    assert found.params["amp_mg"] < PARAMETERS[(BRANCH, "amp_mg")].plausible[0]  # type: ignore[index]
+    assert not found.flags and not d.ambiguous

@@ -29,12 +29,19 @@ TAU_S = 3000.0  # a plausible creep time constant
 
 
 def test_the_rule_is_the_catalogues_range() -> None:
+    """Outside the catalogue's range is implausible, except an amplitude below it: the lower end of
+    an amplitude's range is a typical size, not a physical limit (a quiet sensor shows less)."""
     lo, hi = GAIN_RANGE
     params = {"gain_mg_per_c": -0.5 * (lo + hi), "tau_s": TAU_S}  # |value| is judged: the sign is free
     assert implausible(CREEP.identifier, params) == {}
-    for bad in (0.5 * lo, 2.0 * hi, -2.0 * hi):
+    for bad in (2.0 * hi, -2.0 * hi):
         why = implausible(CREEP.identifier, {**params, "gain_mg_per_c": bad})
         assert list(why) == ["gain_mg_per_c"] and f"{lo:g}..{hi:g}" in why["gain_mg_per_c"]
+    assert implausible(CREEP.identifier, {**params, "gain_mg_per_c": 0.5 * lo}) == {}
+    tau_range = PARAMETERS[(CREEP.identifier, "tau_s")].plausible
+    assert tau_range is not None
+    why = implausible(CREEP.identifier, {**params, "tau_s": 0.5 * tau_range[0]})
+    assert list(why) == ["tau_s"] and f"{tau_range[0]:g}..{tau_range[1]:g}" in why["tau_s"]
 
 
 def _fitted(

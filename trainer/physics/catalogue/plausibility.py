@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 from trainer.data.channels import UNIT_LABELS
 from trainer.physics.catalogue import PARAMETERS, flagged_range
-from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name, is_amplitude
 
 
 def implausible(
@@ -27,9 +27,11 @@ def implausible(
         if bounds is None or bounds[0] <= abs(value) <= bounds[1]:
             continue
         shown = channel_param_name(name, unit)
-        if scale is None or bounds == PARAMETERS[(identifier, name)].plausible:
+        catalogue = PARAMETERS[(identifier, name)].plausible
+        if scale is None or scale.unit == CATALOGUE_UNIT or not is_amplitude(name):
+            assert catalogue is not None  # a flagged range comes from the catalogue's
             out[name] = (
-                f"{shown} = {value:.4g} is outside the catalogue's plausible {bounds[0]:g}..{bounds[1]:g}"
+                f"{shown} = {value:.4g} is outside the catalogue's plausible {catalogue[0]:g}..{catalogue[1]:g}"
             )
         else:
             out[name] = (

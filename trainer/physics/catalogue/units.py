@@ -89,13 +89,19 @@ class ChannelScale:
 def plausible_range(param: Param, scale: ChannelScale | None) -> tuple[float, float] | None:
     """The plausible range of ``|value|`` the finder flags against (None: not flagged).
 
-    On an mg channel (``scale`` None or in mg) the catalogue's range. On another unit an amplitude
-    is implausible when its contribution over the run exceeds the channel's cubic drift span
-    (catalogue, "Other channels"): ``0 .. span / per``; time, temperature and width ranges stay.
+    Time, temperature and width parameters: the catalogue's range. An amplitude is implausible
+    only when too large: on an mg channel (``scale`` None or in mg) above the catalogue's range, on
+    another unit when its contribution over the run exceeds the channel's cubic drift span
+    (catalogue, "Other channels"): ``0 .. span / per``. The lower ends of the catalogue's amplitude
+    ranges are typical sizes, not physical limits: on a quiet sensor a smaller effect with the
+    criterion's evidence is real (a 0.01 mg branch offset was once reported "implausible" and not
+    named on a sensor with 0.005 mg of block noise).
     """
     if param.plausible is None or not param.flagged:
         return None
-    if scale is None or scale.unit == CATALOGUE_UNIT or not is_amplitude(param.name):
+    if not is_amplitude(param.name):
         return param.plausible
+    if scale is None or scale.unit == CATALOGUE_UNIT:
+        return (0.0, param.plausible[1])
     per = scale.per(param.name)
     return (0.0, scale.drift_span / per) if per > 0 else None
