@@ -218,7 +218,6 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines += [f"  note: {n}" for n in report["notes"]]
     dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
     lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
-    if dropped:
-        kept = " + ".join(report["effects"])
-        lines.append(f"  compensates: {kept} (a compensator carries only physics this run determines)")
+    kept = " + ".join(report["effects"])  # the last word: what the exported compensator carries
+    lines.append(f"  compensates: {kept} (a compensator carries only physics this run determines)")
     return lines
