@@ -12,7 +12,12 @@ from collections.abc import Mapping
 
 from trainer.data.channels import UNIT_LABELS
 from trainer.physics.catalogue import PARAMETERS, flagged_range
-from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_param_name, is_amplitude
+from trainer.physics.catalogue.units import (
+    CATALOGUE_UNIT,
+    ChannelScale,
+    channel_param_name,
+    judged_by_drift_span,
+)
 
 
 def implausible(
@@ -27,13 +32,14 @@ def implausible(
         if bounds is None or bounds[0] <= abs(value) <= bounds[1]:
             continue
         shown = channel_param_name(name, unit)
-        catalogue = PARAMETERS[(identifier, name)].plausible
-        if scale is None or scale.unit == CATALOGUE_UNIT or not is_amplitude(name):
+        if not judged_by_drift_span(name, scale):
+            catalogue = PARAMETERS[(identifier, name)].plausible
             assert catalogue is not None  # a flagged range comes from the catalogue's
             out[name] = (
                 f"{shown} = {value:.4g} is outside the catalogue's plausible {catalogue[0]:g}..{catalogue[1]:g}"
             )
         else:
+            assert scale is not None
             out[name] = (
                 f"{shown} = {value:.4g} is outside the plausible 0..{bounds[1]:.4g} (its contribution would "
                 f"exceed the channel's cubic drift span of {scale.drift_span:.4g} {UNIT_LABELS[scale.unit]} "

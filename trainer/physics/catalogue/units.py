@@ -86,6 +86,12 @@ class ChannelScale:
         }.get(tuple(after), 0.0)
 
 
+def judged_by_drift_span(name: str, scale: ChannelScale | None) -> bool:
+    """Whether parameter ``name`` is judged against the channel's drift span (an amplitude on a
+    channel whose unit is not mg) rather than the catalogue's range."""
+    return scale is not None and scale.unit != CATALOGUE_UNIT and is_amplitude(name)
+
+
 def plausible_range(param: Param, scale: ChannelScale | None) -> tuple[float, float] | None:
     """The plausible range of ``|value|`` the finder flags against (None: not flagged).
 
@@ -94,14 +100,15 @@ def plausible_range(param: Param, scale: ChannelScale | None) -> tuple[float, fl
     another unit when its contribution over the run exceeds the channel's cubic drift span
     (catalogue, "Other channels"): ``0 .. span / per``. The lower ends of the catalogue's amplitude
     ranges are typical sizes, not physical limits: on a quiet sensor a smaller effect with the
-    criterion's evidence is real (a 0.01 mg branch offset was once reported "implausible" and not
-    named on a sensor with 0.005 mg of block noise).
+    criterion's evidence is real (a 0.012 mg branch offset was once reported "implausible" and not
+    named on a sensor with 0.01 mg of white noise).
     """
     if param.plausible is None or not param.flagged:
         return None
     if not is_amplitude(param.name):
         return param.plausible
-    if scale is None or scale.unit == CATALOGUE_UNIT:
+    if not judged_by_drift_span(param.name, scale):
         return (0.0, param.plausible[1])
+    assert scale is not None
     per = scale.per(param.name)
     return (0.0, scale.drift_span / per) if per > 0 else None
