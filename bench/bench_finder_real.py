@@ -16,8 +16,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
 * size / limit: each added instance's size over the clean run's detection limit for its own shape
-  (``diagnose.detection.shape_limit``: the size at which the criterion would name it beside the
-  clean model, at the clean run's noise; optimistic, the finder re-estimates the noise). Every
+  (``diagnose.detection.shape_limit``: the size at which the criterion names it beside the clean
+  model, the noise re-estimated on both sides as the finder does). Every
   case is sized by it: ``--multiples`` (default 2 and 4) times the limit, so that a case asks the
   same of a quiet run and a noisy one, and a fixed size does not sit at the edge of detection on
   one channel and far above it on another (at the limit the criterion names an instance half of

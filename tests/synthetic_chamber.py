@@ -27,15 +27,17 @@ def chamber_recording(
     effects: Sequence[tuple[str, dict[str, float]]],
     seed: int,
     temperature_c: Callable[[np.ndarray], np.ndarray] = cycle_with_holds,
+    walk_mg: float = 0.004,
 ) -> Recording:
-    """DURATION_S at FS_HZ of ``temperature_c(t)`` with the backbone above and ``effects`` added."""
+    """DURATION_S at FS_HZ of ``temperature_c(t)`` with the backbone above and ``effects`` added;
+    ``walk_mg``: the random walk's step per sample (0: a quiet sensor, white noise only)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, DURATION_S, 1.0 / FS_HZ)
     temp = temperature_c(t)
     u = (temp - 25.0) / 50.0
     bias = 1.0 + 3.0 * u - 0.8 * u**2 + 0.5 * u**3
     white = 0.3 * rng.standard_normal(t.size)
-    walk = np.cumsum(0.004 * rng.standard_normal(t.size))
+    walk = np.cumsum(walk_mg * rng.standard_normal(t.size))
     added = sum((effect_contribution(e, p, t, temp, temp) for e, p in effects), np.zeros(t.size))
     columns = {
         "time_s": t,
