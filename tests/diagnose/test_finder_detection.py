@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
-from trainer.diagnose import Diagnosis, diagnose
-from trainer.diagnose.detection import limit_at, shape_content, shape_limit
+from trainer.diagnose import Diagnosis, detection, diagnose
+from trainer.diagnose.detection import DetectionLimit, limit_at, shape_content, shape_limit
+from trainer.diagnose.document import undetected
 from trainer.diagnose.model import Term, build_design, evaluate
-from trainer.diagnose.report import markdown
+from trainer.diagnose.report import limit_sizes, markdown
 from trainer.diagnose.select import THRESHOLD
 from trainer.physics.catalogue import bias_step, warmup
 
@@ -125,24 +126,47 @@ def test_a_shape_content_is_its_coefficient_beside_the_model(clean: Diagnosis) -
     assert shape_content(refit, WARMUP, shape, (TAU_S,))[0] == pytest.approx(amplitude + 0.3, rel=1e-6)
 
 
-def test_a_step_on_a_quiet_run_is_named_from_its_stated_limit_on() -> None:
-    """A white-noise-only run (the random walk at its lower bound): the stated limit of a step is
-    above the closed form, and the finder itself draws the line there: a step at half the limit is
-    not named, one at twice the closed form (below the limit) is not named either, one at twice the
-    limit is named at its size."""
-    step_s = 0.55 * DURATION_S
+QUIET_STEP_S = 0.55 * DURATION_S
 
-    def run(step_mg: float) -> Diagnosis:
-        effects = [(STEP, {"t_s": step_s, "step_mg": step_mg})] if step_mg else []
-        rec = chamber_recording(effects, seed=32, walk_mg=0.0)
-        return diagnose(rec, holdout_fraction=0.0, max_blocks=BLOCKS)
 
-    fit = run(0.0).selection.final
-    shape = (fit.data.full_t >= step_s).astype(float)
-    limit = shape_limit(fit, STEP, shape, (step_s,)).amplitude
-    closed = shape_limit(fit, STEP, shape, (step_s,), closed_form=True).amplitude
+def quiet_run(step_mg: float) -> Diagnosis:
+    """A white-noise-only run (the random walk at its lower bound), with a step at QUIET_STEP_S."""
+    effects = [(STEP, {"t_s": QUIET_STEP_S, "step_mg": step_mg})] if step_mg else []
+    return diagnose(chamber_recording(effects, seed=32, walk_mg=0.0), holdout_fraction=0.0, max_blocks=BLOCKS)
+
+
+@pytest.fixture(scope="module")
+def quiet() -> Diagnosis:
+    return quiet_run(0.0)
+
+
+def test_a_step_on_a_quiet_run_is_named_from_its_stated_limit_on(quiet: Diagnosis) -> None:
+    """The stated limit of a step is above the closed form, and the finder itself draws the line
+    there: a step at half the limit is not named, one at twice the closed form (below the limit) is
+    not named either, one at twice the limit is named at its size."""
+    fit = quiet.selection.final
+    shape = (fit.data.full_t >= QUIET_STEP_S).astype(float)
+    limit = shape_limit(fit, STEP, shape, (QUIET_STEP_S,)).amplitude
+    closed = shape_limit(fit, STEP, shape, (QUIET_STEP_S,), closed_form=True).amplitude
     assert limit > 2.0 * closed
     for below in (0.5 * limit, 2.0 * closed):
-        assert STEP not in [e.effect for e in run(below).left_out]
-    named = [e.params for e in run(2.0 * limit).left_out if e.effect == STEP]
+        assert STEP not in [e.effect for e in quiet_run(below).left_out]
+    named = [e.params for e in quiet_run(2.0 * limit).left_out if e.effect == STEP]
     assert len(named) == 1 and named[0]["step_mg"] == pytest.approx(2.0 * limit, rel=0.25)
+
+
+def test_a_limit_beyond_the_search_is_a_lower_bound_and_said_so(
+    quiet: Diagnosis, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Searched only up to 1.5 times the closed form (the step needs about 3): the limit returned is
+    the largest size tried, flagged a lower bound, printed ``> x`` and ``at_least`` in the JSON."""
+    monkeypatch.setattr(detection, "REFIT_MAX_FACTOR", 1.5)
+    fit = quiet.selection.final
+    shape = (fit.data.full_t >= QUIET_STEP_S).astype(float)
+    closed = shape_limit(fit, STEP, shape, (QUIET_STEP_S,), closed_form=True)
+    bound = shape_limit(fit, STEP, shape, (QUIET_STEP_S,))
+    assert bound.at_least and not closed.at_least
+    assert bound.amplitude == pytest.approx(2.0 * closed.amplitude)
+    said = DetectionLimit(STEP, "t_s", "step_mg", (0.0, 10.0), (bound,), "a reason", "a test")
+    assert limit_sizes(said).startswith("> ")
+    assert undetected(said)["smallest_named"][0]["at_least"] is True

@@ -35,7 +35,7 @@ from trainer.physics.catalogue.units import ChannelScale
 GRID_POINTS = 5  # nonlinear values over the plausible range at which a limit is reported
 REFIT_TOLERANCE = 1.05  # the re-estimated limit is found to within 5 %
 REFIT_STEPS = 4  # false-position steps at most (each one noise fit)
-REFIT_MAX_FACTOR = 64.0  # beyond 64 times the closed form the run cannot name the effect (inf)
+REFIT_MAX_FACTOR = 64.0  # searched up to 64 times the closed form; beyond, a lower bound (at_least)
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ class Limit:
     nl_value: float
     amplitude: float
     absorbed: float
+    at_least: bool = False  # not named even at this amplitude (REFIT_MAX_FACTOR x the closed form)
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,7 @@ def _refitted(fit: ModelFit, term: Term, column: np.ndarray, closed: Limit) -> L
     (whose fit does not depend on ``a``: the column absorbs it), charged its free nonlinear
     parameters. The BIC drop grows about as ``a**2``: the root is bracketed from the closed form up
     and found by false position in ``a**2`` (three or four noise fits)."""
-    if not math.isfinite(closed.amplitude):
+    if not math.isfinite(closed.amplitude) or closed.amplitude <= 0.0:
         return closed
     data, noise_terms = fit.data, fit.noise.terms
     held = replace(term, fixed=True)
@@ -167,9 +168,9 @@ def _refitted(fit: ModelFit, term: Term, column: np.ndarray, closed: Limit) -> L
         return closed
     high, high_drop = 2.0 * low, drop(2.0 * low)
     while high_drop < 0.0:
+        if high >= REFIT_MAX_FACTOR * closed.amplitude:
+            return replace(closed, amplitude=high, at_least=True)
         low, low_drop, high = high, high_drop, 2.0 * high
-        if high > REFIT_MAX_FACTOR * closed.amplitude:
-            return replace(closed, amplitude=math.inf)
         high_drop = drop(high)
     for _ in range(REFIT_STEPS):
         if high / low <= REFIT_TOLERANCE:

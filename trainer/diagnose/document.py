@@ -199,6 +199,7 @@ def undetected(u: DetectionLimit) -> dict[str, Any]:
                 u.nl_name: sig(lim.nl_value, 4),
                 u.amp_name: sig(lim.amplitude, 4),
                 "absorbed": round(lim.absorbed, 3),
+                **({"at_least": True} if lim.at_least else {}),
             }
             for lim in u.limits
         ],

@@ -181,7 +181,12 @@ def _value(x: float) -> str:
 def limit_sizes(u: DetectionLimit) -> str:
     """``1.33 at 60, 2.06 at 140.4, ... (tau_s)``: the smallest amplitude named along the time
     constant (the report's and the terminal's one wording)."""
-    return ", ".join(f"{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits) + f" ({u.nl_name})"
+    return (
+        ", ".join(
+            f"{'> ' if lim.at_least else ''}{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits
+        )
+        + f" ({u.nl_name})"
+    )
 
 
 def _near_miss_line(m: Suggestive, d: Diagnosis) -> str:
