@@ -35,8 +35,8 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   multiple of its limit is above the largest size asked, the catalogue's plausible maximum over
   1.25 (this run cannot be asked to name it at a plausible size; it runs at that size). A larger
   multiple above it runs at that size and is scored (within 25 % of it the estimate stays
-  plausible; at the maximum itself half of the estimates would be an implausible best fit). The totals are given for the scored and
-  the other cases apart;
+  plausible; at the maximum itself half of the estimates would be an implausible best fit). The
+  totals are given for the scored and the other cases apart;
 * time per diagnosis.
 
     trainer import ../shared/data/real/tofupilot_imu_chamber_cycle.tsv --preset tofupilot \\
@@ -448,8 +448,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print_totals(grand)
     print(
         "\n(not scored: an added effect the profile cannot identify, one the clean run already carries or is unsettled about (its size merges "
-        "with the run's own), or one whose largest size asked (the plausible maximum / 1.25) is below the "
-        "smallest multiple of its detection limit on this run (it runs at that size))"
+        f"with the run's own), or one whose largest size asked (the plausible maximum / {1 + TOLERANCE:g}) is "
+        "below the smallest multiple of its detection limit on this run (it runs at that size))"
     )
     return 0
 

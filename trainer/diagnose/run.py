@@ -103,8 +103,9 @@ def diagnose(
     ``rec`` may contain ``true_*`` columns; they are removed before anything is read.
     ``report_search``: the search a report wants, with pairs of steps placed jointly when nothing
     single passes, the near misses listed and the detection limits of the weak effects not named
-    (a few noise fits each). The physics compensator turns it off: it reads only the named structure, and on the bundled run's accel z a step pair named in one training fold
-    made that fold's held-out drift worse (4.90 against 4.15 mg on the heating segment).
+    (a few noise fits each). The physics compensator turns it off: it reads only the named
+    structure, and on the bundled run's accel z a step pair named in one training fold made that
+    fold's held-out drift worse (4.90 against 4.15 mg on the heating segment).
     """
     with single_blas_thread():
         return _diagnose(
