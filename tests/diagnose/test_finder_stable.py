@@ -17,6 +17,7 @@ from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
+from trainer.diagnose import run as run_module
 from trainer.diagnose import select as select_module
 from trainer.diagnose.blocks import build_blocks
 from trainer.diagnose.document import document
@@ -24,7 +25,16 @@ from trainer.diagnose.model import Term, fit_model
 from trainer.diagnose.report import markdown
 from trainer.diagnose.run import listed_near_misses
 from trainer.diagnose.select import SUGGESTIVE, THRESHOLD, NearMiss
-from trainer.physics.catalogue import BACKBONE, bias_step, hysteresis, periodic, rate_ramp, temp_rate
+from trainer.physics.catalogue import (
+    BACKBONE,
+    bias_step,
+    hysteresis,
+    hysteresis_offset,
+    periodic,
+    rate_ramp,
+    temp_rate,
+    warmup,
+)
 from trainer.physics.effects import effect_contribution
 
 STEP = bias_step.DEFINITION.identifier
@@ -128,3 +138,100 @@ def test_an_effect_the_search_has_no_room_for_is_listed_not_dropped(monkeypatch:
     assert listed and abs(listed[0].params["t_s"] - left) <= 2 * DURATION_S / BLOCKS, d.suggestive
     assert listed[0].delta_bic >= THRESHOLD
     assert "the search adds: above the criterion" in markdown(d)
+
+
+def _gyro_z(real_run: Path) -> Recording:
+    full = import_foreign(real_run, options_with_preset("tofupilot", channels=(ALL,)))
+    return channel_view(full, select_channels(full, ("gyro0_z",))[0])
+
+
+def test_an_early_strong_finding_is_swapped_for_a_better_description(
+    real_run: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bundled run's gyro z: a greedy search accepts a warm-up early, beside which every other
+    effect earns less than the criterion. Without it, the search finds a description whose BIC is
+    lower (a ramp and a branch offset); greedy, the finder only reached it when a small unrelated
+    effect changed its path, and the warm-up, a finding of the run, was then lost. The finder must
+    end in the lower-BIC model whatever the path, and say why the effect it swapped out is gone."""
+    rec = _gyro_z(real_run)
+    d = diagnose(rec, holdout_fraction=0.0)
+    with monkeypatch.context() as patch:
+        patch.setattr(select_module, "_swap_out", lambda path, *args: path)
+        greedy = diagnose(rec, holdout_fraction=0.0)
+    greedy_effects = {e.effect for e in greedy.left_out}
+    effects = {e.effect for e in d.left_out}
+    assert greedy_effects != effects, (
+        "the greedy search already ends in the better model (the test's premise)"
+    )
+    assert d.selection.final.bic < greedy.selection.final.bic - select_module.SWAP_GAIN
+    # the greedy model, refitted on the same blocks with the final model's noise terms, is worse too
+    # (the comparison does not rest on each search's own noise estimate)
+    refit = fit_model(greedy.selection.final.terms, d.selection.final.noise.terms, d.data)
+    assert refit.bic > d.selection.final.bic
+    for gone in greedy_effects - effects:
+        assert any(t.effect == gone and "search without it" in t.how for t in d.tested), d.tested
+
+
+@pytest.mark.slow
+def test_findings_of_the_bundled_gyro_z_survive_a_periodic_added(real_run: Path) -> None:
+    """findings(clean) is a subset of findings(clean + periodic) on a real recording: a 600 s periodic
+    at twice its detection limit on the bundled gyro z (0.0278 deg/s) had made the warm-up of the
+    clean run disappear, the search ending in another description."""
+    rec = _gyro_z(real_run)
+    clean = diagnose(rec, holdout_fraction=0.0)
+    t = rec.time_s - rec.time_s[0]
+    extra = effect_contribution(
+        PERIODIC, {"amp_mg": 0.0278, "period_s": 600.0, "phase_rad": 0.7}, t, rec.temp_c, rec.temp_c
+    )  # the catalogue's formula in the channel's own unit (the view's signal column is accel_mg)
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    added = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    named = [(e.effect, dict(e.params)) for e in added.left_out]
+    for finding in clean.left_out:
+        same = [p for e, p in named if e == finding.effect]
+        assert same, f"{finding.effect} of the clean recording is lost: {named}"
+        if finding.effect == STEP:
+            assert any(abs(p["t_s"] - finding.params["t_s"]) <= 2 * clean.data.block_s for p in same)
+    assert any(e == PERIODIC and abs(p["period_s"] - 600.0) < 10.0 for e, p in named)
+
+
+def test_a_swap_that_brings_in_an_implausible_effect_is_refused(
+    real_run: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The swap on the bundled gyro z brings in a branch offset. Declared implausible here (the count
+    the search is given, patched), the swap is refused and the greedy model's warm-up stays named:
+    a description is only swapped for one that is as plausible (a 6.1 mg periodic once replaced a
+    3 mg branch offset on accel z, 14 lower in BIC)."""
+    offset = hysteresis_offset.DEFINITION.identifier
+    search = select_module.forward_select
+
+    def offsets_implausible(*args: object, **kwargs: object) -> select_module.Selection:
+        def count(fit: select_module.ModelFit) -> int:
+            return sum(term.identifier == offset for term in fit.terms)
+
+        return search(*args, **{**kwargs, "implausible": count})  # type: ignore[arg-type]
+
+    monkeypatch.setattr(run_module, "forward_select", offsets_implausible)
+    d = diagnose(_gyro_z(real_run), holdout_fraction=0.0)
+    named = {e.effect for e in d.left_out}
+    assert warmup.DEFINITION.identifier in named and offset not in named, named
+    assert not any("search without it" in t.how for t in d.tested)
+
+
+@pytest.mark.slow
+def test_a_branch_offset_is_not_swapped_for_an_implausible_periodic(real_run: Path) -> None:
+    """Bundled accel z with a 3 mg branch offset (10 degC) added: two periodics, one of 6.1 mg at
+    1879 s (above the catalogue's plausible amplitude), fit 14 lower in BIC than the offset. The
+    finder names the offset at its size."""
+    full = import_foreign(real_run, options_with_preset("tofupilot", channels=(ALL,)))
+    rec = channel_view(full, select_channels(full, ("accel0_z",))[0])
+    offset = hysteresis_offset.DEFINITION.identifier
+    size_mg = 3.0
+    t = rec.time_s - rec.time_s[0]
+    extra = effect_contribution(offset, {"amp_mg": size_mg, "width_c": 10.0}, t, rec.temp_c, rec.temp_c)
+    columns = dict(rec.columns)
+    columns["accel_mg"] = rec.accel_mg + extra
+    d = diagnose(Recording(columns, dict(rec.meta), rec.source), holdout_fraction=0.0)
+    found = [e.params for e in d.left_out if e.effect == offset]
+    assert found and abs(found[0]["amp_mg"] - size_mg) <= 0.25 * size_mg, d.left_out
+    assert PERIODIC not in {e.effect for e in d.left_out}

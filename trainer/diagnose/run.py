@@ -152,7 +152,17 @@ def _diagnose(
     candidates = [
         c for c in CANDIDATE_ORDER if c not in present and ident.get(c, None) and ident[c].identifiable
     ]
-    selection = forward_select(baseline_fit, data, candidates, progress=progress, pairs=report_search)
+    scale = channel_scale(rec, data)
+    flags = partial(_param_flags, scale=scale)
+    selection = forward_select(
+        baseline_fit,
+        data,
+        candidates,
+        progress=progress,
+        pairs=report_search,
+        swap=report_search,
+        implausible=lambda fit, index: bool(flags(_term_effect(fit, index))),
+    )
     identifiable = {c for c in CANDIDATE_ORDER if ident.get(c) and ident[c].identifiable}
     resolve(selection, data, identifiable, progress=progress)
     stages.update()
@@ -167,8 +177,6 @@ def _diagnose(
     after = summarise(final, profile, selection.final_ml.noise_params(), own=selection.final_ml)
     after.bic_common = final.bic
 
-    scale = channel_scale(rec, data)
-    flags = partial(_param_flags, scale=scale)
     left_out = _left_out(selection, data, profile, baseline_common, cov_final, before, flags)
     # An implausible best fit is not named: its plausible confounders are fitted in its place.
     left_out, implausible = resolve_implausible(selection, data, identifiable, left_out, flags)
