@@ -347,7 +347,7 @@ def _room(current: ModelFit, effect: str, instances: int) -> bool:
     )
 
 
-def _confusable(first: str, second: str) -> bool:
+def confusable(first: str, second: str) -> bool:
     """Whether either effect declares the other a confounder."""
     return any(
         b in DEFINITIONS[a].finder.confounders
@@ -366,7 +366,7 @@ def propose_pair(current: ModelFit, data: BlockData, effect: str) -> Proposal | 
         or not _room(current, effect, 2)
     ):
         return None
-    if any(_confusable(effect, present) for present in current.identifiers):
+    if any(confusable(effect, present) for present in current.identifiers):
         # a term in the model whose signature a step shares (a rate term's jump at a corner, a branch
         # offset's switch at a reversal): a pair of steps there would redescribe it, not add to it
         return None

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field, replace
 from tqdm import tqdm
 
 from trainer.diagnose.blocks import BlockData
-from trainer.diagnose.candidates import Proposal, propose, propose_pair
+from trainer.diagnose.candidates import Proposal, confusable, propose, propose_pair
 from trainer.diagnose.gls import NoiseState
 from trainer.diagnose.model import ModelFit, fit_model
 from trainer.physics import catalogue
@@ -365,7 +365,7 @@ def _kept_out_of_swap(effect: str, other: str) -> bool:
     declared confounders (either way round). A confounder is the same signature on this kind of
     profile (an instantaneous rate term on a piecewise-linear profile is exactly one step per
     corner): which of the two to name is the ambiguity step's call, reported with both, not a swap."""
-    return other == effect or other in CONFUSABLE.get(effect, ()) or effect in CONFUSABLE.get(other, ())
+    return other == effect or confusable(effect, other)
 
 
 def _count(fit: ModelFit, implausible: Callable[[ModelFit, int], bool]) -> int:
@@ -440,14 +440,11 @@ def _swap_out(
             if reached.bic >= current.bic - SWAP_GAIN:
                 continue
             resumed = _stepwise(reached, data, candidates, bar, pairs=pairs, steps=alternative)
+            resumed = _without_implausible(resumed, current, data, implausible)
             gain = current.bic - resumed.current.bic
-            if gain <= SWAP_GAIN:  # its backward elimination gave back what the swap had gained
+            # backward elimination or stripping may give back what the quick look had gained
+            if gain <= SWAP_GAIN or _count(resumed.current, implausible) > _count(current, implausible):
                 continue
-            stripped = _without_implausible(resumed, current, data, implausible)
-            gain = current.bic - stripped.current.bic
-            if gain <= SWAP_GAIN or _count(stripped.current, implausible) > _count(current, implausible):
-                continue
-            resumed = stripped
             tried += [s for s in resumed.steps if not any(s is other for other in others)]
             swapped = Tested(
                 step.effect,
