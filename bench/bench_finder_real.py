@@ -11,7 +11,14 @@ the clean channel and every clean + effect case without ``--sim``, and scores:
   (periods within ``1/duration`` in frequency, step times within two blocks);
 * lost: findings of the clean run that are missing from the case's findings ("said": the case's
   report names the effect in an ambiguity, e.g. absorbed by a confounder on this profile, or as a
-  near miss below the criterion);
+  near miss below the criterion). Why it is lost, in two measured numbers: the BIC drop the finding
+  earns on the clean run itself once the case's added effects are in the clean model
+  (``diagnose.detection.evidence_beside``; below the criterion the added effect is not elsewhere but
+  shares the finding's signature on this run: a step just after a reversal beside a filtered rate
+  term that switches there), and, on the case's data, the BIC of the clean findings plus the added
+  instances against what the finder named (at or below minus the criterion the finder missed a
+  model it would accept: the search's loss; above it the case's data prefer what was named, or the
+  clean description by less than the criterion asks). The totals count both kinds apart;
 * ambiguous: an added effect not named but reported as ambiguous (an implausible best fit or its
   plausible alternative) or not identifiable;
 * extra: findings that are neither the clean run's nor an added instance;
@@ -64,9 +71,11 @@ from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording
 from trainer.diagnose import diagnose
-from trainer.diagnose.detection import shape_content, shape_limit
+from trainer.diagnose.detection import evidence_beside, shape_content, shape_limit
+from trainer.diagnose.model import Term, fit_model
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.scenarios import make_scenario
+from trainer.diagnose.select import THRESHOLD
 from trainer.errors import run_cli
 from trainer.physics.catalogue import (
     DEFINITIONS,
@@ -283,10 +292,20 @@ def carried(clean: Diagnosis) -> set[str]:
     }
 
 
+def nonlinear_names(effect: str) -> list[str]:
+    """The effect's nonlinear parameters, in the order of the finder's terms."""
+    return [name for name, _ in DEFINITIONS[effect].finder.nonlinear]
+
+
+def as_term(added: EffectConfig) -> Term:
+    """An added instance as the finder's term, at its nonlinear parameters (free)."""
+    return Term(added.identifier, tuple(added.params[n] for n in nonlinear_names(added.identifier)))
+
+
 def unit_shape(added: EffectConfig, rec: Recording) -> tuple[np.ndarray, tuple[float, ...]]:
     """The contribution of ``added`` per unit of its amplitude, and its nonlinear parameters."""
     unit = EffectConfig(added.identifier, {**added.params, amplitude_name(added.identifier): 1.0})
-    nl = tuple(added.params[name] for name, _ in DEFINITIONS[added.identifier].finder.nonlinear)
+    nl = as_term(added).nl
     return contribution(rec, unit), nl
 
 
@@ -302,6 +321,42 @@ def own_of(added: EffectConfig, clean: Diagnosis, rec: Recording) -> float:
     limit, so not named): the case's data hold the sum of this and the added size."""
     shape, nl = unit_shape(added, rec)
     return shape_content(clean.selection.final, added.identifier, shape, nl)[0]
+
+
+def evidence_beside_added(
+    effect: str, params: dict[str, float], clean: Diagnosis, added: Sequence[EffectConfig]
+) -> float | None:
+    """The BIC drop a finding of the clean run earns there once the case's added effects are in the
+    clean model too (:func:`evidence_beside`): below the criterion the added effect is not elsewhere,
+    it shares the finding's signature on this run, and no selection can keep both. None for a noise
+    term."""
+    final = clean.selection.final
+    index = next(
+        (
+            k
+            for k, t in enumerate(final.terms)
+            if t.identifier == effect
+            and (
+                key_of(effect, params) is None
+                or same_instance(effect, params, dict(zip(nonlinear_names(effect), t.nl, strict=True)), clean)
+            )
+        ),
+        None,
+    )
+    if index is None:
+        return None
+    return evidence_beside(final, index, [as_term(a) for a in added])
+
+
+def clean_description_on_case(clean: Diagnosis, d: Diagnosis, added: Sequence[EffectConfig]) -> float:
+    """BIC, on the case's data, of the clean run's findings plus the added instances (free terms, at
+    the case's noise terms) minus that of what the finder named there. At or below minus the
+    criterion the finder missed a model it would have accepted (the search's loss); above it the case's
+    data prefer what was named, or the clean description by less than the criterion asks."""
+    final = d.selection.final
+    terms = clean.selection.final.terms + tuple(as_term(a) for a in added)
+    kept = fit_model(terms, final.noise.terms, final.data, start=final.noise)
+    return kept.bic - final.bic
 
 
 def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
@@ -332,11 +387,14 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         for j, (ej, pj) in enumerate(found)
         if i < j and ei == ej and same_instance(ei, pi, pj, d) and key_of(ei, pi) is not None
     )
-    lost = [
-        effect
+    lost_found = [
+        (effect, p)
         for effect, p in findings(clean)
         if not any(e == effect and same_instance(effect, p, q, d) for e, q in found)
     ]
+    lost = [effect for effect, _ in lost_found]
+    beside = [evidence_beside_added(effect, p, clean, case.added) for effect, p in lost_found]
+    kept_description = clean_description_on_case(clean, d, case.added) if lost_found else math.nan
     extra = [
         effect
         for k, (effect, p) in enumerate(found)
@@ -378,6 +436,10 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         "silent": sorted(unnamed - reported),
         "ambiguous": sorted(unnamed & reported),
         "lost_said": [effect for effect in lost if effect in reported],
+        "lost_beside": beside,
+        "lost_shared": [e for e, b in zip(lost, beside, strict=True) if b is not None and b < THRESHOLD],
+        "clean_on_case": kept_description,
+        "lost_missed": lost if kept_description <= -THRESHOLD else [],
         "named": named,
         "added": len(case.added),
         "params_ok": params_ok,
@@ -455,7 +517,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 GROUPS = ("scored", "not scored")
-TOTAL_KEYS = ("named", "added", "params_ok", "params_ok_own", "duplicates", "lost", "lost_said", "silent")
+TOTAL_KEYS = (
+    "named",
+    "added",
+    "params_ok",
+    "params_ok_own",
+    "duplicates",
+    "lost",
+    "lost_said",
+    "lost_shared",
+    "lost_missed",
+    "silent",
+)
 
 
 def bench_channel(
@@ -486,11 +559,10 @@ def bench_channel(
         total = totals["scored" if s["scored"] else "not scored"]
         for k in ("named", "added", "params_ok", "params_ok_own", "duplicates"):
             total[k] += int(s[k])  # type: ignore[call-overload]
-        for k in ("lost", "lost_said", "silent"):
+        for k in ("lost", "lost_said", "lost_shared", "lost_missed", "silent"):
             total[k] += len(s[k])  # type: ignore[arg-type]
-        said = cast(list[str], s["lost_said"])
         ratios = cast(list[float], s["size_to_limit"])
-        lost = [f"{e} (said)" if e in said else e for e in cast(list[str], s["lost"])]
+        lost = lost_labels(s)
         sizes = ", ".join(f"{abs(a.params[amplitude_name(a.identifier)]):.3g}" for a in at.case.added)
         print(
             f"| {case.name} ({sizes}) | {s['named']}/{s['added']} | {s['params_ok']}/{s['added']} | {s['duplicates']} "
@@ -505,13 +577,34 @@ def bench_channel(
     return totals
 
 
+def lost_labels(s: dict[str, object]) -> list[str]:
+    """Each lost finding with "said" when the case's report names it, its BIC drop beside the added
+    effects on the clean run (below the criterion they share its signature) and, once per case, the
+    BIC of the clean description plus the added on the case's data against what was named."""
+    said = cast(list[str], s["lost_said"])
+    out = []
+    for effect, beside in zip(
+        cast(list[str], s["lost"]), cast(list[float | None], s["lost_beside"]), strict=True
+    ):
+        notes = (["said"] if effect in said else []) + (
+            [] if beside is None else [f"{beside:.1f} beside the added on the clean run"]
+        )
+        out.append(f"{effect} ({'; '.join(notes)})" if notes else effect)
+    if out:
+        out[-1] += f"; clean + added on the case {cast(float, s['clean_on_case']):+.1f}"
+    return out
+
+
 def print_totals(totals: dict[str, dict[str, int]]) -> None:
     for group, t in totals.items():
         print(
             f"\n{group}: named {t['named']}/{t['added']}, params within 25 % {t['params_ok']}/{t['added']} "
             f"(of the added size plus the run's own content of its shape: {t['params_ok_own']}/{t['added']}), "
             f"duplicates {t['duplicates']}, lost clean findings {t['lost']} ({t['lost_said']} of them "
-            f"said out loud: in an ambiguity, e.g. absorbed by a confounder, or as a near miss), added effects neither named "
+            f"said out loud: in an ambiguity, e.g. absorbed by a confounder, or as a near miss; {t['lost_shared']} of them "
+            f"below the criterion ({THRESHOLD:g}) beside the added effects on the clean run itself: the added effect is not "
+            f"elsewhere, it shares the finding's signature; {t['lost_missed']} where the clean findings plus the added "
+            f"fit the case lower in BIC by the criterion or more: the search's), added effects neither named "
             f"nor reported {t['silent']}"
         )
 

@@ -21,7 +21,7 @@ import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.diagnose import Diagnosis, detection, diagnose
-from trainer.diagnose.detection import DetectionLimit, limit_at, shape_content, shape_limit
+from trainer.diagnose.detection import DetectionLimit, evidence_beside, limit_at, shape_content, shape_limit
 from trainer.diagnose.document import undetected
 from trainer.diagnose.model import Term, build_design, evaluate
 from trainer.diagnose.report import limit_sizes, markdown
@@ -170,3 +170,27 @@ def test_a_limit_beyond_the_search_is_a_lower_bound_and_said_so(
     said = DetectionLimit(STEP, "t_s", "step_mg", (0.0, 10.0), (bound,), "a reason", "a test")
     assert limit_sizes(said).startswith("> ")
     assert undetected(said)["smallest_named"][0]["at_least"] is True
+
+
+STEP_AT_S = 3500.0
+
+
+@pytest.fixture(scope="module")
+def stepped() -> Diagnosis:
+    recording = chamber_recording([(STEP, {"t_s": STEP_AT_S, "step_mg": 0.6})], seed=41)
+    return diagnose(recording, holdout_fraction=0.0, max_blocks=BLOCKS)
+
+
+def test_a_finding_earns_nothing_beside_its_own_signature(stepped: Diagnosis) -> None:
+    """``evidence_beside``: the BIC drop a named step earns with other terms in the model. Beside a
+    held step at its own time (the same column) it adds nothing and costs its parameters, at most
+    ``(1 + 2) ln n`` (an amplitude, a scanned time charged twice; its own time is still free to fit
+    a little noise): below zero. Beside a held step far away it keeps the criterion."""
+    fit = stepped.selection.final
+    index = next(k for k, t in enumerate(fit.terms) if t.identifier == STEP)
+    found_at_s = fit.terms[index].nl[0]
+    assert abs(found_at_s - STEP_AT_S) <= 2 * fit.data.block_s
+    same = evidence_beside(fit, index, [Term(STEP, (found_at_s,), fixed=True)])
+    assert -3.0 * np.log(fit.data.n) - 0.5 <= same < 0.0
+    far = evidence_beside(fit, index, [Term(STEP, (1000.0,), fixed=True)])
+    assert far >= THRESHOLD

@@ -23,6 +23,7 @@ algebra).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -125,6 +126,18 @@ def shape_content(
         return 0.0, math.inf
     amplitude = float(orthogonal @ fit.gls.whiten(fit.residual)) / q
     return amplitude, math.sqrt(fit.rss / fit.gls.n_weighted / q)
+
+
+def evidence_beside(fit: ModelFit, index: int, beside: Sequence[Term]) -> float:
+    """BIC drop that term ``index`` of ``fit`` earns once ``beside`` are in the model too (both sides
+    refitted as the finder fits, at the model's noise terms). Below :data:`THRESHOLD` the finding
+    shares its signature with them: a run carrying both cannot be asked to name it (a step just after
+    a reversal beside a filtered rate term that switches there)."""
+    extra = tuple(beside)
+    others = tuple(t for k, t in enumerate(fit.terms) if k != index)
+    with_it = fit_model(fit.terms + extra, fit.noise.terms, fit.data, start=fit.noise)
+    without = fit_model(others + extra, fit.noise.terms, fit.data, start=fit.noise)
+    return without.bic - with_it.bic
 
 
 def _limit(
