@@ -139,9 +139,19 @@ def test_explicit_delimiter(tmp_path: Path, flag: str, delimiter: str) -> None:
     assert len(rec) == 20
 
 
-def test_wrong_explicit_delimiter_reports_the_missing_column(tmp_path: Path) -> None:
+def test_wrong_explicit_delimiter_names_the_files_delimiter(tmp_path: Path) -> None:
     message = import_error(
         tmp_path / "out.csv", logger_file(tmp_path, delimiter="\t"), *BASIC, "--delimiter", ";"
+    )
+    assert "line 1 (header)" in message
+    assert "tab-delimited" in message
+    assert "--delimiter" in message
+
+
+def test_wrong_explicit_delimiter_reports_the_missing_column(tmp_path: Path) -> None:
+    """A header that splits on neither: the column the options name is missing."""
+    message = import_error(
+        tmp_path / "out.csv", logger_file(tmp_path, delimiter=" "), *BASIC, "--delimiter", ";"
     )
     assert "no column 't'" in message
 

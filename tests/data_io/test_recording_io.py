@@ -234,6 +234,11 @@ CSV_ERRORS = {
     "underscore": ({6: "0.010,20.1,1_000"}, ["line 6", "column 'accel_mg'", "not a number"]),
     "quoted": ({6: '0.010,"20.1",1.2'}, ["line 6", "column 'temp_c'", "not a number"]),
     "decimal-comma": ({6: "0.010,20;1,1.2"}, ["line 6", "column 'temp_c'", "not a number"]),
+    "semicolon-delimited": (
+        {3: "time_s;temp_c;accel_mg"},
+        ["line 3 (header)", "semicolon-delimited", "import"],
+    ),
+    "tab-delimited": ({3: "time_s\ttemp_c\taccel_mg"}, ["line 3 (header)", "tab-delimited", "import"]),
     "duplicate-header": ({3: "time_s,temp_c,time_s"}, ["line 3", "column 3", "duplicate", "'time_s'"]),
     "empty-header-name": ({3: "time_s,,accel_mg"}, ["line 3", "column 2", "empty column name"]),
     "missing-required": (

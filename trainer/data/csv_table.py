@@ -105,7 +105,12 @@ def _note_comment(text: str, line: int, meta: dict[str, str], meta_lines: dict[s
 
 
 def _read_preamble(
-    data: bytes, source: str, delimiter: str, meta: dict[str, str], meta_lines: dict[str, int]
+    data: bytes,
+    source: str,
+    delimiter: str,
+    meta: dict[str, str],
+    meta_lines: dict[str, int],
+    other_delimiter_fix: str = "",
 ) -> _Preamble:
     """Collect comment metadata up to the header line and split the header into names."""
     pos, line = 0, 1
@@ -120,9 +125,28 @@ def _read_preamble(
         if stripped.startswith("#"):
             _note_comment(stripped, line, meta, meta_lines)
         elif stripped:
-            return _Preamble(line, [name.strip() for name in text.split(delimiter)], end + 1)
+            names = [name.strip() for name in text.split(delimiter)]
+            _check_delimiter(names, source, line, delimiter, other_delimiter_fix)
+            return _Preamble(line, names, end + 1)
         pos, line = end + 1, line + 1
     raise UserError(f"{source}: no header line (the file is empty or holds only comments)")
+
+
+OTHER_DELIMITERS = {";": "semicolon", "\t": "tab", "|": "vertical bar"}
+
+
+def _check_delimiter(names: list[str], source: str, line: int, delimiter: str, fix: str) -> None:
+    """A header that does not split on ``delimiter`` but holds another delimiter: the file was
+    written with that one (a spreadsheet's semicolons), which every data line would fail on.
+    ``fix``: what the caller's user does about it, appended in parentheses."""
+    if len(names) != 1:
+        return
+    for other, word in OTHER_DELIMITERS.items():
+        if other != delimiter and other in names[0]:
+            raise UserError(
+                f"{source}: line {line} (header): {quote(names[0])} is one column: the file looks "
+                f"{word}-delimited, this reader splits on {delimiter!r}" + (f" ({fix})" if fix else "")
+            )
 
 
 def _select_columns(source: str, preamble: _Preamble, wanted: Sequence[str] | None) -> list[int]:
@@ -259,6 +283,7 @@ def read_table(
     columns: Sequence[str] | None = None,
     decimal_comma: bool = False,
     allow_empty: Sequence[str] = (),
+    other_delimiter_fix: str = "",
 ) -> Table:
     """Parse a delimited text file with a header into float64 columns.
 
@@ -266,7 +291,8 @@ def read_table(
     unique); otherwise only the named ones, so unused columns may hold anything but must still
     have a field on every row. Lines starting with ``#`` are comments (``# key=value`` ones land
     in ``meta``), blank lines are skipped. Values are not checked for being finite here beyond
-    the text (``nan``/``inf`` words are rejected; an overflow such as ``1e999`` is not).
+    the text (``nan``/``inf`` words are rejected; an overflow such as ``1e999`` is not). A header that is one
+    column holding another common delimiter is refused, ``other_delimiter_fix`` saying what to do.
 
     ``decimal_comma``: numbers are written ``1,5`` (the delimiter is then not a comma). Empty
     fields of the ``allow_empty`` columns read as NaN (a channel logged more slowly than the rest).
@@ -275,7 +301,7 @@ def read_table(
     data = _read_bytes(Path(path))
     meta: dict[str, str] = {}
     meta_lines: dict[str, int] = {}
-    preamble = _read_preamble(data, source, delimiter, meta, meta_lines)
+    preamble = _read_preamble(data, source, delimiter, meta, meta_lines, other_delimiter_fix)
     used = _select_columns(source, preamble, columns)
     names = preamble.names
     if decimal_comma:

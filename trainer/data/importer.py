@@ -227,6 +227,7 @@ def import_foreign(path: str | Path, options: ImportOptions, checks: Plausibilit
         columns=wanted,
         decimal_comma=options.decimal_comma,
         allow_empty=(options.temp,),
+        other_delimiter_fix="give the file's delimiter with --delimiter, or leave it out to detect it",
     )
     if len(table) == 0:
         raise UserError(f"{source}: no data rows after the header on line {table.header_line}")

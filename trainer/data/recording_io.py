@@ -182,7 +182,11 @@ def read_recording(path: str | os.PathLike[str]) -> Recording:
 
 
 def _read_csv(path: str | Path) -> Recording:
-    table = read_table(path, delimiter=",")
+    table = read_table(
+        path,
+        delimiter=",",
+        other_delimiter_fix="trainer import converts a file with another delimiter into a recording",
+    )
     missing = missing_required(table.names)
     if missing:
         raise UserError(
