@@ -32,6 +32,7 @@ import torch
 
 from trainer import __version__, methods
 from trainer.compensator import Compensator
+from trainer.data.recording_io import RECORDING_SUFFIXES
 from trainer.errors import UserError, atomic_output
 from trainer.fields import DottedFields, show
 from trainer.reference import OffsetRecord
@@ -84,6 +85,11 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         )
     if not p.is_file():
         raise UserError(f"{p}: no such model file")
+    if p.suffix.lower() in RECORDING_SUFFIXES:
+        raise UserError(
+            f"{p}: a recording ({p.suffix.lower()}), not a model file written by 'trainer fit' "
+            "(arguments swapped? the model comes before the recording)"
+        )
     try:
         checkpoint = torch.load(p, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:

@@ -72,6 +72,16 @@ def test_random_bytes_are_rejected(tmp_path: Path) -> None:
         load_model(path)
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".NPZ"])
+def test_a_recording_given_as_the_model_is_named_as_swapped_arguments(tmp_path: Path, suffix: str) -> None:
+    """The recording passed where the model goes (``trainer evaluate rec.csv model.pt``): said as such,
+    not as a file that "holds content beyond tensors"."""
+    path = tmp_path / f"run{suffix}"
+    path.write_text("time_s,temp_c,accel_mg\n0,25,1\n")
+    with pytest.raises(UserError, match=r"run\.(csv|NPZ): a recording .*arguments swapped"):
+        load_model(path)
+
+
 class _Exploit:
     def __init__(self, marker: Path) -> None:
         self.marker = marker

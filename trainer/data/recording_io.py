@@ -29,6 +29,7 @@ from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
+RECORDING_SUFFIXES: dict[str, RecordingFormat] = {".csv": "csv", ".npz": "npz"}
 
 JITTER_LIMIT = 0.01  # largest accepted |step - nominal period| / nominal period
 TIME_DECIMALS = 6  # minimum decimals of time_s in CSV output
@@ -166,10 +167,8 @@ def _declared_period(rec: Recording, meta_label: Callable[[str], str]) -> float 
 def recording_format(path: str | Path) -> RecordingFormat:
     """'csv' or 'npz' from the file extension (case-insensitive); anything else is a UserError."""
     suffix = Path(path).suffix.lower()
-    if suffix == ".csv":
-        return "csv"
-    if suffix == ".npz":
-        return "npz"
+    if suffix in RECORDING_SUFFIXES:
+        return RECORDING_SUFFIXES[suffix]
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")
 
 
