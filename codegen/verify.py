@@ -32,6 +32,7 @@ from codegen.quantize import ACCEL_PER_MG
 from codegen.rate import declared_rate_millihz, retime_compensator
 from codegen.rate import resample as resample_recording
 from trainer.data.recording import Recording
+from trainer.data.recording_io import RECORDING_SUFFIXES
 from trainer.errors import UserError
 
 if TYPE_CHECKING:
@@ -98,7 +99,13 @@ def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
 
 def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]:
     if not out_dir.is_dir():
-        raise UserError(f"{out_dir}: no such directory")
+        swapped = out_dir.is_file() and out_dir.suffix.lower() in RECORDING_SUFFIXES
+        raise UserError(
+            f"{out_dir}: a recording, not the generated module's directory (arguments swapped? the order is "
+            "model out_dir recording)"
+            if swapped
+            else f"{out_dir}: no such directory"
+        )
     if name is None:
         found = sorted(out_dir.glob("*.manifest.json"))
         if len(found) != 1:

@@ -243,6 +243,20 @@ def test_verify_refuses_a_module_of_another_model(
     _assert_clean_failure(result, "generated from another model")
 
 
+def test_verify_with_the_recording_and_the_module_swapped_says_so(
+    models: dict[str, Path], exported: dict[str, Path], recording: tuple[Recording, Path]
+) -> None:
+    result = _cli("verify", str(models["pla"]), str(recording[1]), str(exported["pla"]))
+    _assert_clean_failure(result, "a recording, not the generated module's directory", "arguments swapped")
+
+
+def test_export_of_a_recording_says_it_is_not_a_model(
+    recording: tuple[Recording, Path], tmp_path: Path
+) -> None:
+    result = _cli("export", str(recording[1]), "-o", str(tmp_path / "c"))
+    _assert_clean_failure(result, "a recording", "not a model file", "arguments swapped")
+
+
 # ------------------------------------------------------------------------------------- errors
 
 
