@@ -179,6 +179,25 @@ def test_errors_are_one_line_and_leave_nothing(tmp_path: Path, capsys: pytest.Ca
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "keep", "rec.npz"]
 
 
+def test_a_noise_free_channel_is_refused_and_a_slow_time_base_warned(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A channel that is a polynomial of the temperature to rounding, its time in ms written as s:
+    one error line (no noise to weigh evidence against), after a warning on the 0.001 Hz rate."""
+    t_s = np.arange(0.0, 3600.0, 1.0)
+    temp_c = 25.0 + 20.0 * np.sin(t_s / 600.0)
+    columns = {"time_s": 1000.0 * t_s, "temp_c": temp_c, "accel_mg": 1.0 + 0.1 * temp_c}
+    path = tmp_path / "ms.csv"
+    write_recording(Recording(columns, {}, "ms"), path)
+    out = tmp_path / "d.json"
+    assert cli("diagnose", str(path), "--json", str(out)) == 2
+    err = capsys.readouterr().err
+    assert "warning:" in err and "0.001 Hz" in err and "milliseconds read as seconds" in err
+    errors = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "no sensor noise" in errors[0] and "ms.csv" in errors[0]
+    assert not out.exists()
+
+
 @pytest.mark.slow
 def test_real_chamber_run(real_run: Path) -> None:
     """The real run: the one-sample jump visible in the raw data is found where it is, and the

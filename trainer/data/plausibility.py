@@ -168,9 +168,15 @@ def check_training(rec: Recording, method: Method, *, accept: bool = False) -> P
 
 def check_scored(rec: Recording) -> Recording:
     """``rec`` unchanged when every sample is one its sensor can output and every temperature one a
-    sensor survives; else one line. For the commands that score, compare, diagnose or verify a
+    sensor survives; else one line. A sample rate outside 0.1 Hz .. 100 kHz (a time unit read wrongly)
+    is a warning line. For the commands that score, compare, diagnose or verify a
     recording (they take no ``--accept-implausible``): import and fit refuse such samples too, so
     no model of this tool was made from them without that option."""
     checks = Plausibility(way_past=f"repair or remove those rows; {ACCEPT_OPTION} is for import and fit")
     checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), rec.source)
+    time_base = Plausibility(
+        accept=True
+    )  # a warning: a decimated log may be slow, and no option would let it through
+    time_base.rate(rec.sample_rate_hz, f"{rec.source}: sample rate", at_import=False)
+    time_base.print_warnings()
     return rec

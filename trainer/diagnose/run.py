@@ -59,6 +59,7 @@ from trainer.diagnose.where import (
     special_where,
     where_regions,
 )
+from trainer.errors import UserError
 from trainer.physics.catalogue import (  # the finder's order and advice, per effect
     ADVICE,
     CANDIDATE_ORDER,
@@ -118,6 +119,24 @@ def diagnose(
         )
 
 
+NOISE_FREE_RATIO = 1e-7  # block residual over the channel's spread below which nothing is measured
+
+
+def _require_noise(baseline_fit: ModelFit, rec: Recording) -> None:
+    """Refuse a channel the baseline explains to rounding: every criterion weighs evidence against
+    the sensor's noise, and without any it names structure of 1e-5 mg with a BIC of -1e11."""
+    spread = float(np.std(baseline_fit.data.accel))
+    left = float(np.std(baseline_fit.residual))
+    if spread > 0.0 and left >= NOISE_FREE_RATIO * spread:
+        return
+    unit = channel_unit(rec)
+    raise UserError(
+        f"{rec.source}: the baseline model explains the channel to {left:.2g} {unit} (its spread {spread:.3g} "
+        f"{unit}): no sensor noise to weigh evidence against (a simulation without noise, or a column computed "
+        "from the temperature?); diagnose a measured channel"
+    )
+
+
 def _diagnose(
     rec: Recording,
     sim: PhysicsConfig | None,
@@ -146,6 +165,8 @@ def _diagnose(
     stages.update()
 
     baseline_fit = fit_model(baseline.terms, baseline.noise_terms, data)
+    if report_search:  # the compensator's search reads structure only, and cross-validation judges it
+        _require_noise(baseline_fit, rec)
     stages.update()
 
     present = set(baseline.identifiers)
