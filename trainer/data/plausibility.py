@@ -174,9 +174,8 @@ def check_scored(rec: Recording) -> Recording:
     no model of this tool was made from them without that option."""
     checks = Plausibility(way_past=f"repair or remove those rows; {ACCEPT_OPTION} is for import and fit")
     checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), rec.source)
-    time_base = Plausibility(
-        accept=True
-    )  # a warning: a decimated log may be slow, and no option would let it through
+    # a warning, not an error: a decimated log may be slow, and these commands have no option to accept it
+    time_base = Plausibility(accept=True)
     time_base.rate(rec.sample_rate_hz, f"{rec.source}: sample rate", at_import=False)
     time_base.print_warnings()
     return rec
