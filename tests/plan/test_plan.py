@@ -225,7 +225,7 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
             ["--effects", "hysteresis:amp_mg=1:width_c=3,hysteresis_offset:amp_mg=1:width_c=3"],
             "same physics twice",
         ),
-        (["--range", "70", "-20"], "--range: high -20 must be above low 70"),
+        (["--range", "70", "-20"], "--range: high -20 must be above low 70 degC (swapped?"),
         (["--max-hours", "1"], "no candidate program fits"),
         (["--targets", "missing.toml"], "no such file"),
         (["--draws", "0"], "--draws must be >= 1"),

@@ -19,7 +19,8 @@ class ChamberLimits:
 
     def __post_init__(self) -> None:
         if not self.high_c > self.low_c:
-            raise UserError(f"--range: high {self.high_c:g} must be above low {self.low_c:g} degC")
+            swapped = " (swapped? --range LOW_C HIGH_C)" if self.high_c < self.low_c else ""
+            raise UserError(f"--range: high {self.high_c:g} must be above low {self.low_c:g} degC{swapped}")
         for name, value in (
             ("--max-rate", self.max_rate_c_per_min),
             ("--settling", self.settling_s),
