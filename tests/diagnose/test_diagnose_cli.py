@@ -198,6 +198,30 @@ def test_a_noise_free_channel_is_refused_and_a_slow_time_base_warned(
     assert not out.exists()
 
 
+def test_a_channel_that_fails_leaves_no_output_of_the_channels_before_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--channels all``: the second channel is noise-free. One error line naming the user's file
+    and the channel (not the temporary one-channel view), and neither the first channel's report
+    nor its JSON is left behind."""
+    rng = np.random.default_rng(3)
+    t_s = np.arange(0.0, 7200.0, 1.0)
+    temp_c = 25.0 + 20.0 * np.sin(t_s / 900.0)
+    columns = {
+        "time_s": t_s,
+        "temp_c": temp_c,
+        "accel0_x_mg": 1.0 + 0.1 * temp_c + 0.3 * rng.standard_normal(t_s.size),
+        "accel0_y_mg": 2.0 + 0.05 * temp_c,
+    }
+    path = tmp_path / "two.csv"
+    write_recording(Recording(columns, {"sample_rate_hz": "1"}, "two"), path)
+    report, out = tmp_path / "rep", tmp_path / "d.json"
+    assert cli("diagnose", str(path), "--channels", "all", "--report", str(report), "--json", str(out)) == 2
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and f"{path} (channel accel0_y)" in errors[0] and "no sensor noise" in errors[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["two.csv"]
+
+
 @pytest.mark.slow
 def test_real_chamber_run(real_run: Path) -> None:
     """The real run: the one-sample jump visible in the raw data is found where it is, and the

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable
@@ -101,20 +102,16 @@ def run_per_channel(
         if reason is not None:
             raise UserError(reason)
     models = model_files(getattr(args, model), tuple(c.name for c in channels)) if model else []
-    status = 0
-    created = [
-        Path(getattr(args, a))
-        for a in out_dirs
-        if getattr(args, a) is not None and not Path(getattr(args, a)).exists()
-    ]
+    made: list[Path] = []  # outputs this run created, removed if any channel fails
     try:
-        status = _each_channel(args, run_one, channels, recs, given, out_dirs, out_files, model, models)
+        return _each_channel(args, run_one, channels, recs, given, out_dirs, out_files, model, models, made)
     except BaseException:
-        for directory in created:  # nothing half-made is left behind
-            if directory.is_dir() and not any(directory.iterdir()):
-                directory.rmdir()
+        for path in reversed(made):  # nothing half-made is left behind: not even the channels done
+            if path.is_dir():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
         raise
-    return status
 
 
 def _each_channel(
@@ -127,39 +124,56 @@ def _each_channel(
     out_files: tuple[str, ...],
     model: str | None,
     models: list[Path],
+    made: list[Path],
 ) -> int:
+    """The channels in turn; every output path created is appended to ``made`` before it is written.
+    An error of one channel names the user's file and the channel, not the temporary view."""
     from trainer.data.channels import channel_view, relabel_units, select_channels
     from trainer.data.recording_io import write_recording
+
+    def note(path: Path) -> None:
+        if not path.exists():
+            made.append(path)
 
     status = 0
     with tempfile.TemporaryDirectory(prefix="channels-") as tmp:
         for index, channel in enumerate(channels):
             sub = argparse.Namespace(**vars(args))
             sub.channels = None
+            views: dict[str, str] = {}
             for attr, rec in recs.items():
                 select_channels(rec, (channel.name,))  # every recording must carry the channel
                 path = Path(tmp) / f"{Path(given[attr]).stem}[{channel.name}].npz"
                 write_recording(channel_view(rec, channel), path)
                 setattr(sub, attr, str(path))
+                views[str(path)] = f"{given[attr]} (channel {channel.name})"
             for attr in out_dirs:
                 if getattr(args, attr) is not None:
                     directory = Path(getattr(args, attr))
                     if not directory.parent.is_dir():
                         raise UserError(f"{directory}: parent directory {directory.parent} does not exist")
+                    note(directory)
                     directory.mkdir(exist_ok=True)
+                    note(channel_output(directory, channel.name))
                     setattr(sub, attr, str(channel_output(directory, channel.name)))
             for attr in out_files:
                 if getattr(args, attr) is not None:
                     original = Path(getattr(args, attr))
-                    setattr(
-                        sub, attr, str(original.with_name(f"{original.stem}.{channel.name}{original.suffix}"))
-                    )
+                    per_channel = original.with_name(f"{original.stem}.{channel.name}{original.suffix}")
+                    note(per_channel)
+                    setattr(sub, attr, str(per_channel))
             if model:
                 setattr(sub, model, str(models[index]))
             print(f"== {channel.name} [{channel.label}]", flush=True)
             captured = io.StringIO()
-            with contextlib.redirect_stdout(captured):
-                status = max(status, run_one(sub))
+            try:
+                with contextlib.redirect_stdout(captured):
+                    status = max(status, run_one(sub))
+            except UserError as exc:
+                message = str(exc)
+                for view, named in views.items():
+                    message = message.replace(view, named)
+                raise UserError(message) from None
             print(relabel_units(captured.getvalue(), channel.unit), end="", flush=True)
             if channel.unit != "mg":
                 _relabel_outputs(sub, out_dirs, out_files, channel.unit)
