@@ -132,7 +132,7 @@ def _read_preamble(
     raise UserError(f"{source}: no header line (the file is empty or holds only comments)")
 
 
-OTHER_DELIMITERS = {";": "semicolon", "\t": "tab", "|": "vertical bar"}
+DELIMITER_NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}  # the delimiters trainer import reads
 
 
 def _check_delimiter(names: list[str], source: str, line: int, delimiter: str, fix: str) -> None:
@@ -141,7 +141,7 @@ def _check_delimiter(names: list[str], source: str, line: int, delimiter: str, f
     ``fix``: what the caller's user does about it, appended in parentheses."""
     if len(names) != 1:
         return
-    for other, word in OTHER_DELIMITERS.items():
+    for other, word in DELIMITER_NAMES.items():
         if other != delimiter and other in names[0]:
             raise UserError(
                 f"{source}: line {line} (header): {quote(names[0])} is one column: the file looks "

@@ -24,7 +24,7 @@ from typing import Literal
 import numpy as np
 
 from trainer.data.channels import ALL, DEFAULT_UNIT, names_text
-from trainer.data.csv_table import Table, read_table
+from trainer.data.csv_table import DELIMITER_NAMES, Table, read_table
 from trainer.data.flightlog import (
     DPS_PER_RADPS,
     KIND_NAMES,
@@ -46,7 +46,6 @@ GYRO_UNIT_TO_DPS: dict[str, float] = {"rad/s": DPS_PER_RADPS, "dps": 1.0}
 BARO_UNIT_TO_PA: dict[str, float] = {"Pa": 1.0, "hPa": 100.0}
 FILL_TEMP_MODES = ("previous",)
 GRAVITY_MODES = ("none", "nominal", "mean")
-DELIMITER_NAMES = {"\t": "tab", ",": "comma", ";": "semicolon"}
 EXTRA_AXIS_COLUMNS = ("accel_x_mg", "accel_y_mg", "accel_z_mg")
 RETIME_MAX_JITTER = 0.05  # --retime refuses larger steps: a lost sample (+100 %) must not be hidden
 NOMINAL_GRAVITY_MIN_MG = 500.0  # below this |mean| the axis is not vertical: nominal removal is wrong

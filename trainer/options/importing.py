@@ -9,12 +9,12 @@ from __future__ import annotations
 import argparse
 import math
 
+from trainer.data.csv_table import DELIMITER_NAMES
 from trainer.data.flightlog import KIND_NAMES
 from trainer.data.flightlog_import import DEFAULT_CHANNEL, LogImportOptions
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
     BARO_UNIT_TO_PA,
-    DELIMITER_NAMES,
     FILL_TEMP_MODES,
     GRAVITY_MODES,
     GYRO_UNIT_TO_DPS,
