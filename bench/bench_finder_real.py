@@ -437,6 +437,17 @@ def score(at: Sized, d: Diagnosis, clean: Diagnosis) -> dict[str, object]:
         "ambiguous": sorted(unnamed & reported),
         "lost_said": [effect for effect in lost if effect in reported],
         "lost_beside": beside,
+        "lost_sharing": [
+            sorted(
+                {
+                    x.effect
+                    for m in d.suggestive
+                    if m.effect == effect and same_instance(effect, p, m.params, d)
+                    for x in m.shares
+                }
+            )
+            for effect, p in lost_found
+        ],
         "lost_shared": [e for e, b in zip(lost, beside, strict=True) if b is not None and b < THRESHOLD],
         "clean_on_case": kept_description,
         "lost_missed": lost if kept_description <= -THRESHOLD else [],
@@ -578,16 +589,22 @@ def bench_channel(
 
 
 def lost_labels(s: dict[str, object]) -> list[str]:
-    """Each lost finding with "said" when the case's report names it, its BIC drop beside the added
+    """Each lost finding with "said" when the case's report names it, the effects its near miss says it
+    shares its signature with (:mod:`trainer.diagnose.shared`), its BIC drop beside the added
     effects on the clean run (below the criterion they share its signature) and, once per case, the
     BIC of the clean description plus the added on the case's data against what was named."""
     said = cast(list[str], s["lost_said"])
     out = []
-    for effect, beside in zip(
-        cast(list[str], s["lost"]), cast(list[float | None], s["lost_beside"]), strict=True
+    for effect, beside, sharing in zip(
+        cast(list[str], s["lost"]),
+        cast(list[float | None], s["lost_beside"]),
+        cast(list[list[str]], s["lost_sharing"]),
+        strict=True,
     ):
-        notes = (["said"] if effect in said else []) + (
-            [] if beside is None else [f"{beside:.1f} beside the added on the clean run"]
+        notes = (
+            (["said"] if effect in said else [])
+            + ([f"the report: shares its signature with {' and '.join(sharing)}"] if sharing else [])
+            + ([] if beside is None else [f"{beside:.1f} beside the added on the clean run"])
         )
         out.append(f"{effect} ({'; '.join(notes)})" if notes else effect)
     if out:

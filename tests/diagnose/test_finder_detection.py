@@ -23,9 +23,10 @@ from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.diagnose import Diagnosis, detection, diagnose
 from trainer.diagnose.detection import DetectionLimit, evidence_beside, limit_at, shape_content, shape_limit
 from trainer.diagnose.document import undetected
-from trainer.diagnose.model import Term, build_design, evaluate
+from trainer.diagnose.model import ModelFit, Term, build_design, evaluate, fit_model
 from trainer.diagnose.report import limit_sizes, markdown
 from trainer.diagnose.select import THRESHOLD
+from trainer.diagnose.shared import shared_signatures, shared_text
 from trainer.physics.catalogue import bias_step, warmup
 
 WARMUP = warmup.DEFINITION.identifier
@@ -194,3 +195,27 @@ def test_a_finding_earns_nothing_beside_its_own_signature(stepped: Diagnosis) ->
     assert -3.0 * np.log(fit.data.n) - 0.5 <= same < 0.0
     far = evidence_beside(fit, index, [Term(STEP, (1000.0,), fixed=True)])
     assert far >= THRESHOLD
+
+
+def test_a_near_miss_names_the_effect_it_shares_its_signature_with(stepped: Diagnosis) -> None:
+    """``shared_signatures``: a second step held at the named step's instant earns nothing beside the
+    final model (the same column), but the criterion once the named step is out of the model, so the
+    named step is the effect it shares its signature with; in its place the model is the same one (the
+    BIC within the named step's freedom to move its time by noise). A held step at 1000 s, where the
+    run has none, shares nothing: it earns nothing without the named step either."""
+    fit = stepped.selection.final
+    index = next(k for k, t in enumerate(fit.terms) if t.identifier == STEP)
+    own_s = fit.terms[index].nl[0]
+
+    def miss_fit(t_s: float) -> ModelFit:
+        return fit_model(
+            (*fit.terms, Term(STEP, (t_s,), fixed=True)), fit.noise.terms, fit.data, start=fit.noise
+        )
+
+    (shared,) = shared_signatures(fit, miss_fit(own_s))
+    assert shared.effect == STEP
+    assert shared.delta_bic >= THRESHOLD
+    assert abs(shared.in_place_bic) <= 2.0 * np.log(fit.data.n)
+    text = shared_text((shared,))
+    assert f"shares its signature with {STEP}" in text and f"{shared.delta_bic:.1f}" in text
+    assert shared_signatures(fit, miss_fit(1000.0)) == ()

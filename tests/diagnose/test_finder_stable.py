@@ -105,6 +105,23 @@ def test_a_finding_displaced_below_the_criterion_is_listed_as_a_near_miss(real_r
     assert "Near misses" in markdown(d) and f"BIC -{miss.delta_bic:.1f}" in markdown(d)
     listed = [m for m in document(d)["suggestive"] if m["effect"] == STEP]
     assert any(abs(m["params"]["t_s"] - miss.params["t_s"]) < 1.0 for m in listed)
+    # confounding said out loud: the effect of the model without which the step would pass, checked
+    # by refitting the model without it, with and without the step held at its instant
+    assert miss.shares, "the near miss names no effect it shares its signature with"
+    for shared in miss.shares:
+        index = next(k for k, term in enumerate(final.terms) if term.identifier == shared.effect)
+        others = tuple(term for k, term in enumerate(final.terms) if k != index)
+        without = fit_model(others, final.noise.terms, d.data, start=final.noise)
+        with_it = fit_model(
+            (*others, Term(STEP, (miss.params["t_s"],), fixed=True)),
+            final.noise.terms,
+            d.data,
+            start=final.noise,
+        )
+        assert without.bic - with_it.bic >= THRESHOLD
+        assert without.bic - with_it.bic == pytest.approx(shared.delta_bic, abs=1.0)
+        assert f"shares its signature with {shared.effect}" in markdown(d)
+    assert any(m.get("shares_signature_with") for m in listed)
 
 
 def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
@@ -118,7 +135,8 @@ def test_a_near_miss_that_is_a_noise_trend_is_listed_with_its_slope() -> None:
     columns["accel_mg"] = rec.accel_mg + slope_mg_per_s * rec.time_s
     data = build_blocks(Recording(columns, dict(rec.meta), rec.source), max_blocks=BLOCKS)
     fit = fit_model((Term(BACKBONE), Term(ramp)), (), data)
-    (listed,) = listed_near_misses([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [])
+    final = fit_model((Term(BACKBONE),), (), data)
+    (listed,) = listed_near_misses([NearMiss(ramp, 8.0, fit)], set(), lambda effect: [], final)
     assert listed.effect == ramp and listed.delta_bic == 8.0
     assert listed.params["r_mg_per_s"] == pytest.approx(slope_mg_per_s, rel=0.2)
 

@@ -107,6 +107,7 @@ def summary(result: Diagnosis) -> str:
     from trainer.diagnose.next_steps import next_steps, terminal_lines
     from trainer.diagnose.report import limit_sizes
     from trainer.diagnose.select import MAX_ADDED, THRESHOLD
+    from trainer.diagnose.shared import shared_text
     from trainer.diagnose.verdict import ambiguity_line
     from trainer.physics.catalogue.units import channel_param_name
 
@@ -144,6 +145,7 @@ def summary(result: Diagnosis) -> str:
                 if m.delta_bic < THRESHOLD
                 else f"the search stopped at its {MAX_ADDED} effects"
             )
+            + (f"; {shared}" if (shared := shared_text(m.shares)) else "")
         )
     lines.append(
         f"fit: block RMS {before.rms_block_mg:.4g} -> {after.rms_block_mg:.4g} {result.signal.label}, "

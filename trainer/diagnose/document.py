@@ -288,6 +288,20 @@ def _document(d: Diagnosis) -> dict[str, Any]:
             {"effect": m.effect, "params": params(m.params), "delta_bic_when_added": round(m.delta_bic, 2)}
             | ({"flags": m.flags} if m.flags else {})
             | ({"joint_instances": m.joint} if m.joint > 1 else {})
+            | (
+                {
+                    "shares_signature_with": [
+                        {
+                            "effect": x.effect,
+                            "delta_bic_without": round(x.delta_bic, 2),
+                            "in_place_delta_bic": round(x.in_place_bic, 2),
+                        }
+                        for x in m.shares
+                    ]
+                }
+                if m.shares
+                else {}
+            )
             for m in d.suggestive
         ],
         "tested": [tested(t) for t in d.tested],

@@ -23,6 +23,7 @@ from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut, Suggestive
 from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
+from trainer.diagnose.shared import shared_text
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
 from trainer.physics.catalogue.units import channel_param_name
@@ -200,8 +201,13 @@ def _near_miss_line(m: Suggestive, d: Diagnosis) -> str:
         f"{added}, which already holds the {MAX_ADDED} effects the search adds: above the criterion "
         f"({THRESHOLD:g}), not named."
         if m.delta_bic >= THRESHOLD
-        else f"{added} ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): a spurious "
-        "component is possible at this evidence, or a named effect shares part of its signature."
+        else f"{added} ({SUGGESTIVE:g} is strong evidence, the criterion needs {THRESHOLD:g}): "
+        + (
+            f"{shared}."
+            if (shared := shared_text(m.shares))
+            else "a spurious component is possible at this evidence, and no single named effect takes "
+            "its place (without any one of them it still earns less than the criterion)."
+        )
     )
     note = f" Note: {'; '.join(m.flags)}." if m.flags else ""
     return (

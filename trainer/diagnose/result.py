@@ -14,6 +14,7 @@ from trainer.diagnose.holdout import Holdout
 from trainer.diagnose.model import ModelFit
 from trainer.diagnose.profile import Profile, Region
 from trainer.diagnose.select import Selection
+from trainer.diagnose.shared import SharedSignature
 from trainer.diagnose.where import AllanWhere
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, ChannelScale, channel_params
 from trainer.physics.config import PhysicsConfig
@@ -75,6 +76,8 @@ class Suggestive:
     delta_bic: float  # BIC drop when added to the final model
     flags: list[str] = field(default_factory=list)  # parameters outside the plausible range
     joint: int = 1  # instances listed together that share this evidence (a pair of steps: 2)
+    # effects of the model without which it would pass the criterion (:mod:`trainer.diagnose.shared`)
+    shares: tuple[SharedSignature, ...] = ()
 
 
 @dataclass(frozen=True)

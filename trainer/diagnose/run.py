@@ -41,6 +41,7 @@ from trainer.diagnose.result import (
     Tested,
 )
 from trainer.diagnose.select import (
+    THRESHOLD,
     NearMiss,
     Selection,
     baseline_support,
@@ -50,6 +51,7 @@ from trainer.diagnose.select import (
     resolve,
     stopped_full,
 )
+from trainer.diagnose.shared import shared_signatures
 from trainer.diagnose.threads import single_blas_thread
 from trainer.diagnose.where import (
     AllanWhere,
@@ -226,7 +228,7 @@ def _diagnose(
             ):
                 undetected.append(limit)
     misses = near_misses(final, data, candidates, full=stopped_full(selection)) if report_search else []
-    suggestive = listed_near_misses(misses, said, flags)
+    suggestive = listed_near_misses(misses, said, flags, final)
     not_supported = [
         NotSupported(cast(str, n["effect"]), cast(float, n["delta_bic"]), cast(str, n["reason"]))
         for n in baseline_support(baseline_common, data)
@@ -273,21 +275,31 @@ def _diagnose(
 
 
 def listed_near_misses(
-    misses: list[NearMiss], said: set[str], param_flags: Callable[[EffectConfig], list[str]]
+    misses: list[NearMiss],
+    said: set[str],
+    param_flags: Callable[[EffectConfig], list[str]],
+    final: ModelFit,
 ) -> list[Suggestive]:
     """The near misses as the report lists them, one entry per instance (a pair of steps: both,
     with their joint evidence); an effect the report already names or lists as ambiguous is not
-    repeated, unless the catalogue allows another instance of it (a second step)."""
+    repeated, unless the catalogue allows another instance of it (a second step). One below the
+    criterion carries the effects of ``final`` it shares its signature with (:func:`shared_signatures`)."""
     out = []
     for miss in misses:
         if miss.effect in said and miss.effect not in MULTI_INSTANCE:
             continue
+        shares = shared_signatures(final, miss.fit) if miss.delta_bic < THRESHOLD else ()
         indices = [k for k, term in enumerate(miss.fit.terms) if term.identifier == miss.effect]
         for index in indices[-miss.instances :]:
             effect = _term_effect(miss.fit, index)
             out.append(
                 Suggestive(
-                    miss.effect, dict(effect.params), miss.delta_bic, param_flags(effect), miss.instances
+                    miss.effect,
+                    dict(effect.params),
+                    miss.delta_bic,
+                    param_flags(effect),
+                    miss.instances,
+                    shares,
                 )
             )
     return out
