@@ -124,6 +124,33 @@ def test_fit_per_channel_equals_a_one_channel_fit_of_that_column(
         assert (lo, hi) == (float(np.min(view.temp_c)), float(np.max(view.temp_c)))
 
 
+def test_a_channel_of_many_prints_the_physics_summary_a_one_channel_fit_prints(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The physics structure, its parameters with their spread, its warnings and what the compensator
+    carries are printed for each channel of a multi-channel fit, as for the one-channel fit of that
+    column (the multi-channel fit once printed none of them, so a flagged parameter went unseen)."""
+    single = tmp_path / "gyro0_x.npz"
+    write_recording(one_axis(read_recording(imu["rec"]), "gyro0_x"), single)
+    forced = ["fit", "--method", "physics", "--effects", "hysteresis_offset", "--quiet"]
+    capsys.readouterr()
+    assert (
+        trainer_main([*forced, str(imu["rec"]), "--channels", "gyro0_x", "-o", str(tmp_path / "many")]) == 0
+    )
+    many = capsys.readouterr().out
+    assert trainer_main([*forced, str(single), "-o", str(tmp_path / "one.pt")]) == 0
+    one = capsys.readouterr().out
+
+    def summary(out: str) -> list[str]:
+        return [line for line in out.splitlines() if line.startswith(("physics structure", "  "))]
+
+    assert summary(many) and summary(many) == summary(one)
+    assert any(
+        line.strip().startswith("compensates: bias_poly + hysteresis_offset") for line in summary(many)
+    )
+    assert "amp_dps" in "\n".join(summary(many))  # in the channel's unit
+
+
 def test_evaluate_per_channel_reports_in_the_channel_unit(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

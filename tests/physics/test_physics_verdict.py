@@ -11,7 +11,7 @@ import pytest
 from tests.methods.test_greybox import config
 from trainer.cli import main
 from trainer.data.recording_io import write_recording
-from trainer.greybox.compensator import undetermined_terms
+from trainer.greybox.compensator import summary_lines, undetermined_terms
 from trainer.greybox.fit import FittedPhysics
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import EFFECTS, PARAMETERS
@@ -61,6 +61,28 @@ def test_an_effect_the_finder_rejects_is_dropped_even_when_the_refit_looks_plaus
     }
     drop = undetermined_terms(replace(fitted, why=own), {})
     assert list(drop) == ["temp_rate"] and own["temp_rate"][0] in drop["temp_rate"]
+
+
+def test_the_last_word_does_not_claim_the_run_determines_a_parameter_it_flags() -> None:
+    """A structure the user forced keeps a parameter at its search bound or outside the plausible
+    range (an automatic one drops it); its summary's last line then names it instead of saying that
+    the compensator carries only what the run determines, which the warnings above it contradict."""
+    report = {
+        "structure": "forced: --effects hysteresis_offset",
+        "effects": ["bias_poly", "hysteresis_offset"],
+        "params": {"bias_poly": {"c0_mg": 0.0}, "hysteresis_offset": {"amp_mg": 11.4, "width_c": 60.3}},
+        "std": {},
+        "nuisance": [],
+        "at_bound": [],
+        "implausible": ["hysteresis_offset.width_c"],
+        "notes": [],
+        "dropped": {},
+    }
+    flagged = summary_lines(report)[-1]
+    assert flagged.strip().startswith("compensates: bias_poly + hysteresis_offset")
+    assert "does not determine hysteresis_offset.width_c" in flagged and "only physics" not in flagged
+    determined = summary_lines({**report, "implausible": []})[-1]
+    assert "only physics this run determines" in determined
 
 
 @pytest.mark.slow  # one diagnose and one physics fit: about 25 s of CPU

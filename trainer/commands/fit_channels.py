@@ -20,7 +20,6 @@ from trainer.data.channels import (
     channel_view,
     method_refusal,
     one_axis_left_out,
-    relabel_units,
     select_channels,
 )
 from trainer.errors import UserError
@@ -30,11 +29,10 @@ from trainer.reference import OffsetPolicy
 
 def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
     from trainer.checkpoint import save_model
-    from trainer.commands.selection_output import checked_method, print_selection, progress_log
+    from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
-    from trainer.reference import RECURSIVE_NOTE
-    from trainer.selection import fit_with_selection, shown_name
+    from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
     check_output_directory(args.output)  # before a possibly long fit
@@ -80,11 +78,5 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         if stats.selection is not None:
             print(f"== {channel.name} [{channel.label}]")
             print_selection(stats)
-        print(
-            f"{shown_name(methods.name_of(model), stats)} {channel.name}: fitted on {stats.n_samples} samples "
-            f"({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} degC), fit residual RMS "
-            f"{stats.fit_residual_rms_mg:.4g} {channel.label} -> {args.output}/{channel.name}{MODEL_SUFFIX}"
-        )
-        note = relabel_units(model.offset.describe() if model.offset else RECURSIVE_NOTE, channel.unit)
-        print(f"{shown_name(methods.name_of(model), stats)} {channel.name}: {note}")
+        print_fitted(model, stats, f"{args.output}/{channel.name}{MODEL_SUFFIX}", channel.unit, channel.name)
     return 0

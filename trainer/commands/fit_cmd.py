@@ -6,10 +6,10 @@ import argparse
 from typing import Any
 
 from trainer import methods
-from trainer.commands.selection_output import checked_method, print_selection, progress_log
+from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
 from trainer.options.channels import add_channels_option
 from trainer.options.offset import add_offset_options, policy_from_args
-from trainer.selection import AUTO, CANDIDATES, candidate_list, shown_name
+from trainer.selection import AUTO, CANDIDATES, candidate_list
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -50,11 +50,10 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
-    from trainer.data.channels import channel_unit, relabel_units
+    from trainer.data.channels import channel_unit
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.errors import UserError, check_output_path
-    from trainer.reference import RECURSIVE_NOTE
     from trainer.selection import fit_with_selection
 
     if args.candidates is not None and args.method != AUTO:
@@ -76,17 +75,6 @@ def run(args: argparse.Namespace) -> int:
     checks.print_warnings()
     print_selection(stats)
     save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
-    name = shown_name(methods.name_of(model), stats)
-    unit = channel_unit(train)  # a gyro or baro recording holds its own unit in the accel_mg column
-    print(
-        relabel_units(
-            f"{name}: fitted on {stats.n_samples} samples "
-            f"({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} degC), "
-            f"fit residual RMS {stats.fit_residual_rms_mg:.4g} mg -> {args.output}",
-            unit,
-        )
-    )
-    for line in model.describe():
-        print(relabel_units(line, unit))
-    print(relabel_units(f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}", unit))
+    # a gyro or baro recording holds its own unit in the accel_mg column
+    print_fitted(model, stats, str(args.output), channel_unit(train))
     return 0

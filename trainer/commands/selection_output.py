@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from trainer import methods
-from trainer.selection import AUTO, record_lines
+from trainer.data.channels import relabel_units
+from trainer.reference import RECURSIVE_NOTE
+from trainer.selection import AUTO, record_lines, shown_name
 from trainer.train_stats import TrainStats
+
+if TYPE_CHECKING:
+    from trainer.compensator import Compensator
 
 
 def checked_method(name: str) -> methods.Method:
@@ -29,3 +34,20 @@ def print_selection(stats: TrainStats) -> None:
     if record is not None:
         for line in record_lines(record):
             print(line)
+
+
+def print_fitted(
+    model: Compensator, stats: TrainStats, destination: str, unit: str, channel: str = ""
+) -> None:
+    """What a fitted model is, in the channel's unit: training rows and range, fit residual, the
+    method's own summary (the physics structure, its parameters and warnings) and the offset policy.
+    One channel and each channel of many print the same (``channel``: its name after the method's)."""
+    name = shown_name(methods.name_of(model), stats) + (f" {channel}" if channel else "")
+    lines = [
+        f"{name}: fitted on {stats.n_samples} samples ({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} "
+        f"degC), fit residual RMS {stats.fit_residual_rms_mg:.4g} mg -> {destination}",
+        *model.describe(),
+        f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}",
+    ]
+    for line in lines:
+        print(relabel_units(line, unit))

@@ -219,5 +219,14 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
     lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
     kept = " + ".join(report["effects"])  # the last word: what the exported compensator carries
-    lines.append(f"  compensates: {kept} (a compensator carries only physics this run determines)")
+    undetermined = [*report["at_bound"], *report["implausible"]]
+    # an automatic structure drops what the run does not determine (_only_determined); one the user
+    # forced (--effects, --from-sim) keeps it, and the last word must not claim otherwise
+    why = (
+        f"kept as given, although this run does not determine {', '.join(undetermined)}: an automatic "
+        "structure would drop it"
+        if undetermined
+        else "a compensator carries only physics this run determines"
+    )
+    lines.append(f"  compensates: {kept} ({why})")
     return lines
