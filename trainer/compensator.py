@@ -54,6 +54,11 @@ class Compensator(ABC):
         """Lines a user reads after fitting (structure, parameters, warnings); none by default."""
         return []
 
+    def undetermined(self) -> list[str]:
+        """Parameters the model carries that its training run does not determine, one sentence each
+        (a structure the user gave keeps them; the sign-off asks for a review); none by default."""
+        return []
+
     def compensate(self, rec: Recording) -> np.ndarray:
         """The compensated output ``accel_mg - drift`` in mg."""
         return rec.accel_mg - self.predict_drift(rec)

@@ -70,6 +70,44 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
         assert "## Verdict: FAIL" in text and f"`{key}`" in text
 
 
+def test_a_model_that_carries_an_undetermined_parameter_asks_for_a_review(
+    unit: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A physics structure forced on a run that cannot determine it (a thermal lag on a 4-minute ramp
+    without one: its time constant runs to the end of its search range) is kept as given; the
+    sign-off turns the thresholds' PASS into REVIEW and names each flagged parameter, in the document
+    and on the terminal. The same thresholds pass the cubic: the review is the model's, not the run's."""
+    model = tmp_path / "lag.pt"
+    fit = [
+        "fit",
+        "--method",
+        "physics",
+        "--effects",
+        "thermal_lag",
+        str(unit["rec"]),
+        "-o",
+        str(model),
+        "--quiet",
+    ]
+    assert trainer_main(fit) == 0
+    loaded, _ = load_model(model)
+    flagged = loaded.undetermined()
+    assert flagged and all("thermal_lag.tau_s" in line for line in flagged)
+    loose = "[thresholds]\nresidual_rms_mg = 1000\n"
+    assert _report(unit, tmp_path / "cubic", loose) == 0
+    assert "## Verdict: PASS" in (tmp_path / "cubic" / "report.md").read_text()
+    capsys.readouterr()
+    args = ["report", str(model), "--recording", str(unit["rec"]), "-o", str(tmp_path / "r")]
+    (tmp_path / "loose.toml").write_text(loose)
+    assert (
+        run_cli(trainer_main, [*args, "--config", str(tmp_path / "loose.toml")]) == 0
+    )  # a review is not a failure
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert "## Verdict: REVIEW" in text
+    assert all(line in text for line in flagged)
+    assert "REVIEW" in capsys.readouterr().out
+
+
 def test_a_threshold_without_its_measurement_fails_as_not_measured(
     unit: dict[str, Path], tmp_path: Path
 ) -> None:

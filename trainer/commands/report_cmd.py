@@ -388,6 +388,7 @@ def run(args: argparse.Namespace) -> int:
                 verify=verify,
                 cost=_cost(sizes, entry, bench_path),
                 notes=notes,
+                undetermined=model.undetermined(),
             )
             report.figures = signoff.write_figures(
                 report, rec, model, compensated, args.smoothing, staging, thresholds, held_rows

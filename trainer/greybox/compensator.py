@@ -84,6 +84,9 @@ class PhysicsCompensator(Compensator):
     def describe(self) -> list[str]:
         return summary_lines(self.report) if self.report else []
 
+    def undetermined(self) -> list[str]:
+        return undetermined_lines(self.report) if self.report else []
+
     # -- running ---------------------------------------------------------------------------------
     @property
     def model(self) -> PhysicsModel:
@@ -196,6 +199,13 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
     }
 
 
+def undetermined_lines(report: dict[str, Any]) -> list[str]:
+    """Each parameter the fit flagged: at the end of its search range, or outside the plausible range."""
+    return [f"{name} sits at the end of its search range" for name in report["at_bound"]] + [
+        f"{name} is outside the catalogue's plausible range" for name in report["implausible"]
+    ]
+
+
 def summary_lines(report: dict[str, Any]) -> list[str]:
     """The fit summary a user reads: structure, parameters with one standard deviation, warnings."""
     lines = [f"physics structure: {report['structure']}"]
@@ -219,12 +229,12 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
     lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
     kept = " + ".join(report["effects"])  # the last word: what the exported compensator carries
-    undetermined = [*report["at_bound"], *report["implausible"]]
+    undetermined = list(dict.fromkeys([*report["at_bound"], *report["implausible"]]))
     # an automatic structure drops what the run does not determine (_only_determined); one the user
     # forced (--effects, --from-sim) keeps it, and the last word must not claim otherwise
     why = (
         f"kept as given, although this run does not determine {', '.join(undetermined)}: an automatic "
-        "structure would drop it"
+        f"structure would drop {'it' if len(undetermined) == 1 else 'them'}"
         if undetermined
         else "a compensator carries only physics this run determines"
     )

@@ -92,6 +92,7 @@ class ChannelReport:
     notes: list[str] = field(default_factory=list)
     figures: list[str] = field(default_factory=list)
     shown: str = ""  # the name the reader knows it by (auto's candidate: poly2, physics-branch), else method
+    undetermined: list[str] = field(default_factory=list)  # Compensator.undetermined(): a review reason
 
     @property
     def name(self) -> str:
@@ -142,16 +143,23 @@ class ChannelReport:
     @property
     def review(self) -> list[str]:
         """Why a human should look (the verdict's REVIEW): a model that cross-validation found better
-        than no compensation pooled but worse on one held-out segment."""
+        than no compensation pooled but worse on one held-out segment; a model that carries a
+        parameter its training run does not determine (it extrapolates wherever its state is not the
+        training run's)."""
+        reasons = (
+            [f"{self.label} carries what its training run does not determine: {'; '.join(self.undetermined)}"]
+            if self.undetermined
+            else []
+        )
         if self.crossval is None:
-            return []
+            return reasons
         from trainer.selection import cross_validated_figures
 
         floor = self.scores.headline.noise_floor_mg
         reason = worse_on_a_segment(
             self.label, cross_validated_figures(self.crossval).per_segment, floor, self.unit
         )
-        return [] if reason is None else [reason]
+        return reasons + ([] if reason is None else [reason])
 
 
 def drift_left(rec: Recording, compensated: np.ndarray, smoothing_s: float) -> np.ndarray:
@@ -447,6 +455,7 @@ def _channel_section(r: ChannelReport) -> list[str]:
     if r.held_out:
         lines.append(f"- Held-out data: {r.held_out}")
     lines += [f"- Note: {n}" for n in r.notes]
+    lines += [f"- Not determined by the training run (review): {u}" for u in r.undetermined]
     if r.crossval is not None:
         from trainer.selection import record_lines
 
