@@ -186,6 +186,21 @@ def test_a_method_worse_than_uncompensated_fails_its_unit() -> None:
     assert unit_verdict("A", result(0.5, 0.1), []).status == "FAIL"
 
 
+def test_a_method_that_carries_an_undetermined_parameter_asks_for_a_review() -> None:
+    """The fleet's verdict reads what a model carries as ``trainer report`` does: a parameter its run
+    does not determine turns PASS into REVIEW, with the same reason."""
+    from trainer.fleet.report import unit_verdict
+    from trainer.scoring.verdict import undetermined_reason
+
+    flagged = ["thermal_lag.tau_s sits at the end of its search range"]
+    figures = {"drift_left_mg": 1.5, "drift_left_uncompensated_mg": 2.0, "noise_floor_mg": 0.1}
+    methods = {"physics": {**figures, "verify": {"passed": True}, "undetermined": flagged}}
+    result = UnitResult.from_dict({"id": "A", "status": "ok", "errors": [], "methods": methods})
+    decided = unit_verdict("A", result, [])
+    assert decided.status == "REVIEW"
+    assert list(decided.review) == [undetermined_reason("A / physics", flagged)] and flagged[0] in decided.line()
+
+
 def test_flagged_units_are_exactly_the_planted_ones(fleet: tuple[Path, FleetRun]) -> None:
     _, run = fleet
     summary = json.loads((run.out_dir / "fleet.json").read_text())

@@ -39,7 +39,7 @@ from trainer.fleet.result import Failure, UnitResult, json_bytes
 from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
-from trainer.scoring.verdict import FAIL, PASS, REVIEW, Figures, Verdict, verdict
+from trainer.scoring.verdict import FAIL, PASS, REVIEW, Figures, Verdict, undetermined_reason, verdict
 from trainer.stale_files import remove_stale_parts, report_removed
 
 FIGURES_DIR = "figures"
@@ -97,7 +97,12 @@ def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -
         for m, s in methods.items()
         if (f := _figures(s, result.evaluated_on or "scored part", unit_label(result))) is not None
     }
-    return verdict(figures, checks, [f.reason for f in findings])
+    undetermined = [
+        reason
+        for m, s in methods.items()
+        if (reason := undetermined_reason(f"{uid} / {m}", s.get("undetermined", [])))
+    ]
+    return verdict(figures, checks, [*undetermined, *(f.reason for f in findings)])
 
 
 def _mg(value: Any, unit: str = "") -> str:

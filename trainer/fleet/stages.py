@@ -359,6 +359,8 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
         summary = {
             **{k: scores[k] for k in (*DRIFT_LEFT_KEYS, *COVERAGE_KEYS, "residual_vs_truth_mg")},
             "verify": verified,
+            # parameters the unit's run does not determine: the verdict asks for a review, as trainer report's
+            **({"undetermined": undetermined} if (undetermined := model.undetermined()) else {}),
         }
         return StageOutput(
             {f"{name}/{k}": v for k, v in files.items()}, summary, time.perf_counter() - started, failures

@@ -35,6 +35,7 @@ from trainer.scoring.verdict import (
     NO_VERDICT,
     Figures,
     Verdict,
+    undetermined_reason,
     verdict,
     worse_on_a_segment,
     worse_than_uncompensated,
@@ -146,11 +147,8 @@ class ChannelReport:
         than no compensation pooled but worse on one held-out segment; a model that carries a
         parameter its training run does not determine (it extrapolates wherever its state is not the
         training run's)."""
-        reasons = (
-            [f"{self.label} carries what its training run does not determine: {'; '.join(self.undetermined)}"]
-            if self.undetermined
-            else []
-        )
+        undetermined = undetermined_reason(self.label, self.undetermined)
+        reasons = [] if undetermined is None else [undetermined]
         if self.crossval is None:
             return reasons
         from trainer.selection import cross_validated_figures

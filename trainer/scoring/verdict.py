@@ -116,6 +116,14 @@ class SegmentFigures:
     uncompensated_rms: float
 
 
+def undetermined_reason(label: str, undetermined: Sequence[str]) -> str | None:
+    """The review reason for a model that carries parameters its training run does not determine
+    (:meth:`trainer.compensator.Compensator.undetermined`), or None."""
+    if not undetermined:
+        return None
+    return f"{label} carries what its training run does not determine: {'; '.join(undetermined)}"
+
+
 def worse_on_a_segment(
     subject: str, segments: Sequence[SegmentFigures], noise_floor: float, unit: str
 ) -> str | None:
