@@ -58,8 +58,24 @@ def load_for_codegen(
         quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
-    notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ())
+    notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ()) + undetermined_notes(raw)
     return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes))
+
+
+def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
+    """A warning, printed and in ``NAME.h``, when the model carries parameters its training run does
+    not determine (``Compensator.undetermined``: a forced physics structure); ``trainer report`` asks
+    for a review of such a model."""
+    from trainer import methods
+
+    model = methods.REGISTRY[raw["method"]].cls.from_payload(raw["payload"])
+    lines = model.undetermined()
+    if not lines:
+        return ()
+    return (
+        f"WARNING: the model carries what its training run does not determine ({'; '.join(lines)}): it "
+        "extrapolates wherever its state is not the training run's (trainer report asks for a review)",
+    )
 
 
 def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...]:

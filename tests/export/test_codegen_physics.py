@@ -243,6 +243,27 @@ def test_warm_up_model_and_missing_rate_are_refused_in_one_line(
         assert not (tmp_path / "never").exists()
 
 
+def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warning(
+    fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Where the firmware engineer reads it (NAME.h) and on the terminal: the parameters the training
+    run does not determine, as the fit summary flagged them; a model without any says nothing."""
+    raw = load_checkpoint(fitted[0])
+    report = raw["payload"]["report"]
+    assert not report["at_bound"] and not report["implausible"]  # the fixture's fit is determined
+    assert not any("WARNING" in note for note in fitted[3].notes)
+    flagged = {**raw, "payload": {**raw["payload"], "report": {**report, "at_bound": ["thermal_lag.tau_s"]}}}
+    path = tmp_path / "flagged.pt"
+    tm.save_checkpoint(flagged, path)
+    capsys.readouterr()
+    assert run_cli(codegen_main, ["export", str(path), "-o", str(tmp_path / "out"), "--name", NAME]) == 0
+    printed = capsys.readouterr().out
+    header = " ".join((tmp_path / "out" / f"{NAME}.h").read_text().replace("*", " ").split())
+    for text in (printed, header):
+        assert "WARNING: the model carries what its training run does not determine" in " ".join(text.split())
+        assert "thermal_lag.tau_s sits at the end of its search range" in " ".join(text.split())
+
+
 def test_export_is_byte_identical_and_ships_the_physics_kernels(
     fitted: tuple[Path, Path, Recording, LoadedModel], tmp_path: Path
 ) -> None:
