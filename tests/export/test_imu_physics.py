@@ -27,7 +27,9 @@ from codegen.hostbuild import (
 from codegen.imu import imu_golden, load_imu
 from codegen.imu_record import KIND_PHYSICS
 from codegen.imu_verify import host_run, step_inputs, verify_imu
+from tests import testmodels as tm
 from tests.imu_checks import NAME, append_burst, golden_with_resets, sanitized_run_with_resets
+from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
@@ -110,6 +112,38 @@ def test_module_holds_a_physics_channel_and_is_bit_exact(fitted: dict[str, Path]
     header = (fitted["out"] / f"{NAME}.h").read_text()
     assert "accel0_x [mg], physics" in header and "#define IMU0_SAMPLE_RATE_MILLIHZ 1000u" in header
     assert (fitted["out"] / "tdc_physics_kernels.h").is_file()
+
+
+def test_a_channel_that_carries_an_undetermined_parameter_is_named_with_its_warning(
+    fitted: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The IMU export says, per channel, what that channel's own module would write in its header:
+    the parameters its training run does not determine (none for the fixture's fit)."""
+    raw = load_checkpoint(fitted["accel0_x"])
+    report = raw["payload"]["report"]
+    flagged = {**raw, "payload": {**raw["payload"], "report": {**report, "implausible": ["temp_rate.tau_s"]}}}
+    path = tmp_path / "accel0_x.pt"
+    tm.save_checkpoint(flagged, path)
+    for first, warned in (
+        (fitted["accel0_x"], bool(report["at_bound"] or report["implausible"])),
+        (path, True),
+    ):
+        capsys.readouterr()
+        argv = [
+            "export",
+            str(first),
+            str(fitted["accel0_y"]),
+            str(fitted["gyro0_z"]),
+            "-o",
+            str(tmp_path / "c"),
+        ]
+        assert codegen_main([*argv, "--name", NAME]) == 0
+        out = capsys.readouterr().out
+        assert (
+            "accel0_x: WARNING: the model carries what its training run does not determine" in out
+        ) == warned
+        assert ("temp_rate.tau_s is outside the catalogue's plausible range" in out) == (first == path)
+        shutil.rmtree(tmp_path / "c")
 
 
 def test_physics_channel_equals_the_one_channel_physics_module(
