@@ -42,10 +42,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Register ``trainer simulate``."""
     parser = subparsers.add_parser(
         "simulate",
-        help="simulate an oven recording of a MEMS accelerometer (with true_* ground truth)",
+        help="simulate an oven recording of a MEMS accelerometer, and of further channels (gyroscope, barometer) its configuration declares (with true_* ground truth)",
         description=(
-            "Simulate the thermal-chamber recording of a MEMS accelerometer from a physics configuration "
-            "(default: the packaged default.toml). See docs/simulator.md."
+            "Simulate the thermal-chamber recording of a MEMS accelerometer, and of the further channels "
+            "(gyroscope, barometer) its physics configuration declares (default: the packaged default.toml). "
+            "See docs/simulator.md."
         ),
     )
     parser.add_argument(
