@@ -54,12 +54,12 @@ def _export(args: argparse.Namespace) -> int:
     name = next(f for f in files if f.endswith(".manifest.json"))[: -len(".manifest.json")]
     sizes = json.loads(files[manifest_name(name)])["sizes"]
     print(
-        f"wrote {args.out_dir}/{{{', '.join(files)}}}: method {model.checkpoint.method}, "
+        f"wrote {args.out_dir}/{{{', '.join(files)}}}: method {model.name}, "
         f"flash tables {sizes['flash_table_bytes']} B, state RAM {sizes['ram_state_bytes']} B, "
         f"model sha256:{model.sha256[:16]}..."
     )
     for note in model.notes:
-        print(f"{model.checkpoint.method}: {note}")
+        print(f"{model.name}: {note}")
     return 0
 
 
@@ -101,7 +101,7 @@ def _export_imu(args: argparse.Namespace) -> int:
     what = "calibration blob" if blob_only else "data-only IMU module and blob" if args.blob else "IMU module"
     print(
         f"wrote {args.out_dir}/{{{', '.join(written)}}}: {what}, {len(imu.channels)} channels "
-        f"({', '.join(f'{c.name} {c.model.checkpoint.method}' for c in imu.channels)}), "
+        f"({', '.join(f'{c.name} {c.model.name}' for c in imu.channels)}), "
         f"module id 0x{imu.module_id:08x}, calibration sha256:{imu.sha256[:16]}..."
     )
     for channel in imu.channels:  # what a channel's own module would say in its header

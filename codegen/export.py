@@ -38,6 +38,11 @@ class LoadedModel:
     checkpoint: Checkpoint
     quantised: QuantModel
     notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
+    shown: str = ""  # the name the user knows the model by (auto's candidate: poly2, physics-branch)
+
+    @property
+    def name(self) -> str:
+        return self.shown or self.checkpoint.method
 
 
 def load_for_codegen(
@@ -59,7 +64,10 @@ def load_for_codegen(
     except UserError as exc:
         raise UserError(f"{p}: {exc}") from None
     notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ()) + undetermined_notes(raw)
-    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes))
+    from trainer.selection import shown_name
+
+    shown = shown_name(ckpt.method, TrainStats.of_checkpoint(raw))
+    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown)
 
 
 def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
@@ -68,8 +76,7 @@ def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
     for a review of such a model."""
     from trainer import methods
 
-    model = methods.REGISTRY[raw["method"]].cls.from_payload(raw["payload"])
-    lines = model.undetermined()
+    lines = methods.REGISTRY[raw["method"]].cls.undetermined_in(raw["payload"])
     if not lines:
         return ()
     return (

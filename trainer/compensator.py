@@ -54,10 +54,17 @@ class Compensator(ABC):
         """Lines a user reads after fitting (structure, parameters, warnings); none by default."""
         return []
 
-    def undetermined(self) -> list[str]:
-        """Parameters the model carries that its training run does not determine, one sentence each
-        (a structure the user gave keeps them; the sign-off asks for a review); none by default."""
+    @classmethod
+    def undetermined_in(cls, payload: dict[str, Any]) -> list[str]:
+        """Parameters a saved model (its :meth:`to_payload`) carries that its training run does not
+        determine, one sentence each (a structure the user gave keeps them; the sign-off asks for a
+        review); none by default. Read from the payload so that the code generator needs no model."""
+        del payload
         return []
+
+    def undetermined(self) -> list[str]:
+        """:meth:`undetermined_in` of this model."""
+        return self.undetermined_in(self.to_payload())
 
     def compensate(self, rec: Recording) -> np.ndarray:
         """The compensated output ``accel_mg - drift`` in mg."""

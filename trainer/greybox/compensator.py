@@ -84,8 +84,10 @@ class PhysicsCompensator(Compensator):
     def describe(self) -> list[str]:
         return summary_lines(self.report) if self.report else []
 
-    def undetermined(self) -> list[str]:
-        return undetermined_lines(self.report) if self.report else []
+    @classmethod
+    def undetermined_in(cls, payload: dict[str, Any]) -> list[str]:
+        report = payload.get("report")
+        return undetermined_lines(report) if report else []
 
     # -- running ---------------------------------------------------------------------------------
     @property
