@@ -145,6 +145,19 @@ def full_cycle(segments: Sequence[Segment]) -> bool:
     return len(segments) >= FULL_CYCLE_SEGMENTS and {LABELS[HEATING], LABELS[COOLING]} <= labels
 
 
+def _short_run(segments: Sequence[Segment]) -> tuple[str, str]:
+    """What a run that is less than a cycle holds, and why its folds extrapolate."""
+    kinds = [s.label.split()[0] for s in segments]  # a part of a ramp is labelled "heating 1/3"
+    if LABELS[HEATING] in kinds and LABELS[COOLING] in kinds:
+        held = " and ".join(f"{kinds.count(k)} {k}" for k in dict.fromkeys(kinds))
+        return f"the run holds {held} segment(s)", "each fold extrapolates to a branch it was not trained on"
+    return (
+        f"the run does not reverse ({' and '.join(dict.fromkeys(kinds))} only; its {len(segments)} folds are parts "
+        "of its temperature span)",
+        "each fold extrapolates beyond the range it was trained on",
+    )
+
+
 def worst_ratio(cv: CrossValidation, label: str) -> float:
     """The candidate's largest ratio, over every held-out segment started warm and cold, to the better
     of (cubic, no compensation) there: 1.0 is as good as the better of the two everywhere."""
@@ -199,11 +212,10 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
         )
     else:
         label = methods.CUBIC if methods.CUBIC in allowed else NONE
+        held, why = _short_run(cv.segments)
         reason = (
-            f"the run holds {len(cv.segments)} thermal segments, less than a cycle ({CYCLE}), where each fold "
-            "extrapolates to a branch it was not trained on and "
-            "cannot judge a shape: auto keeps to the cubic unless it leaves more than no compensation; record a "
-            "whole cycle to let it judge the others"
+            f"{held}: less than a cycle ({CYCLE}); {why} and cannot judge a shape: auto keeps to the cubic "
+            "unless it leaves more than no compensation; record a whole cycle to let it judge the others"
         )
     if unsafe:
         reason += f"; {', '.join(unsafe)} left more than no compensation cross-validated"

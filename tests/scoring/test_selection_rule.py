@@ -109,11 +109,15 @@ def test_on_less_than_a_cycle_only_the_cubic_or_none_is_chosen() -> None:
     assert not full_cycle(two.segments) and len(two.segments) < FULL_CYCLE_SEGMENTS
     label, reason = choose(two)
     assert label == methods.CUBIC and "less than a cycle" in reason
+    assert "1 cooling and 1 heating segment" in reason and "a branch it was not trained on" in reason
     ramp_thirds = table(
         ("cooling 1/3", "cooling 2/3", "cooling 3/3"), {k: [*v, v[0]] for k, v in figures.items()}
     )
     assert not full_cycle(ramp_thirds.segments)  # three parts of one ramp are not a cycle
-    assert choose(ramp_thirds)[0] == methods.CUBIC
+    label, reason = choose(ramp_thirds)
+    assert label == methods.CUBIC  # and the reason says why three segments are not a cycle
+    assert "does not reverse (cooling only; its 3 folds are parts of its temperature span)" in reason
+    assert "beyond the range it was trained on" in reason
     figures[methods.CUBIC] = [5.0, 4.5]  # the cubic leaves more than no compensation pooled
     assert choose(table(("cooling", "heating"), figures))[0] == NONE
 
