@@ -65,9 +65,16 @@ def next_steps(d: Diagnosis) -> NextSteps:
             terms.append(
                 f"an open term where {a.effects[0]} fits implausibly (settle it with the profile below)"
             )
+    alternatives: dict[str, list[str]] = {}
     for a in d.ambiguous:
         if a.implausible is None:
-            terms.append(f"{a.preferred} (or {' / '.join(e for e in a.effects if e != a.preferred)})")
+            alternatives.setdefault(a.preferred, []).extend(e for e in a.effects if e != a.preferred)
+    for preferred, others in alternatives.items():
+        either = f"{preferred} (or {' / '.join(dict.fromkeys(others))})"
+        if preferred in terms:  # a named effect: one term, with its alternatives
+            terms[terms.index(preferred)] = either
+        else:
+            terms.append(either)
     structure = f"{COMPENSATOR}: " + " + ".join(terms)
 
     # The least-squares residuals of the summaries (a GLS fit under a strong random walk pins the

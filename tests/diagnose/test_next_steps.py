@@ -1,0 +1,43 @@
+"""The compensator structure the finder proposes names each effect once: a named effect that is
+ambiguous with others is one term with its alternatives ("hysteresis (or thermal_lag)"), not the
+effect and then the effect again (the bundled accel x with a rate term added read "temp_rate +
+hysteresis + hysteresis (or thermal_lag)")."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any, cast
+
+import numpy as np
+
+from trainer.diagnose.next_steps import next_steps
+from trainer.diagnose.result import Ambiguity, Diagnosis
+
+
+def _diagnosis(named: list[str], ambiguous: list[Ambiguity]) -> Diagnosis:
+    residual = SimpleNamespace(residual_block=np.zeros(4))
+    fake: Any = SimpleNamespace(
+        left_out=[SimpleNamespace(effect=e, peak_visible_mg=1.0) for e in named],
+        ambiguous=ambiguous,
+        before=residual,
+        after=residual,
+        profile=SimpleNamespace(branch=np.zeros(4, dtype=int), identifiability={}),
+        not_identifiable=[],
+        signal=SimpleNamespace(label="mg"),
+    )
+    return cast(Diagnosis, fake)
+
+
+def test_an_ambiguous_named_effect_is_one_term_with_its_alternatives() -> None:
+    ambiguous = [
+        Ambiguity(("hysteresis", "thermal_lag"), 13.3, "hysteresis", "r"),
+        Ambiguity(("hysteresis", "stress_relaxation"), 4.0, "hysteresis", "r"),
+        Ambiguity(("warmup", "temp_rate"), 2.0, "warmup", "r"),  # preferred but not named: added
+    ]
+    structure = next_steps(_diagnosis(["temp_rate", "hysteresis"], ambiguous)).structure
+    terms = structure.split(": ", 1)[1].split(" + ")
+    assert terms[1:] == [
+        "temp_rate",
+        "hysteresis (or thermal_lag / stress_relaxation)",
+        "warmup (or temp_rate)",
+    ]
