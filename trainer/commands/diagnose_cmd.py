@@ -158,6 +158,7 @@ def summary(result: Diagnosis) -> str:
             f"held-out tail: block RMS {hb.test_rms_block_mg_ols:.4g} -> {ha.test_rms_block_mg_ols:.4g} "
             f"{result.signal.label}"
             " (refitted on the rest, extrapolated as a compensator would)"
+            + (f"; {result.holdout.note}" if result.holdout.note else "")
         )
     lines += terminal_lines(next_steps(result))
     lines.append(f"({result.seconds:.1f} s)")

@@ -125,4 +125,28 @@ def holdout_check(
                 train_rms_block_mg_ols=rms(residual_ols[:n_train]),
             )
         )
-    return Holdout(cut, cut, data.duration_s, scores[0], scores[1], note)
+    worse = worse_note(scores[0], scores[1], data, n_train)
+    return Holdout(cut, cut, data.duration_s, scores[0], scores[1], "; ".join(x for x in (note, worse) if x))
+
+
+WORSE_MARGIN = 1.05  # the found terms leave 5 % more on the tail than the starting model: said
+
+
+def worse_note(before: HoldoutScore, after: HoldoutScore, data: BlockData, n_train: int) -> str:
+    """Said when the found terms, fitted on the leading part, leave more on the tail than the starting
+    model: what they fit does not carry over (a compensator built from them would not either), with
+    the share of the tail outside the leading part's temperature range, where every term extrapolates."""
+    if not after.test_rms_block_mg_ols > WORSE_MARGIN * before.test_rms_block_mg_ols:
+        return ""
+    temp = data.temperature(False)
+    lo, hi = float(np.min(temp[:n_train])), float(np.max(temp[:n_train]))
+    outside = float(np.mean((temp[n_train:] < lo) | (temp[n_train:] > hi)))
+    where = (
+        f"; {100 * outside:.0f} % of the tail lies outside the leading part's {lo:.1f} .. {hi:.1f} degC"
+        if outside > 0
+        else ""
+    )
+    return (
+        "the found terms leave more on the tail than the starting model: fitted on the leading part they do "
+        f"not carry over{where}"
+    )
