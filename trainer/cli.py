@@ -27,7 +27,8 @@ COMMANDS: dict[str, str] = {
 
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineArgumentParser(
-        prog="trainer", description="Temperature-drift compensation of MEMS IMUs (accelerometer, gyroscope and barometer channels)."
+        prog="trainer",
+        description="Temperature-drift compensation of MEMS IMUs (accelerometer, gyroscope and barometer channels).",
     )
     parser.add_argument("--version", action="version", version=f"mems-tdc {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, parser_class=OneLineArgumentParser)

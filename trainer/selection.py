@@ -87,7 +87,10 @@ CANDIDATES: tuple[Candidate, ...] = (
     # the branch offset between heating and cooling, the loop measured on real sensors, fitted whatever the
     # finder says: on the bundled run the finder's structure misses the loop on accel z (CV 3.7 against 2.2 mg)
     Candidate(
-        f"{methods.PHYSICS}-branch", methods.PHYSICS, {"effects": BRANCH_OFFSET.identifier}, stateful=True
+        f"{methods.PHYSICS}-branch",
+        methods.PHYSICS,
+        {"effects": BRANCH_OFFSET.identifier, "given_by": f"auto's candidate {methods.PHYSICS}-branch"},
+        stateful=True,
     ),
 )
 

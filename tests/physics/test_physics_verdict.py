@@ -13,7 +13,7 @@ from trainer.cli import main
 from trainer.data.recording_io import write_recording
 from trainer.greybox.compensator import summary_lines, undetermined_terms
 from trainer.greybox.fit import FittedPhysics
-from trainer.greybox.structure import Structure
+from trainer.greybox.structure import Structure, forced
 from trainer.physics.catalogue import EFFECTS, PARAMETERS
 from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.stress_relaxation import DEFINITION as CREEP
@@ -83,6 +83,24 @@ def test_the_last_word_does_not_claim_the_run_determines_a_parameter_it_flags() 
     assert "does not determine hysteresis_offset.width_c" in flagged and "only physics" not in flagged
     determined = summary_lines({**report, "implausible": []})[-1]
     assert "only physics this run determines" in determined
+
+
+def test_a_structure_fixed_by_auto_says_so_not_that_the_user_forced_it() -> None:
+    """``--effects`` is the user's; ``physics-branch`` is auto's candidate with the same structure, and
+    its summary names the candidate (it read "forced: --effects hysteresis_offset" though no one typed
+    that option)."""
+    from trainer.fitting import make_compensator
+    from trainer.greybox.compensator import PhysicsCompensator
+    from trainer.selection import candidate
+
+    branch = candidate("physics-branch")
+    model = make_compensator(branch.method, branch.options)
+    assert isinstance(model, PhysicsCompensator) and model.forced is not None
+    assert (
+        forced(model.forced, model.given_by).how
+        == "forced: hysteresis_offset (auto's candidate physics-branch)"
+    )
+    assert forced(("thermal_lag", "temp_rate")).how == "forced: --effects thermal_lag,temp_rate"
 
 
 @pytest.mark.slow  # one diagnose and one physics fit: about 25 s of CPU

@@ -43,8 +43,10 @@ class PhysicsCompensator(Compensator):
         from_sim: str | None = None,
         with_warmup: bool = False,
         progress: bool = False,
+        given_by: str = "--effects",  # who gave a forced structure (the summary says): auto's candidate
     ) -> None:
         structures.check_source(effects, from_sim)
+        self.given_by = given_by
         self.effects_option = effects
         self.forced = None if effects == "auto" else parse_effects(effects)
         self.from_sim = from_sim
@@ -64,7 +66,7 @@ class PhysicsCompensator(Compensator):
                 )
             return structures.from_sim(path, rec, warmup_allowed=self.with_warmup)
         if self.forced is not None:
-            return structures.forced(self.forced)
+            return structures.forced(self.forced, self.given_by)
         return structures.auto(rec, warmup_allowed=self.with_warmup, progress=self.progress)
 
     def fit(self, rec: Recording) -> Self:

@@ -44,10 +44,11 @@ class Structure:
     dropped: tuple[tuple[str, str], ...] = ()
 
 
-def forced(names: tuple[str, ...]) -> Structure:
-    return Structure(
-        tuple(EffectConfig(n, {}) for n in names), how=f"forced: --effects {','.join(names) or 'none'}"
-    )
+def forced(names: tuple[str, ...], given_by: str = "--effects") -> Structure:
+    """The effects ``names``, as given by ``given_by`` (the option, or auto's candidate that fixes them)."""
+    listed = ",".join(names) or "none"
+    how = f"forced: {given_by} {listed}" if given_by.startswith("--") else f"forced: {listed} ({given_by})"
+    return Structure(tuple(EffectConfig(n, {}) for n in names), how=how)
 
 
 def _split(effects: list[EffectConfig], warmup_allowed: bool) -> tuple[tuple[EffectConfig, ...], ...]:
