@@ -198,7 +198,9 @@ def test_a_method_that_carries_an_undetermined_parameter_asks_for_a_review() -> 
     result = UnitResult.from_dict({"id": "A", "status": "ok", "errors": [], "methods": methods})
     decided = unit_verdict("A", result, [])
     assert decided.status == "REVIEW"
-    assert list(decided.review) == [undetermined_reason("A / physics", flagged)] and flagged[0] in decided.line()
+    assert (
+        list(decided.review) == [undetermined_reason("A / physics", flagged)] and flagged[0] in decided.line()
+    )
 
 
 def test_flagged_units_are_exactly_the_planted_ones(fleet: tuple[Path, FleetRun]) -> None:
