@@ -76,6 +76,7 @@ def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
     for a review of such a model."""
     from trainer import methods
 
+    # the family's parser has read the payload (a physics one through from_payload, which checks it)
     lines = methods.REGISTRY[raw["method"]].cls.undetermined_in(raw["payload"])
     if not lines:
         return ()

@@ -38,6 +38,7 @@ from tests import testmodels as tm
 from tests.methods.test_greybox import LAG_RATE_OFFSET, config
 from tests.repo import REPO_ROOT
 from trainer.checkpoint import load_checkpoint, load_model, save_model
+from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
 from trainer.errors import run_cli
@@ -262,6 +263,19 @@ def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warni
     for text in (printed, header):
         assert "WARNING: the model carries what its training run does not determine" in " ".join(text.split())
         assert "thermal_lag.tau_s sits at the end of its search range" in " ".join(text.split())
+    # flags that are not a list of parameter names: a malformed model file, one line, nothing written
+    malformed = {**raw, "payload": {**raw["payload"], "report": {**report, "at_bound": 5}}}
+    tm.save_checkpoint(malformed, tmp_path / "malformed.pt")
+    model_pt, never = str(tmp_path / "malformed.pt"), str(tmp_path / "never")
+    runs = (
+        (codegen_main, ["export", model_pt, "-o", never]),
+        (trainer_main, ["report", model_pt, "--recording", str(fitted[0].parent / "valid.csv"), "-o", never]),
+    )
+    for main, argv in runs:
+        assert run_cli(main, argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "'report.at_bound' is not a list of parameter names" in err and "\n" not in err
+        assert "Traceback" not in err and not (tmp_path / "never").exists()
 
 
 def test_export_is_byte_identical_and_ships_the_physics_kernels(

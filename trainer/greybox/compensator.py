@@ -88,8 +88,16 @@ class PhysicsCompensator(Compensator):
 
     @classmethod
     def undetermined_in(cls, payload: dict[str, Any]) -> list[str]:
-        report = payload.get("report")
-        return undetermined_lines(report) if report else []
+        """Raises TypeError for a report whose flags are not lists of parameter names (a malformed
+        model file: the loaders turn it into one line naming the field)."""
+        report = payload.get("report") or {}
+        if not isinstance(report, dict):
+            raise TypeError("'report' is not a table")
+        for key in UNDETERMINED_KEYS:
+            names = report.get(key, [])
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise TypeError(f"'report.{key}' is not a list of parameter names")
+        return undetermined_lines(report)
 
     # -- running ---------------------------------------------------------------------------------
     @property
@@ -137,6 +145,7 @@ class PhysicsCompensator(Compensator):
         )
         model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
         model.report = dict(payload["report"])
+        cls.undetermined_in(payload)  # its flags are what the sign-off reads: checked on loading
         return model
 
 
@@ -203,10 +212,13 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
     }
 
 
+UNDETERMINED_KEYS = ("at_bound", "implausible")  # the report's flags of parameters the run does not determine
+
+
 def undetermined_lines(report: dict[str, Any]) -> list[str]:
     """Each parameter the fit flagged: at the end of its search range, or outside the plausible range."""
-    return [f"{name} sits at the end of its search range" for name in report["at_bound"]] + [
-        f"{name} is outside the catalogue's plausible range" for name in report["implausible"]
+    return [f"{name} sits at the end of its search range" for name in report.get("at_bound", [])] + [
+        f"{name} is outside the catalogue's plausible range" for name in report.get("implausible", [])
     ]
 
 
@@ -225,15 +237,12 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         lines.append(f"  {effect}: {text}")
     if report["nuisance"]:
         lines.append(f"  fitted but not compensated (not sensor drift): {', '.join(report['nuisance'])}")
-    for name in report["at_bound"]:
-        lines.append(f"  warning: {name} sits at the end of its search range: not determined by this run")
-    for name in report["implausible"]:
-        lines.append(f"  warning: {name} is outside the catalogue's plausible range")
+    lines += [f"  warning: {line}" for line in undetermined_lines(report)]
     lines += [f"  note: {n}" for n in report["notes"]]
     dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
     lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
     kept = " + ".join(report["effects"])  # the last word: what the exported compensator carries
-    undetermined = list(dict.fromkeys([*report["at_bound"], *report["implausible"]]))
+    undetermined = list(dict.fromkeys(name for key in UNDETERMINED_KEYS for name in report.get(key, [])))
     # an automatic structure drops what the run does not determine (_only_determined); one the user
     # forced (--effects, --from-sim) keeps it, and the last word must not claim otherwise
     why = (
