@@ -80,3 +80,38 @@ def test_a_fold_fit_places_the_rate_term_seen_through_330_s(
     for name in ("k_mg_per_c_per_min", "tau_s"):
         got, true = params["temp_rate"][name], truth[name]
         assert abs(got - true) <= TOLERANCE * abs(true), f"{name} {got:.4g} vs {true:.4g}"
+
+
+def test_a_candidate_the_finder_cannot_place_is_left_out_and_the_others_judged(gyro: Recording) -> None:
+    """On the bundled run decimated to 0.5 Hz, a fold of ``auto``'s physics candidate found no place
+    for ``hysteresis`` and the whole ``trainer fit --method auto`` stopped with "--effects: the
+    finder cannot place hysteresis", an option nobody gave. The stage now drops such a candidate
+    with a note and judges the rest exactly as if it had not been offered."""
+    from trainer.diagnose.api import BlockData, ModelFit
+    from trainer.greybox.fit import _add_trial
+    from trainer.greybox.select import extend
+    from trainer.greybox.structure import Structure
+    from trainer.physics.effects import EffectConfig
+
+    data = build_blocks(gyro)
+    baseline = build_baseline(None, np.asarray(gyro.time_s) - float(gyro.time_s[0]), data.lattice_lsb_c)
+    start = fit_model(baseline.terms, baseline.noise_terms, data)
+    offered = ("thermal_lag", "temp_rate")
+    unplaceable = "stress_relaxation"
+
+    def add(fit: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
+        return None if effect.identifier == unplaceable else _add_trial(fit, data, effect)
+
+    fit_with, structure_with, notes_with = extend(
+        start, data, Structure((), candidates=(unplaceable, *offered)), add
+    )
+    fit_without, structure_without, notes_without = extend(
+        start, data, Structure((), candidates=offered), add
+    )
+    assert [e.identifier for e in structure_with.compensated] == [
+        e.identifier for e in structure_without.compensated
+    ]
+    assert [t.identifier for t in fit_with.terms] == [t.identifier for t in fit_without.terms]
+    assert any(unplaceable in n and "not tried" in n for n in notes_with)
+    assert not any(unplaceable in n for n in notes_without)
+    assert structure_without.compensated, "the realistic gyroscope's rate or lag term is added: the stage ran"

@@ -83,25 +83,33 @@ def _start_term(effect: EffectConfig) -> Term | None:
     return Term(effect.identifier, tuple(float(effect.params[name]) for name in names))
 
 
-def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
-    """Add one effect: from its starting values, else by the finder's own search for it."""
+def _place(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
+    """Add one effect: from its starting values, else by the finder's own search for it; ``None``
+    when that search places it nowhere on these blocks."""
     term = _start_term(effect)
     if term is not None:
         return evaluate((*current.terms, term), data, current.gls)
     fits = [
         p.fit_fixed_noise for p in propose(current, data, effect.identifier) if p.fit_fixed_noise is not None
     ]
-    if not fits:
+    return max(fits, key=lambda f: f.loglik) if fits else None
+
+
+def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
+    """Add an effect of the structure (given by the user, or named by the finder on this run)."""
+    placed = _place(current, data, effect)
+    if placed is None:
         raise UserError(f"--effects: the finder cannot place {effect.identifier} on this recording")
-    return max(fits, key=lambda f: f.loglik)
+    return placed
 
 
-def _add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
+def _add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
     """The cross-validated stage's placement of a candidate: the finder's, or, for a filtered term,
     its filter searched over the whole range when that fits better (:func:`propose_freed_wide`);
-    the stage then keeps it only if it predicts held-out blocks."""
-    placed = _add(current, data, effect)
-    if _start_term(effect) is not None:
+    the stage then keeps it only if it predicts held-out blocks. ``None``: the finder places it
+    nowhere on these blocks (a cross-validation fold's rows, a sparse run), so it is not tried."""
+    placed = _place(current, data, effect)
+    if placed is None or _start_term(effect) is not None:
         return placed
     wide = [p.fit_fixed_noise for p in propose_freed_wide(current, data, effect.identifier)]
     return max([placed, *(f for f in wide if f is not None)], key=lambda f: f.loglik)

@@ -70,14 +70,15 @@ def extend(
     fit: ModelFit,
     data: BlockData,
     structure: Structure,
-    add: Callable[[ModelFit, BlockData, EffectConfig], ModelFit],
+    add: Callable[[ModelFit, BlockData, EffectConfig], ModelFit | None],
     *,
     unit: str = CATALOGUE_UNIT,
     undetermined: Callable[[ModelFit, str], str] | None = None,
 ) -> tuple[ModelFit, Structure, list[str]]:
     """Add candidates while one lowers the cross-validated RMS by ``MIN_GAIN`` and beats the noise.
 
-    ``add(fit, data, effect)`` places one effect (the finder's profile search); returns the
+    ``add(fit, data, effect)`` places one effect (the finder's profile search; ``None`` where it
+    places it nowhere: that candidate is noted and dropped); returns the
     extended fit, the structure with the accepted effects, and one note per decision (figures in
     the channel's unit, ``unit`` its suffix). ``undetermined(trial, effect)``: why the run does not
     determine the placed term ("" when it does); such a trial is not chosen (the fit would drop it),
@@ -90,10 +91,16 @@ def extend(
     accepted: list[EffectConfig] = []
     while remaining:
         trials = []
-        for name in remaining:
+        for name in list(remaining):
             if any(excluded(name, t.identifier) for t in fit.terms):
                 continue
             trial = add(fit, data, EffectConfig(name, {}))
+            if trial is None:
+                notes.append(
+                    f"cross-validation: {name} not tried: the finder places it nowhere on these rows"
+                )
+                remaining.remove(name)
+                continue
             trials.append((cv_rms(trial.terms, data), name, trial))
         if not trials:
             break
