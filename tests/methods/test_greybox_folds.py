@@ -115,3 +115,7 @@ def test_a_candidate_the_finder_cannot_place_is_left_out_and_the_others_judged(g
     assert any(unplaceable in n and "not tried" in n for n in notes_with)
     assert not any(unplaceable in n for n in notes_without)
     assert structure_without.compensated, "the realistic gyroscope's rate or lag term is added: the stage ran"
+    # a later round judges the rest again beside what was added, and its notes say so
+    first = structure_without.compensated[0].identifier
+    later = [n for n in notes_without if n.startswith(f"cross-validation (beside {first})")]
+    assert later and all(first not in n.split(": ", 1)[1] for n in later)

@@ -90,15 +90,18 @@ def extend(
     remaining = list(structure.candidates)
     accepted: list[EffectConfig] = []
     while remaining:
+        # a later round judges each candidate again, beside the terms added so far: say so, or two
+        # rounds read as two contradicting figures for one term
+        stage = "cross-validation" + (
+            f" (beside {', '.join(e.identifier for e in accepted)})" if accepted else ""
+        )
         trials = []
         for name in list(remaining):
             if any(excluded(name, t.identifier) for t in fit.terms):
                 continue
             trial = add(fit, data, EffectConfig(name, {}))
             if trial is None:
-                notes.append(
-                    f"cross-validation: {name} not tried: the finder places it nowhere on these rows"
-                )
+                notes.append(f"{stage}: {name} not tried: the finder places it nowhere on these rows")
                 remaining.remove(name)
                 continue
             trials.append((cv_rms(trial.terms, data), name, trial))
@@ -107,27 +110,23 @@ def extend(
         passing = [item for item in trials if beats_noise(item[2], fit)]
         if undetermined is not None:
             why = {name: undetermined(trial, name) for _, name, trial in passing}
-            notes += [
-                f"cross-validation: {name} not added, undetermined: {w}" for name, w in why.items() if w
-            ]
+            notes += [f"{stage}: {name} not added, undetermined: {w}" for name, w in why.items() if w]
             passing = [item for item in passing if not why[item[1]]]
         if not passing:
             best = min(trials, key=lambda item: item[0])
             notes.append(
-                f"cross-validation: no further term beats the noise model at p < {LR_LEVEL:g} "
+                f"{stage}: no further term beats the noise model at p < {LR_LEVEL:g} "
                 f"(best held out: {best[1]}, {current:.4g} -> {best[0]:.4g} {label})"
             )
             break
         score, name, trial = min(passing, key=lambda item: item[0])
         if score > (1.0 - MIN_GAIN) * current:
             notes.append(
-                f"cross-validation: no further term lowers the held-out block RMS by {MIN_GAIN:.0%} "
+                f"{stage}: no further term lowers the held-out block RMS by {MIN_GAIN:.0%} "
                 f"(best: {name}, {current:.4g} -> {score:.4g} {label})"
             )
             break
-        notes.append(
-            f"cross-validation: {name} lowers the held-out block RMS {current:.4g} -> {score:.4g} {label}"
-        )
+        notes.append(f"{stage}: {name} lowers the held-out block RMS {current:.4g} -> {score:.4g} {label}")
         fit, current = trial, score
         accepted.append(EffectConfig(name, {}))
         remaining.remove(name)
