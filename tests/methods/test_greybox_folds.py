@@ -88,7 +88,7 @@ def test_a_candidate_the_finder_cannot_place_is_left_out_and_the_others_judged(g
     finder cannot place hysteresis", an option nobody gave. The stage now drops such a candidate
     with a note and judges the rest exactly as if it had not been offered."""
     from trainer.diagnose.api import BlockData, ModelFit
-    from trainer.greybox.fit import _add_trial
+    from trainer.greybox.fit import add_trial
     from trainer.greybox.select import extend
     from trainer.greybox.structure import Structure
     from trainer.physics.effects import EffectConfig
@@ -100,7 +100,7 @@ def test_a_candidate_the_finder_cannot_place_is_left_out_and_the_others_judged(g
     unplaceable = "stress_relaxation"
 
     def add(fit: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
-        return None if effect.identifier == unplaceable else _add_trial(fit, data, effect)
+        return None if effect.identifier == unplaceable else add_trial(fit, data, effect)
 
     fit_with, structure_with, notes_with = extend(
         start, data, Structure((), candidates=(unplaceable, *offered)), add

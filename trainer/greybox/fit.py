@@ -103,7 +103,7 @@ def _add(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit:
     return placed
 
 
-def _add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
+def add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> ModelFit | None:
     """The cross-validated stage's placement of a candidate: the finder's, or, for a filtered term,
     its filter searched over the whole range when that fits better (:func:`propose_freed_wide`);
     the stage then keeps it only if it predicts held-out blocks. ``None``: the finder places it
@@ -237,7 +237,7 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
             current,
             data,
             structure,
-            _add_trial,
+            add_trial,
             unit=unit,
             undetermined=lambda trial, name: _undetermined(trial, data, name, scale),
         )
