@@ -70,6 +70,9 @@ def load_for_codegen(
     return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown)
 
 
+UNDETERMINED_WARNING = "WARNING: the model carries what its training run does not determine"
+
+
 def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
     """A warning, printed and in ``NAME.h``, when the model carries parameters its training run does
     not determine (``Compensator.undetermined``: a forced physics structure); ``trainer report`` asks
@@ -81,7 +84,7 @@ def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
     if not lines:
         return ()
     return (
-        f"WARNING: the model carries what its training run does not determine ({'; '.join(lines)}): it "
+        f"{UNDETERMINED_WARNING} ({'; '.join(lines)}): it "
         "extrapolates wherever its state is not the training run's (trainer report asks for a review)",
     )
 
