@@ -40,7 +40,7 @@ from trainer.diagnose.api import (
     single_blas_thread,
 )
 from trainer.errors import UserError
-from trainer.greybox.select import extend
+from trainer.greybox.select import STAGE, extend
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS, EFFECTS
 from trainer.physics.catalogue.base import catalogue_params
@@ -228,8 +228,7 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         seen = analyse_profile(data, rec.meta, seen_only=True).identifiability
         unseen = [name for name in structure.candidates if not (name in seen and seen[name].identifiable)]
         notes += [
-            f"cross-validation: {name} not tried: the rows this fold trains on do not identify it"
-            for name in unseen
+            f"{STAGE}: {name} not tried: the rows this fold trains on do not identify it" for name in unseen
         ]
         structure = replace(structure, candidates=tuple(n for n in structure.candidates if n not in unseen))
     if structure.candidates:

@@ -36,6 +36,7 @@ from trainer.physics.effects import EffectConfig
 FOLDS = 5
 MIN_GAIN = 0.05  # a term must lower the cross-validated RMS by 5 %
 LR_LEVEL = 0.05  # and beat the noise model at its fitted level at this significance
+STAGE = "cross-validation"  # how the fit summary's notes name this stage
 
 
 def beats_noise(trial: ModelFit, current: ModelFit) -> bool:
@@ -92,9 +93,7 @@ def extend(
     while remaining:
         # a later round judges each candidate again, beside the terms added so far: say so, or two
         # rounds read as two contradicting figures for one term
-        stage = "cross-validation" + (
-            f" (beside {', '.join(e.identifier for e in accepted)})" if accepted else ""
-        )
+        stage = STAGE + (f" (beside {', '.join(e.identifier for e in accepted)})" if accepted else "")
         trials = []
         for name in list(remaining):
             if any(excluded(name, t.identifier) for t in fit.terms):
