@@ -236,6 +236,7 @@ register(
         TEMPERATURE_DRIVEN,
         DLSTM_OPTIONS,
         renderer="lstm-stream",
+        min_temp_span_c=10.0,  # a network of the temperature alone: no span, no shape to learn
     )
 )
 register(
@@ -245,6 +246,7 @@ register(
         TEMPERATURE_DRIVEN,
         PHYSICS_OPTIONS,
         renderer=PHYSICS_RENDERER,
+        min_temp_span_c=10.0,  # its backbone is the flight stacks' cubic (as poly3)
     )
 )
 register(

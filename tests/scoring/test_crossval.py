@@ -346,3 +346,39 @@ def test_explicit_folds_replace_the_thermal_segments() -> None:
     assert cv.segments == folds
     assert seen == [len(rec) - (half - first.start), len(rec) - (first.stop - half)]  # trained on the rest
     assert len(cv.results["poly3"].folds) == len(cv.results[UNCOMPENSATED].folds) == 2
+
+
+def test_a_physics_fold_clamps_to_the_temperatures_it_trains_on() -> None:
+    """A fold trained on the first cooling only (50 to -15 degC) sees the whole run's temperature
+    (up to 70 degC) with the rest imputed. Its physics model holds its edge value above 50 degC as
+    the same model trained with ``--holdout`` on those rows does: on a held-out part outside the
+    rows it learned from it leaves what the cubic leaves, not an extrapolation of its backbone."""
+    rec = chamber_run()
+    first_cooling = thermal_segments(rec)[0]
+    train = ~training_rows(len(rec), first_cooling)
+    model = fit_compensator(methods.PHYSICS, impute_held_out(rec, train), {"effects": "thermal_lag"}, None)
+    rows = rec.temp_c[train]
+    assert model.temp_range_c == (float(rows.min()), float(rows.max()))  # type: ignore[attr-defined]
+    assert float(rows.max()) < float(rec.temp_c.max())  # the premise: the imputed rows reach further
+
+
+def test_a_thermometer_read_to_one_degree_cuts_the_same_segments() -> None:
+    """A cycle at 1.1 degC/min read to 1 degC holds each reading for about a minute: over the 60 s
+    rate window the samples alternated between ramp and dwell, and the whole cycle came out as one
+    cooling segment (``auto`` then judged a run that does not reverse). Rounded, it cuts the same
+    segments as the exact temperature, within two minutes of its turns."""
+    minutes = np.r_[0.0, 40.0, 120.0, 160.0]
+    t_s = np.arange(0.0, minutes[-1] * 60.0, 1.0 / RATE_HZ)
+    exact = np.interp(t_s, minutes * 60.0, [25.0, -20.0, 60.0, 25.0])
+    noise = np.random.default_rng(3).normal(0.0, 0.05, t_s.size)
+
+    def run(temp: np.ndarray) -> Recording:
+        columns = {"time_s": t_s, "temp_c": temp, "accel_mg": 1000.0 + noise}
+        return Recording(columns, {"sample_rate_hz": repr(RATE_HZ)}, "<slow cycle>")
+
+    reference = thermal_segments(run(exact))
+    rounded = thermal_segments(run(np.round(exact)))
+    assert [s.label for s in reference] == ["cooling", "heating", "cooling"]
+    assert [s.label for s in rounded] == [s.label for s in reference]
+    for a, b in zip(rounded[1:], reference[1:], strict=True):
+        assert abs(a.t0_s - b.t0_s) <= 120.0

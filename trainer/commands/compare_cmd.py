@@ -6,7 +6,7 @@ import argparse
 import shutil
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -138,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.channels import relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
-    from trainer.data.plausibility import check_scored
+    from trainer.data.plausibility import WIDER_RUN_HINT, check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
     from trainer.fitting import training_stats
@@ -153,9 +153,11 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
         train, valid = split(check_scored(read_recording(args.train)), holdout)
+        t0_s = float(min(train.time_s[0], valid.time_s[0]))  # logger clocks (Unix time) read from the start
         notes.append(
-            f"one recording, {holdout.describe()}: training t = {train.time_s[0]:g} .. {train.time_s[-1]:g} s, "
-            f"validation t = {valid.time_s[0]:g} .. {valid.time_s[-1]:g} s"
+            f"one recording, {holdout.describe()}: training t = {train.time_s[0] - t0_s:g} .. "
+            f"{train.time_s[-1] - t0_s:g} s, validation t = {valid.time_s[0] - t0_s:g} .. "
+            f"{valid.time_s[-1] - t0_s:g} s from the recording's start"
         )
         if holdout.side == "last":
             lead_in = train.without_truth()
@@ -166,6 +168,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         train = check_scored(read_recording(args.train))
         valid = check_scored(read_recording(args.valid))
+    too_short = short_span_methods(train, requested)
+    if too_short and len(too_short) == len(requested):
+        raise UserError(f"{train.source}: compare: {all_too_short(train, requested)}: {WIDER_RUN_HINT}")
+    requested = tuple(m for m in requested if m not in too_short)
+    notes += [f"{name}: not compared ({why})" for name, why in too_short.items()]
+    for name, why in too_short.items():
+        print(f"{train.source}: {name} not compared: {why}", file=sys.stderr, flush=True)
     warning = overlap_warning(training_stats(train), valid, data_fingerprint(valid))
     if warning:
         print(warning, file=sys.stderr, flush=True)
@@ -229,13 +238,33 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def short_span_methods(train: Any, requested: Sequence[str]) -> dict[str, str]:
+    """The requested methods the training temperature spans too little for, with the reason (as
+    ``trainer fit`` refuses them: a shape in temperature the run cannot determine)."""
+    from trainer.data.plausibility import span_shortfall
+
+    out = {}
+    for name in requested:
+        if (why := span_shortfall(train.temp_c, name, methods.get(name).min_temp_span_c)) is not None:
+            out[name] = why
+    return out
+
+
+def all_too_short(train: Any, names: Sequence[str]) -> str:
+    """One reason for methods that all need more span than ``train`` has (the smallest need)."""
+    from trainer.data.plausibility import span_shortfall
+
+    need_c = min(methods.get(name).min_temp_span_c for name in names)
+    return span_shortfall(train.temp_c, ", ".join(names), need_c) or ""
+
+
 def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: Any) -> int:
     """One recording, no --holdout: blocked cross-validation over its thermal segments
     (:mod:`trainer.scoring.crossval`); recursive methods cannot be trained on a run with a hole."""
     import json
 
     from trainer.data.channels import signal_of
-    from trainer.data.plausibility import check_scored
+    from trainer.data.plausibility import WIDER_RUN_HINT, check_scored
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_compensator
     from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
@@ -251,12 +280,15 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     signal = signal_of(rec)
     unit = signal.label
     settings, _ = settings_from_args(args)
-    chosen = [m for m in requested if cross_validatable(m)]
+    too_short = short_span_methods(rec, requested)
+    chosen = [m for m in requested if cross_validatable(m) and m not in too_short]
     skipped = {
-        m: "recursive: it cannot be trained on a run with a hole; score it with --holdout"
+        m: too_short.get(m, "recursive: it cannot be trained on a run with a hole; score it with --holdout")
         for m in requested
         if m not in chosen
     }
+    if not chosen and too_short:
+        raise UserError(f"{rec.source}: compare: {all_too_short(rec, list(too_short))}: {WIDER_RUN_HINT}")
     if not chosen:
         raise UserError(
             f"compare: none of --methods {','.join(requested)} can be cross-validated; give --holdout"

@@ -40,14 +40,18 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     channels = select_channels(train, args.channels)
     if (note := one_axis_left_out(train, args.channels, channels)) is not None:
         print(note, file=sys.stderr, flush=True)
+    checked = []
     for channel in channels:  # refuse before the first (possibly long) fit
         refusal = method_refusal(method.name, method.family, channel)
         if refusal is not None:
             raise UserError(f"{train.source}: {refusal}")
-    fitted = []
-    for channel in channels:
         view = channel_view(train, channel)
-        checks = check_training(view, method, accept=args.accept_implausible)
+        accept = args.accept_implausible
+        checked.append(
+            (channel, view, check_training(view, method, accept=accept, temp_column=channel.temp_column))
+        )
+    fitted = []
+    for channel, view, checks in checked:
         model, stats = fit_with_selection(args.method, view, options, policy, log=progress_log(args))
         fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}

@@ -89,9 +89,15 @@ def split(rec: Recording, holdout: Holdout) -> tuple[Recording, Recording]:
         cut = int(np.searchsorted(rec.time_s - rec.time_s[0], holdout.boundary_s, side="left"))
     first, last = rec.slice(0, cut), rec.slice(cut, n)
     if min(len(first), len(last)) < MIN_ROWS:
+        duration_s = float(rec.time_s[-1] - rec.time_s[0])
+        beyond = (
+            f" (T counts from the recording's start: 0 .. {duration_s:g} s here)"
+            if holdout.boundary_s is not None and not 0.0 < holdout.boundary_s < duration_s
+            else ""
+        )
         raise UserError(
             f"{rec.source}: --holdout leaves {len(first)} and {len(last)} rows; each part needs at least "
-            f"{MIN_ROWS}"
+            f"{MIN_ROWS}{beyond}"
         )
     return (first, last) if holdout.side == "last" else (last, first)
 

@@ -143,26 +143,37 @@ class Plausibility:
 
     def temperature_span(self, temp_c: np.ndarray, method: str, min_span_c: float, where: str) -> None:
         """A temperature-driven method needs the temperature to move enough to determine its shape."""
-        if min_span_c <= 0:
-            return
-        lo, hi = float(np.min(temp_c)), float(np.max(temp_c))
-        if hi - lo < min_span_c:
+        if (short := span_shortfall(temp_c, method, min_span_c)) is not None:
             self.problem(
-                f"{where}: temperature spans {hi - lo:.3g} degC ({lo:.2f} .. {hi:.2f}), too small for {method} "
-                f"(needs {min_span_c:g} degC): a run without heating or cooling, or the wrong temperature column? "
+                f"{where}: {short}: a run without heating or cooling, or the wrong temperature column? "
                 f"To calibrate, {WIDER_RUN_HINT}"
             )
 
 
-def check_training(rec: Recording, method: Method, *, accept: bool = False) -> Plausibility:
-    """The checks ``trainer fit`` runs on a training recording before fitting ``method``."""
+def span_shortfall(temp_c: np.ndarray, method: str, min_span_c: float) -> str | None:
+    """Why ``temp_c`` spans too little to determine ``method``'s shape in temperature, or ``None``."""
+    if min_span_c <= 0:
+        return None
+    lo, hi = float(np.min(temp_c)), float(np.max(temp_c))
+    if hi - lo >= min_span_c:
+        return None
+    return f"temperature spans {hi - lo:.3g} degC ({lo:.2f} .. {hi:.2f}), too small for {method} (needs {min_span_c:g} degC)"
+
+
+def check_training(
+    rec: Recording, method: Method, *, accept: bool = False, temp_column: str = "temp_c"
+) -> Plausibility:
+    """The checks ``trainer fit`` runs on a training recording before fitting ``method``
+    (``temp_column``: the file's column a channel view reads as ``temp_c``, named in a refusal)."""
     checks = Plausibility(accept)
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
     checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), where)
     if rec.meta.get("unit", "mg") == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
-    checks.temperature_span(rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column 'temp_c'")
+    checks.temperature_span(
+        rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column {temp_column!r}"
+    )
     return checks
 
 

@@ -23,7 +23,7 @@ from trainer.diagnose.blocks import DEFAULT_MAX_BLOCKS, BlockData, build_blocks
 from trainer.diagnose.detection import detection_limit
 from trainer.diagnose.fit_summary import FitSummary, summarise
 from trainer.diagnose.holdout import holdout_check
-from trainer.diagnose.implausible import resolve_implausible
+from trainer.diagnose.implausible import prefer_plausible, resolve_implausible
 from trainer.diagnose.model import (
     ModelFit,
     catalogue_effects,
@@ -177,6 +177,10 @@ def _diagnose(
     ]
     scale = channel_scale(rec, data)
     flags = partial(_param_flags, scale=scale)
+
+    def implausible_term(fit: ModelFit, index: int) -> bool:
+        return bool(flags(_term_effect(fit, index)))
+
     selection = forward_select(
         baseline_fit,
         data,
@@ -184,10 +188,15 @@ def _diagnose(
         progress=progress,
         pairs=report_search,
         swap=report_search,
-        implausible=lambda fit, index: bool(flags(_term_effect(fit, index))),
+        implausible=implausible_term,
     )
     identifiable = {c for c in CANDIDATE_ORDER if ident.get(c) and ident[c].identifiable}
     resolve(selection, data, identifiable, progress=progress)
+    # A report's search: an implausible term whose plausible confounder fits better in its place
+    # gives way to it (the compensator's search offers such confounders to cross-validation instead).
+    while report_search and (better := prefer_plausible(selection, data, identifiable, implausible_term)):
+        selection = better
+        resolve(selection, data, identifiable, progress=progress)
     stages.update()
 
     final = selection.final

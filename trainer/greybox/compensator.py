@@ -23,6 +23,7 @@ import numpy as np
 from trainer.compensator import Compensator
 from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording import Recording
+from trainer.diagnose.api import HELD_OUT_COLUMN
 from trainer.errors import UserError
 from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
@@ -71,6 +72,9 @@ class PhysicsCompensator(Compensator):
 
     def fit(self, rec: Recording) -> Self:
         temp = np.asarray(rec.temp_c, dtype=np.float64)
+        held = rec.columns.get(HELD_OUT_COLUMN)
+        if held is not None and np.any(np.asarray(held) == 0):  # a cross-validation fold: the rows it
+            temp = temp[np.asarray(held) == 0]  # trains on set the valid range, as --holdout's would
         lo, hi = float(np.min(temp)), float(np.max(temp))
         if not hi > lo:
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")

@@ -45,7 +45,14 @@ from trainer import methods as registry
 from trainer.data.holdout import MIN_ROWS
 from trainer.data.recording import Recording
 from trainer.errors import UserError
-from trainer.scoring.static import COOLING, HEATING, NEITHER, static_drift_left, thermal_branch
+from trainer.scoring.static import (
+    COOLING,
+    HEATING,
+    NEITHER,
+    RATE_WINDOW_S,
+    static_drift_left,
+    thermal_branch,
+)
 
 MIN_SEGMENT_FRACTION = 0.05  # a thermal run shorter than 5 % of the recording joins its neighbour
 MIN_SEGMENT_S = 300.0  # ... and so does one shorter than 5 minutes
@@ -72,6 +79,25 @@ class Segment:
         return f"{self.label} {self.t0_s:.0f}-{self.t1_s:.0f} s ({self.temp_from_c:.1f} -> {self.temp_to_c:.1f} degC)"
 
 
+def rate_window_s(temp_c: np.ndarray, rate_hz: float) -> float:
+    """The window of the temperature rate that cuts segments: :data:`RATE_WINDOW_S`, or twice the
+    time a ramp holds one reading of a coarse thermometer, up to :data:`MIN_SEGMENT_S`.
+
+    A thermometer read to 1 degC on a 1.1 degC/min ramp holds each reading for about a minute: over
+    60 s the slope reads 0 as often as the ramp, the samples alternate between a ramp and a dwell,
+    and the short runs merged into one segment a whole cycle (cooling, heating, cooling), so that
+    ``auto`` judged it a run that does not reverse. The hold is the 75th percentile of the readings'
+    durations, dwells (one reading for longer than a segment) left out; a thermometer that changes
+    at nearly every sample keeps :data:`RATE_WINDOW_S`.
+    """
+    changes = np.flatnonzero(np.diff(temp_c) != 0) + 1
+    held_s = np.diff(np.r_[0, changes, len(temp_c)]) / rate_hz
+    ramps = held_s[held_s < MIN_SEGMENT_S]
+    if ramps.size == 0:
+        return RATE_WINDOW_S
+    return float(np.clip(2.0 * np.percentile(ramps, 75), RATE_WINDOW_S, MIN_SEGMENT_S))
+
+
 def thermal_segments(rec: Recording) -> list[Segment]:
     """The recording's heating, cooling and dwell segments, short runs joined to their neighbour.
 
@@ -80,7 +106,7 @@ def thermal_segments(rec: Recording) -> list[Segment]:
     point, a brief overshoot) is joined to the segment before it (the first one to the next).
     """
     temp = np.asarray(rec.temp_c, dtype=np.float64)
-    branch = thermal_branch(temp, rec.sample_rate_hz)
+    branch = thermal_branch(temp, rec.sample_rate_hz, window_s=rate_window_s(temp, rec.sample_rate_hz))
     edges = np.flatnonzero(np.diff(branch)) + 1
     starts, stops = np.r_[0, edges], np.r_[edges, len(branch)]
     t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])

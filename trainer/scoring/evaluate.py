@@ -163,13 +163,18 @@ def evaluate(
     window = window_samples(smoothing_s, rate) if smoothing_s > 0 else 1
     floor = noise_floor_mg(rec.accel_mg, window)
     shares = (float(np.mean(branch == HEATING)), float(np.mean(branch == COOLING)))
+    # Fewer in-range samples than one smoothing window are one value: its deviation from its own mean
+    # would read 0 (a held-out part that touches the training range at one sample), not a score.
+    least = max(2, window)
     in_range = {
         name: static_drift_left(smoothed[name][~mask], branch[~mask])
         for name, mask in (out_of_range or {}).items()
-        if mask.any() and not mask.all()
+        if mask.any() and int(np.count_nonzero(~mask)) >= least
     }
     if in_range:
-        mask = next(m for m in (out_of_range or {}).values() if m.any() and not m.all())
+        mask = next(
+            m for m in (out_of_range or {}).values() if m.any() and int(np.count_nonzero(~m)) >= least
+        )
         in_range["raw"] = static_drift_left(smoothed["raw"][~mask], branch[~mask])
     common = set(refs.values())
     raw_drift = drift_score(rec, rec.accel_mg, common.pop() if len(common) == 1 else None, branch)

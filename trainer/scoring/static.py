@@ -46,10 +46,13 @@ def temperature_rate_c_per_min(
 
 
 def thermal_branch(
-    temp_c: np.ndarray, rate_hz: float, dead_band_c_per_min: float = DEAD_BAND_C_PER_MIN
+    temp_c: np.ndarray,
+    rate_hz: float,
+    dead_band_c_per_min: float = DEAD_BAND_C_PER_MIN,
+    window_s: float = RATE_WINDOW_S,
 ) -> np.ndarray:
     """:data:`HEATING`, :data:`COOLING` or :data:`NEITHER` for every sample."""
-    rate = temperature_rate_c_per_min(temp_c, rate_hz)
+    rate = temperature_rate_c_per_min(temp_c, rate_hz, window_s)
     branch = np.full(len(rate), NEITHER, dtype=np.int8)
     branch[rate > dead_band_c_per_min] = HEATING
     branch[rate < -dead_band_c_per_min] = COOLING
