@@ -102,6 +102,18 @@ def test_split_both_ways_round_and_by_time() -> None:
         split(rec, parse_holdout("0.001"))
 
 
+def test_a_time_beyond_the_run_is_read_from_its_start() -> None:
+    """A logger's Unix time as the boundary: the refusal says that T counts from the recording's
+    start, and the run's duration."""
+    rec = chamber_cycle(1000)
+    logged = Recording({**rec.columns, "time_s": rec.time_s + 1.7e9}, dict(rec.meta), "logged.csv")
+    duration_s = float(rec.time_s[-1] - rec.time_s[0])
+    with pytest.raises(UserError, match=f"counts from the recording's start: 0 .. {duration_s:g} s"):
+        split(logged, parse_holdout(f"{1.7e9 + 100:.0f}:"))
+    _, valid = split(logged, parse_holdout("100:"))  # the same boundary from the start
+    assert valid.time_s[0] - logged.time_s[0] == pytest.approx(100.0, abs=1.0)
+
+
 def test_overlap_warning_only_when_validation_data_is_training_data() -> None:
     rec = chamber_cycle(1000)
     assert "is the training data" in str(overlap_warning(training_stats(rec), rec, data_fingerprint(rec)))
