@@ -237,3 +237,23 @@ def test_a_held_out_end_part_is_scored_after_the_training_part() -> None:
     # persistence subtracts the previous smoothed output: only the first window differs
     assert not np.array_equal(warm[:10], cold[:10])
     np.testing.assert_allclose(warm[200:], cold[200:], atol=1e-9)
+
+
+def test_no_in_range_figure_from_fewer_samples_than_a_smoothing_window() -> None:
+    """A held-out part that touches the training range at a few samples: their deviation from their
+    own mean read 0, printed as the in-range figure. Fewer in-range samples than one smoothing window
+    (at least 2) give no figure; a part with enough of them gives one."""
+    from trainer.scoring.evaluate import evaluate
+
+    rec = chamber_cycle(4000)
+    rng = np.random.default_rng(5)
+    output = rec.accel_mg + rng.normal(0.0, 1.0, len(rec))
+    smoothing_s = 1.0
+    window = max(2, round(smoothing_s * rec.sample_rate_hz))
+    for inside, expected in ((window - 1, False), (20 * window, True)):
+        outside = np.ones(len(rec), dtype=bool)
+        outside[:inside] = False
+        scored = evaluate(rec, {"m": output}, out_of_range={"m": outside}, smoothing_s=smoothing_s)
+        assert ("m" in scored.static_in_range) is expected
+        if expected:
+            assert scored.static_in_range["m"].rms_mg > 0.0
