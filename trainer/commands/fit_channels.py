@@ -46,10 +46,8 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         if refusal is not None:
             raise UserError(f"{train.source}: {refusal}")
         view = channel_view(train, channel)
-        accept = args.accept_implausible
-        checked.append(
-            (channel, view, check_training(view, method, accept=accept, temp_column=channel.temp_column))
-        )
+        checks = check_training(view, method, accept=args.accept_implausible, temp_column=channel.temp_column)
+        checked.append((channel, view, checks))
     fitted = []
     for channel, view, checks in checked:
         model, stats = fit_with_selection(args.method, view, options, policy, log=progress_log(args))

@@ -21,7 +21,6 @@ from dataclasses import replace
 from itertools import combinations
 
 from trainer.diagnose.blocks import BlockData
-from trainer.diagnose.candidates import propose
 from trainer.diagnose.model import ModelFit, catalogue_effects
 from trainer.diagnose.result import Alternative, Ambiguity, LeftOut
 from trainer.diagnose.select import (
@@ -32,21 +31,13 @@ from trainer.diagnose.select import (
     Selection,
     Step,
     Tested,
-    _refit,
+    best_with,
     final_indices,
     step_positions,
 )
 from trainer.physics.effects import EffectConfig
 
 MAX_ALTERNATIVES = 4  # confounders tried singly, and in pairs (6)
-
-
-def _best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
-    """``base`` plus the best version of ``effect`` (its own ML noise), or ``None``."""
-    proposals = [p for p in propose(base, data, effect) if p.spectral_evidence is None]
-    if not proposals:
-        return None
-    return min((_refit(base, p, data)[1] for p in proposals), key=lambda f: f.bic)
 
 
 def prefer_plausible(
@@ -72,7 +63,7 @@ def prefer_plausible(
             for a in CONFUSABLE.get(effect, ())
             if a in identifiable and a not in NOISE_EFFECTS and a not in final.identifiers
         ]
-        fits = [(a, fit) for a in names if (fit := _best_with(reduced, data, a)) is not None]
+        fits = [(a, fit) for a in names if (fit := best_with(reduced, data, a)) is not None]
         better = [
             (a, fit) for a, fit in fits if fit.bic < final.bic and not implausible(fit, len(fit.terms) - 1)
         ]
@@ -150,14 +141,14 @@ def resolve_implausible(
         ][:MAX_ALTERNATIVES]
         if not names:  # nothing plausible to compare it with: it stays named, with its flags
             continue
-        singles = {a: _best_with(reduced, data, a) for a in names}
+        singles = {a: best_with(reduced, data, a) for a in names}
         alternatives = []
         for a, fit in singles.items():
             if fit is not None:
                 alternatives.append(Alternative((a,), fit.bic - final.bic, _added_flags(fit, reduced, flags)))
         for a, b in combinations(names, 2):
             first = singles[a]
-            pair = None if first is None else _best_with(first, data, b)
+            pair = None if first is None else best_with(first, data, b)
             if pair is not None:
                 alternatives.append(
                     Alternative((a, b), pair.bic - final.bic, _added_flags(pair, reduced, flags))

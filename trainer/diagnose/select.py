@@ -603,7 +603,7 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
             present = alternative in final.identifiers
             if present and alternative not in catalogue.MULTI_INSTANCE:
                 continue
-            best = _best_with(reduced, data, alternative)
+            best = best_with(reduced, data, alternative)
             if best is None:
                 continue
             gap = best.bic - final.bic
@@ -630,7 +630,7 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
     bar.close()
 
 
-def _best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
+def best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
     """``base`` plus the best version of ``effect`` (its own ML noise), or ``None``."""
     proposals = [p for p in propose(base, data, effect) if p.spectral_evidence is None]
     if not proposals:
@@ -651,7 +651,7 @@ def _absorbed(
     alone = reduced.bic - swapped.bic
     if alone < THRESHOLD or catalogue.excluded(effect, alternative):
         return None
-    beside_fit = _best_with(final, data, alternative)
+    beside_fit = best_with(final, data, alternative)
     beside = final.bic - beside_fit.bic if beside_fit is not None else 0.0
     if beside >= THRESHOLD:
         return None

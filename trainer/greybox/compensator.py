@@ -72,9 +72,9 @@ class PhysicsCompensator(Compensator):
 
     def fit(self, rec: Recording) -> Self:
         temp = np.asarray(rec.temp_c, dtype=np.float64)
-        held = rec.columns.get(HELD_OUT_COLUMN)
-        if held is not None and np.any(np.asarray(held) == 0):  # a cross-validation fold: the rows it
-            temp = temp[np.asarray(held) == 0]  # trains on set the valid range, as --holdout's would
+        if HELD_OUT_COLUMN in rec.columns:  # a cross-validation fold: the rows it trains on set the
+            trained = np.asarray(rec.columns[HELD_OUT_COLUMN]) == 0  # valid range, as --holdout's would
+            temp = temp[trained] if trained.any() else temp
         lo, hi = float(np.min(temp)), float(np.max(temp))
         if not hi > lo:
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")

@@ -166,15 +166,16 @@ def evaluate(
     # Fewer in-range samples than one smoothing window are one value: its deviation from its own mean
     # would read 0 (a held-out part that touches the training range at one sample), not a score.
     least = max(2, window)
-    in_range = {
-        name: static_drift_left(smoothed[name][~mask], branch[~mask])
+    partly_outside = {
+        name: mask
         for name, mask in (out_of_range or {}).items()
         if mask.any() and int(np.count_nonzero(~mask)) >= least
     }
-    if in_range:
-        mask = next(
-            m for m in (out_of_range or {}).values() if m.any() and int(np.count_nonzero(~m)) >= least
-        )
+    in_range = {
+        name: static_drift_left(smoothed[name][~mask], branch[~mask]) for name, mask in partly_outside.items()
+    }
+    if partly_outside:
+        mask = next(iter(partly_outside.values()))
         in_range["raw"] = static_drift_left(smoothed["raw"][~mask], branch[~mask])
     common = set(refs.values())
     raw_drift = drift_score(rec, rec.accel_mg, common.pop() if len(common) == 1 else None, branch)
