@@ -16,9 +16,8 @@ import numpy as np
 import pytest
 
 from trainer.data.channels import channel_view, select_channels
-from trainer.data.recording import Recording
+from trainer.data.recording import HELD_OUT_COLUMN, Recording
 from trainer.diagnose.api import build_baseline, build_blocks, fit_model
-from trainer.diagnose.blocks import HELD_OUT_COLUMN
 from trainer.fitting import fit_compensator
 from trainer.greybox.select import cv_rms
 from trainer.physics.catalogue.temp_rate import FREED_MAX_S

@@ -18,6 +18,10 @@ ONE_AXIS_COLUMNS: tuple[str, ...] = ("temp_c", "accel_mg")  # optional beside na
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", *ONE_AXIS_COLUMNS)  # of a one-axis recording
 MIN_ROWS = 2  # one time step: the least that defines a sample rate (and a drift)
 TRUTH_PREFIX = "true_"
+# A column a cross-validation adds (trainer.scoring.crossval): 1 on the held-out rows, whose output
+# was imputed so that a method with state sees the run's whole temperature history. Every fit that
+# reads it scores the training rows alone (the finder's blocks, the temperature-input DLSTM's loss).
+HELD_OUT_COLUMN = "held_out"
 
 
 @dataclass
@@ -78,6 +82,11 @@ class Recording:
     def truth(self, name: str) -> np.ndarray | None:
         """Ground-truth column ``true_<name>`` for evaluation only, or None when absent."""
         return self.columns.get(TRUTH_PREFIX + name)
+
+    def held_out(self) -> np.ndarray | None:
+        """Boolean mask of the rows a cross-validation fold holds out (:data:`HELD_OUT_COLUMN`), or None."""
+        values = self.columns.get(HELD_OUT_COLUMN)
+        return None if values is None else np.asarray(values, dtype=np.float64) > 0.5
 
     def without_truth(self) -> Recording:
         """A view for fitting and diagnosis: every ``true_*`` column removed."""

@@ -9,7 +9,7 @@ finder's modules can be split or renamed by changing this list.
 from __future__ import annotations
 
 from trainer.diagnose.baseline import build_baseline
-from trainer.diagnose.blocks import HELD_OUT_COLUMN, BlockData, build_blocks
+from trainer.diagnose.blocks import BlockData, build_blocks
 from trainer.diagnose.candidates import propose, propose_freed_wide
 from trainer.diagnose.model import Design, ModelFit, Term, build_design, evaluate, fit_model, search_bounds
 from trainer.diagnose.profile import analyse_profile
@@ -19,7 +19,6 @@ from trainer.diagnose.threads import single_blas_thread
 from trainer.diagnose.verdict import ambiguity_line, implausible_effects
 
 __all__ = [
-    "HELD_OUT_COLUMN",
     "BlockData",
     "Design",
     "Diagnosis",

@@ -24,10 +24,9 @@ DEFAULT_MAX_BLOCKS = 600  # dense GLS: Cholesky cost ~ N^3, a few ms at 600
 FINE_STEP_S = 0.5  # fine grid for periodograms: periods down to the catalogue's 5 s stay resolved
 RATE_WINDOW_S = 60.0  # Savitzky-Golay window for dT/dt: below the package time constants of interest
 MIN_BLOCKS = 60
-# A column a cross-validation adds (trainer.scoring.crossval): 1 on the held-out rows, whose output
-# was imputed. Blocks mostly held out get no weight in the GLS (Gls ``held_out``), and the white
-# noise is measured on the other rows, so the fit is the fit to the training rows alone.
-HELD_OUT_COLUMN = "held_out"
+# Blocks mostly held out by a cross-validation fold (``Recording.held_out``) get no weight in the GLS (Gls
+# ``held_out``), and the white noise is measured on the other rows, so the fit is the fit to the
+# training rows alone.
 
 
 def block_means(x: np.ndarray, m: int, nb: int) -> np.ndarray:
@@ -177,7 +176,9 @@ class BlockData:
     full_accel: np.ndarray = field(repr=False)
     known_input_block: np.ndarray | None = None
     plateaus: list[tuple[float, float]] = field(default_factory=list)  # quantised holds, see dequantize
-    held_out: np.ndarray | None = None  # blocks without weight (HELD_OUT_COLUMN), None: every block counts
+    held_out: np.ndarray | None = (
+        None  # blocks without weight (``Recording.held_out``), None: every block counts
+    )
 
     @property
     def n(self) -> int:
@@ -275,8 +276,8 @@ def build_blocks(
     nf = n // mf
     held = None
     measured = accel
-    if HELD_OUT_COLUMN in rec.columns:
-        rows_held = np.asarray(rec.columns[HELD_OUT_COLUMN], dtype=np.float64) > 0.5
+    rows_held = rec.held_out()
+    if rows_held is not None:
         held = block_means(rows_held.astype(np.float64), m, nb) > 0.5
         measured = accel[~rows_held]
     return BlockData(

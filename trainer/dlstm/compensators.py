@@ -126,9 +126,10 @@ class StreamingDLSTM(Compensator):
         """Front end and standardisation from the training recording; standardised pairs."""
         self.frontend = FrontEnd.from_seconds(rec.sample_rate_hz, **self.frontend_seconds)
         inputs, targets = self.training_pairs(rec)
-        if len(targets) < MIN_TRAINING_STEPS:
+        scored = int(np.count_nonzero(~np.isnan(targets)))
+        if scored < MIN_TRAINING_STEPS:
             raise UserError(
-                f"{rec.source}: only {len(targets)} network steps of {self.frontend.step_s:g} s; "
+                f"{rec.source}: only {scored} network steps of {self.frontend.step_s:g} s; "
                 f"at least {MIN_TRAINING_STEPS} are needed to train a DLSTM"
             )
         self.inputs_norm = Standardiser.fit(inputs)
@@ -246,8 +247,16 @@ class TemperatureDLSTM(StreamingDLSTM):
         return np.column_stack([temp_k, rate_k])
 
     def training_pairs(self, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+        """Targets at the steps whose smoothing window reaches a held-out row (a cross-validation
+        fold's imputed output) are NaN: the network runs through the whole temperature history and
+        learns the training rows alone, as the physics fit does."""
         assert self.frontend is not None
-        u = smoothed_steps(rec.accel_mg, self.frontend.train_accel_window, self.frontend.decimation)
+        window, decimation = self.frontend.train_accel_window, self.frontend.decimation
+        u = smoothed_steps(rec.accel_mg, window, decimation)
+        held = rec.held_out()
+        if held is not None:
+            reached = smoothed_steps(held.astype(np.float64), window, decimation) > 0.5 / window
+            u = np.where(reached, np.nan, u)
         return self._features(rec), u
 
     def run_inputs(self, rec: Recording) -> np.ndarray:

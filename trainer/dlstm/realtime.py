@@ -150,9 +150,10 @@ class Standardiser:
 
     @classmethod
     def fit(cls, features: np.ndarray) -> Standardiser:
-        """From a (T, F) array; a constant feature gets std 1 so that it does not blow up."""
-        mean = features.mean(axis=0)
-        std = features.std(axis=0)
+        """From a (T, F) array, NaN (no value: a held-out target) left out; a constant feature gets
+        std 1 so that it does not blow up."""
+        mean = np.nanmean(features, axis=0)
+        std = np.nanstd(features, axis=0)
         std = np.where(std > 0, std, 1.0)
         return cls(tuple(float(v) for v in mean), tuple(float(v) for v in std))
 

@@ -59,14 +59,25 @@ def one_step_ahead(series: Tensor) -> tuple[Tensor, Tensor]:
 
 
 def per_individual_loss(y: Tensor, targets: Tensor, loss: LossKind = "mse") -> Tensor:
-    """(P,) loss of predictions y (P, B, T, out) against targets (B, T, out) or (P, B, T, out)."""
-    err = y - targets
+    """(P,) loss of predictions y (P, B, T, out) against targets (B, T, out) or (P, B, T, out).
+
+    A NaN target is no target: the network runs through that step (its state carries on) and the
+    step is not scored, so a cross-validation fold's imputed rows are never learned."""
+    missing = torch.isnan(targets)
+    if not bool(missing.any()):
+        err = y - targets
+        mean = lambda v: v.flatten(1).mean(dim=1)  # noqa: E731
+    else:
+        scored = (~missing).expand_as(y)
+        err = torch.where(scored, y - torch.nan_to_num(targets), torch.zeros((), dtype=y.dtype))
+        count = scored.flatten(1).sum(dim=1).clamp(min=1).to(y.dtype)
+        mean = lambda v: v.flatten(1).sum(dim=1) / count  # noqa: E731
     if loss == "mse":
-        return err.square().flatten(1).mean(dim=1)
+        return mean(err.square())
     if loss == "half_mse":  # MATLAB regressionLayer
-        return 0.5 * err.square().flatten(1).mean(dim=1)
+        return 0.5 * mean(err.square())
     if loss == "mae":
-        return err.abs().flatten(1).mean(dim=1)
+        return mean(err.abs())
     raise ValueError(f"loss must be 'mse', 'half_mse' or 'mae', got {loss!r}")
 
 
@@ -109,7 +120,8 @@ def train_population(
     """Train every individual of ``model`` in place with full-batch Adam.
 
     inputs (B, T, in) shared by all individuals or (P, B, T, in); targets (B, T, out) or
-    (P, B, T, out), in the model's dtype. Full-batch Adam has no random step; ``seed`` fixes
+    (P, B, T, out), in the model's dtype; a NaN target is a step not scored (:func:`per_individual_loss`),
+    an infinite one an error. Full-batch Adam has no random step; ``seed`` fixes
     torch's RNG inside the call (without disturbing the caller's) so the run stays reproducible
     if a stochastic option is ever added.
     """
@@ -117,9 +129,10 @@ def train_population(
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     if grad_clip is not None and not grad_clip > 0:
         raise ValueError(f"grad_clip must be > 0 or None, got {grad_clip}")
-    for name, t in (("inputs", inputs), ("targets", targets)):
-        if not bool(torch.isfinite(t).all()):
-            raise ValueError(f"{name} contain NaN or inf")
+    if not bool(torch.isfinite(inputs).all()):
+        raise ValueError("inputs contain NaN or inf")
+    if bool(torch.isinf(targets).any()) or bool(torch.isnan(targets).all()):
+        raise ValueError("targets contain inf, or NaN only (a NaN target is a step not scored)")
     params = model.param_list()
     P = model.population
     rows: list[Tensor] = []

@@ -23,7 +23,6 @@ import numpy as np
 from trainer.compensator import Compensator
 from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording import Recording
-from trainer.diagnose.api import HELD_OUT_COLUMN
 from trainer.errors import UserError
 from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
@@ -72,9 +71,9 @@ class PhysicsCompensator(Compensator):
 
     def fit(self, rec: Recording) -> Self:
         temp = np.asarray(rec.temp_c, dtype=np.float64)
-        if HELD_OUT_COLUMN in rec.columns:  # a cross-validation fold: the rows it trains on set the
-            trained = np.asarray(rec.columns[HELD_OUT_COLUMN]) == 0  # valid range, as --holdout's would
-            temp = temp[trained] if trained.any() else temp
+        held = rec.held_out()  # a cross-validation fold: the rows it trains on set the valid range,
+        if held is not None and not held.all():  # as --holdout's would
+            temp = temp[~held]
         lo, hi = float(np.min(temp)), float(np.max(temp))
         if not hi > lo:
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")

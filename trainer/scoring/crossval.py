@@ -43,7 +43,7 @@ import numpy as np
 
 from trainer import methods as registry
 from trainer.data.holdout import MIN_ROWS
-from trainer.data.recording import Recording
+from trainer.data.recording import HELD_OUT_COLUMN, Recording
 from trainer.errors import UserError
 from trainer.scoring.static import (
     COOLING,
@@ -300,7 +300,6 @@ def training_rows(n: int, segment: Segment) -> np.ndarray:
 def impute_held_out(rec: Recording, train: np.ndarray) -> Recording:
     """``rec`` with the held-out output replaced by the cubic fitted on the training rows alone."""
     from trainer.baselines.poly3 import CubicPolynomial
-    from trainer.diagnose.blocks import HELD_OUT_COLUMN
 
     cubic = CubicPolynomial().fit(rows(rec, train))
     filled = np.where(train, rec.accel_mg, cubic.predict_drift(rec))
