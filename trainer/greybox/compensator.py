@@ -26,6 +26,7 @@ from trainer.data.recording import Recording
 from trainer.errors import UserError
 from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
+from trainer.greybox.least_squares import fit_least_squares
 from trainer.greybox.stream import PhysicsModel
 from trainer.greybox.terms import parse_effects
 from trainer.physics.catalogue import BACKBONE
@@ -44,6 +45,8 @@ class PhysicsCompensator(Compensator):
         with_warmup: bool = False,
         progress: bool = False,
         given_by: str = "--effects",  # who gave a forced structure (the summary says): auto's candidate
+        play_start_c: float | None = None,  # the branch at power-on: that of a sensor brought from here
+        least_squares: bool = False,  # every parameter by least squares (greybox.least_squares), not the finder
     ) -> None:
         structures.check_source(effects, from_sim)
         self.given_by = given_by
@@ -52,6 +55,8 @@ class PhysicsCompensator(Compensator):
         self.from_sim = from_sim
         self.with_warmup = with_warmup
         self.progress = progress
+        self.play_start_c = play_start_c
+        self.least_squares = least_squares
         self.effects: tuple[EffectConfig, ...] = ()
         self.temp_range_c = (np.nan, np.nan)
         self.report: dict[str, Any] = {}
@@ -78,12 +83,20 @@ class PhysicsCompensator(Compensator):
         if not hi > lo:
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")
         chosen = self._structure(rec)
-        fitted = fit_physics(rec, chosen)
+        if self.least_squares:
+            fitted = fit_least_squares(rec, chosen, (lo, hi), self._play_start((lo, hi)))
+        else:
+            fitted = fit_physics(rec, chosen)
         if self.forced is None and self.from_sim is None:
             fitted = _only_determined(rec, fitted)
         self.effects = fitted.effects
         self.temp_range_c = (lo, hi)
         self.report = _report(chosen, fitted)
+        if self.play_start_c is not None:
+            self.report["notes"].append(
+                f"power-on: the branch of a sensor brought to its first temperature from {self.play_start_c:g} degC "
+                "(the play operator starts there, clamped into T0 +- width/2)"
+            )
         return self
 
     def describe(self) -> list[str]:
@@ -103,9 +116,15 @@ class PhysicsCompensator(Compensator):
         return undetermined_lines(report)
 
     # -- running ---------------------------------------------------------------------------------
+    def _play_start(self, temp_range_c: tuple[float, float]) -> float | None:
+        """The play operator's start, clipped to the valid range as every temperature it reads."""
+        if self.play_start_c is None:
+            return None
+        return min(max(self.play_start_c, temp_range_c[0]), temp_range_c[1])
+
     @property
     def model(self) -> PhysicsModel:
-        return PhysicsModel.from_effects(self.effects, self.temp_range_c)
+        return PhysicsModel.from_effects(self.effects, self.temp_range_c, self.play_start_c)
 
     def drift_at_reference(self, t_ref_c: float, rate_hz: float, training: Recording | None = None) -> float:
         """Exactly the settled drift (filters settled, mid-branch, warm-up over), no simulation."""
@@ -124,7 +143,7 @@ class PhysicsCompensator(Compensator):
     def predict_drift(self, rec: Recording) -> np.ndarray:
         t = np.asarray(rec.time_s, dtype=np.float64)
         temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *self.temp_range_c)
-        return drift(self.effects, t - t[0], temp).total
+        return drift(self.effects, t - t[0], temp, play_start_c=self._play_start(self.temp_range_c)).total
 
     def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
         return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])
@@ -137,6 +156,7 @@ class PhysicsCompensator(Compensator):
             "with_warmup": bool(self.with_warmup),
             "effects_option": self.effects_option,
             "report": self.report,
+            "play_start_c": self.play_start_c,
         }
 
     @classmethod
@@ -147,6 +167,8 @@ class PhysicsCompensator(Compensator):
             EffectConfig(str(i), {k: float(v) for k, v in p.items()}) for i, p in payload["effects"]
         )
         model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        start = payload.get("play_start_c")  # absent from checkpoints written before it existed: half-way
+        model.play_start_c = None if start is None else float(start)
         model.report = dict(payload["report"])
         cls.undetermined_in(payload)  # its flags are what the sign-off reads: checked on loading
         return model

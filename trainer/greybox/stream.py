@@ -16,7 +16,10 @@ polynomial. The low-passes are the simulator's exact first-order-hold discretisa
 Power-on: every state word (filters, the play operator) starts at the first clipped temperature:
 every filter in equilibrium (no lag, no rate, no creep) and the play operator half-way between the
 branches. Until the temperature has moved by ``w/2`` in one direction a branch term is therefore
-off by at most ``|amp|`` (half the gap between the branches). A firmware that saves
+off by at most ``|amp|`` (half the gap between the branches). A model with a play start
+(``play_start_c``, the temperature the sensor came from before power-on) starts the play operator
+there instead, clamped into ``T_0 +- w/2`` by its first step: a sensor brought to ``T_0`` from room
+temperature starts on the branch that journey left it on. A firmware that saves
 :class:`StreamState` at power-down and restores it at power-up keeps the branch; the filters are
 then right if the board was off for much less than their time constants (else start fresh).
 """
@@ -31,7 +34,7 @@ import numpy as np
 
 from trainer.physics.catalogue import BACKBONE
 from trainer.physics.catalogue.bias_poly import polynomial
-from trainer.physics.catalogue.streamed import STREAMED, in_step_order
+from trainer.physics.catalogue.streamed import STREAMED, in_step_order, play_words
 from trainer.physics.catalogue.streaming import BRANCH, CHAIN, Sample, StreamedEffect
 from trainer.physics.effects import EffectConfig
 
@@ -44,9 +47,15 @@ class PhysicsModel:
     c_mg: tuple[float, float, float, float]  # bias_poly c0..c3 about T_REF_C
     temp_range_c: tuple[float, float]
     terms: tuple[EffectConfig, ...] = ()
+    play_start_c: float | None = None  # where the play operator starts (clipped to the range); None: T_0
 
     @classmethod
-    def from_effects(cls, effects: tuple[EffectConfig, ...], temp_range_c: tuple[float, float]) -> Self:
+    def from_effects(
+        cls,
+        effects: tuple[EffectConfig, ...],
+        temp_range_c: tuple[float, float],
+        play_start_c: float | None = None,
+    ) -> Self:
         p = {e.identifier: e.params for e in effects}
         poly = p.get(BACKBONE, {})
         terms = tuple(EffectConfig(e.identifier, dict(p[e.identifier])) for e in in_step_order(p))
@@ -60,6 +69,9 @@ class PhysicsModel:
             ),  # type: ignore[arg-type]
             temp_range_c=temp_range_c,
             terms=terms,
+            play_start_c=None
+            if play_start_c is None
+            else min(max(play_start_c, temp_range_c[0]), temp_range_c[1]),
         )
 
     def static_drift_mg(self, temp_c: float) -> float:
@@ -104,7 +116,12 @@ class PhysicsStream:
         T = min(max(temp_c, lo), hi)
         if not s.started:
             s.started, s.temp_prev_c = True, T
-            s.values = {word: T for effect, _, _ in self.parts for word in effect.state}
+            play, starts_at_play = (T if m.play_start_c is None else m.play_start_c), play_words()
+            s.values = {
+                word: play if word in starts_at_play else T
+                for effect, _, _ in self.parts
+                for word in effect.state
+            }
         sample = Sample(T, s.temp_prev_c, T, T, s.time_s)
         drift = 0.0
         for effect, params, constants in self.parts:

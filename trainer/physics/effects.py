@@ -99,12 +99,15 @@ def drift(
     *,
     g_in_mg: np.ndarray | float = 0.0,
     dT_die_dt_c_per_min: np.ndarray | None = None,
+    play_start_c: float | None = None,
 ) -> DriftBreakdown:
     """Everything deterministic that is not the true input, for a set of effects.
 
     Applies the temperature chain first (``thermal_lag`` gives ``T_pm``; ``hysteresis`` switches
     what ``bias_poly`` reads to the play output), then sums the additive effects.
     ``temp_quantization`` only touches the thermometer column, so it contributes nothing here.
+    ``play_start_c``: the branch effects' play operator state before the first sample
+    (:class:`~trainer.physics.catalogue.base.Signals`; ``None``: the catalogue's half-way start).
     """
     effects = list(effects)
     t = np.asarray(t, dtype=np.float64)
@@ -115,7 +118,9 @@ def drift(
         if definition.proof_mass is not None:
             T_pm = definition.proof_mass(t, T_pm, effect.params)
         if definition.bias_temperature is not None and poly_temperature is None:
-            poly_temperature = (lambda f, p: lambda T: f(T, p))(definition.bias_temperature, effect.params)
+            poly_temperature = (lambda f, p: lambda T: f(T, p, play_start_c))(
+                definition.bias_temperature, effect.params
+            )
     signals = Signals(
         t,
         np.asarray(T_die, dtype=np.float64),
@@ -123,6 +128,7 @@ def drift(
         rate_c_per_min=dT_die_dt_c_per_min,
         g_in_mg=g_in_mg,
         poly_temperature=poly_temperature,
+        play_start_c=play_start_c,
     )
     parts: list[tuple[str, np.ndarray]] = []
     total = np.zeros(np.shape(T_die))

@@ -8,7 +8,7 @@ from codegen.families.physics.quantise import QPhysics
 from codegen.fixedpoint import INT32_MAX
 from codegen.golden import GoldenBase
 from codegen.quantize import FLAG_INPUT_CLAMPED
-from trainer.physics.catalogue.streamed import STREAMED
+from trainer.physics.catalogue.streamed import STREAMED, play_words
 from trainer.physics.catalogue.streaming import BRANCH, CHAIN, HI_BITS, IntSample
 
 
@@ -63,6 +63,7 @@ class GoldenPhysics(GoldenBase):
         tf = m.temp_frac
         v = self.values
         wide = {w.name: w.wide for t in m.terms for w in t.fixed.state}
+        play = play_words() if m.play_start_q is not None else frozenset()
         before = [t for t in m.terms if STREAMED[t.identifier].phase in (CHAIN, BRANCH)]
         after = [t for t in m.terms if t not in before]
         drift = np.empty(temp.size, dtype=np.int64)
@@ -75,7 +76,7 @@ class GoldenPhysics(GoldenBase):
             if not self.started:
                 self.started, self.temp_prev = 1, t
                 for name in self.present():
-                    v[name] = x << HI_BITS if wide[name] else x
+                    v[name] = x << HI_BITS if wide[name] else (m.play_start_q if name in play else x)  # type: ignore[assignment]
             prev = (self.temp_prev - m.centre_mdegc) << tf
             s = IntSample(x, prev, t - self.temp_prev, tf, x, x)
             acc = sum(term.fixed.golden(term, v, s) for term in before)

@@ -12,7 +12,7 @@ from codegen.families.physics.render import physics_snippets
 from codegen.family import ImuForm
 from codegen.imu_record import KIND_PHYSICS, ChannelTables, ImuPart
 from trainer.methods import PHYSICS_RENDERER
-from trainer.physics.catalogue.streamed import c_options, c_terms
+from trainer.physics.catalogue.streamed import c_options, c_terms, play_words
 from trainer.physics.catalogue.streaming import FixedPoint
 
 
@@ -24,10 +24,13 @@ def imu_tables(q: QPhysics, sensor: int) -> ChannelTables:
     )  # fmt: skip
 
 
+PLAY_START = "PLAY_START"  # the bit: the play operator starts at NAME_physics_t.play_start, not at x
+
+
 def phys_terms() -> dict[str, int]:
     """A physics channel's terms, bits of NAME_physics_t.terms (the header defines them from these): one
-    per C term of the streamed effects' registry, then its options, in step order."""
-    names = [t.name.upper() for t in c_terms()] + c_options()
+    per C term of the streamed effects' registry, then its options, in step order, then PLAY_START."""
+    names = [t.name.upper() for t in c_terms()] + c_options() + [PLAY_START]
     return {name: 1 << k for k, name in enumerate(names)}
 
 
@@ -43,6 +46,7 @@ class PhysicsTables:
     u_scale: int  # 2^u_shift
     filters: list[tuple[int, int, int, int]]  # per filter: c, b0, step_scale 2^(tf - s), s
     margins: list[int]  # per margin (the play's half width), Q(tf) mdegC
+    play_start: int  # where the play operator starts at power-on (with the PLAY_START bit), Q(tf) mdegC
     gains: list[int]
 
 
@@ -56,12 +60,15 @@ def slot_tables(q: QPhysics) -> PhysicsTables:
     bits = phys_terms()
     layout = c_terms()
     return PhysicsTables(
-        sum(bits[name.upper()] for name in present) + sum(bits[o] for o in q.options),
+        sum(bits[name.upper()] for name in present)
+        + sum(bits[o] for o in q.options)
+        + (0 if q.play_start_q is None else bits[PLAY_START]),
         q.centre_mdegc,
         1 << q.temp_frac,
         1 << q.u_shift,
         [lowpass(present[f.name].filter if f.name in present else None) for f in layout if f.tau_s],
         [(present[f.name].margin_q or 0) if f.name in present else 0 for f in layout if f.margin],
+        0 if q.play_start_q is None else q.play_start_q,
         [
             present[f.name].gain.q if f.name in present and present[f.name].gain else 0  # type: ignore[union-attr]
             for f in layout
@@ -86,12 +93,14 @@ def physics_layout(name: str) -> dict[str, object]:
         if f.poly_reads is not None and f.option is not None:
             u_source = f"({on[f.option]} ? state->{f.poly_reads} : {u_source})"
     words = list({w.name: w for f in layout for w in f.state}.values())
+    start = f"({on[PLAY_START]} ? ph->play_start : x)"
     return {
         "filters": [{"field": f.name, "doc": f.filter_doc} for f in layout if f.tau_s],
         "margins": [{"field": f.margin_field, "doc": f.margin_doc} for f in layout if f.margin],
         "gains": [{"field": f"{f.name}_q", "text": f.difference_text} for f in layout if f.gain_mg_per_c],
         "state": [w for w in words if w.wide] + [w for w in words if not w.wide],
         "words": words,
+        "starts": {w.name: start for w in words if w.name in play_words()},
         "terms": [{"on": on[f.name.upper()], **physics_snippets(f, values(f))} for f in layout],
         "u_source": u_source,
     }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from codegen.families.physics.quantise import QPhysics
+from codegen.families.physics.render import play_start_text
 from codegen.fixedpoint import INT64_MAX, headroom_bits
 from codegen.manifest import six_digits
 from codegen.rate import rate_millihz
@@ -45,7 +46,10 @@ def physics_manifest(model: QPhysics) -> dict[str, object]:
             "gains": [{"name": g.name, "q": g.q, "difference_bound": g.diff_bound} for g in model.gains],
         },
         "model_tag": model.tag,
-        "power_on": "filters start in equilibrium at the first sample; the play operator at T_pm (mid-branch)",
+        "power_on": "filters start in equilibrium at the first sample; "
+        + (
+            "the play operator at T_pm (mid-branch)" if model.play_start_q is None else play_start_text(model)
+        ),
         "save_restore": "copy NAME_state_t; NAME_restore checks model_tag and keeps the hysteresis branch",
         "macs_per_sample": 3 + 2 * len(model.filters) + len(model.gains),
     }

@@ -24,7 +24,7 @@ from codegen.families.physics.spec import PhysicsSpec
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, round_half_away
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
 from trainer.errors import UserError
-from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms
+from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms, play_words
 from trainer.physics.catalogue.streaming import CHAIN, HI_BITS, FixedPoint
 
 MAX_TEMP_FRAC = 24  # finer int32 temperatures buy nothing (the filters' floors are bounded below)
@@ -102,6 +102,8 @@ class QPhysics:
     frac: int  # the polynomial's value is Q(frac) accel LSB; the accumulator Q(frac + 32)
     bound: int  # |drift accumulator|, Q(frac + 32), < 2^62
     tag: int  # uint32 identifying these constants (a saved state is restored only by its own model)
+    # where the play operator starts at power-on (x of the model's play start), None: at the first x
+    play_start_q: int | None = None
 
     @property
     def filters(self) -> tuple[QLowpass, ...]:
@@ -221,6 +223,13 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
         widest = max(margins.values(), key=lambda v: v[0])[1] if margins else "a margin"
         raise UserError(f"physics: {widest} is too wide for int32 temperatures")
     margin_q = {name: round_half_away(half * 2**tf) for name, (half, _) in margins.items()}
+    # the play start, a temperature within the range (PhysicsModel clips it) like every other x
+    play_start_q = None
+    if m.play_start_c is not None and any(
+        w.name in play_words() for _, f, _ in present.values() for w in f.state
+    ):
+        start = min(max(round_half_away(Fraction(m.play_start_c) * 1000), lo), hi)
+        play_start_q = (start - centre) << tf
     from trainer.physics.catalogue.base import T_REF_C
 
     t_ref = round_half_away(Fraction(T_REF_C) * 1000)
@@ -298,6 +307,9 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
             frac,
             filt,
             *gains.values(),
+            *(
+                () if play_start_q is None else (("play_start", play_start_q),)
+            ),  # older models keep their tags
         )
         tag = int(hashlib.sha256(repr(constants).encode()).hexdigest()[:8], 16)
         terms = tuple(
@@ -325,6 +337,7 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
             frac,
             bound,
             tag,
+            play_start_q,
         )
     raise UserError("physics: coefficients too large for the fixed-point format")
 

@@ -8,6 +8,7 @@ from string import Template
 from codegen.families.physics.quantise import QPhysics, QTerm
 from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.render import Field, bound_text, c_rows
+from trainer.physics.catalogue.streamed import play_words
 from trainer.physics.catalogue.streaming import HI_BITS, FixedPoint, StateWord
 
 KERNEL_FILE = "tdc_physics_kernels.h"
@@ -47,8 +48,25 @@ def physics_tables(model: QPhysics) -> dict[str, int]:
     return {"physics_coefficients": 16}
 
 
+def play_start_text(model: QPhysics) -> str:
+    """Where the play operator starts at power-on, as the header and the manifest say it."""
+    if model.play_start_q is None:
+        return "P at T_pm, mid-way between the branches (the branch term is then off by at most its amplitude until T has moved by w/2)"
+    start_c = (model.centre_mdegc + model.play_start_q / 2**model.temp_frac) / 1000.0
+    return (
+        f"P at {start_c:g} degC (x = {model.play_start_q}), clamped into T_pm +- w/2 by the first step: the branch of a sensor "
+        f"brought to its first temperature from {start_c:g} degC"
+    )
+
+
 def physics_context(model: QPhysics) -> dict[str, object]:
     tf = model.temp_frac
+    words = physics_state_words(model)
+    starts = (
+        {}
+        if model.play_start_q is None
+        else {w.name: str(model.play_start_q) for w in words if w.name in play_words()}
+    )
 
     def values(t: QTerm) -> dict[str, object]:
         out: dict[str, object] = {}
@@ -79,7 +97,9 @@ def physics_context(model: QPhysics) -> dict[str, object]:
             }
             for f in model.filters
         ],
-        "words": physics_state_words(model),
+        "words": words,
+        "starts": starts,
+        "play_start_text": play_start_text(model),
         "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
         "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
         "u_shift": model.u_shift,

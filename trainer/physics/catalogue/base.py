@@ -47,7 +47,9 @@ class Signals:
     ``T_b`` is the temperature the bias polynomial reads: ``T_pm``, or what ``poly_temperature``
     makes of it (the play output when ``hysteresis`` is present), computed once when first read.
     ``rate_c_per_min`` is ``dT_die/dt`` (``None``: the formula takes the numerical derivative);
-    ``g_in_mg`` the true input (``None`` when unknown).
+    ``g_in_mg`` the true input (``None`` when unknown). ``play_start_c``: where a play operator
+    (the branch effects) starts before the first sample, clamped into ``T_pm[0] +- w/2``; ``None``:
+    at ``T_pm[0]``, half-way between the branches (the catalogue's ``P_0 = T_0``).
     """
 
     def __init__(
@@ -59,8 +61,10 @@ class Signals:
         rate_c_per_min: np.ndarray | None = None,
         g_in_mg: np.ndarray | float | None = None,
         poly_temperature: Callable[[np.ndarray], np.ndarray] | None = None,
+        play_start_c: float | None = None,
     ) -> None:
         self.t = t
+        self.play_start_c = play_start_c
         self.T_die = T_die
         self.T_pm = T_pm
         self.rate_c_per_min = rate_c_per_min
@@ -326,8 +330,8 @@ class Effect:
 
     Exactly one of the simulator roles is set: ``contribution(params, signals)`` (additive, mg),
     ``proof_mass(t, T, params)`` (gives ``T_pm``), ``thermometer(temp_c, params)`` (acts on the
-    reading only). ``bias_temperature(T_pm, params)`` additionally switches what the polynomial
-    reads. ``input_param`` names a parameter that sets the constant true input. ``compensable``:
+    reading only). ``bias_temperature(T_pm, params, play_start_c)`` additionally switches what the
+    polynomial reads (``play_start_c``: :attr:`Signals.play_start_c`). ``input_param`` names a parameter that sets the constant true input. ``compensable``:
     a property of the sensor that a temperature-drift compensator models (lag, rate, hysteresis,
     creep, warm-up), as opposed to an event or a property of the test set-up (a step, a chamber
     oscillation, the thermometer's resolution). ``excludes``: identifiers that describe the same
@@ -340,7 +344,7 @@ class Effect:
     contribution: Callable[[Mapping[str, float], Signals], np.ndarray] | None = None
     proof_mass: Callable[[np.ndarray, np.ndarray, Mapping[str, float]], np.ndarray] | None = None
     thermometer: Callable[[np.ndarray, Mapping[str, float]], np.ndarray] | None = None
-    bias_temperature: Callable[[np.ndarray, Mapping[str, float]], np.ndarray] | None = None
+    bias_temperature: Callable[[np.ndarray, Mapping[str, float], float | None], np.ndarray] | None = None
     multi_instance: bool = False
     input_param: str | None = None
     compensable: bool = False

@@ -27,7 +27,8 @@ def branch_offset(T_pm: np.ndarray, play: np.ndarray, amp_mg: float, width_c: fl
 
 def branch_contribution(p: Mapping[str, float], s: Signals) -> np.ndarray:
     """The branch term on ``T_pm`` (shared with ``hysteresis_offset``)."""
-    return branch_offset(s.T_pm, play_operator(s.T_pm, p["width_c"]), p["amp_mg"], p["width_c"])
+    play = play_operator(s.T_pm, p["width_c"], s.play_start_c)
+    return branch_offset(s.T_pm, play, p["amp_mg"], p["width_c"])
 
 
 def _columns(term: FinderTerm, d: BlockDesign) -> list[tuple[str, np.ndarray]]:
@@ -63,7 +64,7 @@ DEFINITION = Effect(
     ),
     summary="amp * (T_pm - P) / (width_c / 2), P the play operator of T_pm; bias_poly reads P",
     contribution=branch_contribution,
-    bias_temperature=lambda T_pm, p: play_operator(T_pm, p["width_c"]),
+    bias_temperature=lambda T_pm, p, start: play_operator(T_pm, p["width_c"], start),
     finder=Finder(
         search="profile",
         nonlinear=(("width_c", True),),

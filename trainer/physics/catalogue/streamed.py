@@ -19,7 +19,7 @@ from trainer.physics.catalogue import (
     thermal_lag_stream,
     warmup_stream,
 )
-from trainer.physics.catalogue.streaming import FixedPoint, StreamedEffect
+from trainer.physics.catalogue.streaming import BRANCH, FixedPoint, StreamedEffect
 
 STREAMED: dict[str, StreamedEffect] = {
     m.STREAMED.identifier: m.STREAMED
@@ -66,3 +66,9 @@ def c_options() -> list[str]:
     """The option bits of the registry's C terms (what the polynomial reads), in step order."""
     options = (e.fixed.option for e in in_step_order(STREAMED) if e.fixed is not None)
     return list(dict.fromkeys(o for o in options if o is not None))
+
+
+def play_words() -> frozenset[str]:
+    """The state words that are a play operator's output (the branch effects', phase BRANCH): at
+    power-on they start at a model's play start when it has one, else at the first temperature."""
+    return frozenset(word for e in STREAMED.values() if e.phase == BRANCH for word in e.state)
