@@ -2,8 +2,9 @@
 
 The candidates (:data:`CANDIDATES`, declared here once): no compensation, polynomials of order 1
 to 3 in temperature (the flight stacks' cubic and the lower orders that do not over-fit a short
-range), PLA and the physics compensator, with its automatic structure and with the branch offset.
-Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.crossval`). The rule
+range), PLA and the physics compensator, with its automatic structure, with the branch offset, and
+with the branch offset fitted by least squares and started, at power-on, on the branch a sensor
+brought from room temperature is on (``physics-branch-room``). Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.crossval`). The rule
 (:func:`choose`) judges what a user meets, one held-out segment at a time:
 
 - **A whole cycle** (at least :data:`FULL_CYCLE_SEGMENTS` thermal segments, heating and cooling
