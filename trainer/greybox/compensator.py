@@ -27,7 +27,7 @@ from trainer.errors import UserError
 from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.least_squares import fit_least_squares
-from trainer.greybox.stream import PhysicsModel
+from trainer.greybox.stream import PhysicsModel, play_start_within
 from trainer.greybox.terms import parse_effects
 from trainer.physics.catalogue import BACKBONE
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_params
@@ -84,7 +84,7 @@ class PhysicsCompensator(Compensator):
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")
         chosen = self._structure(rec)
         if self.least_squares:
-            fitted = fit_least_squares(rec, chosen, (lo, hi), self._play_start((lo, hi)))
+            fitted = fit_least_squares(rec, chosen, (lo, hi), play_start_within(self.play_start_c, (lo, hi)))
         else:
             fitted = fit_physics(rec, chosen)
         if self.forced is None and self.from_sim is None:
@@ -116,12 +116,6 @@ class PhysicsCompensator(Compensator):
         return undetermined_lines(report)
 
     # -- running ---------------------------------------------------------------------------------
-    def _play_start(self, temp_range_c: tuple[float, float]) -> float | None:
-        """The play operator's start, clipped to the valid range as every temperature it reads."""
-        if self.play_start_c is None:
-            return None
-        return min(max(self.play_start_c, temp_range_c[0]), temp_range_c[1])
-
     @property
     def model(self) -> PhysicsModel:
         return PhysicsModel.from_effects(self.effects, self.temp_range_c, self.play_start_c)
@@ -143,7 +137,7 @@ class PhysicsCompensator(Compensator):
     def predict_drift(self, rec: Recording) -> np.ndarray:
         t = np.asarray(rec.time_s, dtype=np.float64)
         temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *self.temp_range_c)
-        return drift(self.effects, t - t[0], temp, play_start_c=self._play_start(self.temp_range_c)).total
+        return drift(self.effects, t - t[0], temp, play_start_c=self.model.play_start_c).total
 
     def out_of_range(self, temp_c: np.ndarray) -> np.ndarray:
         return (temp_c < self.temp_range_c[0]) | (temp_c > self.temp_range_c[1])

@@ -39,6 +39,11 @@ from trainer.physics.catalogue.streaming import BRANCH, CHAIN, Sample, StreamedE
 from trainer.physics.effects import EffectConfig
 
 
+def play_start_within(play_start_c: float | None, temp_range_c: tuple[float, float]) -> float | None:
+    """The play operator's start clipped to the valid range, as every temperature the model reads."""
+    return None if play_start_c is None else min(max(play_start_c, temp_range_c[0]), temp_range_c[1])
+
+
 @dataclass(frozen=True)
 class PhysicsModel:
     """Plain parameters of one fitted compensator (catalogue units): the bias polynomial, the
@@ -69,9 +74,7 @@ class PhysicsModel:
             ),  # type: ignore[arg-type]
             temp_range_c=temp_range_c,
             terms=terms,
-            play_start_c=None
-            if play_start_c is None
-            else min(max(play_start_c, temp_range_c[0]), temp_range_c[1]),
+            play_start_c=play_start_within(play_start_c, temp_range_c),
         )
 
     def static_drift_mg(self, temp_c: float) -> float:
