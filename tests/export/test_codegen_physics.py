@@ -5,7 +5,6 @@ save/restore across a power cycle, the out-of-range flag and the export's refusa
 
 from __future__ import annotations
 
-import itertools
 import json
 import shutil
 import subprocess
@@ -35,6 +34,7 @@ from codegen.quantize import ACCEL_PER_MG, FLAG_TEMP_OUT_OF_RANGE
 from codegen.render import render_template
 from codegen.verify import to_step_units, verify
 from tests import testmodels as tm
+from tests.golden_checks import replay
 from tests.methods.test_greybox import LAG_RATE_OFFSET, config
 from tests.repo import REPO_ROOT
 from trainer.checkpoint import load_checkpoint, load_model, save_model
@@ -138,15 +138,8 @@ def test_c_equals_golden_under_sanitizers_with_extremes_resets_and_inits(
     binary = build_harness(out, NAME, harness, tmp_path / "san", flags=("-O1", *SANITIZER_FLAGS))
     raw_state = run_harness(binary, vectors, outputs)
     c_out = np.frombuffer(outputs.read_bytes(), dtype="<i4").astype(np.int64)
-    golden, expected = golden_for(loaded.quantised), []
-    cuts = [0, 2_001, 4_500, 6_100, accel.size]
-    for a, b in itertools.pairwise(cuts):
-        if commands[a] == CMD_RESET:
-            golden.reset()
-        elif commands[a] == CMD_INIT:
-            golden.init()
-        expected.append(golden.run(accel[a:b], temp[a:b]))
-    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    golden = golden_for(loaded.quantised)
+    np.testing.assert_array_equal(c_out, replay(golden, accel, temp, commands))
     c_state = load_module(out, NAME, flags=("-O0",)).state_from_bytes(raw_state)
     assert c_state.keys() == golden.state().keys()
     for key, value in golden.state().items():

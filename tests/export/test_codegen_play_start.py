@@ -9,7 +9,6 @@ stream, the golden model, the one-channel C and the IMU C must all start there.
 
 from __future__ import annotations
 
-import itertools
 import shutil
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from codegen.quantize import ACCEL_PER_MG
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from tests import testmodels as tm
+from tests.golden_checks import replay
 from trainer.checkpoint import load_checkpoint, load_model, save_model
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
@@ -169,14 +169,7 @@ def test_c_equals_golden_under_sanitizers_and_starts_again_after_reset_and_init(
     binary = build_harness(tmp_path / "out", NAME, harness, tmp_path / "san", flags=("-O1", *SANITIZER_FLAGS))
     run_harness(binary, tmp_path / "v.bin", tmp_path / "o.bin")
     c_out = np.frombuffer((tmp_path / "o.bin").read_bytes(), dtype="<i4").astype(np.int64)
-    golden, expected = golden_for(loaded.quantised), []
-    for a, b in itertools.pairwise([0, 2_500, 5_000, accel.size]):
-        if commands[a] == CMD_RESET:
-            golden.reset()
-        elif commands[a] == CMD_INIT:
-            golden.init()
-        expected.append(golden.run(accel[a:b], temp[a:b]))
-    np.testing.assert_array_equal(c_out, np.concatenate(expected))
+    np.testing.assert_array_equal(c_out, replay(golden_for(loaded.quantised), accel, temp, commands))
 
 
 def test_the_imu_module_starts_each_physics_channel_as_its_own_module_does(
