@@ -101,8 +101,9 @@ def shift_polynomial(coefficients: np.ndarray, from_ref: float, to_ref: float) -
     return np.pad(shifted, (0, len(coefficients) - len(shifted)))
 
 
-def _model_cubic(ckpt: Checkpoint, source: str) -> tuple[np.ndarray, float, tuple[float, float]]:
-    """(c0..c3 in the model's unit, t_ref, clamp range) of a model that is a cubic of the temperature."""
+def _model_cubic(ckpt: Checkpoint, source: str, shown: str) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """(c0..c3 in the model's unit, t_ref, clamp range) of a model that is a cubic of the temperature
+    (``shown``: its name as the user knows it, auto's candidate or the method)."""
     model = ckpt.model
     if isinstance(model, Poly3Spec):
         return model.coefficients_mg.copy(), model.t_ref_c, model.temp_range_c
@@ -112,7 +113,7 @@ def _model_cubic(ckpt: Checkpoint, source: str) -> tuple[np.ndarray, float, tupl
         slope, intercept = float(model.slopes_mg_per_c[0]), float(model.intercepts_mg[0])
         return np.array([intercept + slope * t_ref, slope, 0.0, 0.0]), t_ref, (lo, hi)
     raise UserError(
-        f"{source}: method {ckpt.method!r} is not a cubic of the temperature; flight-stack parameters hold one "
+        f"{source}: method {shown!r} is not a cubic of the temperature; flight-stack parameters hold one "
         f"(use poly3, or pla with --intervals 1)"
     )
 
@@ -128,9 +129,11 @@ def load_channel_cubic(
 
     source = str(path)
     raw = load_checkpoint(path)
+    from trainer.selection import shown_name
+
     ckpt = parse_checkpoint(raw, source)
-    coefficients, t_ref, (lo, hi) = _model_cubic(ckpt, source)
     stats = TrainStats.of_checkpoint(raw)
+    coefficients, t_ref, (lo, hi) = _model_cubic(ckpt, source, shown_name(ckpt.method, stats))
     name = channel or stats.channel
     if not isinstance(name, str):
         raise UserError(

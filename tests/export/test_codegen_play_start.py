@@ -39,6 +39,7 @@ from trainer.checkpoint import load_checkpoint, load_model, save_model
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
+from trainer.errors import run_cli
 from trainer.fitting import fit_with_stats
 from trainer.greybox.compensator import PhysicsCompensator
 from trainer.greybox.stream import PhysicsStream
@@ -210,3 +211,28 @@ def test_auto_ships_the_room_start_on_the_bundled_gyro_x_and_it_beats_the_cubic_
         assert abs(fold.cold_rms - fold.warm_rms) < 0.01 * fold.warm_rms, i  # a cold start agrees with warm
         assert fold.warm_rms < 1.05 * min(cubic.folds[i].warm_rms, none.folds[i].warm_rms), i
     assert np.median([f.warm_rms for f in room.folds]) < 0.6 * np.median([f.warm_rms for f in cubic.folds])
+
+
+def test_a_flight_stack_export_refuses_it_by_the_name_auto_chose(
+    fitted: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "fit",
+        "--method",
+        "auto",
+        "--candidates",
+        "none,poly3,physics-branch-room",
+        "--channels",
+        "accel0_x",
+    ]
+    assert trainer_main([*argv, str(fitted["rec"]), "-o", str(tmp_path / "auto")]) == 0
+    model = tmp_path / "auto" / "accel0_x.pt"
+    assert load_checkpoint(model)["train_stats"]["selection"]["chosen"] == "physics-branch-room"
+    capsys.readouterr()
+    assert (
+        run_cli(codegen_main, ["export", str(model), "--format", "px4-params", "-o", str(tmp_path / "px4")])
+        != 0
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "method 'physics-branch-room' is not a cubic of the temperature" in err[0], err
+    assert not (tmp_path / "px4").exists()
