@@ -63,7 +63,10 @@ class GoldenPhysics(GoldenBase):
         tf = m.temp_frac
         v = self.values
         wide = {w.name: w.wide for t in m.terms for w in t.fixed.state}
-        play = play_words() if m.play_start_q is not None else frozenset()
+        start, play = (
+            m.play_start_q,
+            play_words(),
+        )  # the play operator's power-on value, when the model has one
         before = [t for t in m.terms if STREAMED[t.identifier].phase in (CHAIN, BRANCH)]
         after = [t for t in m.terms if t not in before]
         drift = np.empty(temp.size, dtype=np.int64)
@@ -76,7 +79,9 @@ class GoldenPhysics(GoldenBase):
             if not self.started:
                 self.started, self.temp_prev = 1, t
                 for name in self.present():
-                    v[name] = x << HI_BITS if wide[name] else (m.play_start_q if name in play else x)  # type: ignore[assignment]
+                    v[name] = (
+                        x << HI_BITS if wide[name] else (start if start is not None and name in play else x)
+                    )
             prev = (self.temp_prev - m.centre_mdegc) << tf
             s = IntSample(x, prev, t - self.temp_prev, tf, x, x)
             acc = sum(term.fixed.golden(term, v, s) for term in before)
