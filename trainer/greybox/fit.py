@@ -115,7 +115,7 @@ def add_trial(current: ModelFit, data: BlockData, effect: EffectConfig) -> Model
     return max([placed, *(f for f in wide if f is not None)], key=lambda f: f.loglik)
 
 
-def _at_bound(term: Term, data: BlockData) -> dict[str, tuple[float, float, float]]:
+def at_search_bound(term: Term, data: BlockData) -> dict[str, tuple[float, float, float]]:
     """``{nonlinear parameter: (value, search range low, high)}`` for each free one within
     :data:`BOUND_MARGIN` of an end of its search range (the run does not determine it)."""
     if term.fixed:
@@ -151,7 +151,7 @@ def _undetermined(trial: ModelFit, data: BlockData, identifier: str, scale: Chan
     index = max(i for i, t in enumerate(trial.terms) if t.identifier == identifier)
     term = trial.terms[index]
     definition = DEFINITIONS[identifier]
-    for name, (value, lo, hi) in _at_bound(term, data).items():
+    for name, (value, lo, hi) in at_search_bound(term, data).items():
         return f"{name} = {value:.4g} at the end of its search range {lo:g}..{hi:g}"
     design = build_design(trial.terms, data)
     linear = _owned(design, _least_squares(design, data), index)
@@ -271,7 +271,7 @@ def _fit(rec: Recording, structure: Structure) -> FittedPhysics:
         for j, name in enumerate(nonlinear[: len(term.nl)]):
             if name in params and not term.fixed:
                 sd[name] = _nonlinear_std(fit, data, index, j)
-        for name, (_, lo, hi) in _at_bound(term, data).items() if judged else ():
+        for name, (_, lo, hi) in at_search_bound(term, data).items() if judged else ():
             if name not in params:
                 continue
             shown = channel_param_name(name, unit)

@@ -20,20 +20,18 @@ from scipy.optimize import minimize_scalar
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
-from trainer.diagnose.api import build_blocks, channel_scale
+from trainer.diagnose.api import Term, build_blocks, channel_scale, search_bounds
 from trainer.errors import UserError
-from trainer.greybox.fit import FittedPhysics
+from trainer.greybox.fit import FittedPhysics, at_search_bound
 from trainer.greybox.structure import Structure
 from trainer.physics.catalogue import BACKBONE, DEFINITIONS
-from trainer.physics.catalogue.base import T_REF_C
+from trainer.physics.catalogue.base import T_REF_C, catalogue_params
+from trainer.physics.catalogue.bias_poly import POLY_SCALE_C
 from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.units import channel_param_name
 from trainer.physics.effects import EffectConfig, drift
 
-SCALE_C = 50.0  # the polynomial's columns in units of 50 degC: a well-conditioned least-squares problem
-POLY = ("c0_mg", "c1_mg_per_c", "c2_mg_per_c2", "c3_mg_per_c3")
 GRID_POINTS = 64
-BOUND_MARGIN = 0.01  # as the physics fit's: a value within 1 % of an end of its range is at the bound
 
 
 def fit_least_squares(
@@ -60,9 +58,9 @@ def fit_least_squares(
     held = rec.held_out()
     train = np.ones(len(out), dtype=bool) if held is None else ~held
     data = build_blocks(rec)
-    ((lo, hi),) = definition.finder.bounds(data)
-    d = (temp - T_REF_C) / SCALE_C
-    poly = np.column_stack([np.ones_like(d), d, d**2, d**3])
+    ((lo, hi),) = search_bounds(identifier, data)
+    u = (temp - T_REF_C) / POLY_SCALE_C
+    poly = np.column_stack([u**k for k in range(4)])  # the finder's backbone columns c0..c3
 
     def solve(value: float) -> tuple[float, np.ndarray, np.ndarray]:
         unit_term = drift(
@@ -83,24 +81,23 @@ def fit_least_squares(
     rss_best, beta, X = solve(value)
     dof = max(int(train.sum()) - X.shape[1], 1)
     sd = np.sqrt(np.maximum(np.diag((rss_best / dof) * np.linalg.pinv(X.T @ X)), 0.0))
-    per_degree = SCALE_C ** np.arange(4)
-    params = {amplitude: float(beta[4]), shape: value}
+    term = Term(identifier, (value,))
+    params = catalogue_params(definition, term, {amplitude: float(beta[4])})
+
+    def backbone(values: np.ndarray) -> dict[str, float]:
+        """Values of the columns c0..c3 as the catalogue's polynomial coefficients (the finder's mapping)."""
+        columns = {f"c{k}": float(v) for k, v in enumerate(values)}
+        return catalogue_params(DEFINITIONS[BACKBONE], Term(BACKBONE), columns)
+
     unit = channel_unit(rec)
     shown = channel_param_name(shape, unit)
-    reasons = []
-    if value - lo < BOUND_MARGIN * (hi - lo) or hi - value < BOUND_MARGIN * (hi - lo):
-        reasons.append(f"{shown} = {value:.4g} sits at the end of its search range {lo:g}..{hi:g}")
+    bound = f"{shown} = {value:.4g} sits at the end of its search range {lo:g}..{hi:g}"
+    reasons = [bound] if at_search_bound(term, data) else []
     outside = implausible(identifier, params, channel_scale(rec, data))
     return FittedPhysics(
-        effects=(
-            EffectConfig(BACKBONE, {k: float(v) for k, v in zip(POLY, beta[:4] / per_degree, strict=True)}),
-            EffectConfig(identifier, params),
-        ),
+        effects=(EffectConfig(BACKBONE, backbone(beta[:4])), EffectConfig(identifier, params)),
         nuisance=(),
-        std={
-            BACKBONE: {k: float(s) for k, s in zip(POLY, sd[:4] / per_degree, strict=True)},
-            identifier: {amplitude: float(sd[4])},
-        },
+        std={BACKBONE: backbone(sd[:4]), identifier: {amplitude: float(sd[4])}},
         at_bound=(f"{identifier}.{shown}",) if reasons else (),
         implausible=tuple(f"{identifier}.{channel_param_name(n, unit)}" for n in outside),
         blocks=int(train.sum()),
