@@ -64,14 +64,14 @@ def per_individual_loss(y: Tensor, targets: Tensor, loss: LossKind = "mse") -> T
     A NaN target is no target: the network runs through that step (its state carries on) and the
     step is not scored, so a cross-validation fold's imputed rows are never learned."""
     missing = torch.isnan(targets)
-    if not bool(missing.any()):
-        err = y - targets
-        mean = lambda v: v.flatten(1).mean(dim=1)  # noqa: E731
-    else:
-        scored = (~missing).expand_as(y)
-        err = torch.where(scored, y - torch.nan_to_num(targets), torch.zeros((), dtype=y.dtype))
-        count = scored.flatten(1).sum(dim=1).clamp(min=1).to(y.dtype)
-        mean = lambda v: v.flatten(1).sum(dim=1) / count  # noqa: E731
+    scored = None if not bool(missing.any()) else (~missing).expand_as(y)
+    err = y - targets if scored is None else torch.where(scored, y - torch.nan_to_num(targets), 0.0)
+
+    def mean(values: Tensor) -> Tensor:
+        if scored is None:
+            return values.flatten(1).mean(dim=1)
+        return values.flatten(1).sum(dim=1) / scored.flatten(1).sum(dim=1).clamp(min=1).to(values.dtype)
+
     if loss == "mse":
         return mean(err.square())
     if loss == "half_mse":  # MATLAB regressionLayer

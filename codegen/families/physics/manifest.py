@@ -46,10 +46,7 @@ def physics_manifest(model: QPhysics) -> dict[str, object]:
             "gains": [{"name": g.name, "q": g.q, "difference_bound": g.diff_bound} for g in model.gains],
         },
         "model_tag": model.tag,
-        "power_on": "filters start in equilibrium at the first sample; "
-        + (
-            "the play operator at T_pm (mid-branch)" if model.play_start_q is None else play_start_text(model)
-        ),
+        "power_on": f"filters start in equilibrium at the first sample; {play_start_text(model)}",
         "save_restore": "copy NAME_state_t; NAME_restore checks model_tag and keeps the hysteresis branch",
         "macs_per_sample": 3 + 2 * len(model.filters) + len(model.gains),
     }
