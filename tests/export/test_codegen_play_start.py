@@ -34,6 +34,7 @@ from codegen.quantize import ACCEL_PER_MG
 from codegen.render import render_template
 from codegen.verify import to_step_units
 from tests import testmodels as tm
+from tests.export.test_imu_physics import RATE_HZ, SEGMENTS  # the same 1 Hz cycle from 60 degC
 from tests.golden_checks import replay
 from trainer.checkpoint import load_checkpoint, load_model, save_model
 from trainer.cli import main as trainer_main
@@ -45,11 +46,8 @@ from trainer.greybox.compensator import PhysicsCompensator
 from trainer.greybox.stream import PhysicsStream
 from trainer.physics.effects import EffectConfig, drift
 
-RATE_HZ = 1.0
 FROM_C = 25.0
 NOISE_MG = 0.05
-SEGMENTS = ((300, 60.0, 60.0), (2100, 60.0, -10.0), (300, -10.0, -10.0), (2100, -10.0, 60.0),
-            (300, 60.0, 60.0), (2100, 60.0, -10.0))  # fmt: skip
 TRUTH = (
     EffectConfig(
         "bias_poly", {"c0_mg": 0.4, "c1_mg_per_c": 0.15, "c2_mg_per_c2": 1e-3, "c3_mg_per_c3": -5e-6}
