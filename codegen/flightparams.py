@@ -21,7 +21,7 @@ ArduPilot (``libraries/AP_InertialSensor/AP_InertialSensor_tempcal.cpp``, ``corr
 The sign is the same as ours (``compensated = raw - drift``), so the offset is the model's drift
 converted to the stack's unit. The constant term belongs to the stack's ordinary calibration
 (PX4 asks for an accelerometer calibration after the thermal one; ArduPilot keeps it in
-``INS_ACCn_OFFS`` at ``INS_ACCn_CALTEMP``), and a chamber recording's constant includes gravity,
+``INS_ACCOFFS_*``, ``INS_ACC2OFFS_*``, ... at ``INS_ACCn_CALTEMP``), and a chamber recording's constant includes gravity,
 so by default PX4's ``X0`` is 0: the offset is ``drift(T) - drift(TREF)``.
 """
 
@@ -87,6 +87,7 @@ class ChannelCubic:
     t_min_c: float
     t_max_c: float
     model_sha256: str
+    ahrs_orientation: int | None = None  # the training log's board rotation (ArduPilot), None: not noted
 
     @property
     def identity(self) -> bool:
@@ -151,7 +152,9 @@ def load_channel_cubic(
         raise UserError(f"{source}: the valid temperature range {lo:g} .. {hi:g} degC is empty")
     scale = TO_STACK_UNIT[parsed.unit]
     sha = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    return ChannelCubic(parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha)
+    return ChannelCubic(
+        parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha, stats.ahrs_orientation
+    )
 
 
 @dataclass(frozen=True)
@@ -342,6 +345,14 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
 
 def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
     """An ArduPilot parameter file (``NAME VALUE`` lines) of INS_TCALn_* sets, as tempcal_IMU.py writes."""
+    for c in channels:
+        if c.ahrs_orientation:
+            raise UserError(
+                f"{c.name}: fitted on a DataFlash log with AHRS_ORIENTATION={c.ahrs_orientation}, whose IMU axes "
+                "are the vehicle's, while INS_TCAL applies in the sensor frame: these coefficients would land on "
+                "the wrong axes; log the calibration run with AHRS_ORIENTATION=0 (the C module and PX4 "
+                "parameters take the model as it is)"
+            )
     groups = group_by_instance(channels)
     imus: dict[int, dict[str, SensorSet]] = defaultdict(dict)
     for group in groups:
@@ -357,7 +368,8 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
     lines = [
         "# IMU temperature calibration (mems-tdc codegen export --format ardupilot-parm)",
         "# Applied by AP_InertialSensor_tempcal.cpp: P(d) = (C1 + (C2 + C3 d) d) d * 1e-6, d = clamp(T) - 35,",
-        "# corrected = raw - P(T - 35) + P(CALTEMP - 35) (m/s^2, rad/s); the constant belongs to INS_ACCn_OFFS.",
+        "# corrected = raw - P(T - 35) + P(CALTEMP - 35) (m/s^2, rad/s); the constant belongs to",
+        "# INS_ACCOFFS_* (INS_ACC2OFFS_*, INS_ACC3OFFS_* for IMU 2 and 3), measured at INS_ACCn_CALTEMP.",
         "# ArduPilot hides INS_TCALn_* while INS_TCALn_ENABLE is 0, so a first load sets ENABLE and skips",
         "# the rest: refresh the parameters (or reboot), load this file again, reboot (ENABLE needs one),",
         "# then redo the accelerometer calibration.",

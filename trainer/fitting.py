@@ -53,6 +53,7 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
 
     Flight-stack parameters (``codegen export --format px4-params``) are keyed by them.
     """
+    from trainer.data.dataflash_reader import board_rotation
     from trainer.data.flightlog import parse_channel
 
     name = rec.meta.get("channel", "")
@@ -65,6 +66,8 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
     device_id = rec.meta.get(f"device_id_{channel.sensor}{channel.instance}", "")
     if device_id.isdigit():
         stats["device_id"] = int(device_id)
+    if (rotation := board_rotation(rec.meta)) is not None:
+        stats["ahrs_orientation"] = rotation
     return stats
 
 

@@ -79,6 +79,8 @@ class TrainStats:
     channel: str | None = field(default=None, metadata=_checked(TEXT))
     unit: str | None = field(default=None, metadata=_checked(TEXT))
     device_id: int | None = field(default=None, metadata=_checked(COUNT))
+    # ArduPilot's AHRS_ORIENTATION of a DataFlash recording (non-zero: vehicle axes, not the sensor's)
+    ahrs_orientation: int | None = field(default=None, metadata=_checked(COUNT))
     fit_residual_rms_mg: float | None = field(default=None, metadata=_checked(FINITE))
     # trainer.selection.selection_record: the cross-validation that chose an auto model
     selection: dict[str, Any] | None = field(default=None, metadata=_checked(DICT))

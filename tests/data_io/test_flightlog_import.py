@@ -152,6 +152,22 @@ def test_ulog_default_channel_is_accel0_z(tmp_path: Path, ulog_path: Path, ulog_
     assert rec.accel_mg.mean() == pytest.approx(-1000.0, abs=1.0)  # gravity as logged
 
 
+def test_ulog_gravity_removed_from_the_axis_in_both_its_columns(
+    tmp_path: Path, ulog_path: Path, ulog_data: dict
+) -> None:
+    """--remove-gravity takes 1 g off the imported axis wherever the recording holds it (accel_mg and
+    its named column are one axis: a fit of either reads the same values); the other axes keep theirs."""
+    rec = run_import(
+        ulog_path, "--channels", "accel0_x,accel0_z", "--remove-gravity", "nominal", "-o", tmp_path / "g.csv"
+    )
+    logged_mg = ulog_data["accel0"] * 1000.0 / G
+    assert rec.meta["channel"] == "accel0_z"
+    np.testing.assert_allclose(rec.columns["accel0_z_mg"], logged_mg[:, 2] + 1000.0, atol=1e-6)
+    np.testing.assert_array_equal(rec.columns["accel0_z_mg"], rec.accel_mg)
+    np.testing.assert_allclose(rec.columns["accel0_x_mg"], logged_mg[:, 0], atol=1e-6)
+    assert "accel0_z_mg" in rec.meta["gravity_removed"]
+
+
 def test_ulog_wrong_channel_lists_the_available_ones(tmp_path: Path, ulog_path: Path) -> None:
     message = import_error(tmp_path / "o.csv", ulog_path, "--channel", "accel2_z")
     assert "'accel2_z' is not in this log" in message

@@ -395,3 +395,44 @@ def test_px4_export_prints_the_republish_bound(tmp_path: Path, capsys: pytest.Ca
     steepest = float(np.max(np.abs(np.gradient(model.drift_at(dense), dense))))
     cubic = load_channel_cubic(cubic_model)
     assert lag_bound(cubic, lo, hi) == pytest.approx(steepest, rel=1e-4)
+
+
+@pytest.mark.parametrize("orientation", [0, 2])
+def test_ardupilot_parm_of_a_log_in_vehicle_axes_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], orientation: int
+) -> None:
+    """ArduPilot logs IMU values after the board rotation (AHRS_ORIENTATION) but applies INS_TCAL before
+    it: a model fitted on a rotated board's log would put its coefficients on the wrong axes, so the
+    .parm export refuses it in one line and writes nothing; an unrotated board's log exports."""
+    from tests.flightlogs import DataFlashWriter
+
+    writer = DataFlashWriter()
+    writer.parm(1000, "AHRS_ORIENTATION", float(orientation))
+    temp_c = np.linspace(10.0, 50.0, 400)
+    for row, t in enumerate(temp_c):
+        accel = np.array([0.01 * (t - 30.0), 0.0, -G + 1e-4 * (t - 30.0) ** 2])
+        writer.imu(1_000_000 + 500_000 * row, 0, np.array([0.001 * (t - 30.0), 0.0, 0.0]), accel, t)
+    log = writer.write(tmp_path / "rotated.bin")
+    recording, fitted = tmp_path / "rec.npz", tmp_path / "fit"
+    assert trainer_main(["import", str(log), "--channels", "all", "-o", str(recording)]) == 0
+    said = capsys.readouterr().out
+    assert (f"AHRS_ORIENTATION={orientation}" in said) == bool(orientation)
+    assert (
+        trainer_main(["fit", "--method", "poly3", "--channels", "all", str(recording), "-o", str(fitted)])
+        == 0
+    )
+    stats = load_model(fitted / "accel0_x.pt")[1]["train_stats"]
+    assert stats.get("ahrs_orientation") == (orientation or None)
+    parm = tmp_path / "parm"
+    argv = ["export", str(fitted), "--channels", "all", "--format"]
+    if orientation:
+        with pytest.raises(
+            UserError, match=r"AHRS_ORIENTATION=2, whose IMU axes are the vehicle's.*sensor frame"
+        ):
+            codegen_main([*argv, "ardupilot-parm", "-o", str(parm)])
+        assert not parm.exists()
+    else:
+        assert codegen_main([*argv, "ardupilot-parm", "-o", str(parm)]) == 0
+        values = read_ardupilot_parm(next(parm.glob("*.parm")))
+        # the x axis' drift 0.01 m/s^2 per degC about 30 degC, re-expanded about 35 degC (x 1e6)
+        assert values["INS_TCAL1_ACC1_X"] == pytest.approx(1e4, rel=1e-3)

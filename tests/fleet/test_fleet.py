@@ -237,6 +237,37 @@ def test_bad_file_is_one_line_in_its_unit_and_the_fleet_goes_on(fleet: tuple[Pat
     assert f"- **{BAD}** (load): {error.error}" in (run.out_dir / "report.md").read_text()
 
 
+def test_a_run_too_flat_for_its_methods_fails_at_load_as_trainer_fit_refuses_it(
+    tmp_path: Path, client: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A unit whose chamber did not run (0.2 degC) is refused as ``trainer fit`` refuses the same file,
+    before its diagnosis fits a cubic to noise, and nothing of it is exported; the others go on."""
+    from trainer.data.recording import Recording
+    from trainer.data.recording_io import write_recording
+
+    manifest = write_fleet(tmp_path, 1, defects={})
+    run1 = read_recording(tmp_path / "runs" / "U01_run1.npz")
+    flat_temp = 25.0 + 0.1 * np.sin(np.linspace(0.0, 6.0, len(run1)))
+    flat = Recording({**run1.columns, "temp_c": flat_temp}, dict(run1.meta), run1.source)
+    flat_path = tmp_path / "runs" / "FLAT_run1.npz"
+    write_recording(flat.without_truth(), flat_path)
+    data = load_toml(manifest)
+    data["unit"].append({"id": "FLAT", "recordings": ["runs/FLAT_run1.npz", "runs/U01_run2.npz"]})
+    manifest.write_text(tomli_w.dumps(data))
+    run = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+
+    assert run.results["U01"].status == "ok"
+    result = run.results["FLAT"]
+    assert result.status == "failed" and not result.retry
+    (error,) = result.errors
+    assert error.stage == "load" and "\n" not in error.error
+    assert not (run.out_dir / "units" / "FLAT" / "poly3").exists()
+    assert run_cli(main, ["fit", "--method", "poly3", str(flat_path), "-o", str(tmp_path / "m.pt")]) == 2
+    refusal = capsys.readouterr().err.strip().removeprefix("error: ")
+    assert "temperature spans" in refusal and refusal in error.error
+    assert not (tmp_path / "m.pt").exists()
+
+
 def test_restart_skips_finished_units(
     fleet: tuple[Path, FleetRun], capsys: pytest.CaptureFixture[str]
 ) -> None:

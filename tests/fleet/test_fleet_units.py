@@ -234,3 +234,34 @@ def test_a_result_reads_back_as_written_and_older_results_still_read(tmp_path: P
     assert UnitResult.read(path) == dataclasses.replace(read, channel=None, unit=None, import_notes=())
     path.write_text('{"id": "A1"}')  # damaged: read as no result (the unit is computed again)
     assert UnitResult.read(path) is None
+
+
+def test_a_channel_of_a_multi_channel_recording_is_chosen_with_import_channel(
+    tmp_path: Path, client: Any
+) -> None:
+    """A spec recording with several channels and no one-axis columns: ``import = "--channel NAME"``
+    fits that channel in its unit; without it the unit fails in one line naming the field to give."""
+    from trainer.data.recording import Recording
+    from trainer.data.recording_io import write_recording
+
+    rng = np.random.default_rng(6)
+    u = (TEMP_C - 30.0) / 20.0
+    columns = {
+        "time_s": np.arange(N) / RATE_HZ,
+        "accel0_z_mg": -1000.0 + 5.0 * u + 2.0 * u**3 + 0.05 * rng.normal(size=N),
+        "accel0_temp_c": TEMP_C,
+        "gyro0_x_dps": 0.1 * u + 0.05 * u**2 + 0.002 * rng.normal(size=N),
+        "gyro0_temp_c": TEMP_C + GYRO_TEMP_OFFSET_C,
+    }
+    path = tmp_path / "imu.npz"
+    write_recording(Recording(columns, {"sample_rate_hz": f"{RATE_HZ:g}"}, "imu"), path)
+    units = '[[unit]]\nid = "G"\nrecordings = ["LOG"]\nimport = "--channel gyro0_x"\n'
+    units += '[[unit]]\nid = "N"\nrecordings = ["LOG"]\n'
+    run = run_fleet(_manifest(tmp_path, path, units), tmp_path / "out", progress=False, client=client)
+    chosen = run.results["G"]
+    assert chosen.status == "ok", chosen.errors
+    assert (chosen.channel, chosen.unit) == ("gyro0_x", "deg/s")
+    stats = load_checkpoint(run.out_dir / "units" / "G" / "poly3" / "model.pt")["train_stats"]
+    assert stats["temp_min_c"] == pytest.approx(TEMP_C[0] + GYRO_TEMP_OFFSET_C)  # the gyro's own thermometer
+    (error,) = run.results["N"].errors
+    assert error.stage == "load" and 'import = "--channel NAME"' in error.error and "gyro0_x" in error.error

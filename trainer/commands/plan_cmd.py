@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from trainer.options.seed import seed
 from trainer.plan.limits import ChamberLimits
 from trainer.plan.summary import Target
 
@@ -103,10 +105,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     proof.add_argument(
         "--screen-draws",
         type=int,
-        default=DEFAULT_SCREEN,
-        help="draws that screen a candidate (default %(default)s)",
+        help=f"draws that screen a candidate (default {DEFAULT_SCREEN}, at most --draws)",
     )
-    proof.add_argument("--seed", type=int, default=0, help="seed of the draws (default %(default)s)")
+    proof.add_argument("--seed", type=seed, default=0, help="seed of the draws (default %(default)s)")
     proof.add_argument(
         "--rate",
         type=float,
@@ -229,6 +230,8 @@ def _stderr(line: str) -> None:
 def _check(args: argparse.Namespace) -> None:
     from trainer.errors import UserError
 
+    if args.screen_draws is None:
+        args.screen_draws = min(DEFAULT_SCREEN, args.draws)
     for name, value, low in (
         ("--draws", args.draws, 1),
         ("--screen-draws", args.screen_draws, 1),
@@ -236,8 +239,13 @@ def _check(args: argparse.Namespace) -> None:
     ):
         if value < low:
             raise UserError(f"{name} must be >= {low}, got {value}")
-    if not args.rate > 0:
-        raise UserError(f"--rate must be > 0 Hz, got {args.rate:g}")
+    if args.screen_draws > args.draws:
+        raise UserError(
+            f"--screen-draws {args.screen_draws} is more than --draws {args.draws}: screening is the first "
+            "draws of a profile's proof"
+        )
+    if not (args.rate > 0 and math.isfinite(args.rate)):
+        raise UserError(f"--rate must be a finite number > 0 Hz, got {args.rate:g}")
     if not 0 < args.identify_rate <= 1 or not args.tolerance > 0 or not args.vs_cubic > 0:
         raise UserError("--identify-rate must be in (0, 1], --tolerance and --vs-cubic > 0")
 

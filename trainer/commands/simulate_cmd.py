@@ -9,6 +9,7 @@ import time
 from dataclasses import replace
 
 from trainer.data.recording_io import recording_format, write_recording
+from trainer.options.seed import seed
 from trainer.physics.config import load_config, with_overrides
 from trainer.physics.input_presets import INPUT_PRESETS, input_preset
 from trainer.physics.profiles import BUILTIN_PROTOCOLS
@@ -28,16 +29,6 @@ def _positive(unit: str) -> type[float]:
     return parse  # type: ignore[return-value]
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a non-negative integer")
-    return value
-
-
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Register ``trainer simulate``."""
     parser = subparsers.add_parser(
@@ -52,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--protocol", choices=tuple(BUILTIN_PROTOCOLS), help="override the configured protocol"
     )
-    parser.add_argument("--seed", type=_seed, required=True, help="random seed (non-negative integer)")
+    parser.add_argument("--seed", type=seed, required=True, help="random seed (non-negative integer)")
     parser.add_argument("-o", "--output", required=True, help="output recording, .csv or .npz")
     parser.add_argument("--config", help="physics configuration TOML (default: the packaged default.toml)")
     parser.add_argument(

@@ -12,7 +12,7 @@ So the ``IMU`` messages of such a log hold the residual drift, and a fit of them
 ``INS_TCAL`` would replace the real calibration with that residual. :func:`remove_correction` adds
 the logged correction back; ``codegen export --format ardupilot-parm`` writes the same convention
 from the constants declared here, so exporting a fit of the restored data reproduces the stack's
-view. The ordinary calibration applied after it (``INS_ACCn_OFFS``, scale) is not undone: the
+view. The ordinary calibration applied after it (``INS_ACCOFFS_*``, ``INS_ACC2OFFS_*``, ..., scale) is not undone: the
 offset is a constant, and a scale of 1.001 changes the restored drift by 0.1 %.
 """
 

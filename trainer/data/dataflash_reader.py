@@ -35,6 +35,17 @@ from trainer.data.flightlog import (
 )
 from trainer.errors import UserError
 
+# The recording's metadata key of a non-zero AHRS_ORIENTATION: "<rotation> (IMU axes are vehicle axes, ...)".
+ORIENTATION_KEY = "ahrs_orientation"
+
+
+def board_rotation(meta: dict[str, str]) -> int | None:
+    """The ArduPilot board rotation a recording's axes carry (``AHRS_ORIENTATION``; None: not noted,
+    the sensor's own axes)."""
+    words = meta.get(ORIENTATION_KEY, "").split()
+    return int(words[0]) if words and words[0].isdigit() else None
+
+
 IMU_NAME = re.compile(r"IMU([23]?)")
 DEVICE_ID_PARAM = re.compile(r"INS_(ACC|GYR)([23]?)_ID|BARO([1-3])_DEVID")
 
@@ -107,7 +118,12 @@ def read_dataflash(path: str | Path) -> FlightLog:
                 LogChannel("gyro", instance, axis, time_us, gyro, temp_c, ids.get(("gyro", instance)))
             )
     if orientation:
-        notes["ahrs_orientation"] = f"{orientation} (IMU axes are vehicle axes, not sensor axes)"
+        notes[ORIENTATION_KEY] = f"{orientation} (IMU axes are vehicle axes, not sensor axes)"
+        notices.append(
+            f"{source}: AHRS_ORIENTATION={orientation}: the IMU axes logged are the vehicle's, not the sensor's; "
+            "INS_TCAL applies in the sensor frame, so codegen export --format ardupilot-parm refuses models of "
+            "these channels (the C module and PX4 parameters are unaffected)"
+        )
     return FlightLog(source, "dataflash", sorted_channels(channels), notes, notices)
 
 

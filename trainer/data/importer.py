@@ -480,7 +480,9 @@ def resample_columns(columns: dict[str, np.ndarray], rate: float) -> dict[str, n
 
 
 def _remove_gravity(columns: dict[str, np.ndarray], options: ImportOptions, source: str) -> str | None:
-    """Subtract gravity from accel_mg only (extra axes keep it); returns what was subtracted."""
+    """Subtract gravity from accel_mg and from the named column it was read from when the recording
+    keeps that too (a flight log's ``accel0_z_mg``: one axis, one value); other axes keep it. Returns
+    what was subtracted, from which columns."""
     if options.remove_gravity == "none":
         return None
     accel = columns["accel_mg"]
@@ -495,7 +497,11 @@ def _remove_gravity(columns: dict[str, np.ndarray], options: ImportOptions, sour
             )
         offset = math.copysign(1000.0, mean)
     columns["accel_mg"] = accel - offset
-    return f"{options.remove_gravity}, subtracted {offset:.10g} mg"
+    changed = ["accel_mg"]
+    if options.accel and options.accel != "accel_mg" and options.accel in columns:
+        columns[options.accel] = columns[options.accel] - offset
+        changed.append(options.accel)
+    return f"{options.remove_gravity}, subtracted {offset:.10g} mg from {' and '.join(changed)}"
 
 
 def _mapping_note(options: ImportOptions, delimiter: str) -> str:

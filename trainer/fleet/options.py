@@ -27,6 +27,9 @@ if TYPE_CHECKING:
     from trainer.data.importer import ImportOptions
 
 
+RECORDING_OPTIONS = ("channel", "accept_implausible")  # the import options a recording (.csv/.npz) takes
+
+
 def split(text: str, where: str) -> list[str]:
     """Shell-like words of ``text``; an unbalanced quote is a one-line error."""
     try:
@@ -65,6 +68,36 @@ class UnitImport:
     def parse(cls, text: str, where: str) -> UnitImport:
         return cls(text, where, _import_args(text, where))
 
+    @property
+    def accepts_implausible(self) -> bool:
+        """``--accept-implausible`` among the unit's options: a warning instead of a refusal, as in
+        ``trainer import`` and ``trainer fit``."""
+        return bool(self.args.accept_implausible)
+
+    def _only_recording_options(self) -> bool:
+        """Whether the options are all a recording of the spec (.csv/.npz) takes: ``--channel NAME`` (one
+        channel of a multi-channel recording) and ``--accept-implausible``; any column option makes the
+        file a foreign one, imported as ``trainer import`` would."""
+        defaults = vars(_import_args("", self.where))
+        given = {name for name, value in vars(self.args).items() if value != defaults.get(name)}
+        return given <= set(RECORDING_OPTIONS)
+
+    def _recording(self, path: Path) -> Recording:
+        """A recording of the spec, or the one channel ``--channel`` names of a multi-channel one."""
+        from trainer.data.channels import channel_view, recording_channels, select_channels
+        from trainer.data.recording_io import read_recording
+
+        rec = read_recording(path)
+        if self.args.channel is not None:
+            (channel,) = select_channels(rec, (self.args.channel,))
+            return channel_view(rec, channel)
+        if not {"accel_mg", "temp_c"} <= set(rec.columns) and (named := recording_channels(rec)):
+            raise UserError(
+                f"{path}: a multi-channel recording without the one-axis columns accel_mg and temp_c: a unit "
+                f'fits one channel; give the unit import = "--channel NAME" ({", ".join(named)})'
+            )
+        return rec
+
     def _fail(self, path: Path, exc: UserError) -> UserError:
         return UserError(f"{self.where} {self.text!r} for {path}: {exc}")
 
@@ -86,7 +119,7 @@ class UnitImport:
         kind = log_kind(path)
         if kind is not None:
             self._log_options(path, kind)
-        elif self.text:
+        elif self.text and not self._is_recording(path):
             try:
                 self.text_options()
             except UserError as exc:
@@ -96,9 +129,8 @@ class UnitImport:
         """The recording of ``path`` and the import's notes (corrections undone, warnings accepted)."""
         from trainer.data.flightlog_import import import_flight_log
         from trainer.data.importer import import_foreign
-        from trainer.data.recording_io import read_recording
 
-        checks = Plausibility(accept=bool(self.args.accept_implausible))
+        checks = Plausibility(accept=self.accepts_implausible)
         kind = log_kind(path)
         if kind is not None:
             imported = import_flight_log(path, self._log_options(path, kind), checks)
@@ -110,7 +142,7 @@ class UnitImport:
                 )
             (rec,) = imported.recordings.values()
             return rec, [*imported.notices, *checks.warnings]
-        if self.text:
+        if self.text and not self._is_recording(path):
             try:
                 options = self.text_options()
             except UserError as exc:
@@ -121,7 +153,11 @@ class UnitImport:
                 f"{path}: not a recording (.csv/.npz) or a flight log; give the unit 'import' options for a "
                 "foreign file"
             )
-        return read_recording(path), []
+        return self._recording(path), []
+
+    def _is_recording(self, path: Path) -> bool:
+        """A .csv/.npz file with no column option: a recording of the spec."""
+        return path.suffix.lower() in (".csv", ".npz") and self._only_recording_options()
 
 
 def fit_methods() -> tuple[str, ...]:

@@ -35,6 +35,7 @@ from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError
 from trainer.fleet.cluster import pinned
 from trainer.fleet.manifest import FleetSettings, UnitSpec
+from trainer.fleet.options import UnitImport
 from trainer.fleet.result import FAILED, OK, RESULT_FILE, Failure, UnitResult, finite, json_bytes
 from trainer.train_stats import TrainStats
 
@@ -130,11 +131,27 @@ def _guarded(stage: str, work: Callable[[], T]) -> T | Failure:
 # ------------------------------------------------------------------------------------- load
 
 
-def _read(path: Path, unit: UnitSpec) -> tuple[Recording, list[str]]:
-    from trainer.fleet.options import UnitImport
+def _importer(unit: UnitSpec) -> UnitImport:
+    return unit.importer or UnitImport.parse(unit.import_text, f"unit {unit.id}: import")
 
-    importer = unit.importer or UnitImport.parse(unit.import_text, f"unit {unit.id}: import")
-    return importer.read(path)
+
+def _read(path: Path, unit: UnitSpec) -> tuple[Recording, list[str]]:
+    return _importer(unit).read(path)
+
+
+def _training_checks(train: Recording, unit: UnitSpec) -> list[str]:
+    """``trainer fit``'s checks of the training part for every method of the unit (rate, ranges,
+    gravity, temperature span): a run too short in temperature for one of them fails the unit in
+    that command's line, before anything is diagnosed or fitted (the diagnosis fits the cubic's
+    backbone, whose coefficients a flat run leaves free). Warnings when the unit accepts them."""
+    from trainer import methods
+    from trainer.data.plausibility import check_training
+
+    accept = _importer(unit).accepts_implausible
+    warnings: list[str] = []
+    for name in dict.fromkeys((methods.CUBIC, *unit.methods)):
+        warnings += check_training(train, methods.get(name), accept=accept).warnings
+    return list(dict.fromkeys(warnings))
 
 
 @pinned
@@ -160,10 +177,12 @@ def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
                     f"{unit.recordings[1]}: channel {other.heading}, but the unit's first run "
                     f"{unit.recordings[0].name} is {first.heading}: both runs must be of one channel"
                 )
+            notes += tuple(f"{unit.recordings[0].name}: {w}" for w in _training_checks(train, unit))
             where = f"second run {unit.recordings[1].name}"
             return UnitData(train, second, None, where, time.perf_counter() - started, notes)
         holdout = parse_holdout(settings.holdout)
         train, _ = split(recordings[0], holdout)
+        notes += tuple(f"{unit.recordings[0].name}: {w}" for w in _training_checks(train, unit))
         where = f"{unit.recordings[0].name}, {holdout.describe()} (--holdout {settings.holdout})"
         return UnitData(train, recordings[0], holdout, where, time.perf_counter() - started, notes)
 

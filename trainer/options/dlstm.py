@@ -13,6 +13,7 @@ from trainer.dlstm.realtime import (
     PAPER_TRAIN_SMOOTHING_S,
 )
 from trainer.errors import UserError
+from trainer.options.seed import seed
 
 # Size estimates for the budget, at the size of the paper's run (2 h at the 1 s network step):
 # a longer recording only costs more, so a refusal here is never wrong.
@@ -35,7 +36,7 @@ def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--cycles", type=int, default=200, help="SSA/ISSA cycles, ending condition two (200)")
     group.add_argument("--target-loss", type=float, default=None, help="stop early at this training MSE")
-    group.add_argument("--seed", type=int, default=0, help="seed of every random step (0)")
+    group.add_argument("--seed", type=seed, default=0, help="seed of every random step (0)")
     group.add_argument(
         "--train-smoothing",
         type=float,

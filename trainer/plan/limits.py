@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+from trainer.data.plausibility import TEMP_MAX_C, TEMP_MIN_C
 from trainer.errors import UserError
 
 
@@ -18,6 +20,12 @@ class ChamberLimits:
     max_duration_s: float = 6 * 3600.0
 
     def __post_init__(self) -> None:
+        for name, value in (("low", self.low_c), ("high", self.high_c)):
+            if not TEMP_MIN_C <= value <= TEMP_MAX_C:  # NaN fails too
+                raise UserError(
+                    f"--range: {name} {value:g} degC is outside {TEMP_MIN_C:g} .. {TEMP_MAX_C:g} degC, the "
+                    "temperatures a MEMS sensor and a thermal chamber work at (Kelvin or Fahrenheit?)"
+                )
         if not self.high_c > self.low_c:
             swapped = " (swapped? --range LOW_C HIGH_C)" if self.high_c < self.low_c else ""
             raise UserError(f"--range: high {self.high_c:g} must be above low {self.low_c:g} degC{swapped}")
@@ -26,5 +34,5 @@ class ChamberLimits:
             ("--settling", self.settling_s),
             ("--max-hours", self.max_duration_s),
         ):
-            if not value > 0:
-                raise UserError(f"{name} must be > 0, got {value:g}")
+            if not (value > 0 and math.isfinite(value)):
+                raise UserError(f"{name} must be a finite number > 0, got {value:g}")
