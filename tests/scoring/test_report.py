@@ -70,6 +70,21 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
         assert "## Verdict: FAIL" in text and f"`{key}`" in text
 
 
+def test_the_guard_says_whether_its_figures_are_in_sample(unit: dict[str, Path], tmp_path: Path) -> None:
+    """Scored on its own training run the guard's figures are in-sample; on another run (seed 4) they
+    are not, and the document says which."""
+    other = tmp_path / "other.npz"
+    sim = ["simulate", "--seed", "4", "--duration", "240", "--rate", "20", "-o", str(other)]
+    assert trainer_main(sim) == 0
+    assert _report(unit, tmp_path / "own", None) == 0
+    own = (tmp_path / "own" / "report.md").read_text()
+    assert "all samples (in-sample) drift left" in own and "recording not trained on" not in own
+    args = ["report", str(unit["model"]), "--recording", str(other), "-o", str(tmp_path / "new")]
+    assert run_cli(trainer_main, args) == 0
+    new = (tmp_path / "new" / "report.md").read_text()
+    assert "all samples of a recording not trained on drift left" in new and "in-sample" not in new
+
+
 def test_a_model_that_carries_an_undetermined_parameter_asks_for_a_review(
     unit: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -10,11 +10,14 @@ import math
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, raise_write_error
 from trainer.train_stats import TrainStats
+
+if TYPE_CHECKING:
+    from trainer.data.recording import Recording
 
 EXIT_FAILED = 1  # the unit fails a threshold (bad input stays 2, run_cli)
 ANY_RANGE_C = (-math.inf, math.inf)  # scores that need no in-range part
@@ -374,6 +377,8 @@ def run(args: argparse.Namespace) -> int:
             if bench_path is not None and entry is None:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
+                holds_training_rows=warning is not None,
+                scored_range_c=_temp_range(held if holdout is not None else rec),
                 channel=channel,
                 unit=UNIT_LABELS[channel_unit(rec)],
                 model_path=str(model_path),
@@ -412,3 +417,7 @@ def run(args: argparse.Namespace) -> int:
     line = signoff.summary_line(unit, reports, thresholds)
     print(f"{line}; report written to {out_dir}/report.md")
     return EXIT_FAILED if signoff.unit_verdict(reports, thresholds).failed else 0
+
+
+def _temp_range(rec: Recording) -> tuple[float, float]:
+    return (float(rec.temp_c.min()), float(rec.temp_c.max()))

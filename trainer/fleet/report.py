@@ -2,7 +2,9 @@
 
 Sections: the sign-off table (one row per unit, the verdict of ``trainer report``,
 :func:`trainer.scoring.verdict.verdict`: FAIL when a stage failed, an export did not verify or a
-method leaves more drift than no compensation on the scored data, REVIEW when out of family),
+method leaves more drift than no compensation on the scored data, REVIEW when out of family, when a
+model carries a parameter its run does not determine or when a unit is scored entirely outside its
+trained range),
 the failed units with their one-line errors, the exports that
 failed to verify, the out-of-family units with the reason, the effects the finder named and how
 often, and the distributions of each method's drift left and of every fitted physical parameter.
@@ -39,7 +41,16 @@ from trainer.fleet.result import Failure, UnitResult, json_bytes
 from trainer.fleet.stages import DRIFT_LEFT_KEYS, SMOOTHING_S
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
-from trainer.scoring.verdict import FAIL, PASS, REVIEW, Figures, Verdict, undetermined_reason, verdict
+from trainer.scoring.verdict import (
+    FAIL,
+    PASS,
+    REVIEW,
+    Figures,
+    Verdict,
+    outside_trained_range,
+    undetermined_reason,
+    verdict,
+)
 from trainer.stale_files import remove_stale_parts, report_removed
 
 FIGURES_DIR = "figures"
@@ -102,7 +113,13 @@ def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -
         for m, s in methods.items()
         if (reason := undetermined_reason(f"{uid} / {m}", s.get("undetermined", [])))
     ]
-    return verdict(figures, checks, [*undetermined, *(f.reason for f in findings)])
+    outside = [
+        reason
+        for m, s in methods.items()
+        if isinstance(s.get("coverage"), int | float)
+        and (reason := outside_trained_range(f"{uid} / {m}", float(s["coverage"])))
+    ]
+    return verdict(figures, checks, [*undetermined, *outside, *(f.reason for f in findings)])
 
 
 def _mg(value: Any, unit: str = "") -> str:
@@ -261,7 +278,8 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResul
         f"# Fleet report: {manifest.source.name}",
         "",
         f"{len(units)} units; {len(ok)} processed without error; sign-off: {tally[PASS]} PASS, "
-        f"{tally[REVIEW]} REVIEW (out of family), {tally[FAIL]} FAIL (a stage failed, an export did not "
+        f"{tally[REVIEW]} REVIEW (out of family, a parameter its run does not determine, or scored "
+        f"entirely outside the trained range), {tally[FAIL]} FAIL (a stage failed, an export did not "
         "verify or a method leaves more drift than no compensation).",
         f"Methods: {', '.join(methods)}. Drift left: RMS of the compensated output (smoothed over "
         f"{SMOOTHING_S:g} s) about one constant, scored on each unit's second run or its held-out part "
@@ -275,7 +293,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResul
     common = f" ({labels[0]})" if len(labels) == 1 else ""
     header = ["unit", "sign-off", "channel", "scored in trained range", "effects named"]
     header += [f"drift left {m}{common}" for m in methods] + [f"drift left uncompensated{common}"]
-    header += [f"C verified {m}" for m in methods] + ["failed", "out of family"]
+    header += [f"C verified {m}" for m in methods] + ["failed", "review"]
     rows = []
     for u in units:
         result = results.get(u)
@@ -288,7 +306,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResul
         row.append(_mg(next((v for v in raw if v is not None), None), cell_unit))
         row += [verify_state(summaries.get(m, {})) for m in methods]
         row.append("; ".join(decided[u].failed) or "-")
-        row.append("; ".join(f.reason for f in by_unit[u]) or ("-" if u in ok else "n/a (failed)"))
+        row.append("; ".join(decided[u].review) or ("-" if u in ok else "n/a (failed)"))
         rows.append(row)
     lines += [markdown_table(header, rows), ""]
     lines += _coverage_lines(units, results)

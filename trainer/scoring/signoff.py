@@ -35,6 +35,7 @@ from trainer.scoring.verdict import (
     NO_VERDICT,
     Figures,
     Verdict,
+    outside_trained_range,
     undetermined_reason,
     verdict,
     worse_on_a_segment,
@@ -94,6 +95,10 @@ class ChannelReport:
     figures: list[str] = field(default_factory=list)
     shown: str = ""  # the name the reader knows it by (auto's candidate: poly2, physics-branch), else method
     undetermined: list[str] = field(default_factory=list)  # Compensator.undetermined(): a review reason
+    # whether the recording holds the model's training rows (trainer.data.holdout.overlap_warning): without
+    # a hold-out, the figures are then in-sample; otherwise they are of another run
+    holds_training_rows: bool = True
+    scored_range_c: tuple[float, float] | None = None  # the temperatures the figures are of (None: not kept)
 
     @property
     def name(self) -> str:
@@ -131,8 +136,14 @@ class ChannelReport:
                 noise_floor=part.noise_floor_mg,
                 unit=self.unit,
             )
+        if self.scores.held_out is not None:
+            basis = "held-out"
+        elif self.holds_training_rows:
+            basis = "all samples (in-sample)"
+        else:
+            basis = "all samples of a recording not trained on"
         return Figures(
-            "held-out" if self.scores.held_out is not None else "all samples (in-sample)",
+            basis,
             part.model.rms_mg,
             part.uncompensated.rms_mg,
             math.nan if part.model_in_range is None else part.model_in_range.rms_mg,
@@ -149,6 +160,9 @@ class ChannelReport:
         training run's)."""
         undetermined = undetermined_reason(self.label, self.undetermined)
         reasons = [] if undetermined is None else [undetermined]
+        if self.crossval is None and self.scored_range_c is not None:
+            outside = outside_trained_range(self.label, coverage(self.scored_range_c, self.trained_range_c))
+            reasons += [] if outside is None else [outside]
         if self.crossval is None:
             return reasons
         from trainer.selection import cross_validated_figures

@@ -98,10 +98,18 @@ def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
                 f"worse than uncompensated: {where} drift left {model:.4g} {f.unit} RMS > {raw:.4g} {f.unit} "
                 "without the model",
             )
+    if math.isclose(f.model_rms, f.uncompensated_rms, rel_tol=TIE_RELATIVE):
+        return Guard(
+            subject,
+            True,
+            f"no better than uncompensated: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS, the same "
+            "as without the model (a model holding its edge value outside its trained range shifts the "
+            "output by a constant)",
+        )
     return Guard(
         subject,
         True,
-        f"better than uncompensated: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS <= "
+        f"better than uncompensated: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS < "
         f"{f.uncompensated_rms:.4g} {f.unit} without the model",
     )
 
@@ -122,6 +130,18 @@ def undetermined_reason(label: str, undetermined: Sequence[str]) -> str | None:
     if not undetermined:
         return None
     return f"{label} carries what its training run does not determine: {'; '.join(undetermined)}"
+
+
+def outside_trained_range(label: str, coverage: float) -> str | None:
+    """A review reason when none of the scored temperatures lies inside the trained range (coverage
+    0): there every model holds its edge value, so the figures judge that constant, not the model."""
+    if coverage > 0.0:
+        return None
+    return (
+        f"{label}: scored entirely outside its trained temperature range (coverage 0 %): there it holds its "
+        "edge value, so the figures say nothing of the model; score a part inside the range (another "
+        "--holdout, or a second run)"
+    )
 
 
 def worse_on_a_segment(
