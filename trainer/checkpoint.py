@@ -24,6 +24,7 @@ import io
 import os
 import pickle
 import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -91,7 +92,11 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
             "(arguments swapped? the model comes before the recording)"
         )
     try:
-        checkpoint = torch.load(p, map_location="cpu", weights_only=True)
+        with (
+            warnings.catch_warnings()
+        ):  # torch warns about raw pickles; the refusal below says it in one line
+            warnings.simplefilter("ignore")
+            checkpoint = torch.load(p, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         # torch's message advises loading with weights_only=False: never forward that advice.
         found = _UNSUPPORTED_GLOBAL.search(str(exc))
@@ -184,21 +189,28 @@ def _first_non_finite(value: Any, name: str) -> str | None:
     return None
 
 
-def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any]]:
-    """The fitted compensator and its checkpoint dict."""
-    checkpoint = load_checkpoint(path)
+def model_of(checkpoint: dict[str, Any], path: str | os.PathLike[str]) -> Compensator:
+    """The compensator of a validated checkpoint dict, its payload read strictly
+    (:mod:`trainer.payload`): every command that reads a model (evaluate, report, codegen) refuses the
+    same hand edits in the same line."""
     cls = methods.REGISTRY[checkpoint["method"]].cls
     try:
-        model = cls.from_payload(checkpoint["payload"])
+        return cls.from_payload(checkpoint["payload"])
     except KeyError as exc:
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} (key {exc} is missing)"
         ) from None
     # wrong types or shapes (RuntimeError: torch's, e.g. the truth value of a tensor where a flag belongs)
-    except (TypeError, ValueError, IndexError, AttributeError, RuntimeError) as exc:
+    except (TypeError, ValueError, IndexError, AttributeError, RuntimeError, UserError) as exc:
         raise UserError(
             f"{path}: field 'payload' is malformed for method {checkpoint['method']!r} ({exc})"
         ) from None
+
+
+def load_model(path: str | os.PathLike[str]) -> tuple[Compensator, dict[str, Any]]:
+    """The fitted compensator and its checkpoint dict."""
+    checkpoint = load_checkpoint(path)
+    model = model_of(checkpoint, path)
     if "offset" in checkpoint:
         model.offset = OffsetRecord.from_dict(checkpoint["offset"])
     return model, checkpoint

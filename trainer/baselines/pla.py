@@ -21,6 +21,7 @@ from typing import Any, Self
 import numpy as np
 import torch
 
+from trainer import payload as payload_fields
 from trainer.baselines.base import TemperatureCompensator
 from trainer.budget import FLOAT_BYTES, check_memory, check_time
 from trainer.errors import UserError
@@ -103,15 +104,11 @@ class PiecewiseLinear(TemperatureCompensator):
 
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
-        model = cls(int(payload["n_intervals"]))
-        model.split_points_c = payload["split_points_c"].double().numpy()
-        model.slopes_mg_per_c = payload["slopes_mg_per_c"].double().numpy()
-        model.intercepts_mg = payload["intercepts_mg"].double().numpy()
-        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
-        if model.slopes_mg_per_c.shape != (model.n_intervals,) or model.split_points_c.shape != (
-            model.n_intervals - 1,
-        ):
-            raise ValueError("table sizes do not match n_intervals")
+        model = cls(payload_fields.count(payload, "n_intervals", 1))
+        model.split_points_c = payload_fields.table(payload, "split_points_c", model.n_intervals - 1)
+        model.slopes_mg_per_c = payload_fields.table(payload, "slopes_mg_per_c", model.n_intervals)
+        model.intercepts_mg = payload_fields.table(payload, "intercepts_mg", model.n_intervals)
+        model.temp_range_c = payload_fields.temp_range(payload)
         return model
 
 

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from scipy.ndimage import median_filter
 
+from trainer import payload as payload_fields
 from trainer.baselines.base import TemperatureCompensator
 from trainer.errors import UserError
 from trainer.reference import reference_temperature
@@ -116,14 +117,12 @@ class CubicPolynomial(TemperatureCompensator):
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
         model = cls(
-            remove_median=bool(payload["remove_median"]),
-            median_kernel=int(payload["median_kernel"]),
-            n_bins=int(payload["n_bins"]),
-            degree=int(payload.get("degree", 3)),
+            remove_median=payload_fields.flag(payload, "remove_median"),
+            median_kernel=payload_fields.count(payload, "median_kernel", 1),
+            n_bins=payload_fields.count(payload, "n_bins", 1),
+            degree=payload_fields.count(payload, "degree", 0, 3) if "degree" in payload else 3,
         )
-        model.coefficients = payload["coefficients_mg"].double().numpy()
-        if model.coefficients.shape != (4,):
-            raise ValueError("coefficients_mg must hold 4 values")
-        model.t_ref_c = float(payload["t_ref_c"])
-        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        model.coefficients = payload_fields.table(payload, "coefficients_mg", 4)
+        model.t_ref_c = payload_fields.number(payload["t_ref_c"], "payload.t_ref_c")
+        model.temp_range_c = payload_fields.temp_range(payload)
         return model

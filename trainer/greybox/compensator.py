@@ -20,6 +20,7 @@ from typing import Any, Self
 
 import numpy as np
 
+from trainer import payload as payload_fields
 from trainer.compensator import Compensator
 from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording import Recording
@@ -29,7 +30,7 @@ from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.least_squares import fit_least_squares
 from trainer.greybox.stream import PhysicsModel, play_start_within
 from trainer.greybox.terms import parse_effects
-from trainer.physics.catalogue import BACKBONE
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_params
 from trainer.physics.effects import EffectConfig, drift
 
@@ -155,17 +156,41 @@ class PhysicsCompensator(Compensator):
 
     @classmethod
     def from_payload(cls, payload: dict[str, Any]) -> Self:
-        model = cls(with_warmup=bool(payload["with_warmup"]))
+        model = cls(with_warmup=payload_fields.flag(payload, "with_warmup"))
         model.effects_option = str(payload["effects_option"])
-        model.effects = tuple(
-            EffectConfig(str(i), {k: float(v) for k, v in p.items()}) for i, p in payload["effects"]
-        )
-        model.temp_range_c = (float(payload["temp_range_c"][0]), float(payload["temp_range_c"][1]))
+        model.effects = _effects_of(payload["effects"])
+        model.temp_range_c = payload_fields.temp_range(payload)
         start = payload.get("play_start_c")  # absent from checkpoints written before it existed: half-way
-        model.play_start_c = None if start is None else float(start)
+        model.play_start_c = None if start is None else payload_fields.number(start, "payload.play_start_c")
         model.report = dict(payload["report"])
         cls.undetermined_in(payload)  # its flags are what the sign-off reads: checked on loading
         return model
+
+
+def _effects_of(raw: Any) -> tuple[EffectConfig, ...]:
+    """``payload.effects``: ``[identifier, {parameter: value}]`` pairs, each a catalogue effect with
+    exactly its catalogue parameters (a missing one would change the exported tables without a word,
+    an unknown effect fail deep inside the drift formula)."""
+    if not isinstance(raw, list | tuple) or not raw:
+        raise ValueError(f"payload.effects must be a list of [effect, parameters] pairs, got {raw!r}")
+    effects = []
+    for index, item in enumerate(raw):
+        where = f"payload.effects[{index}]"
+        if not (isinstance(item, list | tuple) and len(item) == 2 and isinstance(item[1], dict)):
+            raise ValueError(f"{where} must be [effect, {{parameter: value}}], got {item!r}")
+        identifier, params = item
+        definition = DEFINITIONS.get(identifier) if isinstance(identifier, str) else None
+        if definition is None:
+            raise ValueError(f"{where}: {identifier!r} is not a catalogue effect")
+        expected = [p.name for p in definition.params]
+        if sorted(params) != sorted(expected):
+            raise ValueError(
+                f"{where} ({identifier}) has parameters {sorted(params)}; the catalogue's are {expected}"
+            )
+        effects.append(
+            EffectConfig(identifier, {k: payload_fields.number(v, f"{where}.{k}") for k, v in params.items()})
+        )
+    return tuple(effects)
 
 
 def undetermined_terms(fitted: FittedPhysics, rejected: dict[str, str]) -> dict[str, str]:

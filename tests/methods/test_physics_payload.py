@@ -1,0 +1,87 @@
+"""A hand-edited physics ``model.pt`` is refused in the same one line by every command that reads
+it: an unknown effect, a missing parameter, text where a number or a flag belongs, a reversed clamp
+range. Before, evaluate and report failed with a traceback deep in the drift formula, and codegen
+wrote C whose tables silently lacked the parameter."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.cli import main as codegen_main
+from tests.testmodels import physics_checkpoint, save_checkpoint
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import run_cli
+
+
+def _recording() -> Recording:
+    temp = np.concatenate([np.linspace(40.0, -10.0, 300), np.linspace(-10.0, 40.0, 300)])
+    accel = 0.0002 * (temp - 15.0) ** 3 + np.random.default_rng(0).normal(0.0, 0.05, temp.size)
+    columns = {"time_s": np.arange(temp.size, dtype=float), "temp_c": temp, "accel_mg": accel}
+    return Recording(columns, {"sample_rate_hz": "1"}, "payload")
+
+
+def _edited(rec: Recording, edit: str) -> dict:
+    checkpoint = physics_checkpoint(rec)
+    payload = checkpoint["payload"]
+    effects = payload["effects"]
+    if edit == "unknown effect":
+        effects[1] = ["quantum_foam", dict(effects[1][1])]
+    elif edit == "missing parameter":
+        effects[0] = [effects[0][0], {k: v for k, v in effects[0][1].items() if k != "c1_mg_per_c"}]
+    elif edit == "parameter as text":
+        effects[0][1]["c1_mg_per_c"] = "0.1"
+    elif edit == "flag as text":
+        payload["with_warmup"] = "yes"
+    elif edit == "reversed range":
+        payload["temp_range_c"] = [40.0, -10.0]
+    return checkpoint
+
+
+EDITS = {
+    "unknown effect": "payload.effects[1]: 'quantum_foam' is not a catalogue effect",
+    "missing parameter": "payload.effects[0] (bias_poly) has parameters",
+    "parameter as text": "payload.effects[0].c1_mg_per_c must be a finite number, got '0.1'",
+    "flag as text": "payload.with_warmup must be true or false, got 'yes'",
+    "reversed range": "payload.temp_range_c must be increasing, got [40, -10]",
+}
+
+
+@pytest.mark.parametrize("edit", list(EDITS))
+def test_an_edited_physics_model_is_one_line_in_every_command(
+    edit: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = _recording()
+    recording = tmp_path / "rec.csv"
+    write_recording(rec, recording)
+    intact, model = tmp_path / "intact.pt", tmp_path / "edited.pt"
+    save_checkpoint(physics_checkpoint(rec), intact)
+    save_checkpoint(_edited(rec, edit), model)
+    assert (
+        run_cli(trainer_main, ["evaluate", str(intact), str(recording), "--out-dir", str(tmp_path / "ok")])
+        == 0
+    )
+    capsys.readouterr()
+    commands = {
+        "evaluate": (
+            trainer_main,
+            ["evaluate", str(model), str(recording), "--out-dir", str(tmp_path / "ev")],
+        ),
+        "report": (
+            trainer_main,
+            ["report", str(model), "--recording", str(recording), "-o", str(tmp_path / "rp")],
+        ),
+        "export": (codegen_main, ["export", str(model), "-o", str(tmp_path / "c")]),
+    }
+    lines = set()
+    for main, argv in commands.values():
+        assert run_cli(main, argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "Traceback" not in err and EDITS[edit] in err and str(model) in err
+        lines.add(err)
+    assert len(lines) == 1  # the same refusal everywhere
+    assert not any((tmp_path / name).exists() for name in ("ev", "rp", "c"))
