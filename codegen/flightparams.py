@@ -44,6 +44,7 @@ from trainer.data.ardupilot_tcal import INSTANCES as ARDUPILOT_INSTANCES  # INS_
 from trainer.data.ardupilot_tcal import PREFIX as ARDUPILOT_PREFIX
 from trainer.data.ardupilot_tcal import SCALE as ARDUPILOT_SCALE
 from trainer.data.ardupilot_tcal import TEMP_REF_C as ARDUPILOT_TEMP_REF_C  # (the import undoes it)
+from trainer.data.channels import UNIT_LABELS, unit_of_channel_name
 from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
 from trainer.data.plausibility import WIDER_RUN_HINT
 from trainer.errors import UserError
@@ -145,6 +146,13 @@ def load_channel_cubic(
     if parsed is None:
         raise UserError(
             f"{source}: channel {name!r} is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
+        )
+    fitted_unit = stats.unit or unit_of_channel_name(stats.channel)
+    if channel is not None and parsed.unit != fitted_unit:
+        raise UserError(
+            f"{source}: --channel {channel} is in {UNIT_LABELS[parsed.unit]}, but the model was fitted on a "
+            f"channel in {UNIT_LABELS.get(fitted_unit, fitted_unit)} ({stats.channel or 'accel_mg'}): a model "
+            "of another sensor"
         )
     if device_id is None and channel is None:
         device_id = stats.device_id

@@ -42,7 +42,10 @@ SANITIZER_FLAGS = (
 
 
 def find_compiler(preferred: str | None = None) -> str:
-    """``preferred``, else $CC, else cc/gcc/clang on PATH."""
+    """``preferred`` (``--cc``: that one or a one-line refusal, never another), else $CC, else
+    cc/gcc/clang on PATH."""
+    if preferred and not shutil.which(preferred):
+        raise UserError(f"--cc {preferred}: no such compiler on PATH")
     for candidate in (preferred, os.environ.get("CC"), "cc", "gcc", "clang"):
         if candidate and shutil.which(candidate):
             return candidate

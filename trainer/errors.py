@@ -113,14 +113,33 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
         return 130
 
 
-def check_output_path(path: str | os.PathLike[str]) -> None:
-    """Fail early (before long work) when ``path`` cannot be written; creates nothing."""
+def check_output_path(path: str | os.PathLike[str], *, inputs: Sequence[str | os.PathLike[str]] = ()) -> None:
+    """Fail early (before long work) when ``path`` cannot be written, is a directory, or is one of
+    the command's ``inputs`` (writing it would destroy what it is made from); creates nothing."""
     target = Path(path)
+    if target.is_dir():
+        raise UserError(f"{target}: a directory, not a file name for the output")
+    for source in inputs:
+        if _same_path(target, Path(source)):
+            raise UserError(
+                f"{target}: is also the input {source}; writing it would destroy the input (arguments swapped? "
+                "give another output name)"
+            )
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise UserError(f"{target}: output directory {parent} does not exist")
     if not os.access(parent, os.W_OK) or (target.exists() and not os.access(target, os.W_OK)):
         raise UserError(f"{target}: not writable")
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    """The same file, by its resolved path, or by device and inode when both exist (a hard link)."""
+    try:
+        if a.exists() and b.exists():
+            return a.samefile(b)
+        return a.resolve() == b.resolve()
+    except OSError:
+        return a == b
 
 
 def _current_umask() -> int:

@@ -191,16 +191,18 @@ def test_ardupilot_parm_matches_the_model_drift(tmp_path: Path, xyz_models: dict
             )
 
 
-def test_gyro_channel_is_converted_to_rad_per_s(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
-    # the same model declared as a gyroscope axis: its unit is deg/s, the stacks' rad/s
-    written = export(
-        tmp_path / "g", "px4-params", xyz_models["y"], "--channel", "gyro1_y", "--device-id", "77"
+def test_gyro_channel_is_converted_to_rad_per_s(tmp_path: Path) -> None:
+    # a model of a gyroscope axis: its unit is deg/s, the stacks' rad/s
+    meta = {"channel": "gyro1_y", "unit": "dps"}
+    gyro = fit(
+        chamber_recording(tmp_path / "g.csv", axis_offset_mg=0.5, meta=meta, seed=4), tmp_path / "g.pt"
     )
+    written = export(tmp_path / "g", "px4-params", gyro, "--device-id", "77")
     params = read_px4_params(written)
     assert params["TC_G_ENABLE"] == 1 and params["TC_G1_ID"] == 77 and "TC_A_ENABLE" not in params
-    temp = grid(xyz_models["y"])
-    drift, drift_range = model_drift(xyz_models["y"], temp)
-    at_ref, _ = model_drift(xyz_models["y"], np.array([params["TC_G1_TREF"]]))
+    temp = grid(gyro)
+    drift, drift_range = model_drift(gyro, temp)
+    at_ref, _ = model_drift(gyro, np.array([params["TC_G1_TREF"]]))
     offset_dps = np.degrees(px4_offset(params, "TC_G1", 1, temp).astype(float))
     np.testing.assert_allclose(offset_dps, drift - at_ref[0], rtol=0, atol=1e-6 * drift_range)
 
@@ -212,12 +214,17 @@ def test_export_is_deterministic_and_refuses_what_a_stack_cannot_hold(
     assert export(tmp_path / "b", "px4-params", *xyz_models.values()).read_bytes() == first
     rec = chamber_recording(tmp_path / "r.csv", axis_offset_mg=0.0, meta={}, seed=9)
     pla = fit(rec, tmp_path / "pla.pt", "pla")
+    baro_meta = {"channel": "baro0", "unit": "pa"}
+    baro = fit(
+        chamber_recording(tmp_path / "b.csv", axis_offset_mg=101325.0, meta=baro_meta, seed=5),
+        tmp_path / "b.pt",
+    )
     messages = []
     for args in (
         [pla],  # ten lines are not one cubic
         [fit(rec, tmp_path / "nochan.pt")],  # no channel recorded
         [tmp_path / "nochan.pt", "--channel", "accel0_x"],  # PX4 needs the device id
-        [xyz_models["x"], "--channel", "baro0", "--format", "ardupilot-parm"],  # INS_TCAL: IMUs only
+        [baro, "--format", "ardupilot-parm"],  # INS_TCAL: IMUs only
         [xyz_models["x"], "--channel", "accel3_x", "--format", "ardupilot-parm"],  # INS_TCAL1..3
     ):
         argv = ["export", *map(str, args), "-o", str(tmp_path / "out")]
@@ -325,9 +332,9 @@ def test_the_physical_bound_is_two_metres_per_second_squared(tmp_path: Path) -> 
         export(tmp_path / f"ok-{fmt}", fmt, models[180.0])
         message = refused(tmp_path, models[230.0], "--format", fmt)
         assert "moves by 2.26 m/s^2 over 0.00 .. 80.00 degC" in message and "(2 m/s^2)" in message
-    message = refused(
-        tmp_path, models[180.0], "--channel", "gyro0_z", "--device-id", "7", "--format", "px4-params"
-    )
+    gyro_meta = {"channel": "gyro0_z", "unit": "dps"}
+    gyro = fit(ramp_recording(tmp_path / "g.csv", temp, 180.0 * temp / 80.0, gyro_meta), tmp_path / "g.pt")
+    message = refused(tmp_path, gyro, "--device-id", "7", "--format", "px4-params")
     assert f"moves by {np.radians(180.0):.3g} rad/s" in message and "a gyroscope's offset" in message
 
 
@@ -436,3 +443,27 @@ def test_ardupilot_parm_of_a_log_in_vehicle_axes_is_refused(
         values = read_ardupilot_parm(next(parm.glob("*.parm")))
         # the x axis' drift 0.01 m/s^2 per degC about 30 degC, re-expanded about 35 degC (x 1e6)
         assert values["INS_TCAL1_ACC1_X"] == pytest.approx(1e4, rel=1e-3)
+
+
+def test_a_channel_of_another_unit_than_the_model_s_is_refused(
+    tmp_path: Path, xyz_models: dict[str, Path]
+) -> None:
+    """--channel renames the axis a model is written for; naming a gyroscope for an accelerometer
+    model (mg) would write milli-g as rad/s, so it is refused in one line and nothing is written."""
+    out = tmp_path / "params"
+    argv = [
+        "export",
+        str(xyz_models["x"]),
+        "--format",
+        "px4-params",
+        "--device-id",
+        str(DEVICE_ID),
+        "-o",
+        str(out),
+    ]
+    with pytest.raises(
+        UserError, match=r"--channel gyro0_x is in deg/s, but the model was fitted on a channel in mg"
+    ):
+        codegen_main([*argv, "--channel", "gyro0_x"])
+    assert not out.exists()
+    assert codegen_main([*argv, "--channel", "accel1_x"]) == 0

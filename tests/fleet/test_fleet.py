@@ -426,3 +426,14 @@ def test_separate_dask_cluster_gives_identical_results(tmp_path: Path) -> None:
     for name in names:
         if not name.endswith("timing.json"):
             assert (local / name).read_bytes() == (remote / name).read_bytes(), name
+
+
+def test_a_scheduler_that_is_not_an_address_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    manifest = write_fleet(tmp_path, 1, defects={})
+    argv = ["fleet", str(manifest), "-o", str(tmp_path / "out"), "--scheduler", "notaurl", "--quiet"]
+    assert run_cli(main, argv) == 2
+    err = capsys.readouterr().err
+    assert "--scheduler 'notaurl': not a scheduler address" in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()

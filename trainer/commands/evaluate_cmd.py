@@ -76,6 +76,7 @@ def drift_lines(result: Any) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
+    from trainer.atomic_dir import check_output_directory
     from trainer.checkpoint import load_model
     from trainer.data.channels import model_view, relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
@@ -92,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    check_output_directory(args.out_dir)  # an existing file there: one line, before any work
     model, checkpoint = load_model(args.model)
     stats = TrainStats.of_checkpoint(checkpoint)
     # the model's own channel (gyro0_x of a multi-channel file), never the file's accel_mg

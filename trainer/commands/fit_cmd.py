@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from trainer import methods
 from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
 from trainer.options.channels import add_channels_option
+from trainer.options.methods import NO_OPTIONS, options_not_applying
 from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.selection import AUTO, CANDIDATES, candidate_list
 
@@ -52,12 +54,21 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.channels import channel_unit
     from trainer.data.plausibility import check_training
-    from trainer.data.recording_io import read_recording
+    from trainer.data.recording_io import RECORDING_SUFFIXES, read_recording
     from trainer.errors import UserError, check_output_path
     from trainer.selection import fit_with_selection
 
     if args.candidates is not None and args.method != AUTO:
         raise UserError("--candidates applies to --method auto")
+    own = NO_OPTIONS if args.method == AUTO else methods.get(args.method).options
+    every = [(m.name, m.options) for m in methods.entries() if m.in_fit_cli]
+    if stray := options_not_applying(args, own, every):
+        option, owners = next(iter(stray.items()))
+        raise UserError(
+            f"{option} does not apply to --method {args.method}: it is an option of {', '.join(owners)}"
+            + (f" (likewise {', '.join(list(stray)[1:])})" if len(stray) > 1 else "")
+            + "; leave it out, or choose that method"
+        )
     options = (
         {"candidates": args.candidates}
         if args.method == AUTO
@@ -68,7 +79,12 @@ def run(args: argparse.Namespace) -> int:
         from trainer.commands.fit_channels import fit_channels
 
         return fit_channels(args, options, policy)
-    check_output_path(args.output)  # fail before a long training run, not after it
+    check_output_path(args.output, inputs=[args.train])  # fail before a long training run, not after it
+    if Path(args.output).suffix.lower() in RECORDING_SUFFIXES:
+        raise UserError(
+            f"{args.output}: a recording's name ({Path(args.output).suffix}) for the model file; a model is "
+            "written as .pt (arguments swapped? the recording comes first, -o names the model)"
+        )
     train = read_recording(args.train)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
     model, stats = fit_with_selection(args.method, train, options, policy, log=progress_log(args))

@@ -9,6 +9,7 @@ mapped by the column options.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 from trainer.data.flightlog import KIND_NAMES, log_kind
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         imported = LogImport({})
         outputs = {Path(args.output): _import_text(args, checks)}
-    _write_all(outputs)
+    _write_all(outputs, [args.foreign])
     for notice in imported.notices:
         print(f"note: {notice}")
     checks.print_warnings()
@@ -76,10 +77,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_all(outputs: dict[Path, Recording]) -> None:
+def _write_all(outputs: dict[Path, Recording], inputs: Sequence[str]) -> None:
     """Write every recording or none: a failure removes the ones already written."""
     for path in outputs:
-        check_output_path(path)
+        check_output_path(path, inputs=inputs)
     written: list[Path] = []
     try:
         for path, rec in outputs.items():

@@ -34,10 +34,13 @@ from trainer.data.flightlog import (
     parse_channel,
 )
 from trainer.data.flightlog import STANDARD_GRAVITY as STANDARD_GRAVITY  # re-exported for callers
-from trainer.data.plausibility import Plausibility
+from trainer.data.plausibility import RATE_MAX_HZ, Plausibility
 from trainer.data.recording import Recording, require_rows
 from trainer.data.recording_io import JITTER_LIMIT, csv_time_decimals, find_time_problem
 from trainer.errors import UserError
+
+# a resampled recording holds at most this many rows (the paper's 2 h at 200 Hz is 1.44 million)
+RESAMPLED_ROWS_MAX = 50_000_000
 
 TIME_UNIT_SECONDS: dict[str, float | None] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "index": None}
 ACCEL_UNIT_TO_MG: dict[str, float] = {"m/s^2": MG_PER_MPS2, "g": 1000.0, "mg": 1.0}
@@ -452,7 +455,15 @@ def _retime_rate(time: np.ndarray, table: Table, time_column: str) -> float:
 def _resample_rate(resample: float | str, time: np.ndarray, source: str) -> float:
     if resample == "auto":
         return (len(time) - 1) / float(time[-1])
-    return float(resample)
+    rate = float(resample)
+    rows = float(time[-1] - time[0]) * rate + 1
+    if rate > RATE_MAX_HZ or rows > RESAMPLED_ROWS_MAX:
+        raise UserError(
+            f"{source}: --resample {rate:g} Hz would make {rows:.4g} rows of a {float(time[-1] - time[0]):g} s run "
+            f"(at most {RATE_MAX_HZ / 1e3:g} kHz and {RESAMPLED_ROWS_MAX:.0e} rows: the rate is in Hz, "
+            f"the run's own is {(len(time) - 1) / float(time[-1] - time[0]):.4g} Hz)"
+        )
+    return rate
 
 
 def _jitter_summary(time: np.ndarray) -> str:

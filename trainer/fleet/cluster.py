@@ -75,6 +75,11 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
             raise UserError(
                 f"--scheduler {scheduler}: cannot connect ({' '.join(str(exc).split())})"
             ) from None
+        except (ValueError, TypeError) as exc:  # distributed's parser of the address
+            raise UserError(
+                f"--scheduler {scheduler!r}: not a scheduler address, such as tcp://host:8786 "
+                f"({' '.join(str(exc).split())})"
+            ) from None
         with client:
             yield client
         return

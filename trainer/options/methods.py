@@ -40,6 +40,31 @@ class OptionGroup:
 
 NO_OPTIONS = OptionGroup()
 
+# options that act on the command rather than on a method's fit (progress lines: auto's log too)
+COMMAND_WIDE = frozenset({"quiet"})
+
+
+def option_defaults(group: OptionGroup) -> dict[str, Any]:
+    """``{dest: default}`` of the options ``group`` adds (read off a parser it fills)."""
+    parser = argparse.ArgumentParser(add_help=False)
+    group.add_arguments(parser)
+    return vars(parser.parse_args([]))
+
+
+def options_not_applying(
+    args: argparse.Namespace, own: OptionGroup, others: list[tuple[str, OptionGroup]]
+) -> dict[str, list[str]]:
+    """``{--option: [methods it belongs to]}`` for the options given on the command line (a value
+    other than the default) that ``own`` does not have: a user who passes ``--effects`` to poly3
+    expects it to act. ``others``: (method name, its group) of every method."""
+    mine = option_defaults(own)
+    given: dict[str, list[str]] = {}
+    for name, group in others:
+        for dest, default in option_defaults(group).items():
+            if dest not in mine and dest not in COMMAND_WIDE and getattr(args, dest, default) != default:
+                given.setdefault("--" + dest.replace("_", "-"), []).append(name)
+    return given
+
 
 def _add_intervals(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--intervals", type=int, default=10, help="pla: number of temperature intervals (10)")
