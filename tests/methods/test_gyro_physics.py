@@ -194,7 +194,8 @@ def test_a_deg_per_s_diagnosis_json_names_parameters_in_dps(tmp_path: Path) -> N
 
 
 def test_a_pascal_channel_is_diagnosed_in_pa_with_ranges_from_its_own_drift(tmp_path: Path) -> None:
-    doc = _cli_json(simulate(_one_loop("baro0", "pa", 101325.0, 1.5, 6.0, 0.5), 8), "baro0", tmp_path)
+    # the simulator reads the standard atmosphere as a barometer's true input: c0 is its offset only
+    doc = _cli_json(simulate(_one_loop("baro0", "pa", -20.0, 1.5, 6.0, 0.5), 8), "baro0", tmp_path)
     assert doc["channel"]["unit"] == "pa" and doc["channel"]["label"] == "Pa"
     named = {e["effect"]: e for e in doc["left_out"]}
     assert "hysteresis_offset" in named, f"named {sorted(named)}"

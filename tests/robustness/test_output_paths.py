@@ -48,3 +48,19 @@ def test_an_output_that_cannot_be_written_there_is_one_line(
     assert message in err and err.count("\n") == 1 and "Traceback" not in err
     assert rec.read_bytes() == before
     assert not (tmp_path / "m.csv").exists() and not any((tmp_path / "out.csv").iterdir())
+
+
+def test_a_constant_output_and_cr_only_line_ends_are_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two inputs that used to pass or mislead: an output column that never varies (fitted as a
+    perfect, meaningless model) and a file whose lines end in CR alone (read as one comment line)."""
+    lines = valid_lines()
+    constant = [*lines[:2], *(",".join([*row.split(",")[:2], "1.0"]) for row in lines[2:])]
+    (tmp_path / "const.csv").write_text("\n".join(constant) + "\n")
+    (tmp_path / "cr.csv").write_text("\r".join(lines) + "\r")
+    for name, message in (("const.csv", "holds 1 in every row"), ("cr.csv", "end in CR alone")):
+        argv = ["fit", "--method", "poly3", str(tmp_path / name), "-o", str(tmp_path / "m.pt")]
+        assert run_cli(trainer_main, argv) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1 and not (tmp_path / "m.pt").exists()

@@ -129,6 +129,11 @@ def _read_preamble(
             _check_delimiter(names, source, line, delimiter, other_delimiter_fix)
             return _Preamble(line, names, end + 1)
         pos, line = end + 1, line + 1
+    if b"\r" in data and b"\n" not in data:
+        raise UserError(
+            f"{source}: its lines end in CR alone (an old Mac text file), so it reads as one line; "
+            "convert the line ends to LF or CRLF"
+        )
     raise UserError(f"{source}: no header line (the file is empty or holds only comments)")
 
 

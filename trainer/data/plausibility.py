@@ -108,17 +108,24 @@ class Plausibility:
         )
 
     def recording_ranges(
-        self, columns: dict[str, np.ndarray], accel_unit: str, source: str, skip: tuple[str, ...] = ()
+        self,
+        columns: dict[str, np.ndarray],
+        accel_unit: str,
+        source: str,
+        skip: tuple[str, ...] = (),
+        output_column: str = "accel_mg",
     ) -> None:
         """Every measured column against its sensor's range, every temperature column against
-        the plausible temperatures (``accel_mg`` holds ``accel_unit``: a one-channel view)."""
+        the plausible temperatures (``accel_mg`` holds ``accel_unit``: a one-channel view, whose
+        data came from the file's ``output_column``, the name a refusal gives)."""
         for name, values in columns.items():
             if not values.size or name in skip:
                 continue
             data = _DATA_COLUMN.fullmatch(name)
             if name == "accel_mg" or data is not None:
                 unit = accel_unit if name == "accel_mg" else data.group(1) if data else accel_unit
-                self.sensor_range(values, unit, f"{source}: column {name!r}")
+                shown = output_column if name == "accel_mg" else name
+                self.sensor_range(values, unit, f"{source}: column {shown!r}")
             elif name == "temp_c" or _TEMP_COLUMN.fullmatch(name):
                 self.temperature(values, f"{source}: column {name!r}", at_import=False)
 
@@ -168,9 +175,18 @@ def check_training(
     checks = Plausibility(accept)
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
-    checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), where)
-    if rec.meta.get("unit", "mg") == "mg":  # a gyroscope or barometer view holds no gravity
+    unit = rec.meta.get("unit", "mg")
+    output_column = f"{rec.meta['channel']}_{unit}" if "channel" in rec.meta else "accel_mg"
+    checks.recording_ranges(rec.columns, unit, where, output_column=output_column)
+    if unit == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
+    output = np.asarray(rec.accel_mg)
+    output_name = "column 'accel_mg'" if "channel" not in rec.meta else f"channel {rec.meta['channel']}"
+    if output.size and float(np.ptp(output)) == 0.0:
+        checks.problem(
+            f"{where}: {output_name} holds {float(output[0]):g} in every row: no sensor output varies so "
+            "little (the wrong column, or a sensor that was not read?)"
+        )
     checks.temperature_span(
         rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column {temp_column!r}"
     )

@@ -285,6 +285,8 @@ def _npz_bytes(archive: np.lib.npyio.NpzFile) -> float:
 
 def _read_npz(path: str | Path) -> Recording:
     source = str(path)
+    if Path(path).is_dir():
+        raise UserError(f"{source}: is a directory, not a file")
     if not Path(path).is_file():
         raise UserError(f"{source}: no such file")
     try:

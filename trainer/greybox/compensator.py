@@ -30,7 +30,7 @@ from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.least_squares import fit_least_squares
 from trainer.greybox.stream import PhysicsModel, play_start_within
 from trainer.greybox.terms import parse_effects
-from trainer.physics.catalogue import BACKBONE, DEFINITIONS
+from trainer.physics.catalogue import BACKBONE, EFFECTS
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_params
 from trainer.physics.effects import EffectConfig, drift
 
@@ -179,7 +179,7 @@ def _effects_of(raw: Any) -> tuple[EffectConfig, ...]:
         if not (isinstance(item, list | tuple) and len(item) == 2 and isinstance(item[1], dict)):
             raise ValueError(f"{where} must be [effect, {{parameter: value}}], got {item!r}")
         identifier, params = item
-        definition = DEFINITIONS.get(identifier) if isinstance(identifier, str) else None
+        definition = EFFECTS.get(identifier) if isinstance(identifier, str) else None
         if definition is None:
             raise ValueError(f"{where}: {identifier!r} is not a catalogue effect")
         expected = [p.name for p in definition.params]

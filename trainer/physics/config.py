@@ -101,8 +101,8 @@ class ChannelConfig:
     It shares the recording's temperature chain (``T_die``, ``temp_c``) and has its own effects
     and noise in its own unit, written in the TOML with the channel's parameter names
     (``amp_dps``) and held here with the catalogue's (``amp_mg``), so that one formula
-    (:func:`trainer.physics.effects.drift`) serves every channel. Its true input is zero (a static
-    chamber test).
+    (:func:`trainer.physics.effects.drift`) serves every channel. Its true input is a static
+    chamber test's (:data:`trainer.physics.simulate.STATIC_INPUT`).
     """
 
     name: str  # gyro0_x, baro0: the recording format's channel name

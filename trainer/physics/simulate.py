@@ -83,10 +83,16 @@ def channel_rngs(seed: int, name: str) -> dict[str, np.random.Generator]:
     return {term: np.random.default_rng(child) for term, child in zip(NOISE, children, strict=True)}
 
 
+# The true input of a further channel in a static chamber test: a barometer reads the ambient
+# pressure (the standard atmosphere at sea level, ISO 2533), every other axis rests at zero.
+STATIC_INPUT = {"pa": 101325.0}
+
+
 def _channel_columns(
     channel: ChannelConfig, seed: int, t: np.ndarray, T_die: np.ndarray, rate: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """A further channel's data and ground-truth columns (true input zero: a static chamber test)."""
+    """A further channel's data and ground-truth columns: a static chamber test, whose true input is
+    :data:`STATIC_INPUT` (a barometer that read 0 Pa would be refused as no barometer's output)."""
     n, dt = t.size, float(t[1] - t[0])
     breakdown = drift(channel.effects, t, T_die, g_in_mg=0.0, dT_die_dt_c_per_min=rate)
     rngs = channel_rngs(seed, channel.name)
@@ -95,9 +101,10 @@ def _channel_columns(
         noise += noise_term(term.identifier, term.params, n, dt, rngs[term.identifier])
     total = np.ascontiguousarray(breakdown.total, dtype=np.float64)
     truth = truth_columns(channel.name, channel.unit)
+    true_input = np.full(n, STATIC_INPUT.get(channel.unit, 0.0))
     return {
-        channel.column: total + noise,
-        truth["true_accel_mg"]: np.zeros(n),
+        channel.column: true_input + total + noise,
+        truth["true_accel_mg"]: true_input,
         truth["true_drift_mg"]: total,
         truth["true_noise_mg"]: noise,
         truth["true_pm_temp_c"]: np.array(breakdown.T_pm, dtype=np.float64),
