@@ -324,7 +324,12 @@ def _expected(data: dict[str, np.ndarray], sensor: str, instance: int, k: int) -
 def test_ulog_gyro_channel_alone_is_its_own_recording(tmp_path: Path, three_imu: tuple[Path, dict]) -> None:
     path, data = three_imu
     rec = run_import(path, "--channel", "gyro0_x", "-o", tmp_path / "g.csv")
-    np.testing.assert_allclose(rec.accel_mg, _expected(data, "gyro", 0, 0), rtol=1e-9)  # deg/s, in accel_mg
+    # the format keeps accel_mg for milli-g: the file holds deg/s only under gyro0_x_dps, which a
+    # one-channel command reads as its data (the metadata name the channel)
+    assert "accel_mg" not in rec.columns
+    header = next(line for line in (tmp_path / "g.csv").read_text().splitlines() if not line.startswith("#"))
+    assert "accel_mg" not in header.split(",") and "gyro0_x_dps" in header.split(",")
+    np.testing.assert_allclose(rec.accel_mg, _expected(data, "gyro", 0, 0), rtol=1e-9)  # deg/s, its data
     np.testing.assert_allclose(rec.temp_c, data["gyro0_temp"], rtol=1e-9)  # the gyroscope's own temperature
     np.testing.assert_allclose(rec.time_s, np.arange(N) / GYRO_RATE_HZ, atol=1e-9)  # its own clock
     assert float(rec.meta["sample_rate_hz"]) == pytest.approx(GYRO_RATE_HZ)

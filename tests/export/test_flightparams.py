@@ -417,8 +417,9 @@ def test_ardupilot_parm_of_a_log_in_vehicle_axes_is_refused(
     writer.parm(1000, "AHRS_ORIENTATION", float(orientation))
     temp_c = np.linspace(10.0, 50.0, 400)
     for row, t in enumerate(temp_c):
-        accel = np.array([0.01 * (t - 30.0), 0.0, -G + 1e-4 * (t - 30.0) ** 2])
-        writer.imu(1_000_000 + 500_000 * row, 0, np.array([0.001 * (t - 30.0), 0.0, 0.0]), accel, t)
+        small = 1e-4 * (t - 30.0)  # every axis varies: a constant output is refused as no sensor's
+        accel = np.array([0.01 * (t - 30.0), small, -G + 1e-4 * (t - 30.0) ** 2])
+        writer.imu(1_000_000 + 500_000 * row, 0, np.array([0.001 * (t - 30.0), small, small]), accel, t)
     log = writer.write(tmp_path / "rotated.bin")
     recording, fitted = tmp_path / "rec.npz", tmp_path / "fit"
     assert trainer_main(["import", str(log), "--channels", "all", "-o", str(recording)]) == 0

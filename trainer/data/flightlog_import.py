@@ -173,16 +173,17 @@ def _group_recording(
     columns.update((column, values) for column, values in table.columns.items() if column != "timestamp")
     meta = {"channel": main.name}
     if main.unit != DEFAULT_UNIT:
-        meta["unit"] = main.unit  # accel_mg holds deg/s or Pa: a one-channel view (trainer.data.channels)
+        meta["unit"] = main.unit  # the file keeps it in its named column (recording_io.contract_columns)
     for channel in group:
         if channel.device_id is not None:
             meta[f"device_id_{channel.sensor_instance}"] = str(channel.device_id)
     meta.update(log.notes)
     if fill_note:
         meta["temp_filled"] = fill_note
+    data = f"accel_mg<-{main.column}" if main.unit == DEFAULT_UNIT else f"one-channel data: {main.column}"
     mapping = (
         f"{KIND_NAMES[log.kind]} log; time_s<-sample time[us] temp_c<-{main.temp_column} "
-        f"accel_mg<-{main.column}; kept the {len(group)} channel(s) of its time base"
+        f"{data}; kept the {len(group)} channel(s) of its time base"
     )
     rec = _finish(table, imported, columns, mapping, meta, checks)
     rec.meta["source"] = Path(log.source).name  # the file; errors also named the time base

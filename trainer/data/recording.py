@@ -56,10 +56,28 @@ class Recording:
     def accel_mg(self) -> np.ndarray:
         return self._one_axis("accel_mg")
 
+    def channel_column(self) -> str | None:
+        """The named column (``gyro0_x_dps``) of the channel the ``channel`` and ``unit`` metadata
+        name, when the recording holds it: what ``accel_mg`` stands for in a file of a gyroscope or
+        barometer channel, which the contract keeps out of ``accel_mg`` (milli-g only)."""
+        channel, unit = self.meta.get("channel"), self.meta.get("unit")
+        if not channel or not unit or unit == "mg":  # an accelerometer's file keeps its accel_mg
+            return None
+        column = f"{channel}_{unit}"
+        return column if column in self.columns else None
+
+    def one_axis_or_none(self, name: str) -> np.ndarray | None:
+        """``temp_c`` or ``accel_mg`` as a one-channel command reads it, or None: the file's column,
+        else (``accel_mg``) the column of the channel its metadata names."""
+        values = self.columns.get(name)
+        if values is None and name == "accel_mg" and (column := self.channel_column()) is not None:
+            values = self.columns[column]
+        return values
+
     def _one_axis(self, name: str) -> np.ndarray:
         """A one-axis column; a multi-channel recording may leave it out (the contract's "Several
         channels"), and a one-channel command then asks for a channel in one line."""
-        values = self.columns.get(name)
+        values = self.one_axis_or_none(name)
         if values is None:
             raise UserError(
                 f"{self.source}: no column {name!r}: a multi-channel recording without a one-axis column "
@@ -114,6 +132,7 @@ def data_fingerprint(rec: Recording) -> str:
     with the scored data's."""
     digest = hashlib.sha256()
     for name in REQUIRED_COLUMNS:
-        if name in rec.columns:  # a multi-channel recording may carry no one-axis column
-            digest.update(np.ascontiguousarray(rec.columns[name], dtype=np.float64).tobytes())
+        values = rec.columns["time_s"] if name == "time_s" else rec.one_axis_or_none(name)
+        if values is not None:  # a multi-channel recording may carry no one-axis column
+            digest.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
     return digest.hexdigest()

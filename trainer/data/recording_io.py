@@ -369,8 +369,26 @@ def _ordered_meta(meta: dict[str, str]) -> list[tuple[str, str]]:
     return first + [(k, v) for k, v in meta.items() if k != "sample_rate_hz"]
 
 
+def contract_columns(rec: Recording) -> Recording:
+    """``rec`` as the format holds it: ``accel_mg`` is milli-g only, so a gyroscope's or barometer's
+    one-channel data (a view, an import of such a channel) goes to its named column (``gyro0_x_dps``;
+    dropped when the recording holds that already), which ``channel``/``unit`` metadata point to
+    and :meth:`Recording.one_axis_or_none` reads back as ``accel_mg``."""
+    unit = rec.meta.get("unit", "mg")
+    if unit == "mg" or "accel_mg" not in rec.columns or not rec.meta.get("channel"):
+        return rec
+    column = f"{rec.meta['channel']}_{unit}"
+    if column in rec.columns:  # an import keeps both: one column, under the channel's own name
+        columns = {name: values for name, values in rec.columns.items() if name != "accel_mg"}
+    else:
+        columns = {(column if name == "accel_mg" else name): values for name, values in rec.columns.items()}
+    return Recording(columns, dict(rec.meta), rec.source)
+
+
 def write_recording(rec: Recording, path: str | Path) -> None:
-    """Write every column (unknown ones included) to ``.csv`` or ``.npz``; atomic, nothing left on error."""
+    """Write every column (unknown ones included) to ``.csv`` or ``.npz``; atomic, nothing left on error.
+    A gyroscope's or barometer's data leave ``accel_mg`` for their own column (:func:`contract_columns`)."""
+    rec = contract_columns(rec)
     fmt = recording_format(path)
     _check_recording_writable(rec)
     if fmt == "npz" and NPZ_META in rec.columns:

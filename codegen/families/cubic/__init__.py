@@ -31,6 +31,9 @@ class Poly3Spec:
 
 
 def parse(root: DottedFields, payload: DottedFields, method: str) -> Poly3Spec:
+    from trainer.checkpoint import model_of  # the trainer's strict reading: evaluate's refusals, here too
+
+    model_of(root.data, root.source)
     lo, hi = payload.numbers("temp_range_c", 2)
     if not lo < hi:
         root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trainer.errors import UserError
 from trainer.fields import DottedFields as _Fields
 from trainer.greybox.stream import PhysicsModel
 from trainer.physics.catalogue.streamed import STREAMED
@@ -21,13 +20,13 @@ class PhysicsSpec:
 
 def parse_physics(root: _Fields, payload: _Fields, method: str) -> PhysicsSpec:
     """Parameters through the trainer's own payload reader (one definition of the layout)."""
+    from trainer.checkpoint import model_of  # the trainer's strict reading: evaluate's refusals, here too
     from trainer.greybox.compensator import PhysicsCompensator
 
     rate_hz = root.sub("train_stats").number("sample_rate_hz", positive=True)
-    try:
-        model = PhysicsCompensator.from_payload(payload.data).model
-    except (KeyError, TypeError, ValueError, IndexError, UserError) as exc:
-        root.fail(f"field 'payload' is not a physics model ({exc})")
+    compensator = model_of(root.data, root.source)
+    assert isinstance(compensator, PhysicsCompensator)
+    model = compensator.model
     for term in model.terms:  # a streamed effect without a C form: refused, or left out when it adds nothing
         streamed = STREAMED[term.identifier]
         why = (

@@ -32,6 +32,9 @@ class PlaSpec:
 
 
 def parse(root: DottedFields, payload: DottedFields, method: str) -> PlaSpec:
+    from trainer.checkpoint import model_of  # the trainer's strict reading: evaluate's refusals, here too
+
+    model_of(root.data, root.source)
     n = payload.integer("n_intervals", 1, 4096)
     splits = payload.array("split_points_c", (n - 1,))
     if np.any(np.diff(splits) < 0):
