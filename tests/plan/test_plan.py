@@ -14,7 +14,8 @@ import pytest
 from tests.repo import REPO_ROOT
 from trainer.checkpoint import save_model
 from trainer.cli import main
-from trainer.data.recording_io import read_recording
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import UserError, run_cli
 from trainer.fitting import fit_compensator
 from trainer.greybox.compensator import PhysicsCompensator
@@ -238,6 +239,7 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
         (["--channel", "gyro_q"], "not a channel name"),
         (["--targets", "poly3.pt"], "has no catalogue effects to plan for"),
         (["--channel", "gyro0_x", "--targets", "physics.pt"], "the --targets model's effects are in mg"),
+        (["--noise-from", "baro.npz"], "--noise-from"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(
@@ -255,7 +257,12 @@ def test_bad_input_is_one_line_and_writes_nothing(
         )
     if "physics.pt" in argv:  # a reference model of a one-axis accelerometer (mg)
         shutil.copy(REPO_ROOT / "tests" / "data" / "ref" / "physics.pt", inputs / "physics.pt")
-    argv = [str(inputs / a) if a in ("poly3.pt", "physics.pt") else a for a in argv]
+    if "baro.npz" in argv:  # a barometer's recording, for an accelerometer's plan
+        temp = np.linspace(-10.0, 50.0, 600)
+        columns = {"time_s": np.arange(600.0), "temp_c": temp, "baro0_pa": 101325.0 + 2.0 * temp}
+        write_recording(Recording(columns, {"channel": "baro0", "unit": "pa"}, "baro"), inputs / "baro.npz")
+        message = "its data are in Pa (baro0), the planned channel's in mg"
+    argv = [str(inputs / a) if a in ("poly3.pt", "physics.pt", "baro.npz") else a for a in argv]
     out = tmp_path / "plan"
     assert _cli("plan", "-o", str(out), *argv) == 2
     err = capsys.readouterr().err.strip()

@@ -197,7 +197,13 @@ def _base(args: argparse.Namespace, channel: str | None, fitted: FittedModel | N
 def _with_noise(cfg: PhysicsConfig, path: str, channel: str | None) -> PhysicsConfig:
     """The recording's white-noise density (of the planned channel); the slow terms scaled by the same
     factor (their shares kept)."""
-    from trainer.data.channels import channel_view, select_channels
+    from trainer.data.channels import (
+        UNIT_LABELS,
+        channel_unit,
+        channel_view,
+        select_channels,
+        unit_of_channel_name,
+    )
     from trainer.data.recording_io import read_recording
     from trainer.diagnose.blocks import white_noise_density
     from trainer.errors import UserError
@@ -207,6 +213,12 @@ def _with_noise(cfg: PhysicsConfig, path: str, channel: str | None) -> PhysicsCo
     rec = read_recording(path)
     if channel is not None:
         rec = channel_view(rec, select_channels(rec, (channel,))[0])
+    planned, measured_unit = unit_of_channel_name(channel), channel_unit(rec)
+    if measured_unit != planned:
+        raise UserError(
+            f"--noise-from {path}: its data are in {UNIT_LABELS[measured_unit]} ({rec.meta.get('channel')}), the "
+            f"planned channel's in {UNIT_LABELS[planned]}: give a recording of the planned sensor, or --channel"
+        )
     measured = white_noise_density(rec.accel_mg, rec.sample_rate_hz)
     own = cfg.channels[0] if channel is not None else None
     terms = own.noise if own is not None else cfg.noise
