@@ -291,3 +291,14 @@ def test_planned_program_identifies_what_the_paper_oven_cannot() -> None:
     assert identified(results[planned.name], target) and results[planned.name].ratio <= target.vs_cubic
     assert all(e == np.inf for e in results[oven.name].error.values())
     assert results[planned.name].ratio < results[oven.name].ratio
+
+
+@pytest.mark.parametrize("draws", [1, 2, 5, 20, 59])
+def test_the_rate_bound_of_a_clean_sweep_is_the_rule_of_three(draws: int) -> None:
+    """n of n draws identified: the one-sided 95 % Clopper-Pearson bound is 0.05**(1/n) exactly (22 % at
+    2 draws, 86 % at 20, 95 % first at 59), what the report now prints beside "meets the target"."""
+    from trainer.plan.summary import rate_lower_bound
+
+    assert rate_lower_bound(draws, draws) == pytest.approx(0.05 ** (1.0 / draws), rel=1e-9)
+    assert rate_lower_bound(0, draws) == 0.0
+    assert rate_lower_bound(draws - 1, draws) < rate_lower_bound(draws, draws)

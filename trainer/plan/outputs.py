@@ -19,7 +19,7 @@ from trainer.plan.limits import ChamberLimits
 from trainer.plan.montecarlo import CUBIC, PHYSICS, sensor
 from trainer.plan.priors import Prior
 from trainer.plan.programs import Program
-from trainer.plan.summary import Summary, Target
+from trainer.plan.summary import CONFIDENCE, Summary, Target
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 
@@ -107,8 +107,18 @@ def report(
     channel: str | None = None,
 ) -> str:
     s = choice.summary
+    bound = s.lower_bound()
+    shown = (
+        f"; on {s.draws} draws the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
+        f"bound of {100 * bound:.0f} %"
+        + (
+            f", below the {100 * target.identify_rate:g} % asked: more --draws to show it"
+            if bound < target.identify_rate
+            else ""
+        )
+    )
     verdict = (
-        f"meets the target in {s.draws} draws"
+        f"meets the target in {s.draws} draws{shown}"
         if choice.met(target)
         else "does **not** meet the target; it cannot reach: " + "; ".join(s.short_of(target))
     )

@@ -39,6 +39,11 @@ class Summary:
             and self.ratio_median <= target.vs_cubic
         )
 
+    def lower_bound(self) -> float:
+        """The :data:`CONFIDENCE` lower bound on the least identified effect's rate."""
+        least = min(self.identified.values(), default=1.0)
+        return rate_lower_bound(round(least * self.draws), self.draws)
+
     def short_of(self, target: Target) -> list[str]:
         """What this profile does not reach (empty: the target is met)."""
         out = [
@@ -49,6 +54,19 @@ class Summary:
         if not self.ratio_median <= target.vs_cubic:
             out.append(f"physics leaves {self.ratio_median:.2f}x the cubic (> {target.vs_cubic:g}x)")
         return out
+
+
+CONFIDENCE = 0.95  # of the one-sided lower bound the report gives beside an identification rate
+
+
+def rate_lower_bound(successes: int, draws: int, confidence: float = CONFIDENCE) -> float:
+    """The one-sided Clopper-Pearson lower bound on a rate seen ``successes`` times in ``draws``: what
+    a few draws can show (2 of 2: 22 %; 20 of 20: 86 %)."""
+    from scipy.stats import beta
+
+    if successes <= 0:
+        return 0.0
+    return float(beta.ppf(1.0 - confidence, successes, draws - successes + 1))
 
 
 def identified(result: DrawResult, target: Target) -> bool:
