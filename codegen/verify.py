@@ -477,6 +477,14 @@ def write_json(result: VerifyResult, out_dir: str | os.PathLike[str], path: str 
     module's sizes from its manifest; written atomically."""
     from trainer.errors import atomic_output
 
+    data = json_document(result, out_dir)
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+
+
+def json_document(result: VerifyResult, out_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """What ``codegen verify --json`` writes (and ``trainer fleet``'s ``verify.json`` holds, so that
+    ``trainer report --verify`` reads either)."""
     _, manifest = find_manifest(Path(out_dir), result.name)
     model = manifest.get("model")
     data = {
@@ -498,5 +506,4 @@ def write_json(result: VerifyResult, out_dir: str | os.PathLike[str], path: str 
         },
         "sizes": manifest.get("sizes"),
     }
-    with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    return data

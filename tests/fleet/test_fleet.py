@@ -143,6 +143,21 @@ def test_fleet_drift_left_is_the_report_s(fleet: tuple[Path, FleetRun], tmp_path
             assert _same(summary["drift_left_uncompensated_mg"], rows["all"][2]), (summary, rows)
 
 
+def test_the_fleet_verify_json_is_what_report_verify_reads(
+    fleet: tuple[Path, FleetRun], tmp_path: Path
+) -> None:
+    """A unit's ``verify.json`` is ``codegen verify --json``'s document: ``trainer report --verify`` takes
+    it for the unit's model (it checks the model id) and prints the fleet's sample count and mismatches."""
+    _, run = fleet
+    result = run.results["U01"]
+    unit = run.out_dir / "units" / "U01" / "poly3"
+    verified = json.loads((unit / "verify.json").read_text())
+    args = ["report", str(unit / "model.pt"), "--recording", str(result.recordings[1]), "--verify"]
+    assert run_cli(main, [*args, str(unit / "verify.json"), "-o", str(tmp_path / "r")]) in (0, 1)
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert verified["mismatches"] == 0 and f"{verified['samples']} samples" in text and "0 mismatches" in text
+
+
 def test_fleet_holdout_is_the_report_s(fleet: tuple[Path, FleetRun], client: Any, tmp_path: Path) -> None:
     """A unit with one run and `holdout = "first:0.3"`: the fleet fits and scores exactly what
     `trainer report --holdout first:0.3` scores (the same parser, split and scoring)."""

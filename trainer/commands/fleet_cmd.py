@@ -64,6 +64,6 @@ def run(args: argparse.Namespace) -> int:
     )
     for unit in summary["units"]:
         if unit["sign_off"] != "PASS":
-            why = "; ".join(unit["errors"] or unit["out_of_family"]) or unit["status"]
+            why = "; ".join(unit["errors"] or unit["failed"] or unit["review"])
             print(f"  {unit['id']}: {unit['sign_off']} ({why})")
     return EXIT_UNITS_FAILED if FAIL in verdicts else 0

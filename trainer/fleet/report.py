@@ -98,7 +98,8 @@ def unit_verdict(uid: str, result: UnitResult | None, findings: list[Finding]) -
     if result is None:
         return verdict({}, [PipelineCheck(f"{uid}: no result", False)])
     checks = [PipelineCheck(f"{uid} {e.stage}: {e.error}", False) for e in result.errors]
-    checks.append(PipelineCheck(f"{uid} processed", result.ok))
+    if not checks:  # a stage's failure above says what failed; this check only when none did
+        checks.append(PipelineCheck(f"{uid} processed", result.ok))
     methods = result.methods
     checks += [
         PipelineCheck(f"{uid} / {m} C module verified", verify_state(s) != "NO") for m, s in methods.items()
@@ -393,6 +394,7 @@ def write_report(manifest: Manifest, out_dir: Path, results: dict[str, UnitResul
                 "status": results[u].status if u in results else "missing",
                 "out_of_family": [f.reason for f in by_unit[u]],
                 "failed": list(decided[u].failed),
+                "review": list(decided[u].review),
                 "channel": results[u].channel if u in results else None,
                 "unit": results[u].unit if u in results else None,
                 "coverage": None if (covered := unit_coverage(results.get(u))) is None else covered[0],

@@ -315,7 +315,7 @@ def _export_and_verify(
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
     """``codegen export`` + ``codegen verify`` on the scoring recording (0 mismatches to pass)."""
     from codegen.export import export
-    from codegen.verify import verify
+    from codegen.verify import json_document, verify
     from trainer.data.recording_io import write_recording
 
     c_dir = tmp / "c"
@@ -323,12 +323,9 @@ def _export_and_verify(
     write_recording(valid, tmp / "verify.npz")
     result = verify(model_path, c_dir, tmp / "verify.npz", name=name, table1=False)
     passed = result.mismatches == 0 and result.state_equal
-    report = {
+    report = {  # codegen verify --json's document: trainer report --verify reads it
+        **json_document(result, c_dir),
         "passed": passed,
-        "samples": result.samples,
-        "mismatches": result.mismatches,
-        "first_mismatch": result.first_mismatch,
-        "state_equal": result.state_equal,
         "error_budget_rms_mg": result.budget.rms_mg,
         "error_budget_max_abs_mg": result.budget.max_abs_mg,
     }
