@@ -64,3 +64,12 @@ def test_a_constant_output_and_cr_only_line_ends_are_named(
         assert run_cli(trainer_main, argv) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1 and not (tmp_path / "m.pt").exists()
+
+
+def test_a_mavlink_telemetry_log_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A .tlog was answered with the delimited importer's "--temp COLUMN is required"."""
+    log = tmp_path / "flight.tlog"
+    log.write_bytes(bytes(range(256)) * 4)
+    assert run_cli(trainer_main, ["import", str(log), "-o", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "a MAVLink telemetry log (.tlog) is not read" in err and err.count("\n") == 1

@@ -38,8 +38,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+UNSUPPORTED_LOGS = {".tlog": "a MAVLink telemetry log (.tlog)"}  # said by name, not as a delimited file
+
+
 def run(args: argparse.Namespace) -> int:
     kind = log_kind(args.foreign)
+    what = UNSUPPORTED_LOGS.get(Path(args.foreign).suffix.lower())
+    if kind is None and what is not None:
+        raise UserError(
+            f"{args.foreign}: {what} is not read by this tool; import the flight's PX4 ULog (.ulg) or ArduPilot "
+            "DataFlash log (.bin), which log each IMU at its own rate with its temperature"
+        )
     if args.list_channels:
         if kind is None:
             raise UserError(f"{args.foreign}: --list-channels applies to flight logs (ULog, DataFlash) only")

@@ -32,6 +32,8 @@ def implausible(
         if bounds is None or bounds[0] <= abs(value) <= bounds[1]:
             continue
         shown = channel_param_name(name, unit)
+        if value < 0:  # the plausible ranges are of the size: say so for a negative value
+            shown, value = f"|{shown}|", abs(value)
         if not judged_by_drift_span(name, scale):
             catalogue = PARAMETERS[(identifier, name)].plausible
             assert catalogue is not None  # a flagged range comes from the catalogue's
