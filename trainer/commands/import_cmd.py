@@ -39,11 +39,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 UNSUPPORTED_LOGS = {".tlog": "a MAVLink telemetry log (.tlog)"}  # said by name, not as a delimited file
+# a log's name on a file whose first bytes are not that log's: said, instead of the delimited importer's
+LOG_SUFFIXES = {".ulg": "a PX4 ULog", ".bin": "an ArduPilot DataFlash log"}
 
 
 def run(args: argparse.Namespace) -> int:
     kind = log_kind(args.foreign)
     what = UNSUPPORTED_LOGS.get(Path(args.foreign).suffix.lower())
+    named = LOG_SUFFIXES.get(Path(args.foreign).suffix.lower())
+    if kind is None and named is not None and Path(args.foreign).is_file():
+        raise UserError(
+            f"{args.foreign}: named as {named}, but its first bytes are not that log's header (a damaged, "
+            "truncated or renamed file?)"
+        )
     if kind is None and what is not None:
         raise UserError(
             f"{args.foreign}: {what} is not read by this tool; import the flight's PX4 ULog (.ulg) or ArduPilot "

@@ -258,8 +258,11 @@ def _check(args: argparse.Namespace) -> None:
         )
     if not (args.rate > 0 and math.isfinite(args.rate)):
         raise UserError(f"--rate must be a finite number > 0 Hz, got {args.rate:g}")
-    if not 0 < args.identify_rate <= 1 or not args.tolerance > 0 or not args.vs_cubic > 0:
-        raise UserError("--identify-rate must be in (0, 1], --tolerance and --vs-cubic > 0")
+    if not 0 < args.identify_rate <= 1:
+        raise UserError(f"--identify-rate must be a share in (0, 1], got {args.identify_rate:g}")
+    for name, value in (("--tolerance", args.tolerance), ("--vs-cubic", args.vs_cubic)):
+        if not (value > 0 and math.isfinite(value)):
+            raise UserError(f"{name} must be a finite number > 0, got {value:g}")
 
 
 def run(args: argparse.Namespace) -> int:

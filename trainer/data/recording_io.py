@@ -247,6 +247,8 @@ def _npz_member(archive: np.lib.npyio.NpzFile, name: str, source: str) -> np.nda
     member = _member_name(zipped, name)
     try:
         shape, dtype = _member_header(zipped, member)
+        if dtype.hasobject:  # pickled Python objects: never loaded (their size says nothing of a truncation)
+            raise UserError(f"{where}: holds Python objects, not numbers")
         size = zipped.getinfo(member).file_size
         if math.prod(shape) * dtype.itemsize > size:
             raise UserError(
