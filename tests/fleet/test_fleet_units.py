@@ -243,6 +243,7 @@ def test_a_channel_of_a_multi_channel_recording_is_chosen_with_import_channel(
 ) -> None:
     """A spec recording with several channels and no one-axis columns: ``import = "--channel NAME"``
     fits that channel in its unit; without it the unit fails in one line naming the field to give."""
+    from trainer.data.channels import channel_view, select_channels
     from trainer.data.recording import Recording
     from trainer.data.recording_io import write_recording
 
@@ -256,10 +257,21 @@ def test_a_channel_of_a_multi_channel_recording_is_chosen_with_import_channel(
         "gyro0_temp_c": TEMP_C + GYRO_TEMP_OFFSET_C,
     }
     path = tmp_path / "imu.npz"
-    write_recording(Recording(columns, {"sample_rate_hz": f"{RATE_HZ:g}"}, "imu"), path)
+    imu = Recording(columns, {"sample_rate_hz": f"{RATE_HZ:g}"}, "imu")
+    write_recording(imu, path)
+    # a one-channel file of the gyroscope, as trainer import --channel gyro0_x writes it: no accel_mg
+    (gyro,) = select_channels(imu, ("gyro0_x",))
+    write_recording(channel_view(imu, gyro), tmp_path / "gyro.npz")
     units = '[[unit]]\nid = "G"\nrecordings = ["LOG"]\nimport = "--channel gyro0_x"\n'
     units += '[[unit]]\nid = "N"\nrecordings = ["LOG"]\n'
+    units += f'[[unit]]\nid = "V"\nrecordings = ["{(tmp_path / "gyro.npz").as_posix()}"]\n'
     run = run_fleet(_manifest(tmp_path, path, units), tmp_path / "out", progress=False, client=client)
+    assert "accel_mg" not in np.load(tmp_path / "gyro.npz").files
+    assert (run.results["V"].status, run.results["V"].channel, run.results["V"].unit) == (
+        "ok",
+        "gyro0_x",
+        "deg/s",
+    )
     chosen = run.results["G"]
     assert chosen.status == "ok", chosen.errors
     assert (chosen.channel, chosen.unit) == ("gyro0_x", "deg/s")

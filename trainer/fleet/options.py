@@ -91,7 +91,8 @@ class UnitImport:
         if self.args.channel is not None:
             (channel,) = select_channels(rec, (self.args.channel,))
             return channel_view(rec, channel)
-        if not {"accel_mg", "temp_c"} <= set(rec.columns) and (named := recording_channels(rec)):
+        one_axis = rec.one_axis_or_none("accel_mg") is not None and rec.one_axis_or_none("temp_c") is not None
+        if not one_axis and (named := recording_channels(rec)):
             raise UserError(
                 f"{path}: a multi-channel recording without the one-axis columns accel_mg and temp_c: a unit "
                 f'fits one channel; give the unit import = "--channel NAME" ({", ".join(named)})'
