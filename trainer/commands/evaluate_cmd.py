@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,8 @@ def add_parser(subparsers: Any) -> None:
 
 
 def _mg(value: float) -> str:
-    return f"{value:.4g} mg"
+    """A figure in mg; n/a where the scored part has no sample (a branch it never ramps on)."""
+    return f"{value:.4g} mg" if math.isfinite(value) else "n/a"
 
 
 def drift_lines(result: Any) -> list[str]:
@@ -66,9 +68,9 @@ def drift_lines(result: Any) -> list[str]:
         )
     for name, fraction in result.out_of_range_fraction.items():
         if fraction > 0:
+            share = f"{100 * fraction:.2f} %" if fraction >= 5e-5 else f"{100 * fraction:.1g} %"
             lines.append(
-                f"warning [{name}]: {100 * fraction:.2f} % of samples lie outside the model's valid "
-                f"temperature range"
+                f"warning [{name}]: {share} of samples lie outside the model's valid temperature range"
             )
     return lines
 

@@ -23,8 +23,8 @@ def add_parser(subparsers: Any) -> None:
         "--method",
         required=True,
         choices=(*methods.fit_cli_names(), AUTO),
-        help="compensation method; auto: per channel, the candidate (none, polynomials of order 1-3, pla, physics) "
-        "that cross-validation over the run's thermal segments says leaves the least drift (docs/real-data.md)",
+        help="compensation method; auto: per channel, the candidate (see --candidates) that cross-validation "
+        "over the run's thermal segments says leaves the least drift (docs/real-data.md)",
     )
     parser.add_argument(
         "-o", "--output", required=True, help="checkpoint to write (model.pt); a directory with --channels"
