@@ -70,6 +70,21 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
         assert "## Verdict: FAIL" in text and f"`{key}`" in text
 
 
+def test_a_verified_module_decides_without_thresholds_as_the_fleet_does(
+    unit: dict[str, Path], tmp_path: Path
+) -> None:
+    """Without --config a report has no decisive check (NO VERDICT); a --verify result is one (the C
+    is bit-exact or not), as ``trainer fleet``, which always verifies, counts it: one verdict."""
+    assert _report(unit, tmp_path / "bare", None) == 0
+    assert "## Verdict: NO VERDICT" in (tmp_path / "bare" / "report.md").read_text()
+    assert _report(unit, tmp_path / "verified", None, "--verify", str(unit["module"])) == 0
+    text = (tmp_path / "verified" / "report.md").read_text()
+    assert (
+        "## Verdict: PASS" in text
+        and "`max_verify_mismatches` (codegen verify) | 0 | <= 0 samples | PASS" in text
+    )
+
+
 def test_the_guard_says_whether_its_figures_are_in_sample(unit: dict[str, Path], tmp_path: Path) -> None:
     """Scored on its own training run the guard's figures are in-sample; on another run (seed 4) they
     are not, and the document says which."""

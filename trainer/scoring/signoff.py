@@ -237,6 +237,10 @@ def checks(report: ChannelReport, thresholds: dict[str, float]) -> list[Check]:
             ("module", None if cost.instructions_per_sample is None else cost.instructions_per_sample[0])
         ],
     }
+    if report.verify is not None and "max_verify_mismatches" not in thresholds:
+        # a verified module is a decisive fact without a --config, as in trainer fleet (one verdict):
+        # the C is bit-exact or it is not
+        thresholds = {**thresholds, "max_verify_mismatches": 0.0}
     return [
         Check(report.label, key, what, value, limit, report.unit)
         for key, limit in thresholds.items()

@@ -132,15 +132,22 @@ def undetermined_reason(label: str, undetermined: Sequence[str]) -> str | None:
     return f"{label} carries what its training run does not determine: {'; '.join(undetermined)}"
 
 
+# Below this share of the scored temperature span inside the trained range the figures are of the
+# clamp (every model holds its edge value outside the range), not of the model: a hold-out that
+# shares only its boundary sample with the training part has a coverage of a few 1e-5.
+MIN_SCORED_COVERAGE = 0.05
+
+
 def outside_trained_range(label: str, coverage: float) -> str | None:
-    """A review reason when none of the scored temperatures lies inside the trained range (coverage
-    0): there every model holds its edge value, so the figures judge that constant, not the model."""
-    if coverage > 0.0:
+    """A review reason when (almost) none of the scored temperature span lies inside the trained range
+    (coverage below :data:`MIN_SCORED_COVERAGE`): there every model holds its edge value, so the
+    figures judge that constant, not the model."""
+    if coverage >= MIN_SCORED_COVERAGE:
         return None
     return (
-        f"{label}: scored entirely outside its trained temperature range (coverage 0 %): there it holds its "
-        "edge value, so the figures say nothing of the model; score a part inside the range (another "
-        "--holdout, or a second run)"
+        f"{label}: scored outside its trained temperature range ({100 * coverage:.2g} % of the scored span "
+        f"inside it, under {100 * MIN_SCORED_COVERAGE:g} %): there it holds its edge value, so the figures say "
+        "nothing of the model; score a part inside the range (another --holdout, or a second run)"
     )
 
 
