@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import shutil
 import struct
+import subprocess
 import zlib
 from pathlib import Path
 
@@ -359,6 +360,16 @@ def test_imu_module_is_bit_exact_against_each_channel_golden_model(
     assert (
         "gyro0_x [deg/s], pla" in header and "baro0 [Pa], pla" in header and "accel0_z [mg], poly3" in header
     )
+    # the rate contract's macros are there for memoryless channels too (any rate): firmware that checks
+    # its rate compiles against this module as against one built for a rate; a rate of 0 does not
+    strict = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Werror", "-c"]
+    for rate, compiles in (("200000u", True), ("0u", False)):
+        check = tmp_path / f"check_{rate}.c"
+        check.write_text(f'#include "imu0.h"\nIMU0_CHECK_SAMPLE_RATE_MILLIHZ({rate});\nint imu0_user;\n')
+        built = subprocess.run(
+            ["gcc", *strict, f"-I{out}", str(check), "-o", str(tmp_path / "check.o")], capture_output=True
+        )
+        assert (built.returncode == 0) == compiles, built.stderr.decode()
 
 
 def test_imu_module_under_sanitizers_saturates_and_flags(imu: dict[str, Path], tmp_path: Path) -> None:
