@@ -6,6 +6,14 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# The property tests draw their examples from a fixed seed per test (derandomize): the suite that CI
+# runs is the same every time (a random draw found a refused export on 2026-11-30, one run in several;
+# it is kept as an explicit case). HYPOTHESIS_PROFILE=explore draws new examples each run.
+settings.register_profile("deterministic", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 SHARED_ENV = "MEMS_TDC_SHARED"  # where the shared directory is, if not next to this checkout
 REAL_RUN = ("data", "real", "tofupilot_imu_chamber_cycle.tsv")  # the bundled real chamber run
