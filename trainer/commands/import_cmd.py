@@ -12,7 +12,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from trainer.data.flightlog import KIND_NAMES, log_kind
+from trainer.data.flightlog import KIND_NAMES, KIND_SUFFIXES, log_kind
 from trainer.data.flightlog_import import LogImport, import_flight_log, log_output
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import import_foreign
@@ -39,18 +39,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 UNSUPPORTED_LOGS = {".tlog": "a MAVLink telemetry log (.tlog)"}  # said by name, not as a delimited file
-# a log's name on a file whose first bytes are not that log's: said, instead of the delimited importer's
-LOG_SUFFIXES = {".ulg": "a PX4 ULog", ".bin": "an ArduPilot DataFlash log"}
 
 
 def run(args: argparse.Namespace) -> int:
     kind = log_kind(args.foreign)
     what = UNSUPPORTED_LOGS.get(Path(args.foreign).suffix.lower())
-    named = LOG_SUFFIXES.get(Path(args.foreign).suffix.lower())
+    named = KIND_SUFFIXES.get(Path(args.foreign).suffix.lower())  # a log's name on a file that is not one
     if kind is None and named is not None and Path(args.foreign).is_file():
         raise UserError(
-            f"{args.foreign}: named as {named}, but its first bytes are not that log's header (a damaged, "
-            "truncated or renamed file?)"
+            f"{args.foreign}: named as a {KIND_NAMES[named]} log, but its first bytes are not that log's header "
+            "(a damaged, truncated or renamed file?)"
         )
     if kind is None and what is not None:
         raise UserError(

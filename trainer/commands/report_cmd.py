@@ -386,7 +386,7 @@ def run(args: argparse.Namespace) -> int:
                 method=str(ckpt["method"]),
                 shown=shown,
                 trained_range_c=(lo, hi),
-                recording_range_c=(float(rec.temp_c.min()), float(rec.temp_c.max())),
+                recording_range_c=_temp_range(rec),
                 scores=scores,
                 held_out=held_text,
                 crossval=crossval,

@@ -41,6 +41,7 @@ DPS_PER_RADPS = 180.0 / np.pi
 # DataFlash: every message starts 0xA3 0x95 <type>, and a log starts with the FMT message (128).
 MAGIC: dict[str, bytes] = {"ulog": b"ULog\x01\x12\x35", "dataflash": b"\xa3\x95\x80"}
 KIND_NAMES = {"ulog": "PX4 ULog", "dataflash": "ArduPilot DataFlash"}
+KIND_SUFFIXES = {".ulg": "ulog", ".bin": "dataflash"}  # the names these logs are written under
 
 SENSOR_UNITS = {"accel": "mg", "gyro": "dps", "baro": "pa"}  # column unit suffix per sensor
 # What a sensor can output, in its unit: beyond it a sample is a fault or a unit mistake, not data
@@ -67,6 +68,11 @@ class ChannelName:
     def temp_column(self) -> str:
         """``accel0_temp_c``: the temperature column the instance's channels share."""
         return f"{self.sensor}{self.instance}_temp_c"
+
+
+def data_column(channel: str, unit: str) -> str:
+    """A channel's data column in the recording format: ``gyro0_x`` in ``dps`` -> ``gyro0_x_dps``."""
+    return f"{channel}_{unit}"
 
 
 def parse_channel(name: str) -> ChannelName | None:
@@ -103,7 +109,7 @@ class LogChannel:
     @property
     def column(self) -> str:
         """The recording-format data column, e.g. ``accel0_z_mg``."""
-        return f"{self.name}_{self.unit}"
+        return data_column(self.name, self.unit)
 
     @property
     def temp_column(self) -> str:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from trainer.data.flightlog import SENSOR_RANGES, SENSOR_UNITS
+from trainer.data.flightlog import SENSOR_RANGES, SENSOR_UNITS, data_column
 from trainer.errors import UserError
 
 if TYPE_CHECKING:
@@ -176,7 +176,7 @@ def check_training(
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
     unit = rec.meta.get("unit", "mg")
-    output_column = f"{rec.meta['channel']}_{unit}" if "channel" in rec.meta else "accel_mg"
+    output_column = data_column(rec.meta["channel"], unit) if "channel" in rec.meta else "accel_mg"
     checks.recording_ranges(rec.columns, unit, where, output_column=output_column)
     if unit == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trainer.data.flightlog import data_column
 from trainer.errors import UserError
 
 ONE_AXIS_COLUMNS: tuple[str, ...] = ("temp_c", "accel_mg")  # optional beside named channels
@@ -63,7 +64,7 @@ class Recording:
         channel, unit = self.meta.get("channel"), self.meta.get("unit")
         if not channel or not unit or unit == "mg":  # an accelerometer's file keeps its accel_mg
             return None
-        column = f"{channel}_{unit}"
+        column = data_column(channel, unit)
         return column if column in self.columns else None
 
     def one_axis_or_none(self, name: str) -> np.ndarray | None:

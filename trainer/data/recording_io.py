@@ -25,6 +25,7 @@ import numpy as np
 from trainer.budget import FLOAT_BYTES, check_memory
 from trainer.data.channels import channels_in, own_temp_column
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
+from trainer.data.flightlog import data_column
 from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
@@ -379,7 +380,7 @@ def contract_columns(rec: Recording) -> Recording:
     unit = rec.meta.get("unit", "mg")
     if unit == "mg" or "accel_mg" not in rec.columns or not rec.meta.get("channel"):
         return rec
-    column = f"{rec.meta['channel']}_{unit}"
+    column = data_column(rec.meta["channel"], unit)
     if column in rec.columns:  # an import keeps both: one column, under the channel's own name
         columns = {name: values for name, values in rec.columns.items() if name != "accel_mg"}
     else:
