@@ -224,7 +224,10 @@ CSV_ERRORS = {
     "nan": ({6: "0.010,20.1,nan"}, ["line 6", "column 'accel_mg'", "nan"]),
     "inf": ({5: "0.005,inf,1.1"}, ["line 5", "column 'temp_c'", "inf"]),
     "minus-infinity": ({7: "0.015,20.1,-Infinity"}, ["line 7", "column 'accel_mg'", "-Infinity"]),
-    "overflow-to-inf": ({6: "0.010,1e999,1.2"}, ["line 6", "column 'temp_c'", "finite"]),
+    "overflow-to-inf": (
+        {6: "0.010,1e999,1.2"},
+        ["line 6", "column 'temp_c'", "'1e999' is out of the float64 range"],
+    ),
     "empty-field": ({5: "0.005,,1.1"}, ["line 5", "column 'temp_c'", "empty field"]),
     "blank-last-field": ({7: "0.015,20.1,"}, ["line 7", "column 'accel_mg'", "empty field"]),
     "too-few-fields": ({6: "0.010,20.1"}, ["line 6", "column 'accel_mg'", "missing field"]),

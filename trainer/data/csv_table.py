@@ -226,7 +226,9 @@ def _parse_chunk_fast(
             )
     except ValueError:
         return None
-    return block if block.shape == (n_lines, n_columns) else None
+    if block.shape != (n_lines, n_columns) or not np.isfinite(block).all():
+        return None  # the row-by-row parse names the line and quotes the cell (``1e400``)
+    return block
 
 
 def _scan_chunk(
@@ -295,8 +297,8 @@ def read_table(
     ``columns=None`` parses every column (and requires every header name to be present and
     unique); otherwise only the named ones, so unused columns may hold anything but must still
     have a field on every row. Lines starting with ``#`` are comments (``# key=value`` ones land
-    in ``meta``), blank lines are skipped. Values are not checked for being finite here beyond
-    the text (``nan``/``inf`` words are rejected; an overflow such as ``1e999`` is not). A header that is one
+    in ``meta``), blank lines are skipped. Every value is finite: ``nan``/``inf`` words and overflows
+    such as ``1e999`` are refused with the cell's text. A header that is one
     column holding another common delimiter is refused, ``other_delimiter_fix`` saying what to do.
 
     ``decimal_comma``: numbers are written ``1,5`` (the delimiter is then not a comma). Empty
