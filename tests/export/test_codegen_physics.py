@@ -185,6 +185,48 @@ def test_a_restored_state_continues_exactly_and_a_foreign_one_is_refused(
     assert again.step(float(valid.temp_c[cut])) == stream.step(float(valid.temp_c[cut]))
 
 
+def test_a_damaged_saved_state_is_refused_not_run(fitted: tuple[Path, Path, Recording, LoadedModel]) -> None:
+    """A saved state with the right tag but a word outside what the step's proofs assume (one flipped
+    high bit of ``temp_prev``, a filter state or the play operator beyond the range) is refused and
+    initialised by the C and the golden model alike, and both continue alike (the tester's flipped bit
+    made the next step overflow a signed product under UBSan). A state at the bounds is still taken."""
+    _, out, valid, loaded = fitted
+    q = loaded.quantised
+    assert isinstance(q, QPhysics)
+    accel, temp = to_step_units(valid)
+    host = load_module(out, NAME, flags=("-O1",))
+    first = host.new_state()
+    host.run(first, accel[:500], temp[:500])
+    saved = host.read_state(first)
+    fresh = host.read_state(host.new_state())
+    wide = {w.name: w.wide for t in q.terms for w in t.fixed.state}
+    words = [w for w in saved if w not in ("temp_prev", "started", "model_tag", "flags", "samples")]
+    assert sorted(words) == sorted(wide) and any(wide.values()) and not all(wide.values())
+    damaged: list[tuple[str, int]] = [("temp_prev", int(saved["temp_prev"]) ^ (1 << 30))]
+    for name in words:
+        bound = q.word_bound(wide[name])
+        damaged.append((name, bound + 1))
+        damaged.append((name, -bound - 1))
+    for name, value in damaged:
+        blob = host.ffi.new(f"{NAME}_state_t *")
+        host.ffi.memmove(blob, host.ffi.buffer(first), host.ffi.sizeof(f"{NAME}_state_t"))
+        setattr(blob, name, value)
+        resumed = host.new_state()
+        assert host.lib.tdc_phys_restore(resumed, blob) == 0, name
+        assert host.read_state(resumed) == fresh, name
+        golden = golden_for(q)
+        assert isinstance(golden, GoldenPhysics)
+        assert not golden.restore({**saved, name: value}), name
+        np.testing.assert_array_equal(
+            host.run(resumed, accel[500:600], temp[500:600]), golden.run(accel[500:600], temp[500:600])
+        )
+    for name in words:  # at the bound: a state the step may reach, taken
+        blob = host.ffi.new(f"{NAME}_state_t *")
+        host.ffi.memmove(blob, host.ffi.buffer(first), host.ffi.sizeof(f"{NAME}_state_t"))
+        setattr(blob, name, q.word_bound(wide[name]))
+        assert host.lib.tdc_phys_restore(host.new_state(), blob) == 1, name
+
+
 def test_out_of_range_temperature_is_flagged_and_held_at_the_edge(
     fitted: tuple[Path, Path, Recording, LoadedModel],
 ) -> None:
@@ -210,6 +252,10 @@ def test_the_header_carries_the_rate_and_a_compile_time_check(
     out = fitted[1]
     header = (out / f"{NAME}.h").read_text()
     assert "#define TDC_PHYS_SAMPLE_RATE_MILLIHZ 2000u" in header
+    text = " ".join(header.replace("*", " ").split())
+    assert (
+        "at exactly 2 Hz" in text and "cubic(T_pm) + branch gain (T_pm - P) + temp_rate gain (T - R)" in text
+    )
     for rate, ok in ((2000, True), (200_000, False)):
         src = tmp_path / f"r{rate}.c"
         src.write_text(f'#include "{NAME}.h"\nTDC_PHYS_CHECK_SAMPLE_RATE_MILLIHZ({rate});\n')
@@ -219,6 +265,45 @@ def test_the_header_carries_the_rate_and_a_compile_time_check(
             text=True,
         )
         assert (result.returncode == 0) == ok, result.stderr
+
+
+@pytest.mark.parametrize(
+    ("extra", "formula", "absent"),
+    [
+        ({}, "Drift = cubic(T), with T clipped to the training range", ("Power-on", "restore at", "P (")),
+        (
+            {"hysteresis_offset": {"amp_mg": 3.0, "width_c": 20.0}},
+            "Drift = cubic(T) + branch gain (T_pm - P)",
+            ("filters are right", "proof-mass", "temp_rate", "creep"),
+        ),
+    ],
+)
+def test_a_model_without_filters_runs_at_any_rate_and_its_header_says_only_its_terms(
+    tmp_path: Path, extra: dict[str, dict[str, float]], formula: str, absent: tuple[str, ...]
+) -> None:
+    """No filter, no time base: the header declares any rate (0u), a firmware's rate check compiles
+    at any rate, and the formula and the power-on and save/restore paragraphs name only the terms the
+    model has (the tester's bias-only model said "exactly 1.97862 Hz", described lag, branch, rate and
+    creep, and failed its own rate check at 200 Hz)."""
+    effects = {"bias_poly": SLOW_LAG_AT_50_HZ["bias_poly"], **extra}
+    _export_physics(effects, (-20.0, 60.0), 1.97862, tmp_path)
+    out = tmp_path / "out"
+    header = " ".join((out / f"{NAME}.h").read_text().replace("*", " ").split())
+    assert (
+        "#define TDC_PHYS_SAMPLE_RATE_MILLIHZ 0u" in header
+        and "at any rate: this model has no filter" in header
+    )
+    assert formula in header and "1.97862" not in header
+    assert not [text for text in absent if text in header]
+    if shutil.which("gcc") is not None:
+        src = tmp_path / "r.c"
+        src.write_text(f'#include "{NAME}.h"\nTDC_PHYS_CHECK_SAMPLE_RATE_MILLIHZ(200000u);\n')
+        result = subprocess.run(
+            ["gcc", *STRICT_FLAGS, f"-I{out}", "-c", str(src), "-o", str(tmp_path / "r.o")],
+            capture_output=True,
+            text=True,
+        )
+        assert result.returncode == 0, result.stderr
 
 
 def test_warm_up_model_and_missing_rate_are_refused_in_one_line(

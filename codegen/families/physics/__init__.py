@@ -37,7 +37,7 @@ def trained_hz(raw: dict[str, Any]) -> float:
 
 
 TIME_BASE = TimeBase(
-    rate_hz=lambda model: model.rate_hz,
+    rate_hz=lambda model: model.rate_hz if model.filters else 0.0,  # no filter: any rate
     trained_hz=trained_hz,
     retime=retime,
     what="filter coefficients",

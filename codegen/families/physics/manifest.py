@@ -47,6 +47,6 @@ def physics_manifest(model: QPhysics) -> dict[str, object]:
         },
         "model_tag": model.tag,
         "power_on": f"filters start in equilibrium at the first sample; {play_start_text(model)}",
-        "save_restore": "copy NAME_state_t; NAME_restore checks model_tag and keeps the hysteresis branch",
+        "save_restore": "copy NAME_state_t; NAME_restore checks model_tag and every word against the bounds of the step's proofs, and keeps the hysteresis branch",
         "macs_per_sample": 3 + 2 * len(model.filters) + len(model.gains),
     }

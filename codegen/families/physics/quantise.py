@@ -108,6 +108,20 @@ class QPhysics:
     play_start_q: int | None = None
 
     @property
+    def reach_mdegc(self) -> int:
+        """|temperature or filter state - centre| at most, mdegC: the range and the floors' margin."""
+        return state_reach_mdegc(self.clip_lo_mdegc, self.clip_hi_mdegc, self.centre_mdegc)
+
+    def word_bound(self, wide: bool) -> int:
+        """|state word| at most after any step: what the step's overflow proofs assume of a state, and
+        what ``NAME_restore`` checks of a saved one. A filter state (wide) stays within the range in
+        Q(tf + 32); a play operator output within the range widened by its half width, in Q(tf)."""
+        if wide:
+            return self.reach_mdegc << (self.temp_frac + HI_BITS)
+        margins = [t.margin_q for t in self.terms if t.margin_q is not None]
+        return (self.reach_mdegc << self.temp_frac) + max(margins, default=0)
+
+    @property
     def filters(self) -> tuple[QLowpass, ...]:
         return tuple(t.filter for t in self.terms if t.filter is not None)
 
@@ -124,6 +138,11 @@ class QPhysics:
     def poly_reads(self) -> str | None:
         """The state word the polynomial reads instead of T_pm (None: T_pm)."""
         return next((t.fixed.poly_reads for t in self.terms if t.fixed.poly_reads is not None), None)
+
+
+def state_reach_mdegc(lo_mdegc: int, hi_mdegc: int, centre_mdegc: int) -> int:
+    """|state - centre| at most, mdegC: the range's far end plus 2 mdegC for the filters' floors."""
+    return max(hi_mdegc - centre_mdegc, centre_mdegc - lo_mdegc) + 2
 
 
 def _lowpass(
@@ -214,7 +233,7 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     # the centre: an immediate operand of one Thumb-2 instruction (12 bits, or 8 significant bits)
     grain = 1 if abs(mid) < 4096 else 1 << max(0, abs(mid).bit_length() - 8)
     centre = round_half_away(Fraction(mid, grain)) * grain
-    reach = max(hi - centre, centre - lo) + 2  # |state - centre|, mdegC: the range and the floors' margin
+    reach = state_reach_mdegc(lo, hi, centre)
     present: dict[str, tuple[str, FixedPoint, Mapping[str, float]]] = {}
     for term in m.terms:
         fixed = STREAMED[term.identifier].fixed

@@ -59,6 +59,48 @@ def play_start_text(model: QPhysics) -> str:
     )
 
 
+def usage_paragraphs(model: QPhysics, name: str) -> list[str]:
+    """The header's paragraphs on this model: the rate, its drift formula (the cubic and the terms it
+    carries, each symbol said once), power-on and save/restore, only what the model has."""
+    words = physics_state_words(model)
+    has_lag = any(t.fixed.name == "lag" for t in model.terms)
+    has_branch = any(w.name in play_words() for w in words)
+    reads = "P" if model.poly_reads is not None else ("T_pm" if has_lag else "T")
+    terms = [f"{t.fixed.gain_name} gain {t.fixed.difference_text}" for t in model.terms if t.gain is not None]
+    symbols = ["T clipped to the training range", *(w.doc for t in model.terms for w in t.fixed.state)]
+    if not has_lag and any("T_pm" in text for text in terms):
+        symbols.append("T_pm = T (no lag)")
+    out = [
+        f"Call {name}_step once per raw sample at exactly {model.rate_hz:g} Hz: the filters' coefficients "
+        "are computed for it."
+        if model.filters
+        else f"Call {name}_step once per raw sample, at any rate: this model has no filter.",
+        f"Drift = {' + '.join([f'cubic({reads})', *terms])}, with {'; '.join(symbols)} (docs/codegen.md, "
+        '"physics").',
+    ]
+    if model.filters:
+        out.append("Power-on: every filter starts in equilibrium at the first sample.")
+    if has_branch:
+        out.append(f"Power-on, the play operator: {play_start_text(model)}.")
+    if words:
+        kept = [
+            *(["the hysteresis branch is kept"] if has_branch else []),
+            *(
+                [
+                    "the filters are right if the board was off for much less than their time constants "
+                    f"(else call {name}_init)"
+                ]
+                if model.filters
+                else []
+            ),
+        ]
+        out.append(
+            "Save/restore: the state is plain data; copy it to non-volatile memory at power-down and give "
+            f"it to {name}_restore at power-up: {'; '.join(kept)}."
+        )
+    return out
+
+
 def physics_context(model: QPhysics) -> dict[str, object]:
     tf = model.temp_frac
     words = physics_state_words(model)
@@ -98,8 +140,15 @@ def physics_context(model: QPhysics) -> dict[str, object]:
             for f in model.filters
         ],
         "words": words,
+        "word_bounds": {
+            w.name: f"INT64_C({model.word_bound(True)})" if w.wide else str(model.word_bound(False))
+            for w in words
+        },
         "starts": starts,
         "play_start_text": play_start_text(model),
+        "usage": usage_paragraphs(
+            model, "{name}"
+        ),  # the header's paragraphs, the module's name filled in there
         "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
         "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
         "u_shift": model.u_shift,
