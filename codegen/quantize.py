@@ -19,7 +19,7 @@ from fractions import Fraction
 
 from codegen import family
 from codegen.family import QuantModel, family_of
-from codegen.fixedpoint import INT32_MAX
+from codegen.fixedpoint import INT32_MAX, round_half_away
 from codegen.spec import Checkpoint
 from trainer import methods as registry
 from trainer.errors import UserError
@@ -58,8 +58,10 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
             f"fire: a model fitted on impossible temperatures; re-fit on a recording without them"
         )
     clip = (-(1 << 31) + 1, INT32_MAX)
-    valid_lo = min(max(math.ceil(Fraction(lo) * 1000), clip[0]), clip[1])
-    valid_hi = min(max(math.floor(Fraction(hi) * 1000), clip[0]), clip[1])
+    # rounded as the firmware's mdegC reading of the range's ends is (and as the physics clamp is): the
+    # hottest training sample (73.96679 degC, read as 73967) is inside, not flagged out of range
+    valid_lo = min(max(round_half_away(Fraction(lo) * 1000), clip[0]), clip[1])
+    valid_hi = min(max(round_half_away(Fraction(hi) * 1000), clip[0]), clip[1])
     return Limits(
         round(accel_limit_g * 1000 * ACCEL_PER_MG), valid_lo_mdegc=valid_lo, valid_hi_mdegc=valid_hi
     )

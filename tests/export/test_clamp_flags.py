@@ -102,3 +102,26 @@ def test_imu_module_flags_each_clamped_channel(rec: Recording, tmp_path: Path) -
     assert (flags, samples) == (g_flags, g_samples)
     assert [bool(f & FLAG_INPUT_CLAMPED) for f in flags] == [True, True, False]
     assert all(f & FLAG_TEMP_OUT_OF_RANGE for f in flags)
+
+
+@pytest.mark.parametrize("method", ["poly3", "physics"])
+def test_the_training_run_read_in_mdegc_is_inside_the_valid_range(method: str, tmp_path: Path) -> None:
+    """The range's ends at a fraction of a mdegC (the bundled run's 73.96679 degC): the firmware reads
+    them rounded to mdegC (73967), which must be neither flagged out of range nor clipped; a reading
+    one mdegC beyond is flagged."""
+    base = _training()
+    temp = np.clip(base.temp_c, -10.00049, 49.96679)
+    temp[0], temp[-1] = -10.00049, 49.96679
+    rec = Recording({**base.columns, "temp_c": temp}, base.meta, "fraction-train")
+    path = tmp_path / f"{method}.pt"
+    tm.save_checkpoint(tm.checkpoint_for(method, rec), path)
+    model, _ = export(path, tmp_path / "out", name="edge")
+    host = load_module(tmp_path / "out", "edge", flags=("-O1",))
+    read_mdegc = np.round(temp * 1000).astype(np.int32)
+    assert (read_mdegc[0], read_mdegc[-1]) == (-10000, 49967)
+    for stream, flagged in ((read_mdegc, False), (np.full(20, 49968, dtype=np.int32), True)):
+        accel = np.zeros(stream.size, dtype=np.int32)
+        state, golden = host.new_state(), golden_for(model.quantised)
+        np.testing.assert_array_equal(host.run(state, accel, stream), golden.run(accel, stream))
+        flags = int(host.read_state(state)["flags"])
+        assert bool(flags & FLAG_TEMP_OUT_OF_RANGE) == flagged and bool(flags & FLAG_INPUT_CLAMPED) == flagged
