@@ -141,7 +141,7 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
         raise UserError(
             f"{source}: field 'method' is {show(method)}, not one of {', '.join(sorted(methods.REGISTRY))}"
         )
-    root.sub("payload")  # a dict
+    payload = root.sub("payload")  # a dict
     stats = root.sub("train_stats")
     for key, (valid, what) in FIELD_CHECKS.items():  # each optional; when present, what readers expect
         if stats.has(key) and not valid(stats.data[key]):
@@ -149,6 +149,16 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
     lo, hi = root.numbers("valid_temp_range_c", 2)
     if not lo <= hi:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
+    if payload.has("temp_range_c"):  # the range the model clamps its temperature to
+        clamp_lo, clamp_hi = payload.numbers("temp_range_c", 2)
+        if clamp_lo <= clamp_hi and (
+            lo < clamp_lo - 1e-9 or hi > clamp_hi + 1e-9
+        ):  # reversed: the payload's reader says so
+            root.fail(
+                f"field 'valid_temp_range_c' {lo:g} .. {hi:g} degC reaches beyond 'payload.temp_range_c' "
+                f"{clamp_lo:g} .. {clamp_hi:g} degC, where the model clamps its temperature: the module would "
+                "not flag the extrapolation (a damaged or hand-edited model file)"
+            )
     if "offset" in checkpoint:
         try:
             OffsetRecord.from_dict(checkpoint["offset"])

@@ -206,7 +206,10 @@ def test_manifest_documents_rates_ranges_bounds_and_sizes(exported: dict[str, Pa
     assert manifest["activations"]["tanh"]["max_abs_error"] < 3 / 2**15
     assert manifest["activations"]["sigmoid"]["max_abs_error"] < 3 / 2**16
     lo, hi = manifest["valid_temp_range_c"]
-    assert manifest["valid_temp_range_mdegc"] == [int(np.ceil(lo * 1000)), int(np.floor(hi * 1000))]
+    # rounded to the nearest mdegC, as the firmware reads the range's ends
+    assert manifest["valid_temp_range_mdegc"] == [
+        int(np.sign(v) * np.floor(abs(v) * 1000 + 0.5)) for v in (lo, hi)
+    ]
 
 
 def test_verify_reports_zero_mismatches(

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from codegen.cli import main as codegen_main
-from tests.testmodels import physics_checkpoint, save_checkpoint
+from tests.testmodels import checkpoint_for, physics_checkpoint, save_checkpoint
+from trainer.checkpoint import load_checkpoint
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
@@ -85,3 +86,59 @@ def test_an_edited_physics_model_is_one_line_in_every_command(
         lines.add(err)
     assert len(lines) == 1  # the same refusal everywhere
     assert not any((tmp_path / name).exists() for name in ("ev", "rp", "c"))
+
+
+def test_a_forced_undetermined_term_saves_a_model_every_command_reads(real_run: Path, tmp_path: Path) -> None:
+    """`--effects hysteresis_offset,thermal_lag` on the real run's accel z: the lag's time constant is
+    not determined (its standard deviation is infinite). The fit used to write that inf into the model,
+    which every other command then refused as "damaged or hand-edited"; now the model exports and
+    evaluates, the lag still flagged as undetermined."""
+    imu = tmp_path / "imu.csv"
+    assert (
+        run_cli(
+            trainer_main,
+            ["import", str(real_run), "--preset", "tofupilot", "--channels", "all", "-o", str(imu)],
+        )
+        == 0
+    )
+    models = tmp_path / "models"
+    argv = ["fit", "--method", "physics", str(imu), "--channels", "accel0_z", "-o", str(models)]
+    assert run_cli(trainer_main, [*argv, "--effects", "hysteresis_offset,thermal_lag"]) == 0
+    model = models / "accel0_z.pt"
+    report = load_checkpoint(model)["payload"]["report"]
+    assert "thermal_lag.tau_s" in report["at_bound"]
+    assert "tau_s" not in report["std"]["thermal_lag"]
+    assert all(np.isfinite(v) for stds in report["std"].values() for v in stds.values())
+    assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c"), "--name", "t_hl"]) == 0
+    assert (
+        run_cli(
+            trainer_main,
+            ["evaluate", str(models), str(imu), "--channels", "accel0_z", "--out-dir", str(tmp_path / "ev")],
+        )
+        == 0
+    )
+
+
+@pytest.mark.parametrize("method", ["poly3", "physics"])
+def test_a_valid_range_beyond_the_clamp_range_is_refused(
+    method: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`valid_temp_range_c` edited to -40 .. 120 degC on a model that clamps its temperature to its
+    fitted range: the module would have declared 120 degC valid and never flagged the extrapolation
+    between the fitted end and 120. Refused in one line by export and evaluate; nothing written."""
+    rec = _recording()
+    checkpoint = checkpoint_for(method, rec)
+    save_checkpoint({**checkpoint, "valid_temp_range_c": [-40.0, 120.0]}, tmp_path / "m.pt")
+    write_recording(rec, tmp_path / "r.csv")
+    model, never = str(tmp_path / "m.pt"), str(tmp_path / "never")
+    for main, argv in (
+        (codegen_main, ["export", model, "-o", never]),
+        (trainer_main, ["evaluate", model, str(tmp_path / "r.csv"), "--out-dir", never]),
+    ):
+        assert run_cli(main, argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert (
+            "\n" not in err
+            and "'valid_temp_range_c' -40 .. 120 degC reaches beyond 'payload.temp_range_c'" in err
+        )
+    assert not (tmp_path / "never").exists()

@@ -247,7 +247,14 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
         "structure": how,
         "effects": [e.identifier for e in fitted.effects],
         "params": {e.identifier: channel_params(e.params, unit) for e in fitted.effects},
-        "std": {e.identifier: channel_params(fitted.std.get(e.identifier, {}), unit) for e in fitted.effects},
+        # an undetermined parameter's standard deviation is infinite: left out (the report shows none),
+        # so that the model file holds finite numbers only, as every reader requires
+        "std": {
+            e.identifier: channel_params(
+                {k: v for k, v in fitted.std.get(e.identifier, {}).items() if np.isfinite(v)}, unit
+            )
+            for e in fitted.effects
+        },
         "nuisance": [e.identifier for e in fitted.nuisance],
         "at_bound": list(fitted.at_bound),
         "implausible": list(fitted.implausible),
