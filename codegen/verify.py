@@ -39,6 +39,10 @@ if TYPE_CHECKING:
     from trainer.scoring.allan import AllanTable
 
 
+ERROR_BUDGET_RMS_MG = 1e-3  # golden minus float on the same integer inputs, docs/codegen.md "Error budget"
+ERROR_BUDGET_MAX_MG = 5e-3
+
+
 @dataclass(frozen=True)
 class ErrorBudget:
     """Golden minus float, mg, over every sample of the recording."""
@@ -55,6 +59,15 @@ class ErrorBudget:
     @property
     def noise_ratio(self) -> float:
         return self.noise_mg / self.rms_mg if self.rms_mg > 0 else float("inf")
+
+    @property
+    def met(self) -> bool:
+        """The generator's share (golden minus float on the same integer inputs) within the budget of
+        docs/codegen.md: what the quantiser is sized for, whatever network it is given."""
+        return (
+            self.arithmetic_rms_mg <= ERROR_BUDGET_RMS_MG
+            and self.arithmetic_max_abs_mg <= ERROR_BUDGET_MAX_MG
+        )
 
 
 @dataclass(frozen=True)
@@ -430,7 +443,14 @@ def report_lines(result: VerifyResult) -> list[str]:
         f"(sensor noise {b.noise_mg:.3g} mg per sample, {b.noise_ratio:.3g} x the RMS)",
         f"  of which integer arithmetic (golden - float on the same integer inputs): RMS "
         f"{b.arithmetic_rms_mg:.3g} mg, max {b.arithmetic_max_abs_mg:.3g} mg; "
-        f"RMS {b.smoothed_rms_mg:.3g} mg over 0.5 s means",
+        f"RMS {b.smoothed_rms_mg:.3g} mg over 0.5 s means: "
+        + (
+            "within the budget"
+            if b.met
+            else "OVER THE BUDGET (the quantised model strays further from the float model than "
+            "docs/codegen.md allows; the C still equals its golden model)"
+        )
+        + f" ({ERROR_BUDGET_RMS_MG:g} mg RMS, {ERROR_BUDGET_MAX_MG:g} mg max)",
     ]
     if b.network_rms_mg is not None:
         lines.append(
@@ -495,6 +515,12 @@ def json_document(result: VerifyResult, out_dir: str | os.PathLike[str]) -> dict
         "mismatches": result.mismatches,
         "first_mismatch": result.first_mismatch,
         "state_equal": result.state_equal,
+        "error_budget": {
+            "arithmetic_rms": result.budget.arithmetic_rms_mg,
+            "arithmetic_max_abs": result.budget.arithmetic_max_abs_mg,
+            "unit": result.unit,
+            "met": result.budget.met,
+        },
         "rate_millihz": result.rate_millihz,
         "resampled_from_hz": result.resampled_from_hz,
         "schedule": None
