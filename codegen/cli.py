@@ -262,7 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--accel-limit-g",
         type=float,
         default=16.0,
-        help="acceleration full scale in g; the front end clamps beyond it (default 16)",
+        help="acceleration full scale in g: a recursive DLSTM's front end clamps its input beyond it "
+        "(default 16); the other modules subtract the drift from the acceleration as it comes",
     )
     add_channels_option(exp, "take the model from each MODEL directory (written by 'trainer fit --channels')")
     exp.add_argument(

@@ -116,6 +116,10 @@ def _no_state(model: Any, common: list[Any]) -> list[Any]:
     return common
 
 
+def _never(_: Any) -> bool:
+    return False
+
+
 @dataclass(frozen=True, eq=False)
 class CFamily:
     """One C family. ``template``: its C template (included by ``module.c.j2`` for NAME_init, _reset
@@ -126,7 +130,9 @@ class CFamily:
     its modules (manifest key -> file; each has a ``#define TDC..._VERSION N`` the module checks);
     ``restore``: it has NAME_restore; ``usage``: its paragraph of the header's comment (a template
     beside ``template``; None: a memoryless model's, any rate); ``time_base``: None for a memoryless
-    family (any rate); ``imu``: None when it has no IMU-module form."""
+    family (any rate); ``imu``: None when it has no IMU-module form; ``clamps_accel``: whether a model's
+    step clamps the acceleration to ``--accel-limit-g`` (a network whose input is the acceleration);
+    the others subtract the drift from the acceleration as it comes."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
@@ -143,6 +149,7 @@ class CFamily:
     usage: Path | None = None
     time_base: TimeBase | None = None
     imu: ImuForm | None = None
+    clamps_accel: Callable[[Any], bool] = _never
 
 
 _LOADED: dict[str, CFamily] = {}

@@ -74,6 +74,7 @@ def build_manifest(
         "input_limits": {
             "accel_lsb": [-lim.accel, lim.accel],
             "accel_g": [-lim.accel / ACCEL_PER_MG / 1000, lim.accel / ACCEL_PER_MG / 1000],
+            "accel_clamped": unit.clamps_accel(model),  # False: the acceleration passes through as it comes
             "temp_mdegc": [lim.temp_lo_mdegc, lim.temp_hi_mdegc],
         },
         "flags": dict(FLAGS),

@@ -125,3 +125,31 @@ def test_the_training_run_read_in_mdegc_is_inside_the_valid_range(method: str, t
         np.testing.assert_array_equal(host.run(state, accel, stream), golden.run(accel, stream))
         flags = int(host.read_state(state)["flags"])
         assert bool(flags & FLAG_TEMP_OUT_OF_RANGE) == flagged and bool(flags & FLAG_INPUT_CLAMPED) == flagged
+
+
+@pytest.mark.parametrize("method", ["poly3", "pla", "physics", "dlstm-temp", "dlstm"])
+def test_only_a_network_clamps_the_acceleration_and_the_manifest_says_which(
+    method: str, rec: Recording, tmp_path: Path
+) -> None:
+    """16 g + 1 LSB: a recursive DLSTM clamps its network input, the acceleration (flagged); the cubic,
+    PLA, physics and temperature-input DLSTM modules subtract the drift from the acceleration as it
+    comes (no flag, the output one LSB above the output at full scale), and their manifest says
+    `accel_clamped: false`."""
+    import json
+
+    path = tmp_path / f"{method}.pt"
+    tm.save_checkpoint(tm.checkpoint_for(method, rec, hidden=4, layers=1), path)
+    export(path, tmp_path / "out", name="full")
+    manifest = json.loads((tmp_path / "out" / "full.manifest.json").read_text())
+    clamps = method == "dlstm"
+    assert manifest["input_limits"]["accel_clamped"] is clamps
+    host = load_module(tmp_path / "out", "full", flags=("-O1",))
+    full = manifest["input_limits"]["accel_lsb"][1]
+    temp = np.full(50, 20_000, dtype=np.int32)
+    outputs = []
+    for accel in (full, full + 1):
+        state = host.new_state()
+        outputs.append(host.run(state, np.full(50, accel, dtype=np.int32), temp))
+        assert bool(int(host.read_state(state)["flags"]) & FLAG_INPUT_CLAMPED) == (clamps and accel > full)
+    if not clamps:
+        np.testing.assert_array_equal(outputs[1], outputs[0] + 1)

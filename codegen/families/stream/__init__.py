@@ -59,5 +59,6 @@ LSTM = CFamily(
     schedules=SCHEDULES,
     time_base=TIME_BASE,
     imu=FORM,
+    clamps_accel=lambda model: model.kind != "temperature",  # the network reads the acceleration
 )
 MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))
