@@ -377,7 +377,7 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
         "# IMU temperature calibration (mems-tdc codegen export --format ardupilot-parm)",
         "# Applied by AP_InertialSensor_tempcal.cpp: P(d) = (C1 + (C2 + C3 d) d) d * 1e-6, d = clamp(T) - 35,",
         "# corrected = raw - P(T - 35) + P(CALTEMP - 35) (m/s^2, rad/s); the constant belongs to",
-        "# INS_ACCOFFS_* (INS_ACC2OFFS_*, INS_ACC3OFFS_* for IMU 2 and 3), measured at INS_ACCn_CALTEMP.",
+        "# INS_ACCOFFS_* (INS_ACC2OFFS_*, INS_ACC3OFFS_* for the second and third IMU), measured at INS_ACCn_CALTEMP.",
         "# ArduPilot hides INS_TCALn_* while INS_TCALn_ENABLE is 0, so a first load sets ENABLE and skips",
         "# the rest: refresh the parameters (or reboot), load this file again, reboot (ENABLE needs one),",
         "# then redo the accelerometer calibration.",
@@ -393,7 +393,10 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
             )
         enabled = not all(c.identity for found in sensors.values() for c in found.axes.values())
         if not enabled:
-            lines.append(f"# IMU {instance}: every model given is the identity (no compensation): disabled")
+            lines.append(
+                f"# {prefix} (accel{instance}, gyro{instance}): every model given is the identity "
+                "(no compensation): disabled"
+            )
         lines += [
             f"{prefix}_ENABLE {int(enabled)}",
             f"{prefix}_TMIN {_number(lo)}",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,7 @@ def make_compensator(method: str, options: dict[str, Any] | None = None) -> Comp
 def training_stats(rec: Recording) -> TrainStats:
     """What the checkpoint records about its training data."""
     return TrainStats(
-        source=rec.source,
+        source=Path(rec.source).name,  # the file, not the path typed: the same data gives the same model id
         n_samples=len(rec),
         sample_rate_hz=float(rec.sample_rate_hz),
         duration_s=float(rec.time_s[-1] - rec.time_s[0]),
@@ -81,7 +82,11 @@ def fit_compensator(
     offset policy (relative to ``T_ref`` by default; :mod:`trainer.reference`)."""
     model = make_compensator(method, options)
     blind = train.without_truth()
-    model.fit(blind)
+    try:
+        model.fit(blind)
+    except UserError as exc:  # a method's refusal names the recording it could not fit
+        text = str(exc)
+        raise UserError(text if text.startswith(train.source) else f"{train.source}: {text}") from None
     apply_offset_policy(model, methods.get(method), blind, policy or OffsetPolicy())
     return model
 

@@ -265,3 +265,23 @@ def test_a_named_noise_trend_runs_through_every_output(
     assert "rate_ramp" in next(line for line in printed.splitlines() if "not for the compensator" in line)
     text = (report / "report.md").read_text()
     assert "rate_ramp" in text.split("## What to do next")[1]
+
+
+@pytest.mark.slow  # 160 s: the search names several effects around the bump
+def test_a_gyroscope_report_names_its_statistics_in_deg_per_s(tmp_path: Path) -> None:
+    """A gyroscope channel (its own column, deg/s) with a local bump: the report's region lines name
+    the statistics as the JSON does (``mean_residual_dps``), not ``mean_residual_mg``."""
+    rec = chamber_recording([], seed=5)
+    middle = rec.time_s[-1] / 2
+    bump = 3.0 * np.exp(-0.5 * ((rec.time_s - middle) / 60.0) ** 2)  # a local residual, no catalogue shape
+    columns = {"time_s": rec.time_s, "temp_c": rec.temp_c, "gyro0_x_dps": rec.accel_mg + bump}
+    path = tmp_path / "gyro.csv"
+    write_recording(Recording(columns, dict(rec.meta), rec.source), path)
+    out, report = tmp_path / "d.json", tmp_path / "report"
+    argv = ("diagnose", str(path), "--channels", "gyro0_x", "--json", str(out), "--report", str(report))
+    assert cli(*argv) == 0
+    out, report = tmp_path / "d.gyro0_x.json", report / "gyro0_x"
+    document = out.read_text()
+    assert "mean_residual_dps" in document and "mean_residual_mg" not in document
+    text = (report / "report.md").read_text()
+    assert "mean_residual_dps" in text and "mean_residual_mg" not in text

@@ -87,7 +87,15 @@ class CubicPolynomial(TemperatureCompensator):
         if self.n_bins > 0:
             temp_rel, drift = bin_by_temperature(temp_rel, drift, self.n_bins)
         if np.unique(temp_rel).size < 4:
-            raise UserError("poly3: fewer than 4 distinct temperatures; a cubic is not determined")
+            binned = (
+                f" after averaging into {self.n_bins} bins over {t_min:g} .. {t_max:g} degC"
+                if self.n_bins > 0 and np.unique(temp_c).size >= 4
+                else ""
+            )
+            hint = " (a few outlying temperatures stretch the range?)" if binned else ""
+            raise UserError(
+                f"poly3: fewer than 4 distinct temperatures{binned}; a cubic is not determined{hint}"
+            )
         self.coefficients = np.zeros(4)
         if self.degree > 0:
             self.coefficients[: self.degree + 1] = np.polynomial.polynomial.polyfit(

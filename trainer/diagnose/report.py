@@ -163,9 +163,9 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         if h.note:
             lines.append(f"({h.note}.)")
     lines += ["", "## Where the starting model's residual is structured", ""]
-    lines += [_region_line(r) for r in d.mismatch] or ["Nowhere beyond the modelled noise."]
+    lines += [_region_line(r, d.unit) for r in d.mismatch] or ["Nowhere beyond the modelled noise."]
     lines += ["", "## Still unexplained after the additions", ""]
-    lines += [_region_line(r) for r in d.unexplained] or ["Nothing."]
+    lines += [_region_line(r, d.unit) for r in d.unexplained] or ["Nothing."]
     notes = d.notes + d.baseline.notes
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
@@ -235,8 +235,11 @@ def _undetected_line(u: DetectionLimit, unit: str) -> str:
     return out + (f" Test that would identify it: {u.recommended_test}." if u.recommended_test else "")
 
 
-def _region_line(r: Region) -> str:
-    sig = ", ".join(f"{k} {v}" for k, v in document.significance(r.significance).items())
+def _region_line(r: Region, unit: str) -> str:
+    """A region's line, its statistics named in the channel's unit (``mean_residual_dps``) as in the JSON."""
+    sig = ", ".join(
+        f"{channel_param_name(k, unit)} {v}" for k, v in document.significance(r.significance).items()
+    )
     note = f" {r.note}." if r.note else ""
     return (
         f"- {r.kind}: {r.t_start_s:.0f}..{r.t_end_s:.0f} s ({r.segment}, {r.branch}, "
