@@ -39,6 +39,7 @@ class LoadedModel:
     quantised: QuantModel
     notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
     shown: str = ""  # the name the user knows the model by (auto's candidate: poly2, physics-branch)
+    sensor: str = "accelerometer"  # what the header's title names (codegen.export.sensor_of)
 
     @property
     def name(self) -> str:
@@ -67,7 +68,7 @@ def load_for_codegen(
     from trainer.selection import shown_name
 
     shown = shown_name(ckpt.method, TrainStats.of_checkpoint(raw))
-    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown)
+    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown, sensor_of(raw))
 
 
 UNDETERMINED_WARNING = "WARNING: the model carries what its training run does not determine"
@@ -147,6 +148,17 @@ def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
     return (note,)
 
 
+def sensor_of(raw: dict[str, Any]) -> str:
+    """What the header's title names: "accelerometer", or the channel's sensor and name
+    ("gyroscope (channel gyro0_y, deg/s)") for a model of a gyroscope or barometer channel."""
+    from trainer.data.channels import SENSOR_NAMES, UNIT_LABELS
+
+    stats = TrainStats.of_checkpoint(raw)
+    if stats.unit is None or stats.unit not in SENSOR_NAMES or stats.unit == "mg":
+        return SENSOR_NAMES["mg"]
+    return f"{SENSOR_NAMES[stats.unit]} (channel {stats.channel}, {UNIT_LABELS[stats.unit]})"
+
+
 def manifest_name(name: str) -> str:
     return f"{name}.manifest.json"
 
@@ -154,13 +166,17 @@ def manifest_name(name: str) -> str:
 def generate(model: LoadedModel, name: str) -> dict[str, str]:
     """File name -> content of the three output files (pure; nothing touches the disk)."""
     name = validate_name(name)
-    files = render_sources(model.quantised, name, model.sha256, notes=model.notes)
+    files = render_sources(model.quantised, name, model.sha256, notes=model.notes, sensor=model.sensor)
     manifest = build_manifest(
         model.quantised,
         name=name,
         sha256=model.sha256,
         valid_temp_range_c=model.checkpoint.valid_temp_range_c,
     )
+    if model.notes and model.sensor != "accelerometer":  # the first note says how the units read
+        units = manifest["units"]
+        assert isinstance(units, dict)
+        manifest["units"] = {**units, "channel": f"{model.sensor}: {model.notes[0]}"}
     files[manifest_name(name)] = manifest_json(manifest)
     return files
 

@@ -248,12 +248,16 @@ def kernel_header() -> str:
     return text
 
 
-def render_sources(model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = ()) -> dict[str, str]:
+def render_sources(
+    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = (), sensor: str = "accelerometer"
+) -> dict[str, str]:
     """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
-    (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment."""
+    (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment,
+    ``sensor`` what its title names."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
+    ctx["sensor"] = sensor
     files = {
         f"{name}.h": env.get_template("module.h.j2").render(ctx),
         f"{name}.c": env.get_template("module.c.j2").render(ctx),

@@ -27,8 +27,13 @@ from trainer.errors import UserError
 ALL = "all"
 # Column unit suffix -> (the unit as reports print it, the quantity it measures): the one place
 # figures and tables take a channel's unit and axis wording from.
-UNITS = {"mg": ("mg", "acceleration"), "dps": ("deg/s", "angular rate"), "pa": ("Pa", "pressure")}
-UNIT_LABELS = {suffix: label for suffix, (label, _) in UNITS.items()}  # what reports print
+UNITS = {
+    "mg": ("mg", "acceleration", "accelerometer"),
+    "dps": ("deg/s", "angular rate", "gyroscope"),
+    "pa": ("Pa", "pressure", "barometer"),
+}
+UNIT_LABELS = {suffix: label for suffix, (label, _, _) in UNITS.items()}  # what reports print
+SENSOR_NAMES = {suffix: sensor for suffix, (_, _, sensor) in UNITS.items()}  # what a module's header names
 DEFAULT_UNIT = "mg"  # a one-axis recording's accel_mg
 ONE_AXIS_CHANNEL = "accel_mg"  # what figures call the channel of a one-axis recording (its column)
 _DATA_COLUMN = re.compile(r"(accel|gyro)([0-9])_([xyz])_(mg|dps)|(baro)([0-9])_(pa)")
