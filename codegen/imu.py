@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import os
 import struct
+import textwrap
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +34,7 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.export import LoadedModel, load_for_codegen
+from codegen.export import UNDETERMINED_WARNING, LoadedModel, load_for_codegen
 from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
 from codegen.imu_record import ChannelTables, ImuPart
@@ -310,6 +311,15 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
         "NAME": name.upper(),
         "p": f"{name}_",
         "guard": f"{name.upper()}_H_INCLUDED",
+        # what a channel's own module would say in its header (codegen export prints the same)
+        "warnings": [
+            textwrap.wrap(f"{c.name}: {note}", 92)
+            for c in imu.channels
+            for note in c.model.notes
+            if note.startswith(UNDETERMINED_WARNING)
+        ],
+        # channels whose one-channel module has NAME_restore: state the IMU module cannot save
+        "unsaved": [c.name for c in imu.channels if family_of(c.model.quantised).restore],
         "version": __version__,
         "sha256": imu.sha256,
         "module_id": f"0x{imu.module_id:08x}u",

@@ -63,8 +63,12 @@ def one_axis(rec: Recording, channel: str, temp_column: str = "temp_c") -> Recor
     column = f"{channel}_{unit}"
     return Recording(
         {"time_s": rec.time_s, "temp_c": rec.columns[temp_column], "accel_mg": rec.columns[column]},
-        # the unit of accel_mg said, as a one-channel view says it: Pa in an accel column is implausible
-        {"sample_rate_hz": rec.meta["sample_rate_hz"], **({"unit": unit} if unit != "mg" else {})},
+        # a one-channel view's metadata: the writer keeps deg/s and Pa in the channel's own column
+        # (accel_mg is milli-g only), which the metadata point to
+        {
+            "sample_rate_hz": rec.meta["sample_rate_hz"],
+            **({"unit": unit, "channel": channel} if unit != "mg" else {}),
+        },
         f"{channel}.npz",
     )
 
@@ -623,3 +627,25 @@ def test_a_channel_without_any_temperature_is_refused_naming_it(imu: dict[str, P
         UserError, match=r"line 2 \(header\), column 'temp_c': missing: channel gyro0_x has no"
     ):
         read_recording(path)
+
+
+def test_two_spellings_of_one_channel_must_agree(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`accel_y_mg` (the older spelling) beside `accel0_y_mg` 100 mg apart: one was dropped without a
+    word; now a refusal naming both. The same data under both names is one channel, read once."""
+    n = 300
+    temp = np.linspace(-10, 50, n)
+    for offset, code in ((100.0, 2), (0.0, 0)):
+        columns = {"time_s": np.arange(n, dtype=float), "temp_c": temp, "accel_y_mg": 0.05 * temp}
+        columns["accel0_y_mg"] = 0.05 * temp + offset
+        path = tmp_path / f"both{code}.csv"
+        write_recording(Recording(columns, {"sample_rate_hz": "1"}, "both"), path)
+        out = tmp_path / f"fit{code}"
+        argv = ["fit", "--method", "poly3", str(path), "--channels", "all", "-o", str(out)]
+        assert run_cli(trainer_main, argv) == code
+        if code:
+            err = capsys.readouterr().err
+            assert (
+                "'accel_y_mg' and 'accel0_y_mg' are two spellings of one channel" in err and not out.exists()
+            )
+        else:
+            assert sorted(p.name for p in out.glob("*.pt")) == ["accel0_y.pt"]

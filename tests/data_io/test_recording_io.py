@@ -466,3 +466,25 @@ def test_unwritable_recordings_are_rejected(tmp_path: Path, bad: dict) -> None:
 def test_output_directory_must_exist(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="does not exist"):
         write_recording(make_recording(), tmp_path / "nope" / "out.csv")
+
+
+@pytest.mark.parametrize("unit", ["dps", "pa"])
+def test_accel_mg_is_milli_g_whatever_other_metadata_say(unit: str, tmp_path: Path) -> None:
+    """The format: `accel_mg` is milli-g and `sample_rate_hz` the only key a reader may rely on. A file
+    of another writer with `unit=dps` (or `pa`) beside a bare `accel_mg` was read as deg/s (or refused
+    as an impossible pressure); now as milli-g. A gyroscope's own column with the same metadata (what
+    this tool writes for a gyroscope's view) still reads as that channel."""
+    from trainer.data.channels import channel_unit
+
+    n = 200
+    rows = "".join(f"{i},{-10 + 0.3 * i},{0.05 * i - 3:.3f}\n" for i in range(n))
+    other = tmp_path / "other.csv"
+    other.write_text(f"# sample_rate_hz=1\n# unit={unit}\n# channel=gyro0_x\ntime_s,temp_c,accel_mg\n{rows}")
+    rec = read_recording(other)
+    assert channel_unit(rec) == "mg" and "channel" not in rec.meta
+    np.testing.assert_allclose(rec.accel_mg, [0.05 * i - 3 for i in range(n)], atol=1e-9)
+    own = tmp_path / "own.csv"
+    own.write_text(f"# sample_rate_hz=1\n# unit=dps\n# channel=gyro0_x\ntime_s,temp_c,gyro0_x_dps\n{rows}")
+    mine = read_recording(own)
+    assert channel_unit(mine) == "dps" and mine.meta["channel"] == "gyro0_x"
+    np.testing.assert_allclose(mine.accel_mg, [0.05 * i - 3 for i in range(n)], atol=1e-9)

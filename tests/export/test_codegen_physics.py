@@ -350,7 +350,29 @@ def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warni
     assert run_cli(codegen_main, ["export", str(path), "-o", str(tmp_path / "out"), "--name", NAME]) == 0
     printed = capsys.readouterr().out
     header = " ".join((tmp_path / "out" / f"{NAME}.h").read_text().replace("*", " ").split())
-    for text in (printed, header):
+    # the IMU module of that channel says it too, in its header, and that it cannot save the branch
+    flagged["train_stats"] = {**flagged["train_stats"], "channel": "accel0_z", "unit": "mg"}
+    (tmp_path / "imu").mkdir()
+    tm.save_checkpoint(flagged, tmp_path / "imu" / "accel0_z.pt")
+    plain = {**raw, "train_stats": {**raw["train_stats"], "channel": "accel0_x", "unit": "mg"}}
+    tm.save_checkpoint(plain, tmp_path / "imu" / "accel0_x.pt")
+    imu_argv = [
+        "export",
+        str(tmp_path / "imu"),
+        "--channels",
+        "all",
+        "-o",
+        str(tmp_path / "imu_c"),
+        "--name",
+        "imu_w",
+    ]
+    assert run_cli(codegen_main, imu_argv) == 0
+    imu_header = " ".join((tmp_path / "imu_c" / "imu_w.h").read_text().replace("*", " ").split())
+    assert (
+        "No save/restore: the filters and hysteresis branch of accel0_x, accel0_z start afresh" in imu_header
+    )
+    assert imu_header.count("WARNING") == 1 and "accel0_z: WARNING" in imu_header
+    for text in (printed, header, imu_header):
         assert "WARNING: the model carries what its training run does not determine" in " ".join(text.split())
         assert "thermal_lag.tau_s sits at the end of its search range" in " ".join(text.split())
     # flags that are not a list of parameter names: a malformed model file, one line, nothing written

@@ -66,8 +66,18 @@ class Channel:
 def recording_channels(rec: Recording) -> dict[str, Channel]:
     """Every channel a recording carries, in the order (sensor, instance, axis).
 
-    ``accel_x_mg`` etc. count as ``accel0_x`` unless ``accel0_x_mg`` is present too.
+    ``accel_x_mg`` etc. count as ``accel0_x`` unless ``accel0_x_mg`` is present too, in which case the
+    two spellings of one channel must hold the same data (a refusal names both otherwise).
     """
+    for column in rec.columns:
+        legacy = _LEGACY_AXIS.fullmatch(column)
+        named = f"accel0_{legacy.group(1)}_mg" if legacy is not None else None
+        if named in rec.columns and not np.array_equal(rec.columns[column], rec.columns[named]):
+            raise UserError(
+                f"{rec.source}: columns {column!r} and {named!r} are two spellings of one channel "
+                f"({named} is the format's name, {column} the older one) with different data: "
+                "keep one, or rename the other to another instance (accel1_...)"
+            )
     return channels_in(rec.columns)
 
 

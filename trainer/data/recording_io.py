@@ -176,9 +176,20 @@ def recording_format(path: str | Path) -> RecordingFormat:
 def read_recording(path: str | os.PathLike[str]) -> Recording:
     """Read and validate a recording (``.csv`` or ``.npz``); every violation is a one-line UserError."""
     path = Path(path)
-    if recording_format(path) == "csv":
-        return _read_csv(path)
-    return _read_npz(path)
+    rec = _read_csv(path) if recording_format(path) == "csv" else _read_npz(path)
+    return _accel_mg_is_milli_g(rec)
+
+
+def _accel_mg_is_milli_g(rec: Recording) -> Recording:
+    """The format's ``accel_mg`` is milli-g whatever other metadata say ("``sample_rate_hz`` is the only
+    key a reader may rely on"): ``unit`` and ``channel`` name the channel a one-channel command reads
+    only when the file holds that channel's own column (``gyro0_x_dps``, as this tool writes a
+    gyroscope's view); beside a bare ``accel_mg`` they are ignored."""
+    unit = rec.meta.get("unit", "mg")
+    if unit == "mg" or rec.channel_column() is not None or "accel_mg" not in rec.columns:
+        return rec
+    meta = {k: v for k, v in rec.meta.items() if k not in ("unit", "channel")}
+    return Recording(rec.columns, meta, rec.source)
 
 
 def _read_csv(path: str | Path) -> Recording:
