@@ -372,7 +372,13 @@ def test_npz_missing_column(tmp_path: Path) -> None:
 def test_npz_that_is_not_an_archive(tmp_path: Path) -> None:
     path = tmp_path / "rec.npz"
     path.write_text("time_s,temp_c,accel_mg\n")
-    assert "not a readable .npz" in read_error(path)
+    assert "not a readable .npz" in read_error(
+        path
+    ) and "a CSV recording takes the .csv extension" in read_error(path)
+    cut = tmp_path / "cut.npz"
+    np.savez(cut, time_s=np.arange(10.0), temp_c=np.zeros(10), accel_mg=np.zeros(10))
+    cut.write_bytes(cut.read_bytes()[:200])
+    assert "not a readable .npz" in read_error(cut) and "truncated or damaged" in read_error(cut)
 
 
 def test_npz_good_arrays_are_valid(tmp_path: Path) -> None:

@@ -306,7 +306,14 @@ def _read_npz(path: str | Path) -> Recording:
     try:
         archive = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise UserError(f"{source}: not a readable .npz archive ({type(exc).__name__})") from None
+        with open(path, "rb") as head:
+            start = head.read(64)
+        cause = (
+            "a text file named .npz: a CSV recording takes the .csv extension"
+            if start.lstrip(b"\xef\xbb\xbf#\r\n ").startswith(b"time_s") or b"time_s," in start
+            else "truncated or damaged (a copy cut short?), or not written by numpy.savez"
+        )
+        raise UserError(f"{source}: not a readable .npz archive ({type(exc).__name__}): {cause}") from None
     if not isinstance(archive, np.lib.npyio.NpzFile):
         raise UserError(f"{source}: not a .npz archive (a single .npy array?)")
     columns: dict[str, np.ndarray] = {}

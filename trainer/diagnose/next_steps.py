@@ -17,8 +17,8 @@ from trainer.scoring.markdown import markdown_table
 
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"
 GENERIC_PROFILE = (
-    "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a 180 degree flip "
-    "(+1 g / -1 g) at two temperatures"
+    "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a known second input "
+    "at two temperatures (an accelerometer flipped 180 degrees, +1 g / -1 g; a gyroscope on a rate table)"
 )
 
 

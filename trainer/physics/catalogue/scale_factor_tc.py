@@ -65,7 +65,8 @@ def _identifiability(p: FinderProfile) -> Identifiability:
         False,
         "a single static orientation: the scale-factor tempco times a constant input equals the "
         "polynomial's linear term (a fixture tilt is a constant c0 the same way)",
-        "a 180 degree turn (+1 g / -1 g) at several temperatures, or a tumble",
+        "a known second input at several temperatures: an accelerometer turned 180 degrees (+1 g / -1 g) or "
+        "tumbled, a gyroscope on a rate table, a barometer at a second pressure",
     )
 
 
