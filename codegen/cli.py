@@ -80,6 +80,7 @@ def _export_imu(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from codegen.imu import export_imu
+    from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
     from codegen.rate import parse_rate_hz
 
     if args.format not in ("c", "calibration-blob"):
@@ -93,7 +94,7 @@ def _export_imu(args: argparse.Namespace) -> int:
         [Path(p) for p in args.model],
         args.out_dir,
         name=args.name or "imu_tdc",
-        accel_limit_g=args.accel_limit_g,
+        accel_limit_g=DEFAULT_ACCEL_LIMIT_G if args.accel_limit_g is None else args.accel_limit_g,
         blob=args.blob,
         blob_only=blob_only,
         rate_millihz=None if args.rate is None else parse_rate_hz(args.rate),
@@ -261,9 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument(
         "--accel-limit-g",
         type=float,
-        default=16.0,
+        default=None,
         help="acceleration full scale in g: a recursive DLSTM's front end clamps its input beyond it "
-        "(default 16); the other modules subtract the drift from the acceleration as it comes",
+        "(default 16); the other modules subtract the drift from the acceleration as it comes and refuse it",
     )
     add_channels_option(exp, "take the model from each MODEL directory (written by 'trainer fit --channels')")
     exp.add_argument(

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from codegen.family import QuantModel
+from codegen.family import QuantModel, family_of
 from codegen.manifest import build_manifest
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, quantise_checkpoint
 from codegen.rate import retime_checkpoint
@@ -198,16 +198,26 @@ def export(
     out_dir: str | os.PathLike[str],
     *,
     name: str | None = None,
-    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    accel_limit_g: float | None = None,
     rate_millihz: int | None = None,
     schedule: str = "step",
 ) -> tuple[LoadedModel, dict[str, str]]:
-    """Load, quantise (for ``rate_millihz`` when given), render and write; returns the model and files."""
+    """Load, quantise (for ``rate_millihz`` when given), render and write; returns the model and files.
+    ``accel_limit_g`` (None: the default full scale) applies to a module that clamps its acceleration
+    input; given for another, it is refused rather than written into a manifest it does not govern."""
     if name is not None:
         validate_name(name)
     model = load_for_codegen(
-        model_path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz, schedule=schedule
+        model_path,
+        accel_limit_g=DEFAULT_ACCEL_LIMIT_G if accel_limit_g is None else accel_limit_g,
+        rate_millihz=rate_millihz,
+        schedule=schedule,
     )
+    if accel_limit_g is not None and not family_of(model.quantised).clamps_accel(model.quantised):
+        raise UserError(
+            f"--accel-limit-g: a {model.name} module subtracts the drift from the acceleration as it comes and "
+            "never clamps it; the option applies to a module whose network reads the acceleration (dlstm)"
+        )
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)
     return model, files

@@ -153,3 +153,10 @@ def test_only_a_network_clamps_the_acceleration_and_the_manifest_says_which(
         assert bool(int(host.read_state(state)["flags"]) & FLAG_INPUT_CLAMPED) == (clamps and accel > full)
     if not clamps:
         np.testing.assert_array_equal(outputs[1], outputs[0] + 1)
+    # a full scale given for a module that never clamps is refused, not written into its manifest
+    from codegen.cli import main as codegen_main
+    from trainer.errors import run_cli
+
+    argv = ["export", str(path), "-o", str(tmp_path / "two_g"), "--accel-limit-g", "2"]
+    assert run_cli(codegen_main, argv) == (0 if clamps else 2)
+    assert (tmp_path / "two_g").exists() == clamps
