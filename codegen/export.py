@@ -39,7 +39,7 @@ class LoadedModel:
     quantised: QuantModel
     notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
     shown: str = ""  # the name the user knows the model by (auto's candidate: poly2, physics-branch)
-    sensor: str = "accelerometer"  # what the header's title names (codegen.export.sensor_of)
+    sensor: str = ""  # what the header's title names (sensor_of): "accelerometer", or a channel's sensor
 
     @property
     def name(self) -> str:
@@ -173,7 +173,7 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
         sha256=model.sha256,
         valid_temp_range_c=model.checkpoint.valid_temp_range_c,
     )
-    if model.notes and model.sensor != "accelerometer":  # the first note says how the units read
+    if model.notes and model.sensor != sensor_of({}):  # a channel's: the first note says how the units read
         units = manifest["units"]
         assert isinstance(units, dict)
         manifest["units"] = {**units, "channel": f"{model.sensor}: {model.notes[0]}"}

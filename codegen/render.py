@@ -249,7 +249,7 @@ def kernel_header() -> str:
 
 
 def render_sources(
-    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...] = (), sensor: str = "accelerometer"
+    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...], sensor: str
 ) -> dict[str, str]:
     """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
     (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment,

@@ -216,7 +216,7 @@ def test_a_damaged_saved_state_is_refused_not_run(fitted: tuple[Path, Path, Reco
     assert sorted(words) == sorted(wide) and any(wide.values()) and not all(wide.values())
     damaged: list[tuple[str, int]] = [("temp_prev", int(saved["temp_prev"]) ^ (1 << 30))]
     for name in words:
-        bound = q.word_bound(wide[name])
+        bound = q.word_bounds[name]
         damaged.append((name, bound + 1))
         damaged.append((name, -bound - 1))
     for name, value in damaged:
@@ -235,7 +235,7 @@ def test_a_damaged_saved_state_is_refused_not_run(fitted: tuple[Path, Path, Reco
     for name in words:  # at the bound: a state the step may reach, taken
         blob = host.ffi.new(f"{NAME}_state_t *")
         host.ffi.memmove(blob, host.ffi.buffer(first), host.ffi.sizeof(f"{NAME}_state_t"))
-        setattr(blob, name, q.word_bound(wide[name]))
+        setattr(blob, name, q.word_bounds[name])
         assert host.lib.tdc_phys_restore(host.new_state(), blob) == 1, name
 
 

@@ -306,8 +306,11 @@ def _read_npz(path: str | Path) -> Recording:
     try:
         archive = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        with open(path, "rb") as head:
-            start = head.read(64)
+        try:
+            with open(path, "rb") as head:
+                start = head.read(64)
+        except OSError:
+            start = b""
         cause = (
             "a text file named .npz: a CSV recording takes the .csv extension"
             if start.lstrip(b"\xef\xbb\xbf#\r\n ").startswith(b"time_s") or b"time_s," in start

@@ -48,9 +48,8 @@ class GoldenPhysics(GoldenBase):
         """The C ``NAME_restore``: continue from a saved state of this model whose words lie within
         the bounds the step's proofs assume (a damaged copy would overflow it), else start afresh."""
         m = self.model
-        wide = {w.name: w.wide for t in m.terms for w in t.fixed.state}
         inside = m.clip_lo_mdegc <= int(saved["temp_prev"]) <= m.clip_hi_mdegc and all(
-            abs(int(saved[name])) <= m.word_bound(wide[name]) for name in self.present()
+            abs(int(saved[name])) <= bound for name, bound in m.word_bounds.items()
         )
         if saved["model_tag"] != m.tag or not inside:
             self.init()

@@ -112,14 +112,16 @@ class QPhysics:
         """|temperature or filter state - centre| at most, mdegC: the range and the floors' margin."""
         return state_reach_mdegc(self.clip_lo_mdegc, self.clip_hi_mdegc, self.centre_mdegc)
 
-    def word_bound(self, wide: bool) -> int:
-        """|state word| at most after any step: what the step's overflow proofs assume of a state, and
-        what ``NAME_restore`` checks of a saved one. A filter state (wide) stays within the range in
-        Q(tf + 32); a play operator output within the range widened by its half width, in Q(tf)."""
-        if wide:
-            return self.reach_mdegc << (self.temp_frac + HI_BITS)
-        margins = [t.margin_q for t in self.terms if t.margin_q is not None]
-        return (self.reach_mdegc << self.temp_frac) + max(margins, default=0)
+    @property
+    def word_bounds(self) -> dict[str, int]:
+        """|state word| at most after any step, per word of the state: what the step's overflow proofs
+        assume of a state, and what ``NAME_restore`` checks of a saved one. A filter state (wide) stays
+        within the range in Q(tf + 32); a play operator output within the range widened by its half
+        width, in Q(tf)."""
+        margin = max((t.margin_q for t in self.terms if t.margin_q is not None), default=0)
+        wide = self.reach_mdegc << (self.temp_frac + HI_BITS)
+        narrow = (self.reach_mdegc << self.temp_frac) + margin
+        return {w.name: wide if w.wide else narrow for t in self.terms for w in t.fixed.state}
 
     @property
     def filters(self) -> tuple[QLowpass, ...]:

@@ -141,7 +141,7 @@ def physics_context(model: QPhysics) -> dict[str, object]:
         ],
         "words": words,
         "word_bounds": {
-            w.name: f"INT64_C({model.word_bound(True)})" if w.wide else str(model.word_bound(False))
+            w.name: f"INT64_C({model.word_bounds[w.name]})" if w.wide else str(model.word_bounds[w.name])
             for w in words
         },
         "starts": starts,

@@ -36,7 +36,13 @@ def embedded_modules(part: ImuPart) -> list[dict[str, object]]:
     modules: list[dict[str, object]] = []
     for channel, index in zip(part.channels, part.indices, strict=True):
         sub = stream_module_name(name, channel.name)
-        files = render_sources(channel.model.quantised, sub, channel.model.sha256, notes=channel.model.notes)
+        files = render_sources(
+            channel.model.quantised,
+            sub,
+            channel.model.sha256,
+            notes=channel.model.notes,
+            sensor=channel.model.sensor,
+        )
         own_include = f'#include "{sub}.h"\n'
         assert files[f"{sub}.c"].count(own_include) == 1
         modules.append(
