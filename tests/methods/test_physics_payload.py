@@ -6,17 +6,19 @@ wrote C whose tables silently lacked the parameter."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import pytest
 
 from codegen.cli import main as codegen_main
 from tests.testmodels import checkpoint_for, physics_checkpoint, save_checkpoint
-from trainer.checkpoint import load_checkpoint
+from trainer.checkpoint import load_checkpoint, load_model
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
-from trainer.errors import run_cli
+from trainer.errors import UserError, run_cli
+from trainer.greybox.compensator import PhysicsCompensator
 
 
 def _recording() -> Recording:
@@ -142,3 +144,37 @@ def test_a_valid_range_beyond_the_clamp_range_is_refused(
             and "'valid_temp_range_c' -40 .. 120 degC reaches beyond 'payload.temp_range_c'" in err
         )
     assert not (tmp_path / "never").exists()
+
+
+def test_a_gyroscope_model_file_names_its_parameters_in_deg_per_s(tmp_path: Path) -> None:
+    """physics-catalogue.md, "Other channels": on a deg/s channel an amplitude parameter carries
+    ``dps`` in place of ``mg``; another program reading ``model.pt`` parses it against those names.
+    A file written before (catalogue names on a gyroscope) still loads, to the same model."""
+    rec = _recording()
+    checkpoint = physics_checkpoint(rec)
+    mg_effects = [[name, dict(params)] for name, params in checkpoint["payload"]["effects"]]
+    save_checkpoint(checkpoint, tmp_path / "mg.pt")
+    model = cast(PhysicsCompensator, load_model(tmp_path / "mg.pt")[0])
+    model.report = {"unit": "dps"}  # what the fit records for a gyroscope channel
+    checkpoint["payload"] = model.to_payload()
+    names = [k for _, params in checkpoint["payload"]["effects"] for k in params]
+    amplitudes = [k for _, params in mg_effects for k in params if "mg" in k.split("_")]
+    assert amplitudes and not [k for k in names if "mg" in k.split("_")]
+    assert sorted(names) == sorted(k.replace("_mg", "_dps") for _, params in mg_effects for k in params)
+    save_checkpoint(checkpoint, tmp_path / "dps.pt")
+    dps_model, _ = load_model(tmp_path / "dps.pt")
+    old = dict(checkpoint, payload=dict(checkpoint["payload"], effects=mg_effects))
+    save_checkpoint(old, tmp_path / "old.pt")
+    old_model, _ = load_model(tmp_path / "old.pt")
+    drift = model.predict_drift(rec)
+    assert np.abs(drift).max() > 0.1
+    np.testing.assert_array_equal(dps_model.predict_drift(rec), drift)
+    np.testing.assert_array_equal(old_model.predict_drift(rec), drift)
+    mixed = [list(e) for e in checkpoint["payload"]["effects"]]
+    mixed[0] = [mixed[0][0], {**mg_effects[0][1], "c1_dps_per_c": 0.1}]
+    mixed[0][1].pop("c1_mg_per_c")
+    save_checkpoint(
+        dict(checkpoint, payload=dict(checkpoint["payload"], effects=mixed)), tmp_path / "mixed.pt"
+    )
+    with pytest.raises(UserError, match=r"payload.effects\[0\] \(bias_poly\) has parameters .*c0_dps"):
+        load_model(tmp_path / "mixed.pt")

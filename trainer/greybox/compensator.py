@@ -31,7 +31,7 @@ from trainer.greybox.least_squares import fit_least_squares
 from trainer.greybox.stream import PhysicsModel, play_start_within
 from trainer.greybox.terms import parse_effects
 from trainer.physics.catalogue import BACKBONE, EFFECTS
-from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_params
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, catalogue_names, channel_params
 from trainer.physics.effects import EffectConfig, drift
 
 
@@ -100,6 +100,11 @@ class PhysicsCompensator(Compensator):
             )
         return self
 
+    @property
+    def unit(self) -> str:
+        """The unit suffix of the channel the model was fitted to (mg, dps, pa): its parameters' names."""
+        return str(self.report.get("unit", CATALOGUE_UNIT))
+
     def describe(self) -> list[str]:
         return summary_lines(self.report) if self.report else []
 
@@ -146,7 +151,12 @@ class PhysicsCompensator(Compensator):
     # -- checkpoint ------------------------------------------------------------------------------
     def to_payload(self) -> dict[str, Any]:
         return {
-            "effects": [[e.identifier, {k: float(v) for k, v in e.params.items()}] for e in self.effects],
+            # parameters as the channel names them (amp_dps on a gyroscope: physics-catalogue.md,
+            # "Other channels"), as everything else a user or another program reads does
+            "effects": [
+                [e.identifier, {k: float(v) for k, v in channel_params(e.params, self.unit).items()}]
+                for e in self.effects
+            ],
             "temp_range_c": [float(v) for v in self.temp_range_c],
             "with_warmup": bool(self.with_warmup),
             "effects_option": self.effects_option,
@@ -158,19 +168,25 @@ class PhysicsCompensator(Compensator):
     def from_payload(cls, payload: dict[str, Any]) -> Self:
         model = cls(with_warmup=payload_fields.flag(payload, "with_warmup"))
         model.effects_option = str(payload["effects_option"])
-        model.effects = _effects_of(payload["effects"])
+        cls.undetermined_in(payload)  # its flags are what the sign-off reads: checked on loading
+        model.report = dict(payload["report"])
+        if model.unit not in UNIT_LABELS:
+            raise ValueError(
+                f"payload.report.unit: {model.unit!r} is not a channel unit ({', '.join(UNIT_LABELS)})"
+            )
+        model.effects = _effects_of(payload["effects"], model.unit)
         model.temp_range_c = payload_fields.temp_range(payload)
         start = payload.get("play_start_c")  # absent from checkpoints written before it existed: half-way
         model.play_start_c = None if start is None else payload_fields.number(start, "payload.play_start_c")
-        model.report = dict(payload["report"])
-        cls.undetermined_in(payload)  # its flags are what the sign-off reads: checked on loading
         return model
 
 
-def _effects_of(raw: Any) -> tuple[EffectConfig, ...]:
+def _effects_of(raw: Any, unit: str) -> tuple[EffectConfig, ...]:
     """``payload.effects``: ``[identifier, {parameter: value}]`` pairs, each a catalogue effect with
-    exactly its catalogue parameters (a missing one would change the exported tables without a word,
-    an unknown effect fail deep inside the drift formula)."""
+    exactly its catalogue parameters as a channel of ``unit`` names them (a missing one would change
+    the exported tables without a word, an unknown effect fail deep inside the drift formula), held
+    under the catalogue's names. A file written before the channel's names were used holds the
+    catalogue's (``amp_mg`` on a gyroscope) and reads as before."""
     if not isinstance(raw, list | tuple) or not raw:
         raise ValueError(f"payload.effects must be a list of [effect, parameters] pairs, got {raw!r}")
     effects = []
@@ -182,13 +198,17 @@ def _effects_of(raw: Any) -> tuple[EffectConfig, ...]:
         definition = EFFECTS.get(identifier) if isinstance(identifier, str) else None
         if definition is None:
             raise ValueError(f"{where}: {identifier!r} is not a catalogue effect")
-        expected = [p.name for p in definition.params]
-        if sorted(params) != sorted(expected):
+        named = catalogue_names(definition.params, unit)  # {name on the channel: catalogue name}
+        if sorted(params) == sorted(named.values()):
+            named = {name: name for name in named.values()}
+        elif sorted(params) != sorted(named):
             raise ValueError(
-                f"{where} ({identifier}) has parameters {sorted(params)}; the catalogue's are {expected}"
+                f"{where} ({identifier}) has parameters {sorted(params)}; the catalogue's are {list(named)}"
             )
         effects.append(
-            EffectConfig(identifier, {k: payload_fields.number(v, f"{where}.{k}") for k, v in params.items()})
+            EffectConfig(
+                identifier, {named[k]: payload_fields.number(v, f"{where}.{k}") for k, v in params.items()}
+            )
         )
     return tuple(effects)
 

@@ -6,7 +6,7 @@ any channel's bias; an amplitude parameter carries the channel's unit in place o
 and width parameters keep their names, identifiers never change. Inside the tool parameters keep
 their catalogue (mg) names, because the one-channel view carries any unit in its ``accel_mg``
 column; :func:`channel_param_name` is the one renaming, applied where a name is shown or read
-(JSON, reports, TOML, fit summaries).
+(JSON, reports, TOML, fit summaries, the physics model file).
 
 Plausible amplitude ranges are in mg and fit no gyroscope or barometer, so on another unit an
 amplitude is judged against the channel's own drift instead (:func:`plausible_range`).
