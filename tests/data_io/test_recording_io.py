@@ -250,7 +250,11 @@ CSV_ERRORS = {
     ),
     "time-repeats": ({6: "0.005,20.1,1.2"}, ["line 6", "column 'time_s'", "not greater"]),
     "time-goes-back": ({7: "0.001,20.1,1.3"}, ["line 7", "column 'time_s'", "not greater"]),
-    "jitter": ({6: "0.01006,20.1,1.2"}, ["line 6", "column 'time_s'", "1.20 %", "nominal period 0.005"]),
+    # 3 % of a period late: the step is 3 % long, the row 1.5 % off the closest uniform grid
+    "jitter": (
+        {6: "0.01015,20.1,1.2"},
+        ["line 6", "column 'time_s'", "3.00 %", "1.50 %", "nominal period 0.005"],
+    ),
     "rate-not-a-number": ({1: "# sample_rate_hz=fast"}, ["line 1", "'sample_rate_hz'", "'fast'"]),
     "rate-negative": ({1: "# sample_rate_hz=-200"}, ["line 1", "'sample_rate_hz'", "positive"]),
     "rate-zero": ({1: "# sample_rate_hz=0"}, ["line 1", "'sample_rate_hz'", "positive"]),
@@ -285,6 +289,43 @@ def test_jitter_is_judged_against_the_median_without_sample_rate(tmp_path: Path)
     message = read_error(write_lines(tmp_path / "rec.csv", lines))
     assert "line 6, column 'time_s'" in message  # the row at 0.402 s comes 2 % late
     assert "nominal period 0.1 s" in message
+
+
+def _clock_read_late(jitter: float, seed: int, rows: int = 4000, period_s: float = 0.01) -> np.ndarray:
+    """A free-running 100 Hz clock whose every timestamp is read up to ``jitter`` of a period off
+    its tick (uniformly): the timestamps stay within ``jitter`` of the grid, the steps within 2x."""
+    ticks = np.arange(rows) * period_s
+    return ticks + np.random.default_rng(seed).uniform(-jitter, jitter, rows) * period_s
+
+
+def _file_with_time(path: Path, time: np.ndarray) -> Path:
+    lines = ["# sample_rate_hz=100", "time_s,temp_c,accel_mg", *(f"{t:.7f},20.0,1.0" for t in time)]
+    return write_lines(path, lines)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_timestamps_within_one_percent_of_the_grid_are_accepted_although_steps_differ_more(
+    tmp_path: Path, seed: int
+) -> None:
+    """recording-format.md: "jitter up to 1 % of the period is accepted". A clock read late by up to
+    0.9 % of a period (the grid's sense of jitter) makes steps up to 1.8 % off nominal."""
+    time = _clock_read_late(0.0099, seed)
+    steps_off = np.abs(np.diff(time) / 0.01 - 1.0)
+    assert steps_off.max() > 0.012  # the file would break a rule on steps alone
+    assert len(read_recording(_file_with_time(tmp_path / "late.csv", time))) == time.size
+
+
+def test_a_clock_read_late_by_more_than_one_percent_is_refused_at_the_first_row_that_breaks_both(
+    tmp_path: Path,
+) -> None:
+    time = _clock_read_late(0.02, 3)
+    period = 0.01
+    step_off = np.abs(np.diff(time) - period) > 0.01 * period
+    grid_off = np.abs(time - np.arange(time.size) * period) > 0.01 * period  # the clock's own ticks
+    first_row = int(np.flatnonzero(step_off & (grid_off[1:] | grid_off[:-1]))[0]) + 1
+    message = read_error(_file_with_time(tmp_path / "late.csv", time))
+    assert f"line {first_row + 3}, column 'time_s'" in message  # two header lines, rows from 0
+    assert "uniform grid" in message and "limit 1 %" in message
 
 
 def test_no_data_rows(tmp_path: Path) -> None:
