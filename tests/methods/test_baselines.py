@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from codegen.cli import main as codegen_main
+from tests.testmodels import baseline_checkpoint, save_checkpoint
 from trainer.baselines.pla import PiecewiseLinear
 from trainer.baselines.poly3 import CubicPolynomial, bin_by_temperature
-from trainer.errors import UserError
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import UserError, run_cli
 
 
 def _ramp(n: int = 24_000, lo: float = -40.0, hi: float = 80.0) -> np.ndarray:
@@ -103,3 +110,34 @@ def test_poly3_binning_equalises_uneven_heating() -> None:
     assert t_bins.size == 100
     np.testing.assert_allclose(v_bins, 2.0 * t_bins)
     assert np.all(np.diff(t_bins) > 0)
+
+
+def test_a_pla_whose_split_points_are_out_of_order_is_one_line_in_every_command(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The interval lookup (numpy's and the C's) needs sorted split points; a hand-edited model with
+    two swapped is refused by evaluate, report and codegen alike, in the same line, nothing written
+    (before, evaluate ran it and only codegen refused)."""
+    temp = np.concatenate([np.linspace(40.0, -10.0, 300), np.linspace(-10.0, 40.0, 300)])
+    columns = {"time_s": np.arange(temp.size, dtype=float), "temp_c": temp, "accel_mg": 0.01 * temp**2}
+    rec = Recording(columns, {"sample_rate_hz": "1"}, "pla")
+    recording = tmp_path / "rec.csv"
+    write_recording(rec, recording)
+    checkpoint = baseline_checkpoint("pla", rec)
+    splits = checkpoint["payload"]["split_points_c"].clone()
+    splits[[2, 3]] = splits[[3, 2]]
+    checkpoint["payload"]["split_points_c"] = splits
+    model = tmp_path / "edited.pt"
+    save_checkpoint(checkpoint, model)
+    lines = set()
+    for main, argv in (
+        (trainer_main, ["evaluate", str(model), str(recording), "--out-dir", str(tmp_path / "ev")]),
+        (trainer_main, ["report", str(model), "--recording", str(recording), "-o", str(tmp_path / "rp")]),
+        (codegen_main, ["export", str(model), "-o", str(tmp_path / "c")]),
+    ):
+        assert run_cli(main, argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "split_points_c must be in ascending order" in err and str(model) in err
+        lines.add(err)
+    assert len(lines) == 1
+    assert not any((tmp_path / name).exists() for name in ("ev", "rp", "c"))

@@ -106,6 +106,8 @@ class PiecewiseLinear(TemperatureCompensator):
     def from_payload(cls, payload: dict[str, Any]) -> Self:
         model = cls(payload_fields.count(payload, "n_intervals", 1))
         model.split_points_c = payload_fields.table(payload, "split_points_c", model.n_intervals - 1)
+        if np.any(np.diff(model.split_points_c) < 0):  # the interval lookup (here and in C) needs them sorted
+            raise ValueError("payload.split_points_c must be in ascending order")
         model.slopes_mg_per_c = payload_fields.table(payload, "slopes_mg_per_c", model.n_intervals)
         model.intercepts_mg = payload_fields.table(payload, "intercepts_mg", model.n_intervals)
         model.temp_range_c = payload_fields.temp_range(payload)

@@ -31,13 +31,17 @@ class Poly3Spec:
 
 
 def parse(root: DottedFields, payload: DottedFields, method: str) -> Poly3Spec:
-    from trainer.checkpoint import model_of  # the trainer's strict reading: evaluate's refusals, here too
+    """The cubic as the trainer reads it (:func:`trainer.checkpoint.model_of`: evaluate's refusals,
+    in the same line, here too), read once."""
+    from trainer.baselines.poly3 import CubicPolynomial
+    from trainer.checkpoint import model_of
 
-    model_of(root.data, root.source)
-    lo, hi = payload.numbers("temp_range_c", 2)
-    if not lo < hi:
-        root.fail(f"field 'payload.temp_range_c' must be increasing, got {[lo, hi]}")
-    return Poly3Spec(method, payload.array("coefficients_mg", (4,)), payload.number("t_ref_c"), (lo, hi))
+    del payload  # read by the model's own from_payload
+    model = model_of(root.data, root.source)
+    assert isinstance(model, CubicPolynomial), f"{method} is registered with the cubic's class"
+    return Poly3Spec(
+        method, np.asarray(model.coefficients, dtype=np.float64), model.t_ref_c, model.temp_range_c
+    )
 
 
 @dataclass(frozen=True)

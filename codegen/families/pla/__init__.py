@@ -32,16 +32,15 @@ class PlaSpec:
 
 
 def parse(root: DottedFields, payload: DottedFields, method: str) -> PlaSpec:
-    from trainer.checkpoint import model_of  # the trainer's strict reading: evaluate's refusals, here too
+    """The PLA as the trainer reads it (:func:`trainer.checkpoint.model_of`: evaluate's refusals,
+    in the same line, here too), read once."""
+    from trainer.baselines.pla import PiecewiseLinear
+    from trainer.checkpoint import model_of
 
-    model_of(root.data, root.source)
-    n = payload.integer("n_intervals", 1, 4096)
-    splits = payload.array("split_points_c", (n - 1,))
-    if np.any(np.diff(splits) < 0):
-        root.fail("field 'payload.split_points_c' must be in ascending order")
-    return PlaSpec(
-        method, splits, payload.array("slopes_mg_per_c", (n,)), payload.array("intercepts_mg", (n,))
-    )
+    del payload  # read by the model's own from_payload
+    model = model_of(root.data, root.source)
+    assert isinstance(model, PiecewiseLinear), f"{method} is registered with the PLA's class"
+    return PlaSpec(method, model.split_points_c, model.slopes_mg_per_c, model.intercepts_mg)
 
 
 @dataclass(frozen=True)
