@@ -64,6 +64,25 @@ def test_a_constant_output_and_cr_only_line_ends_are_named(
         assert run_cli(trainer_main, argv) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1 and not (tmp_path / "m.pt").exists()
+    # what fit refuses, evaluate and compare refuse too (they printed an Allan improvement of nan)
+    (tmp_path / "good.csv").write_text("\n".join(lines) + "\n")
+    assert (
+        run_cli(
+            trainer_main,
+            ["fit", "--method", "poly3", str(tmp_path / "good.csv"), "-o", str(tmp_path / "g.pt")],
+        )
+        == 0
+    )
+    capsys.readouterr()
+    const = str(tmp_path / "const.csv")
+    for argv in (
+        ["evaluate", str(tmp_path / "g.pt"), const, "--out-dir", str(tmp_path / "ev")],
+        ["compare", const, "--holdout", "first:0.5", "--methods", "poly3", "--out-dir", str(tmp_path / "cp")],
+    ):
+        assert run_cli(trainer_main, argv) == 2
+        err = capsys.readouterr().err
+        assert "holds 1 in every row" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "ev").exists() and not (tmp_path / "cp").exists()
 
 
 def test_a_mavlink_telemetry_log_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

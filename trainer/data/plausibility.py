@@ -148,6 +148,16 @@ class Plausibility:
                 f"re-import with --accel-unit m/s^2"
             )
 
+    def output_varies(self, rec: Recording) -> None:
+        """A channel that holds one value in every row is no sensor's output."""
+        output = np.asarray(rec.accel_mg)
+        if output.size and float(np.ptp(output)) == 0.0:
+            name = "column 'accel_mg'" if "channel" not in rec.meta else f"channel {rec.meta['channel']}"
+            self.problem(
+                f"{rec.source}: {name} holds {float(output[0]):g} in every row: no sensor output varies so "
+                "little (the wrong column, or a sensor that was not read?)"
+            )
+
     def temperature_span(self, temp_c: np.ndarray, method: str, min_span_c: float, where: str) -> None:
         """A temperature-driven method needs the temperature to move enough to determine its shape."""
         if (short := span_shortfall(temp_c, method, min_span_c)) is not None:
@@ -180,13 +190,7 @@ def check_training(
     checks.recording_ranges(rec.columns, unit, where, output_column=output_column)
     if unit == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
-    output = np.asarray(rec.accel_mg)
-    output_name = "column 'accel_mg'" if "channel" not in rec.meta else f"channel {rec.meta['channel']}"
-    if output.size and float(np.ptp(output)) == 0.0:
-        checks.problem(
-            f"{where}: {output_name} holds {float(output[0]):g} in every row: no sensor output varies so "
-            "little (the wrong column, or a sensor that was not read?)"
-        )
+    checks.output_varies(rec)
     checks.temperature_span(
         rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column {temp_column!r}"
     )
@@ -201,6 +205,8 @@ def check_scored(rec: Recording) -> Recording:
     no model of this tool was made from them without that option."""
     checks = Plausibility(way_past=f"repair or remove those rows; {ACCEPT_OPTION} is for import and fit")
     checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), rec.source)
+    # what fit refuses is not scored either (a constant channel's Allan figures are nan)
+    Plausibility(way_past="trainer fit refuses it too; leave it out of --channels").output_varies(rec)
     # a warning, not an error: a decimated log may be slow, and these commands have no option to accept it
     time_base = Plausibility(accept=True)
     time_base.rate(rec.sample_rate_hz, f"{rec.source}: sample rate", at_import=False)
