@@ -25,20 +25,18 @@ from __future__ import annotations
 import argparse
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
+from bundled_run import REAL, bundled_run
 
 from trainer.baselines.poly3 import CubicPolynomial
 from trainer.data.channels import channel_view, select_channels
-from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording import Recording
 from trainer.greybox.compensator import PhysicsCompensator
 from trainer.physics.catalogue.base import T_REF_C
 from trainer.physics.effects import drift
 from trainer.scoring.crossval import Segment, folds_of, impute_held_out, rows, training_rows
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 RULES = (("half-way", None), (f"from {T_REF_C:g} degC", T_REF_C))
 START_FRACTIONS = (
     -1.0,
@@ -75,7 +73,7 @@ def main() -> None:
     parser.add_argument("--channels", default="all")
     args = parser.parse_args()
     started = time.perf_counter()
-    rec = import_foreign(REAL, options_with_preset("tofupilot", channels=("all",)))
+    rec = bundled_run()
     wanted = tuple(args.channels.split(",")) if args.channels != "all" else ("all",)
     print(f"# {platform.node()} ({platform.processor() or platform.machine()}), {REAL.name}")
     for channel in select_channels(rec, wanted):

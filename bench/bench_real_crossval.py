@@ -30,16 +30,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bundled_run import bundled_run
 
 from trainer import methods
 from trainer.data.channels import ONE_AXIS_CHANNEL, channel_view, select_channels
-from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording_io import read_recording
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.scoring.crossval import UNCOMPENSATED
 from trainer.selection import row_name, select
-
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 
 
 def main() -> int:
@@ -48,10 +46,7 @@ def main() -> int:
     parser.add_argument("--recording", type=Path, help="a recording instead of the bundled real run")
     parser.add_argument("--markdown", type=Path)
     args = parser.parse_args()
-    if args.recording is None:
-        rec = import_foreign(REAL, options_with_preset("tofupilot", channels=("all",)))
-    else:
-        rec = read_recording(args.recording)
+    rec = bundled_run() if args.recording is None else read_recording(args.recording)
     wanted = tuple(args.channels.split(",")) if args.channels != "all" else ("all",)
     out = [f"machine: {platform.processor() or platform.machine()}, {platform.python_version()}", ""]
     checks: list[str] = []

@@ -23,11 +23,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bundled_run import bundled_run
 
 from trainer import methods
 from trainer.data.channels import channel_view, select_channels
 from trainer.data.holdout import parse_holdout, split
-from trainer.data.importer import import_foreign, options_with_preset
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.fitting import fit_compensator
@@ -35,7 +35,6 @@ from trainer.scoring.evaluate import smooth_for_scoring
 from trainer.scoring.static import static_drift_left, thermal_branch
 from trainer.selection import AUTO, TOLERANCE, candidate_list, fit_with_selection
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 FRACTION_SPLITS = tuple(f"{side}:{f / 10:g}" for side in ("first", "last") for f in range(2, 7))
 SPLITS = (*FRACTION_SPLITS, ":1500", "1500:", ":3000", "3000:")  # time splits, seconds from the start
 
@@ -59,7 +58,7 @@ def main() -> int:
     parser.add_argument("--candidates", type=candidate_list, help="auto's candidates (default all)")
     parser.add_argument("--markdown", type=Path)
     args = parser.parse_args()
-    rec = import_foreign(REAL, options_with_preset("tofupilot", channels=("all",)))
+    rec = bundled_run()
     wanted = tuple(args.channels.split(",")) if args.channels != "all" else ("all",)
     specs = [s for s in args.splits.split(",") if s]
     out = [f"machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}", ""]

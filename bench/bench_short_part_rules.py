@@ -29,12 +29,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
-from bench_real_splits import REAL, SPLITS, held_out_rms  # noqa: E402  (the same splits and scoring)
+from bench_real_splits import SPLITS, held_out_rms  # noqa: E402  (the same splits and scoring)
+from bundled_run import bundled_run  # noqa: E402
 
 from trainer import methods  # noqa: E402
 from trainer.data.channels import channel_view, select_channels  # noqa: E402
 from trainer.data.holdout import parse_holdout, split  # noqa: E402
-from trainer.data.importer import import_foreign, options_with_preset  # noqa: E402
 from trainer.data.recording import Recording  # noqa: E402
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S  # noqa: E402
 from trainer.fitting import fit_compensator  # noqa: E402
@@ -86,7 +86,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--markdown", type=Path)
     args = parser.parse_args()
-    rec = import_foreign(REAL, options_with_preset("tofupilot", channels=("all",)))
+    rec = bundled_run()
     header = " | ".join(RULES)
     out = [
         f"machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}",

@@ -576,6 +576,27 @@ def test_channel_map_of_a_delimited_file_converts_each_sensor_unit(tmp_path: Pat
     np.testing.assert_allclose(rec.columns["baro0_pa"], p * 100.0, rtol=1e-12)
 
 
+@pytest.mark.parametrize(("mapped", "given", "option"), [
+    ("gyro0_x=gx", ["--baro-unit", "hPa"], "--gyro-unit rad/s|dps"),
+    ("baro0=p", ["--gyro-unit", "rad/s"], "--baro-unit Pa|hPa"),
+])  # fmt: skip
+def test_a_mapped_gyroscope_or_barometer_needs_its_unit_given(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], mapped: str, given: list[str], option: str
+) -> None:
+    """A gyroscope in rad/s imported as deg/s (the default it had) is 57x too small and plausible:
+    a channel the user maps takes its unit from the user, in one line otherwise, nothing written."""
+    lines = ["t;T;ax;gx;p"] + [
+        f"{0.1 * i:.1f};{20 + 0.25 * i};{0.01 * i};{0.001 * i};1013" for i in range(40)
+    ]
+    source = tmp_path / "log.csv"
+    source.write_text("\n".join(lines) + "\n")
+    argv = ["import", str(source), "--time", "t", "--temp", "T", "--accel", "ax", "--channel-map", mapped]
+    assert run_cli(trainer_main, [*argv, *given, "--channels", "all", "-o", str(tmp_path / "rec.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and option in err and mapped.split("=")[0] in err
+    assert not (tmp_path / "rec.csv").exists()
+
+
 def _without(rec: Recording, *names: str, temps: dict[str, np.ndarray] | None = None) -> Recording:
     columns = {k: v for k, v in rec.columns.items() if k not in names}
     return Recording({**columns, **(temps or {})}, dict(rec.meta), rec.source)

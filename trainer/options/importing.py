@@ -138,10 +138,14 @@ def add_import_arguments(parser: argparse.ArgumentParser) -> None:
         help="delimited files: the columns of the channels --channels picks, e.g. accel0_x=ax,gyro0_x=gx",
     )
     parser.add_argument(
-        "--gyro-unit", choices=list(GYRO_UNIT_TO_DPS), help="unit of gyro columns (default dps)"
+        "--gyro-unit",
+        choices=list(GYRO_UNIT_TO_DPS),
+        help="unit of gyro columns: required when --channel-map maps a gyroscope (no default: both look plausible)",
     )
     parser.add_argument(
-        "--baro-unit", choices=list(BARO_UNIT_TO_PA), help="unit of baro columns (default Pa)"
+        "--baro-unit",
+        choices=list(BARO_UNIT_TO_PA),
+        help="unit of baro columns: required when --channel-map maps a barometer (no default: both look plausible)",
     )
     parser.add_argument(
         "--remove-gravity", choices=GRAVITY_MODES, help="subtract +-1 g (nominal) or the mean from accel_mg"
