@@ -58,12 +58,18 @@ def test_mps2_declared_as_g_is_refused_with_a_hint(tmp_path: Path) -> None:
     assert read_recording(out).accel_mg[0] == pytest.approx(-9810.0)
 
 
-def test_milliseconds_read_as_seconds_is_refused(tmp_path: Path) -> None:
-    src = logger_file(tmp_path / "log.csv", step=20.0)  # a 50 Hz logger's ms column, declared as s
-    message = cli_error("import", src, *IMPORT, "-o", tmp_path / "o.csv")
-    assert "0.05 Hz is below 0.1 Hz" in message and "milliseconds read as seconds?" in message
+@pytest.mark.parametrize(("step", "declared", "right"), [(20.0, "s", "ms"), (20_000.0, "ms", "us")])
+def test_a_time_column_in_another_unit_is_refused_naming_the_likely_one(
+    tmp_path: Path, step: float, declared: str, right: str
+) -> None:
+    """A 50 Hz logger's ms column declared as s, or its us column declared as ms: the hint names the
+    unit that gives a rate IMU logs are written at (it said "milliseconds read as seconds?" to both)."""
+    src = logger_file(tmp_path / "log.csv", step=step)
+    message = cli_error("import", src, *IMPORT, "--time-unit", declared, "-o", tmp_path / "o.csv")
+    assert "0.05 Hz is below 0.1 Hz" in message and f"--time-unit {right} gives 50 Hz" in message
+    assert message.count("--time-unit") == 1  # the other units give no plausible rate
     rec_path = tmp_path / "ok.csv"
-    assert main(["import", str(src), *IMPORT, "--time-unit", "ms", "-o", str(rec_path)]) == 0
+    assert main(["import", str(src), *IMPORT, "--time-unit", right, "-o", str(rec_path)]) == 0
     assert float(read_recording(rec_path).meta["sample_rate_hz"]) == pytest.approx(50.0)
 
 

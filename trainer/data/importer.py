@@ -368,7 +368,9 @@ def _finish(
             rate = options.rate_hz
         else:
             rate = _median_rate(time)
-        checks.rate(rate, f"{source}: column {time_column}", at_import=True)
+        checks.rate(
+            rate, f"{source}: column {time_column}", at_import=True, time_units=_other_units(rate, options)
+        )
         problem = find_time_problem(np.round(time, csv_time_decimals(time)))
         if problem is not None:
             raise UserError(
@@ -390,6 +392,18 @@ def _finish(
     meta.update(extra_meta)
     meta.update(options.meta)
     return Recording(columns, meta, source)
+
+
+def _other_units(rate_hz: float, options: ImportOptions) -> dict[str, float]:
+    """``{--time-unit value: the sample rate it would give}`` for the other units of a time column."""
+    declared = TIME_UNIT_SECONDS[options.time_unit]
+    if declared is None:  # a row index: its rate is --rate, no unit to change
+        return {}
+    return {
+        unit: rate_hz * declared / scale
+        for unit, scale in TIME_UNIT_SECONDS.items()
+        if scale is not None and unit != options.time_unit
+    }
 
 
 def _check_options(options: ImportOptions) -> None:

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 
 RATE_MIN_HZ = 0.1  # slower than one sample per 10 s: a time column in ms read as s
 RATE_MAX_HZ = 100e3  # faster than any MEMS output data rate: s read as ms/us, or an index
+LIKELY_RATE_HZ = (0.5, 10e3)  # the rates IMU logs are written at: a time unit giving one is the likely one
 TEMP_MAX_C = 150.0  # above any MEMS operating range (-40..125 degC typical)
 TEMP_MIN_C = -60.0  # below any MEMS operating range and any thermal chamber's test: an error code
 _SENSOR_OF_UNIT = {unit: sensor for sensor, unit in SENSOR_UNITS.items()}
@@ -61,18 +62,29 @@ class Plausibility:
             print(f"warning: {message}", file=sys.stderr)
 
     # ---- the checks
-    def rate(self, rate_hz: float, where: str, *, at_import: bool) -> None:
-        """A sample rate outside 0.1 Hz .. 100 kHz is a time unit read wrongly."""
+    def rate(
+        self, rate_hz: float, where: str, *, at_import: bool, time_units: dict[str, float] | None = None
+    ) -> None:
+        """A sample rate outside 0.1 Hz .. 100 kHz is a time unit read wrongly. At import,
+        ``time_units`` (``{--time-unit value: the rate it would give}``) names the likely one."""
         fix = "check --time-unit" if at_import else "check the time unit at import"
+        likely = [
+            f"--time-unit {unit} gives {rate:.4g} Hz"
+            for unit, rate in (time_units or {}).items()
+            if LIKELY_RATE_HZ[0] <= rate <= LIKELY_RATE_HZ[1]
+        ]
+        if likely:
+            fix = f"the wrong time unit? ({'; '.join(likely)})"
         if rate_hz < RATE_MIN_HZ:
-            self.problem(
-                f"{where}: {rate_hz:.4g} Hz is below {RATE_MIN_HZ:g} Hz: milliseconds read as seconds? {fix}"
-            )
+            cause = "" if likely else "milliseconds read as seconds? "
+            self.problem(f"{where}: {rate_hz:.4g} Hz is below {RATE_MIN_HZ:g} Hz: {cause}{fix}")
         elif rate_hz > RATE_MAX_HZ:
-            self.problem(
-                f"{where}: {rate_hz:.4g} Hz is above {RATE_MAX_HZ / 1e3:g} kHz: microseconds or milliseconds read "
-                f"as seconds, or a sample counter as time? {fix}"
+            cause = (
+                ""
+                if likely
+                else "microseconds or milliseconds read as seconds, or a sample counter as time? "
             )
+            self.problem(f"{where}: {rate_hz:.4g} Hz is above {RATE_MAX_HZ / 1e3:g} kHz: {cause}{fix}")
 
     def temperature(self, temp_c: np.ndarray, where: str, *, at_import: bool) -> None:
         """Temperatures above 150 degC; all of them within 200..400 suggests kelvin."""
