@@ -307,7 +307,9 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument(
         "--keep-constant",
         action="store_true",
-        help="px4-params: write the model's constant term as X0 (default 0: the ordinary calibration owns it)",
+        help="px4-params: write the model's constant term as X0 (default 0: the ordinary calibration owns it); "
+        "a model fitted with 'trainer fit --offset relative' (the default) holds none and is refused: fit with "
+        "--offset absolute to keep it",
     )
     exp.set_defaults(func=_export)
 

@@ -48,6 +48,7 @@ from trainer.data.channels import UNIT_LABELS, unit_of_channel_name
 from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
 from trainer.data.plausibility import WIDER_RUN_HINT
 from trainer.errors import UserError
+from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, OffsetRecord
 
 EXTENSIONS = {"px4-params": ".params", "ardupilot-parm": ".parm"}  # the --format choices besides c
 # model unit -> the stacks' unit (PX4 and ArduPilot alike: m/s^2, rad/s, Pa)
@@ -89,6 +90,7 @@ class ChannelCubic:
     t_max_c: float
     model_sha256: str
     ahrs_orientation: int | None = None  # the training log's board rotation (ArduPilot), None: not noted
+    offset: OffsetRecord | None = None  # the fit's offset policy (None: a file written before it)
 
     @property
     def identity(self) -> bool:
@@ -160,8 +162,9 @@ def load_channel_cubic(
         raise UserError(f"{source}: the valid temperature range {lo:g} .. {hi:g} degC is empty")
     scale = TO_STACK_UNIT[parsed.unit]
     sha = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    offset = OffsetRecord.from_dict(raw["offset"]) if "offset" in raw else None  # checked by load_checkpoint
     return ChannelCubic(
-        parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha, stats.ahrs_orientation
+        parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha, stats.ahrs_orientation, offset
     )
 
 
@@ -301,6 +304,7 @@ def _px4_coefficients(cubic: ChannelCubic, t_ref_c: float, keep_constant: bool) 
     if not keep_constant:
         coefficients[0] = 0.0
     else:
+        _check_holds_constant(cubic)
         constant_model_unit = coefficients[0] / TO_STACK_UNIT[cubic.channel.unit]
         if cubic.channel.sensor == "accel" and abs(constant_model_unit) > GRAVITY_IN_CONSTANT_MG:
             raise UserError(
@@ -308,6 +312,27 @@ def _px4_coefficients(cubic: ChannelCubic, t_ref_c: float, keep_constant: bool) 
                 f"without --keep-constant, or fit on a recording imported with --remove-gravity"
             )
     return coefficients
+
+
+def _check_holds_constant(cubic: ChannelCubic) -> None:
+    """Refuse --keep-constant for a model fitted relative to T_ref: ``trainer fit`` shifted its constant
+    out (trainer/reference.py), so its X0 would be 0 whatever the option says."""
+    if cubic.offset is None or not cubic.offset.relative:
+        return
+    unit = UNIT_LABELS[cubic.channel.unit]
+    constant = f"{cubic.offset.drift_at_t_ref_mg:.4g} {unit}"
+    todo = f"refit with 'trainer fit {OFFSET_OPTION} absolute' to keep it, or export without --keep-constant"
+    if cubic.channel.sensor == "accel" and abs(cubic.offset.drift_at_t_ref_mg) > OFFSET_LIMIT_MG:
+        # gravity: 'trainer fit --offset absolute' refuses it too
+        todo = (
+            f"{constant} is gravity or a static offset, which the ordinary calibration owns: export without "
+            f"--keep-constant (or refit with {OFFSET_OPTION} absolute on a recording imported with --remove-gravity)"
+        )
+    raise UserError(
+        f"{cubic.name}: --keep-constant: the model holds no constant to keep (fitted with {OFFSET_OPTION} "
+        f"relative, the default: its constant, {constant} at T_ref {cubic.offset.t_ref_c:.2f} degC, was left "
+        f"to the ordinary calibration), so X0 would be 0; {todo}"
+    )
 
 
 def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False) -> str:

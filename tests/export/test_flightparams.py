@@ -10,6 +10,7 @@ ArduPilot, libraries/AP_InertialSensor/AP_InertialSensor_tempcal.cpp (correct_se
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -145,11 +146,15 @@ def test_px4_params_match_the_model_drift(tmp_path: Path, xyz_models: dict[str, 
         assert params[f"TC_A0_X0_{index}"] == 0.0
 
 
-def test_px4_keep_constant_writes_x0_and_refuses_gravity(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
-    written = export(tmp_path / "x", "px4-params", xyz_models["x"], "--keep-constant")
+def test_px4_keep_constant_writes_x0_and_refuses_gravity(tmp_path: Path) -> None:
+    # fitted with --offset absolute, the model holds its constant (12 mg + the drift at T_ref)
+    meta = {"channel": "accel0_x", "device_id_accel0": str(DEVICE_ID)}
+    rec = chamber_recording(tmp_path / "x.csv", axis_offset_mg=12.0, meta=meta, seed=0)
+    absolute_x = fit(rec, tmp_path / "x_abs.pt", "poly3", "--offset", "absolute")
+    written = export(tmp_path / "x", "px4-params", absolute_x, "--keep-constant")
     params = read_px4_params(written)
-    temp = grid(xyz_models["x"])
-    drift, drift_range = model_drift(xyz_models["x"], temp)
+    temp = grid(absolute_x)
+    drift, drift_range = model_drift(absolute_x, temp)
     offset_mg = px4_offset(params, "TC_A0", 0, temp).astype(float) * 1000.0 / G
     np.testing.assert_allclose(offset_mg, drift, rtol=0, atol=1e-6 * drift_range)
     assert params["TC_A0_X1_1"] == 0.0 and params["TC_A0_X3_2"] == 0.0  # y, z: no model given
@@ -172,6 +177,23 @@ def test_px4_keep_constant_writes_x0_and_refuses_gravity(tmp_path: Path, xyz_mod
             ]
         )
     assert not (tmp_path / "z").exists()
+
+
+def test_px4_keep_constant_refuses_a_model_fitted_relative_to_t_ref(
+    tmp_path: Path, xyz_models: dict[str, Path]
+) -> None:
+    # The default fit (--offset relative) moved the constant out of the model: X0 would be 0 whatever
+    # --keep-constant says. x: 12 mg + the drift's 5 mg at T_ref = 20 degC (the run's mid-point), which
+    # --offset absolute keeps; z: gravity, which it refuses (above 100 mg).
+    for axis, constant_mg, hint in (
+        ("x", 17.0, "refit with 'trainer fit --offset absolute'"),
+        ("z", -995.0, "imported with --remove-gravity"),
+    ):
+        message = refused(tmp_path, xyz_models[axis], "--format", "px4-params", "--keep-constant")
+        assert message.startswith(f"accel0_{axis}: --keep-constant: the model holds no constant to keep")
+        assert "--offset relative" in message and hint in message
+        stated = re.search(r"its constant, (\S+) mg at T_ref 20.00 degC", message)
+        assert stated is not None and float(stated.group(1)) == pytest.approx(constant_mg, abs=0.1)
 
 
 def test_ardupilot_parm_matches_the_model_drift(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
