@@ -277,7 +277,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         metavar="HZ",
         help="the firmware's sample rate: a model with a time base (DLSTM front end, physics filters) is "
-        "re-derived for it exactly or refused; memoryless models run at any rate (default: as trained)",
+        "re-derived for it exactly or refused; a model without one (cubic, PLA, physics without a filter) runs at "
+        "any rate and is exported as trained (default: as trained)",
     )
     exp.add_argument(
         "--schedule",

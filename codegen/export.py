@@ -17,7 +17,7 @@ from typing import Any
 from codegen.family import QuantModel, family_of
 from codegen.manifest import build_manifest
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, quantise_checkpoint
-from codegen.rate import retime_checkpoint
+from codegen.rate import ANY_RATE_MILLIHZ, any_rate_note, declared_rate_millihz, retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods as registry
@@ -58,12 +58,24 @@ def load_for_codegen(
     p = Path(path)
     raw = load_checkpoint(p)
     sha256 = hashlib.sha256(p.read_bytes()).hexdigest()
+
+    def parsed(checkpoint: dict[str, Any]) -> tuple[Checkpoint, QuantModel]:
+        ckpt = parse_checkpoint(checkpoint, str(p))
+        try:
+            return ckpt, quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
+        except UserError as exc:
+            raise UserError(f"{p}: {exc}") from None
+
     retimed, rate_note = retime_checkpoint(raw, rate_millihz, str(p))
-    ckpt = parse_checkpoint(retimed, str(p))
-    try:
-        quantised = quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
-    except UserError as exc:
-        raise UserError(f"{p}: {exc}") from None
+    ckpt, quantised = parsed(retimed)
+    if (
+        rate_millihz is not None
+        and rate_note is not None
+        and declared_rate_millihz(quantised) == ANY_RATE_MILLIHZ
+    ):
+        # nothing in it was built for the rate after all: exported as trained, as a memoryless model is
+        ckpt, quantised = parsed(raw)
+        rate_note = any_rate_note(raw, rate_millihz)
     notes = offset_notes(p, raw) + ((rate_note,) if rate_note else ()) + undetermined_notes(raw)
     from trainer.selection import shown_name
 

@@ -58,8 +58,7 @@ def retime_checkpoint(
     A memoryless method is unchanged at any rate. A malformed rate field is left for the parser
     (``codegen.spec``) to report.
     """
-    renderer = registry.REGISTRY[raw["method"]].renderer
-    time_base = family.get(renderer).time_base if renderer in family.names() else None
+    time_base = _time_base(raw)
     if millihz is None or time_base is None:
         return raw, None
     try:
@@ -79,6 +78,22 @@ def retime_checkpoint(
         f"rate: exported for {millihz / 1000:g} Hz (trained at {trained / 1000:g} Hz; "
         f"{time_base.what} re-derived)",
     )
+
+
+def any_rate_note(raw: dict[str, Any], millihz: int) -> str:
+    """The note of a model whose family has a time base but that holds nothing built for a rate (a
+    physics model without a filter): it runs at any rate, so ``--rate`` leaves it as trained."""
+    time_base = _time_base(raw)
+    assert time_base is not None
+    return (
+        f"rate: --rate {millihz / 1000:g} Hz changes nothing: this model has no {time_base.what} to "
+        "re-derive (it runs at any rate)"
+    )
+
+
+def _time_base(raw: dict[str, Any]) -> family.TimeBase | None:
+    renderer = registry.REGISTRY[raw["method"]].renderer
+    return family.get(renderer).time_base if renderer in family.names() else None
 
 
 def retime_compensator(model: Compensator, millihz: int) -> None:

@@ -169,3 +169,27 @@ def test_the_gnc_example_and_the_bench_refuse_a_module_of_another_rate(
             assert (bench.returncode == 0) == ok, bench.stderr[-2000:]
             if not ok:
                 assert "m_built_for_another_sample_rate" in bench.stderr
+
+
+def test_a_physics_model_without_a_filter_is_exported_as_trained_at_any_rate(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    # Nothing in it is built for a rate (the hysteresis branch is a function of the temperature), so
+    # --rate changes no byte of the code or manifest, as for a cubic, and the header says so instead of
+    # claiming filter coefficients re-derived for a module it declares for any rate.
+    effects = {name: tm.PHYSICS_EFFECTS[name] for name in ("bias_poly", "hysteresis_offset")}
+    model = tmp_path / "physics.pt"
+    tm.save_checkpoint(tm.physics_checkpoint(read_recording(runs["trained"]), effects), model)
+    assert _export(model, tmp_path / "plain") == 0
+    assert _export(model, tmp_path / "rated", "--rate", f"{TWICE_HZ:g}") == 0
+    for name in ("m.c", "m.manifest.json"):
+        assert (tmp_path / "plain" / name).read_bytes() == (tmp_path / "rated" / name).read_bytes()
+    plain = (tmp_path / "plain" / "m.h").read_text().splitlines()
+    rated = (tmp_path / "rated" / "m.h").read_text().splitlines()
+    added = " ".join(line.lstrip(" *") for line in rated if line not in plain)  # the header wraps it
+    assert added == (
+        "rate: --rate 100 Hz changes nothing: this model has no filter coefficients to re-derive "
+        "(it runs at any rate)."
+    )
+    assert [line for line in plain if line not in rated] == []
+    assert "#define M_SAMPLE_RATE_MILLIHZ 0u" in rated
