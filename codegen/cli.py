@@ -164,6 +164,7 @@ def _verify_imu(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from codegen.imu_verify import imu_report_lines, verify_imu, write_imu_json
+    from codegen.verify import check_module_dir
     from trainer.data.plausibility import check_scored
     from trainer.data.recording_io import read_recording
     from trainer.errors import check_output_path
@@ -171,6 +172,7 @@ def _verify_imu(args: argparse.Namespace) -> int:
 
     if args.json:
         check_output_path(args.json)  # before the build, not after it
+    check_module_dir(Path(args.out_dir))
     rec = check_scored(read_recording(args.recording))
     models = model_files(args.model, args.channels)
     result = verify_imu(models, Path(args.out_dir), rec, name=args.name, cc=args.cc, cortex_m4=args.cortex_m4)

@@ -110,7 +110,9 @@ def to_step_units(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     return convert(rec.accel_mg, ACCEL_PER_MG), convert(rec.temp_c, 1000.0)
 
 
-def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]:
+def check_module_dir(out_dir: Path) -> None:
+    """Refuse an ``out_dir`` that is no directory; a recording there is the arguments swapped (both
+    forms of ``codegen verify``: checked before the recording is read, which would blame the module)."""
     if not out_dir.is_dir():
         swapped = out_dir.is_file() and out_dir.suffix.lower() in RECORDING_SUFFIXES
         raise UserError(
@@ -119,6 +121,10 @@ def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]
             if swapped
             else f"{out_dir}: no such directory"
         )
+
+
+def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]:
+    check_module_dir(out_dir)
     if name is None:
         found = sorted(out_dir.glob("*.manifest.json"))
         if len(found) != 1:

@@ -119,3 +119,19 @@ def test_a_model_outside_the_module_is_refused(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "accel0_z" in err and str(module["out"]) in err
     assert not (tmp_path / "s").exists()
+
+
+def test_codegen_verify_channels_with_the_recording_and_the_module_swapped_says_so(
+    module: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # as the one-model form does (docs/recordings.md), not "unsupported extension" of the module's directory
+    json_path = tmp_path / "v.json"
+    argv = ["verify", str(module["fit"]), str(module["rec"]), str(module["out"]), "--channels", "all"]
+    capsys.readouterr()
+    assert run_cli(codegen_main, [*argv, "--json", str(json_path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"error: {module['rec']}: a recording, not the generated module's directory (arguments swapped? the "
+        "order is model out_dir recording)\n"
+    )
+    assert not json_path.exists()
