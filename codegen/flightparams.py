@@ -247,6 +247,15 @@ def check_physical(cubic: ChannelCubic, lo_c: float, hi_c: float) -> None:
         )
 
 
+NO_MODEL = "no model given, coefficients 0"  # what both files say of what they write as zero
+
+
+def missing_axes_note(group: SensorSet) -> str | None:
+    """The comment naming the axes of a sensor written as zero (no model given); None: none are."""
+    missing = [axis for axis in AXIS_INDEX if axis not in group.axes] if group.sensor != "baro" else []
+    return f"# {group.sensor}{group.instance} axes {', '.join(missing)}: {NO_MODEL}" if missing else None
+
+
 def _sensor_rank(sensor: str) -> int:
     return list(PX4_PREFIX).index(sensor)
 
@@ -350,12 +359,7 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
         f"# X0: {'the model constant' if keep_constant else '0, the constant belongs to the ordinary calibration'}.",
     ]
     lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
-    for group in groups:
-        missing = [axis for axis in AXIS_INDEX if axis not in group.axes] if group.sensor != "baro" else []
-        if missing:
-            lines.append(
-                f"# {group.sensor}{group.instance} axes {', '.join(missing)}: no model given, coefficients 0"
-            )
+    lines += [note for note in map(missing_axes_note, groups) if note is not None]
     lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
     rows: list[tuple[str, float | int, int]] = []
     for sensor in PX4_PREFIX:
@@ -429,8 +433,9 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
         ]
         for sensor, short in ARDUPILOT_PREFIX.items():
             axes = sensors[sensor].axes if sensor in sensors else {}
-            if not axes:
-                lines.append(f"# {sensor}{instance}: no model given, coefficients 0")
+            note = f"# {sensor}{instance}: {NO_MODEL}" if not axes else missing_axes_note(sensors[sensor])
+            if note is not None:
+                lines.append(note)
             for order in (1, 2, 3):
                 for axis in AXIS_INDEX:
                     cubic = axes.get(axis)

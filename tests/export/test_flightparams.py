@@ -213,6 +213,21 @@ def test_ardupilot_parm_matches_the_model_drift(tmp_path: Path, xyz_models: dict
             )
 
 
+def test_parm_comment_names_the_axes_written_as_zero(tmp_path: Path, xyz_models: dict[str, Path]) -> None:
+    # a z-only accelerometer: x and y are written as zero and the file says so, as the .params does
+    written = export(tmp_path / "z", "ardupilot-parm", xyz_models["z"])
+    params = read_ardupilot_parm(written)
+    assert all(params[f"INS_TCAL1_ACC{k}_{axis}"] == 0.0 for k in (1, 2, 3) for axis in "XY")
+    assert params["INS_TCAL1_ACC1_Z"] != 0.0
+    comments = [line for line in written.read_text().splitlines() if "no model given" in line]
+    assert comments == [
+        "# accel0 axes x, y: no model given, coefficients 0",
+        "# gyro0: no model given, coefficients 0",
+    ]
+    every_axis = export(tmp_path / "xyz", "ardupilot-parm", *xyz_models.values()).read_text()
+    assert "accel0 axes" not in every_axis and "# gyro0: no model given" in every_axis
+
+
 def test_gyro_channel_is_converted_to_rad_per_s(tmp_path: Path) -> None:
     # a model of a gyroscope axis: its unit is deg/s, the stacks' rad/s
     meta = {"channel": "gyro1_y", "unit": "dps"}
