@@ -10,4 +10,5 @@ export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} MPLBACKEND=Agg
 "$BIN/ruff" check trainer codegen tests bench firmware_c
 "$BIN/ruff" format --check --quiet trainer codegen tests bench firmware_c
 "$BIN/mypy"  # configured in pyproject.toml: trainer, codegen, bench
-exec "$BIN/python" -m pytest -n 2 "$@"
+# worksteal: an idle worker takes tests queued on the busy one (the long fold and finder tests no longer end the run on one core)
+exec "$BIN/python" -m pytest -n 2 --dist worksteal "$@"
