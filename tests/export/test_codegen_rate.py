@@ -193,3 +193,5 @@ def test_a_physics_model_without_a_filter_is_exported_as_trained_at_any_rate(
     )
     assert [line for line in plain if line not in rated] == []
     assert "#define M_SAMPLE_RATE_MILLIHZ 0u" in rated
+    rates = json.loads((tmp_path / "plain" / "m.manifest.json").read_text())["rates"]
+    assert rates["sample_rate_millihz"] == 0 and rates["sample_rate_hz"] is None  # as the header says

@@ -6,16 +6,28 @@ from codegen.families.physics.quantise import QPhysics
 from codegen.families.physics.render import play_start_text
 from codegen.fixedpoint import INT64_MAX, headroom_bits
 from codegen.manifest import six_digits
-from codegen.rate import rate_millihz
+from codegen.rate import ANY_RATE_MILLIHZ, rate_millihz
+
+
+def physics_rates(model: QPhysics) -> dict[str, object]:
+    """The rate contract, as the header states it: the filters' rate, or any rate without a filter
+    (the hysteresis branch is a function of the temperature alone)."""
+    if not model.filters:
+        return {
+            "sample_rate_hz": None,
+            "sample_rate_millihz": ANY_RATE_MILLIHZ,
+            "note": "no filter: NAME_step runs at any rate (the hysteresis branch depends on the temperature alone)",
+        }
+    return {
+        "sample_rate_hz": model.rate_hz,
+        "sample_rate_millihz": rate_millihz(model.rate_hz),
+        "note": "the filters are discretised for this rate: call NAME_step at exactly this rate",
+    }
 
 
 def physics_manifest(model: QPhysics) -> dict[str, object]:
     return {
-        "rates": {
-            "sample_rate_hz": model.rate_hz,
-            "sample_rate_millihz": rate_millihz(model.rate_hz),
-            "note": "the filters are discretised for this rate: call NAME_step at exactly this rate",
-        },
+        "rates": physics_rates(model),
         "quantisation": {
             "rounding": "floor (filter differences, high words) and half up (Horner products, the drift): "
             "tdc_physics_kernels.h",
