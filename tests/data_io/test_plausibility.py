@@ -144,6 +144,26 @@ def recording(path: Path, *, temp: np.ndarray, accel: np.ndarray, rate_hz: float
     return path
 
 
+def test_fit_refuses_an_accelerometer_in_g_read_as_mg(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A chamber run's z axis logged in g (-1 g and 25 mg of drift over 60 degC, 0.5 mg of noise) read
+    as mg moves by 0.03 "mg": fitted, it gave a 0.0045 mg residual and a correction 1000x too small."""
+    n = 2000
+    temp = np.linspace(-20.0, 40.0, n)
+    in_mg = -1000.0 + 25.0 * ((temp - 10.0) / 30.0) ** 2 + np.random.default_rng(1).normal(0.0, 0.5, n)
+    as_g = recording(tmp_path / "g.csv", temp=temp, accel=in_mg / 1000.0)
+    message = cli_error("fit", "--method", "poly3", as_g, "-o", tmp_path / "m.pt")
+    moved = float(np.ptp(in_mg / 1000.0))
+    assert f"moves by only {moved:.3g} mg over a 60 degC run" in message and "--accel-unit g" in message
+    # the same run in mg, and one axis of a quiet sensor that moves by 0.2 mg, fit
+    assert main(["fit", "--method", "poly3", str(recording(tmp_path / "mg.csv", temp=temp, accel=in_mg)),
+                 "-o", str(tmp_path / "mg.pt")]) == 0  # fmt: skip
+    quiet = recording(tmp_path / "q.csv", temp=temp, accel=0.2 * np.sin(np.linspace(0.0, 3.0, n)))
+    assert main(["fit", "--method", "poly3", str(quiet), "-o", str(tmp_path / "q.pt")]) == 0
+    capsys.readouterr()
+    argv = ["fit", "--method", "poly3", str(as_g), "--accept-implausible", "-o", str(tmp_path / "g.pt")]
+    assert main(argv) == 0 and "warning:" in capsys.readouterr().err  # the user's word, with a warning
+
+
 def test_fit_refuses_a_span_too_small_for_the_cubic(tmp_path: Path) -> None:
     n = 400
     path = recording(tmp_path / "flat.csv", temp=25.0 + np.linspace(0, 0.12, n), accel=np.linspace(0, 1, n))

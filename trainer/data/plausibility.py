@@ -31,6 +31,8 @@ _SENSOR_NOUNS = {"accel": "an accelerometer", "gyro": "a gyroscope", "baro": "a 
 _DATA_COLUMN = re.compile(r"(?!true_).*_(mg|dps|pa)")  # a measured column by its unit suffix
 _TEMP_COLUMN = re.compile(r"(?!true_).*_temp_c")  # a channel's own temperature column
 KELVIN_RANGE = (200.0, 400.0)  # -73..127 degC written in kelvin
+ACCEL_MOVES_MIN_MG = 0.1  # an accelerometer in mg moves by more over a chamber run (accel_moves)
+ACCEL_RUN_SPAN_C = 10.0  # ... of at least this temperature span
 G_AS_MPS2 = (8.5, 11.0)  # |a| of a static axis carrying gravity when m/s^2 is read as g
 ACCEPT_OPTION = "--accept-implausible"
 # What to record when the temperature did not move enough (PX4: SDLOG_PROFILE bit 2 "Thermal
@@ -170,6 +172,17 @@ class Plausibility:
                 "little (the wrong column, or a sensor that was not read?)"
             )
 
+    def accel_moves(self, rec: Recording, where: str) -> None:
+        """An accelerometer in mg whose output moves by less than 0.1 mg over a run of 10 degC or more
+        is in g (1000x too small): every MEMS accelerometer's bias moves by more (0.1 .. 1 mg/degC
+        typical), and its noise alone spans more over a run."""
+        temp_span_c, moved_mg = float(np.ptp(rec.temp_c)), float(np.ptp(rec.accel_mg))
+        if temp_span_c >= ACCEL_RUN_SPAN_C and 0.0 < moved_mg < ACCEL_MOVES_MIN_MG:
+            self.problem(
+                f"{where}: moves by only {moved_mg:.3g} mg over a {temp_span_c:.3g} degC run, less than any MEMS "
+                f"accelerometer's bias and noise: logged in g and read as mg? re-import with --accel-unit g"
+            )
+
     def temperature_span(self, temp_c: np.ndarray, method: str, min_span_c: float, where: str) -> None:
         """A temperature-driven method needs the temperature to move enough to determine its shape."""
         if (short := span_shortfall(temp_c, method, min_span_c)) is not None:
@@ -203,6 +216,8 @@ def check_training(
     if unit == "mg":  # a gyroscope or barometer view holds no gravity
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
     checks.output_varies(rec)
+    if unit == "mg":
+        checks.accel_moves(rec, f"{where}: column {output_column!r}")
     checks.temperature_span(
         rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column {temp_column!r}"
     )
