@@ -49,8 +49,9 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         checks = check_training(view, method, accept=args.accept_implausible, temp_column=channel.temp_column)
         checked.append((channel, view, checks))
     fitted = []
-    for channel, view, checks in checked:
-        model, stats = fit_with_selection(args.method, view, options, policy, log=progress_log(args))
+    for number, (channel, view, checks) in enumerate(checked, start=1):
+        log = progress_log(args, prefix=f"[{channel.name}, channel {number} of {len(checked)}] ")
+        model, stats = fit_with_selection(args.method, view, options, policy, log=log)
         fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
     with atomic_directory(args.output) as staging:  # old set or new set, never a mix

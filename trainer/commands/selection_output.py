@@ -21,11 +21,12 @@ def checked_method(name: str) -> methods.Method:
     return methods.get(methods.CUBIC if name == AUTO else name)
 
 
-def progress_log(args: argparse.Namespace) -> Any:
-    """Progress lines on stderr (a cross-validation fits every candidate once per segment)."""
+def progress_log(args: argparse.Namespace, prefix: str = "") -> Any:
+    """Progress lines on stderr (a cross-validation fits every candidate once per segment);
+    ``prefix`` says which channel of how many (a six-channel ``auto`` runs for minutes)."""
     if getattr(args, "quiet", False):
         return None
-    return lambda message: print(message, file=sys.stderr, flush=True)
+    return lambda message: print(f"{prefix}{message}", file=sys.stderr, flush=True)
 
 
 def print_selection(stats: TrainStats) -> None:

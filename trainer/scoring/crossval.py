@@ -374,12 +374,17 @@ def cross_validate(
         lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
         raw_folds.append(_score(raw, raw, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
     results[UNCOMPENSATED] = MethodCV(UNCOMPENSATED, raw_folds, natural_cold, sizes)
+    fits, done, began = len(fitters) * len(segments), 0, time.perf_counter()
     for name, fit in fitters.items():
         folds: list[FoldScore] = []
         seconds = 0.0
         for index, s in enumerate(segments):
             if log is not None:
-                log(f"cross-validation: {name}, holding out segment {index + 1}/{len(segments)}: {s.name}")
+                log(
+                    f"cross-validation: {name}, holding out segment {index + 1}/{len(segments)}: {s.name} "
+                    f"(fit {done + 1} of {fits}, {time.perf_counter() - began:.0f} s so far)"
+                )
+            done += 1
             mask = training_rows(len(rec), s)
             train = impute_held_out(rec, mask) if name in stateful else rows(rec, mask)
             start = time.perf_counter()
