@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from bundled_run import REAL
 
 from codegen.cli import main as codegen_main
 from codegen.flightparams import load_channel_cubic
@@ -31,7 +32,6 @@ from trainer.cli import main as trainer_main
 from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording_io import read_recording
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 CHANNELS = ("accel0_x", "accel0_y", "accel0_z", "gyro0_x", "gyro0_y", "gyro0_z")
 C_MODULE_CHANNEL = "accel0_z"  # the recording's primary column, what a one-channel module verifies on
 

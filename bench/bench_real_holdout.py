@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import torch
+from bundled_run import REAL
 
 from trainer import methods as registry
 from trainer.data.holdout import parse_holdout, split
@@ -40,7 +41,6 @@ from trainer.options.methods import DLSTM_OPTIONS
 from trainer.scoring.compare import compare
 from trainer.scoring.markdown import markdown_table
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "tofupilot_imu_chamber_cycle.tsv"
 SPLITS = ("last:0.5", "first:0.5", "3131:", ":1361")
 DLSTM_SETTINGS = FusionSettings(population=4, iterations=500, cycles=0)
 

@@ -160,10 +160,13 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
             raise UserError(f"--{required} COLUMN is required (or use --preset)")
     # a gyroscope's rad/s and deg/s (57x), a barometer's Pa and hPa (100x) both look plausible: a
     # channel the user maps takes its unit from the user (or the preset), never from a default
-    for sensor, option in (("gyro", "gyro_unit"), ("baro", "baro_unit")):
-        mapped = [c for c in (given.get("channel_map") or {}) if str(c).startswith(sensor)]  # type: ignore[attr-defined]
+    mapped_by_user = [str(c) for c in given.get("channel_map") or {}]  # type: ignore[attr-defined]
+    for sensor, option, units in (
+        ("gyro", "gyro_unit", GYRO_UNIT_TO_DPS),
+        ("baro", "baro_unit", BARO_UNIT_TO_PA),
+    ):
+        mapped = [c for c in mapped_by_user if c.startswith(sensor)]
         if mapped and values.get(option) is None:
-            units = GYRO_UNIT_TO_DPS if sensor == "gyro" else BARO_UNIT_TO_PA
             raise UserError(
                 f"--channel-map maps {mapped[0]}: give its unit, --{option.replace('_', '-')} "
                 f"{'|'.join(units)} (the values of both look plausible, so the file cannot tell)"

@@ -213,11 +213,10 @@ def check_training(
     unit = rec.meta.get("unit", "mg")
     output_column = data_column(rec.meta["channel"], unit) if "channel" in rec.meta else "accel_mg"
     checks.recording_ranges(rec.columns, unit, where, output_column=output_column)
-    if unit == "mg":  # a gyroscope or barometer view holds no gravity
+    if unit == "mg":  # an accelerometer: gravity, and g read as mg (a gyroscope or barometer holds neither)
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
-    checks.output_varies(rec)
-    if unit == "mg":
         checks.accel_moves(rec, f"{where}: column {output_column!r}")
+    checks.output_varies(rec)
     checks.temperature_span(
         rec.temp_c, method.name, method.min_temp_span_c, f"{where}: column {temp_column!r}"
     )

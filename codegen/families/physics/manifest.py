@@ -6,21 +6,22 @@ from codegen.families.physics.quantise import QPhysics
 from codegen.families.physics.render import play_start_text
 from codegen.fixedpoint import INT64_MAX, headroom_bits
 from codegen.manifest import six_digits
-from codegen.rate import ANY_RATE_MILLIHZ, rate_millihz
+from codegen.rate import ANY_RATE_MILLIHZ, declared_rate_millihz
 
 
 def physics_rates(model: QPhysics) -> dict[str, object]:
     """The rate contract, as the header states it: the filters' rate, or any rate without a filter
     (the hysteresis branch is a function of the temperature alone)."""
-    if not model.filters:
+    millihz = declared_rate_millihz(model)  # the family's time base decides, as for the header
+    if millihz == ANY_RATE_MILLIHZ:
         return {
             "sample_rate_hz": None,
-            "sample_rate_millihz": ANY_RATE_MILLIHZ,
+            "sample_rate_millihz": millihz,
             "note": "no filter: NAME_step runs at any rate (the hysteresis branch depends on the temperature alone)",
         }
     return {
         "sample_rate_hz": model.rate_hz,
-        "sample_rate_millihz": rate_millihz(model.rate_hz),
+        "sample_rate_millihz": millihz,
         "note": "the filters are discretised for this rate: call NAME_step at exactly this rate",
     }
 
