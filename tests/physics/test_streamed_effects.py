@@ -32,6 +32,7 @@ from trainer.physics.catalogue.streaming import (
     ADDITIVE,
     HI_BITS,
     FixedPoint,
+    GoldenStep,
     IntSample,
     IntTerm,
     Sample,
@@ -72,10 +73,15 @@ def _step(p: Mapping[str, float], lp: tuple[float, ...], v: dict[str, float], s:
     return p["gain_mg_per_c"] * (s.T - v[WORD])
 
 
-def _golden(q: IntTerm, v: dict[str, int], s: IntSample) -> int:
+def _golden(q: IntTerm) -> GoldenStep:
     assert q.filter is not None and q.gain is not None
-    v[WORD] = lowpass_int(q.filter, v[WORD], s)
-    return (s.x - (v[WORD] >> HI_BITS)) * q.gain.q
+    lowpass, gain = lowpass_int(q.filter), q.gain.q
+
+    def step(v: dict[str, int], s: IntSample) -> int:
+        v[WORD] = y = lowpass(v[WORD], s)
+        return (s.x - (y >> HI_BITS)) * gain
+
+    return step
 
 
 STREAMED = StreamedEffect(

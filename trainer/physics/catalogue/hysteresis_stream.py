@@ -9,6 +9,7 @@ from trainer.physics.catalogue.hysteresis import DEFINITION
 from trainer.physics.catalogue.streaming import (
     BRANCH,
     FixedPoint,
+    GoldenStep,
     IntSample,
     IntTerm,
     Params,
@@ -36,12 +37,22 @@ def branch(identifier: str, *, reads_play: bool) -> StreamedEffect:
             s.T_b = v[WORD]
         return p["amp_mg"] * (s.T_pm - v[WORD]) / half
 
-    def golden(q: IntTerm, v: dict[str, int], s: IntSample) -> int:
+    def golden(q: IntTerm) -> GoldenStep:
         assert q.margin_q is not None and q.gain is not None
-        v[WORD] = min(max(v[WORD], s.t_pm - q.margin_q), s.t_pm + q.margin_q)
-        if reads_play:
-            s.t_b = v[WORD]
-        return (s.t_pm - v[WORD]) * q.gain.q
+        half, gain = q.margin_q, q.gain.q
+
+        def step(v: dict[str, int], s: IntSample) -> int:
+            t_pm, p = s.t_pm, v[WORD]
+            if p < t_pm - half:  # tdcp_play: P within T_pm +- w/2
+                p = t_pm - half
+            elif p > t_pm + half:
+                p = t_pm + half
+            v[WORD] = p
+            if reads_play:
+                s.t_b = p
+            return (t_pm - p) * gain
+
+        return step
 
     return StreamedEffect(
         identifier=identifier,

@@ -99,10 +99,21 @@ class IntTerm(Protocol):
     def margin_q(self) -> int | None: ...
 
 
-def lowpass_int(f: IntLowpass, y: int, s: IntSample) -> int:
-    """``tdcp_lowpass`` on Python integers (floors as the exact ``>>``)."""
-    d = ((s.prev << HI_BITS) - y) >> (HI_BITS + f.shift)
-    return y + d * f.c_q + (s.step_mdegc << (s.temp_frac - f.shift)) * f.b_q
+GoldenStep = Callable[[dict[str, int], IntSample], int]
+"""One term's golden-model step with its constants: advances its state words in ``values`` and
+returns its drift term (see :class:`FixedPoint`)."""
+
+
+def lowpass_int(f: IntLowpass) -> Callable[[int, IntSample], int]:
+    """``tdcp_lowpass`` with the filter ``f``'s constants, on Python integers (floors as the exact
+    ``>>``): ``lowpass_int(f)(y, s)`` is the state after ``y``."""
+    c, b0, shift = f.c_q, f.b_q, f.shift
+
+    def lowpass(y: int, s: IntSample) -> int:
+        d = ((s.prev << HI_BITS) - y) >> (HI_BITS + shift)
+        return y + d * c + (s.step_mdegc << (s.temp_frac - shift)) * b0
+
+    return lowpass
 
 
 def lowpass_call(word: str) -> str:
@@ -145,8 +156,9 @@ class FixedPoint:
     filter's error budget). ``poly_reads``: the state word the polynomial reads when present (an
     IMU option bit ``READS_<WORD>``).
 
-    ``golden(term, values, sample)``: the step on Python integers (returns its int64 drift term, in
-    Q(frac + 32), and may set ``sample.t_pm`` / ``t_b``). ``before_poly`` / ``after_poly``: its C step
+    ``golden(term)``: the step on Python integers with the term's constants, ``step(values, sample)``
+    (a :data:`GoldenStep`: advances its state words, returns its int64 drift term in Q(frac + 32),
+    and may set ``sample.t_pm`` / ``t_b``). ``before_poly`` / ``after_poly``: its C step
     (``string.Template`` text, lines indented by four) before and after the polynomial, with
     ``${c} ${b0} ${shift} ${step_scale}`` (its filter), ``${q}`` (its gain), ``${margin}`` and
     ``${margin_text}`` (its margin, and that value with its format) filled in by the renderer.
@@ -154,7 +166,7 @@ class FixedPoint:
 
     name: str
     state: tuple[StateWord, ...]
-    golden: Callable[[IntTerm, dict[str, int], IntSample], int]
+    golden: Callable[[IntTerm], GoldenStep]
     before_poly: str = ""
     after_poly: str = ""
     tau_s: Callable[[Params], float] | None = None
@@ -218,10 +230,15 @@ def filtered_difference(
     (``doc``: what it is, e.g. ``the rate filter``, ``letter`` its symbol; the term's filter and
     gain take ``identifier``'s name)."""
 
-    def golden(q: IntTerm, v: dict[str, int], s: IntSample) -> int:
+    def golden(q: IntTerm) -> GoldenStep:
         assert q.filter is not None and q.gain is not None
-        v[word] = lowpass_int(q.filter, v[word], s)
-        return (s.x - (v[word] >> HI_BITS)) * q.gain.q
+        lowpass, gain = lowpass_int(q.filter), q.gain.q
+
+        def step(v: dict[str, int], s: IntSample) -> int:
+            v[word] = y = lowpass(v[word], s)
+            return (s.x - (y >> HI_BITS)) * gain
+
+        return step
 
     return FixedPoint(
         name=name,

@@ -6,6 +6,7 @@ from trainer.physics.catalogue.streaming import (
     CHAIN,
     HI_BITS,
     FixedPoint,
+    GoldenStep,
     IntSample,
     IntTerm,
     Params,
@@ -27,11 +28,16 @@ def _step(p: Params, lp: tuple[float, ...], v: dict[str, float], s: Sample) -> f
     return 0.0
 
 
-def _golden(q: IntTerm, v: dict[str, int], s: IntSample) -> int:
+def _golden(q: IntTerm) -> GoldenStep:
     assert q.filter is not None
-    v[WORD] = lowpass_int(q.filter, v[WORD], s)
-    s.t_pm = s.t_b = v[WORD] >> HI_BITS
-    return 0
+    lowpass = lowpass_int(q.filter)
+
+    def step(v: dict[str, int], s: IntSample) -> int:
+        v[WORD] = y = lowpass(v[WORD], s)
+        s.t_pm = s.t_b = y >> HI_BITS
+        return 0
+
+    return step
 
 
 STREAMED = StreamedEffect(
