@@ -40,6 +40,7 @@ from typing import Any
 
 from trainer import methods
 from trainer.data.recording import Recording
+from trainer.fleet.cluster import TaskMap
 from trainer.physics.catalogue.base import T_REF_C
 from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.reference import OffsetPolicy
@@ -256,6 +257,7 @@ def select(
     unit: str = "mg",
     labels: tuple[str, ...] | None = None,
     log: Callable[[str], None] | None = None,
+    tasks: TaskMap | None = None,
 ) -> Selection:
     """Cross-validate the candidates (all, or ``labels``) on ``rec`` and choose one. On less than a
     cycle only the cubic and no compensation can be chosen, so only they are cross-validated (the
@@ -276,6 +278,7 @@ def select(
         smoothing_s=smoothing_s,
         unit=unit,
         log=log,
+        tasks=tasks,
     )
     cv.skipped.update(
         {
@@ -299,7 +302,7 @@ def selection_record(selection: Selection) -> dict[str, Any]:
         "to the better of (cubic, uncompensated) over the held-out segments, warm and cold, the simplest within "
         f"{100 * POOLED_GAIN:g} % of the least pooled drift; on less than a "
         "cycle the cubic; never a candidate that leaves more than none pooled, whole or inside the training range",
-        "crossval": selection.cv.to_dict(),
+        "crossval": selection.cv.to_dict(timings=False),
     }
 
 
@@ -369,6 +372,7 @@ def fit_with_selection(
     options: dict[str, Any] | None = None,
     policy: OffsetPolicy | None = None,
     log: Callable[[str], None] | None = None,
+    tasks: TaskMap | None = None,
 ) -> tuple[Any, TrainStats]:
     """:func:`trainer.fitting.fit_with_stats`, with ``auto`` resolved first: the candidates are
     cross-validated on ``train``, the chosen one is fitted on the whole of it, and
@@ -386,6 +390,7 @@ def fit_with_selection(
         smoothing_s=PAPER_RUN_SMOOTHING_S,
         unit=UNIT_LABELS[channel_unit(train)],
         log=log,
+        tasks=tasks,
     )
     model, stats = fit_with_stats(selection.candidate.method, train, selection.candidate.options, policy)
     return model, replace(stats, selection=selection_record(selection))

@@ -255,8 +255,13 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     folds = len(folds_of(Recording(columns, {"sample_rate_hz": "2.0"}, "imu")))
     fits = 2 * folds  # poly1 and poly3 (none is the uncompensated row, not fitted)
     assert len(progress) == 2 * fits
-    assert progress[0].startswith("[accel0_z, channel 1 of 2] ") and f"(fit 1 of {fits}," in progress[0]
-    assert progress[-1].startswith("[gyro0_x, channel 2 of 2] ") and f"(fit {fits} of {fits}," in progress[-1]
+    assert (
+        progress[0].startswith("[accel0_z, channel 1 of 2] ") and f"(fit 1 of {fits} done in " in progress[0]
+    )
+    assert (
+        progress[-1].startswith("[gyro0_x, channel 2 of 2] ")
+        and f"(fit {fits} of {fits} done in " in progress[-1]
+    )
     index = json.loads((tmp_path / "m" / "channels.json").read_text())
     chosen = {c["channel"]: c["auto_chose"] for c in index["channels"]}
     assert chosen["gyro0_x"] == NONE and chosen["accel0_z"] != NONE

@@ -17,6 +17,7 @@ from trainer.errors import UserError, raise_write_error
 from trainer.options.channels import add_channels_option, run_per_channel
 from trainer.options.dlstm import add_dlstm_options, settings_from_args
 from trainer.options.offset import add_offset_options, policy_from_args
+from trainer.options.workers import workers
 from trainer.physics.input_presets import INPUT_PRESETS
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
@@ -68,11 +69,11 @@ def add_parser(subparsers: Any) -> None:
     )
     parser.add_argument(
         "--jobs",
-        type=int,
-        default=1,
+        type=workers,
         metavar="N",
-        help="fit the methods side by side in N worker processes, each with --threads torch threads "
-        "(same results as 1, the default; e.g. the machine's cores)",
+        help="fit in N worker processes, with the same results as 1: a cross-validation's fits (one thread "
+        "each; default one per core), or with VALID or --holdout the methods side by side (--threads torch "
+        "threads each; default 1)",
     )
     add_dlstm_options(parser)
     add_offset_options(parser)
@@ -126,8 +127,6 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
-    if args.jobs < 1:
-        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
     settings, frontend = settings_from_args(args)
     policy = policy_from_args(args)
     if args.valid is not None and args.holdout is not None:
@@ -199,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
         policy=policy,
         inject=args.inject,
         lead_in=lead_in,
-        jobs=args.jobs,
+        jobs=args.jobs or 1,
     )
     comparison.notes += notes
     signal = signal_of(valid)
@@ -267,6 +266,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     from trainer.data.plausibility import WIDER_RUN_HINT, check_scored
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_compensator
+    from trainer.fleet.cluster import default_workers, task_map
     from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
 
     if args.inject is not None or args.input_test:
@@ -302,14 +302,16 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
-    cv = cross_validate(
-        rec,
-        {name: fitter(name) for name in chosen},
-        stateful={m for m in chosen if methods.get(m).family == methods.TEMPERATURE_DRIVEN},
-        smoothing_s=args.smoothing,
-        unit=unit,
-        log=log,
-    )
+    with task_map(args.jobs or default_workers()) as tasks:
+        cv = cross_validate(
+            rec,
+            {name: fitter(name) for name in chosen},
+            stateful={m for m in chosen if methods.get(m).family == methods.TEMPERATURE_DRIVEN},
+            smoothing_s=args.smoothing,
+            unit=unit,
+            log=log,
+            tasks=tasks,
+        )
     cv.skipped.update(skipped)
     lines = [
         f"# Cross-validated comparison: {rec.source}, channel {signal.heading}",

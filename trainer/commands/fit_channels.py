@@ -32,6 +32,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
+    from trainer.fleet.cluster import default_workers, task_map
     from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
@@ -49,10 +50,11 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         checks = check_training(view, method, accept=args.accept_implausible, temp_column=channel.temp_column)
         checked.append((channel, view, checks))
     fitted = []
-    for number, (channel, view, checks) in enumerate(checked, start=1):
-        log = progress_log(args, prefix=f"[{channel.name}, channel {number} of {len(checked)}] ")
-        model, stats = fit_with_selection(args.method, view, options, policy, log=log)
-        fitted.append((channel, model, stats, checks))
+    with task_map(args.jobs or default_workers()) as tasks:  # one cluster for every channel, if any
+        for number, (channel, view, checks) in enumerate(checked, start=1):
+            log = progress_log(args, prefix=f"[{channel.name}, channel {number} of {len(checked)}] ")
+            model, stats = fit_with_selection(args.method, view, options, policy, log=log, tasks=tasks)
+            fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
     with atomic_directory(args.output) as staging:  # old set or new set, never a mix
         for channel, model, stats, _ in fitted:

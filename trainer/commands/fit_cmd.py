@@ -11,6 +11,7 @@ from trainer.commands.selection_output import checked_method, print_fitted, prin
 from trainer.options.channels import add_channels_option
 from trainer.options.methods import NO_OPTIONS, options_not_applying
 from trainer.options.offset import add_offset_options, policy_from_args
+from trainer.options.workers import workers
 from trainer.selection import AUTO, CANDIDATES, candidate_list
 
 # Heavy modules (torch) are imported inside run() so that 'trainer --help' starts fast.
@@ -35,6 +36,13 @@ def add_parser(subparsers: Any) -> None:
         metavar="LIST",
         help=f"auto: the candidates to cross-validate (default all: {','.join(c.label for c in CANDIDATES)})",
     )
+    parser.add_argument(
+        "--jobs",
+        type=workers,
+        metavar="N",
+        help="auto: the cross-validation's physics fits in N worker processes, one thread each, with the "
+        "same results for any N (default one per core)",
+    )
     add_channels_option(parser, "fit one model, written as OUT/<channel>.pt with OUT/channels.json,")
     parser.add_argument(
         "--accept-implausible",
@@ -56,10 +64,12 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import RECORDING_SUFFIXES, read_recording
     from trainer.errors import UserError, check_output_path
+    from trainer.fleet.cluster import default_workers, task_map
     from trainer.selection import fit_with_selection
 
-    if args.candidates is not None and args.method != AUTO:
-        raise UserError("--candidates applies to --method auto")
+    for option, value in (("--candidates", args.candidates), ("--jobs", args.jobs)):
+        if value is not None and args.method != AUTO:
+            raise UserError(f"{option} applies to --method auto")
     own = NO_OPTIONS if args.method == AUTO else methods.get(args.method).options
     every = [(m.name, m.options) for m in methods.entries() if m.in_fit_cli]
     if stray := options_not_applying(args, own, every):
@@ -87,7 +97,10 @@ def run(args: argparse.Namespace) -> int:
         )
     train = read_recording(args.train)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
-    model, stats = fit_with_selection(args.method, train, options, policy, log=progress_log(args))
+    with task_map(args.jobs or default_workers()) as tasks:
+        model, stats = fit_with_selection(
+            args.method, train, options, policy, log=progress_log(args), tasks=tasks
+        )
     checks.print_warnings()
     print_selection(stats)
     save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)

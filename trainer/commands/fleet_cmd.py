@@ -4,17 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from trainer.options.workers import add_workers_option
+
 EXIT_UNITS_FAILED = 1  # the fleet ran, but a unit failed or an export did not verify
-
-
-def _workers(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive whole number of workers")
-    return value
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -36,12 +28,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="ADDRESS",
         help="an existing Dask scheduler (tcp://host:8786); default: a LocalCluster on this machine",
     )
-    parser.add_argument(
-        "--workers",
-        type=_workers,
-        metavar="N",
-        help="LocalCluster worker processes, one thread each (default: the number of cores)",
-    )
+    add_workers_option(parser, "the units", None)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 

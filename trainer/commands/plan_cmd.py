@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trainer.options.seed import seed
+from trainer.options.workers import add_workers_option
 from trainer.plan.limits import ChamberLimits
 from trainer.plan.summary import Target
 
@@ -115,9 +116,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="HZ",
         help="simulated sample rate (default %(default)s)",
     )
-    proof.add_argument(
-        "--workers", type=int, default=1, help="Dask LocalCluster workers (default 1: in this process)"
-    )
+    add_workers_option(proof, "the draws", 1)
     proof.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
     proof.add_argument("--no-standard", action="store_true", help="skip the standard profiles' rows")
     goal = p.add_argument_group("target")
@@ -247,7 +246,6 @@ def _check(args: argparse.Namespace) -> None:
     for name, value, low in (
         ("--draws", args.draws, 1),
         ("--screen-draws", args.screen_draws, 1),
-        ("--workers", args.workers, 1),
     ):
         if value < low:
             raise UserError(f"{name} must be >= {low}, got {value}")

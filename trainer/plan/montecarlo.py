@@ -17,12 +17,12 @@ import math
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
 from trainer import methods as registry
 from trainer.data.recording import Recording
+from trainer.fleet.cluster import TaskMap, task_map
 from trainer.physics.catalogue import EFFECTS, excluded
 from trainer.physics.config import ChannelConfig, PhysicsConfig, RecordingConfig
 from trainer.physics.effects import EffectConfig
@@ -146,12 +146,17 @@ def _view(rec: Recording, task: DrawTask) -> Recording:
 
 class Runner:
     """Maps draws in this process, on a process pool of Dask workers (LocalCluster) or an existing
-    Dask cluster, with a progress bar; results come back in task order."""
+    Dask cluster (:class:`trainer.fleet.cluster.TaskMap`), with a progress bar; results come back in
+    task order."""
 
-    def __init__(self, client: Any = None, progress: bool = True, width: int = 1) -> None:
-        self.client = client
+    def __init__(self, tasks: TaskMap, progress: bool = True) -> None:
+        self.tasks = tasks
         self.progress = progress
-        self.width = width  # how many draws run at once
+
+    @property
+    def width(self) -> int:
+        """How many draws run at once."""
+        return self.tasks.width
 
     def map(self, tasks: Sequence[DrawTask], desc: str) -> list[DrawResult]:
         from tqdm import tqdm
@@ -160,34 +165,11 @@ class Runner:
             total=len(tasks), desc=desc, unit="draw", disable=None if self.progress else True, leave=False
         )
         with bar:
-            if self.client is None:
-                results = []
-                for task in tasks:
-                    results.append(_pinned_draw(task))
-                    bar.update()
-                return results
-            from distributed import as_completed
-
-            futures = self.client.map(_pinned_draw, list(tasks), pure=False)
-            for _ in as_completed(futures):
-                bar.update()
-            return [f.result() for f in futures]
-
-
-def _pinned_draw(task: DrawTask) -> DrawResult:
-    from trainer.fleet.cluster import one_thread
-
-    with one_thread():
-        return run_draw(task)
+            return self.tasks.map(run_draw, tasks, done=lambda _count, _task, _result: bar.update())
 
 
 @contextmanager
 def runner(workers: int, scheduler: str | None, progress: bool) -> Iterator[Runner]:
     """In this process for one worker, else on the project's Dask cluster (:mod:`trainer.fleet.cluster`)."""
-    if workers == 1 and scheduler is None:
-        yield Runner(None, progress)
-        return
-    from trainer.fleet.cluster import open_client
-
-    with open_client(scheduler, None if scheduler is not None else workers) as client:
-        yield Runner(client, progress, max(1, len(client.scheduler_info().get("workers", {})) or workers))
+    with task_map(workers, scheduler) as tasks:
+        yield Runner(tasks, progress)

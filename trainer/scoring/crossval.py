@@ -45,6 +45,7 @@ from trainer import methods as registry
 from trainer.data.holdout import MIN_ROWS
 from trainer.data.recording import HELD_OUT_COLUMN, Recording
 from trainer.errors import UserError
+from trainer.fleet.cluster import TaskMap
 from trainer.scoring.static import (
     COOLING,
     HEATING,
@@ -201,8 +202,9 @@ class CrossValidation:
     results: dict[str, MethodCV]  # uncompensated first
     skipped: dict[str, str] = field(default_factory=dict)  # method -> why it was not cross-validated
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain values (the saved table and the checkpoint's selection record)."""
+    def to_dict(self, timings: bool = True) -> dict[str, Any]:
+        """Plain values (the saved table and, without ``timings``, the checkpoint's selection record:
+        a model file, and the sha256 its export carries, must not depend on how long a fit took)."""
         return {
             "source": self.source,
             "unit": self.unit,
@@ -210,7 +212,7 @@ class CrossValidation:
             "methods": {
                 name: {
                     "cv_rms": r.cv_rms,
-                    "fit_seconds": r.fit_seconds,
+                    **({"fit_seconds": r.fit_seconds} if timings else {}),
                     "natural_cold": r.natural_cold,
                     "folds": [vars(f) for f in r.folds],
                 }
@@ -226,7 +228,11 @@ class CrossValidation:
         sizes = [s.stop - s.start for s in segments]
         results = {
             name: MethodCV(
-                name, [FoldScore(**f) for f in r["folds"]], list(r["natural_cold"]), sizes, r["fit_seconds"]
+                name,
+                [FoldScore(**f) for f in r["folds"]],
+                list(r["natural_cold"]),
+                sizes,
+                r.get("fit_seconds", math.nan),  # a checkpoint keeps no timing: unknown
             )
             for name, r in data["methods"].items()
         }
@@ -339,6 +345,42 @@ def _score(
     )
 
 
+@dataclass(frozen=True)
+class FoldTask:
+    """One fit of a cross-validation: ``method`` trained without ``segment`` and scored on it."""
+
+    method: str
+    fit: Callable[[Recording], object]
+    stateful: bool  # trained on the imputed whole run (impute_held_out), not on the training rows
+    segment: Segment
+    index: int  # the segment's number in the run (from 0)
+
+
+def run_fold(task: FoldTask, rec: Recording, smoothing_s: float) -> tuple[FoldScore, float]:
+    """Fit ``task`` and score its held-out segment warm and cold; also the fit's seconds."""
+    from trainer.scoring.evaluate import smooth_for_scoring
+
+    rate = rec.sample_rate_hz
+
+    def smooth(x: np.ndarray) -> np.ndarray:
+        return np.asarray(smooth_for_scoring(np.asarray(x, dtype=np.float64), rate, smoothing_s))
+
+    s = task.segment
+    temp = np.asarray(rec.temp_c, dtype=np.float64)
+    mask = training_rows(len(rec), s)
+    train = impute_held_out(rec, mask) if task.stateful else rows(rec, mask)
+    start = time.perf_counter()
+    model = task.fit(train)
+    seconds = time.perf_counter() - start
+    predict = model.predict_drift  # type: ignore[attr-defined]
+    warm = smooth(rec.accel_mg - predict(rec))[s.start : s.stop]
+    part = rec.slice(s.start, s.stop)
+    cold = smooth(part.accel_mg - predict(part))
+    lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
+    branch = thermal_branch(temp, rate)[s.start : s.stop]
+    return _score(warm, cold, temp[s.start : s.stop], branch, (lo, hi)), seconds
+
+
 def cross_validate(
     rec: Recording,
     fitters: dict[str, Callable[[Recording], object]],
@@ -348,11 +390,15 @@ def cross_validate(
     unit: str = "mg",
     log: Callable[[str], None] | None = None,
     fold_segments: Sequence[Segment] | None = None,
+    tasks: TaskMap | None = None,
 ) -> CrossValidation:
     """Hold out every thermal segment of ``rec`` in turn; ``fitters[name](train_rec)`` returns a fitted
     compensator (anything with ``predict_drift``). ``stateful`` names the methods trained on the
     imputed whole run (:func:`impute_held_out`) instead of on the training rows alone. ``fold_segments``
-    replaces :func:`folds_of` (a bench comparing fold schemes)."""
+    replaces :func:`folds_of` (a bench comparing fold schemes). ``tasks`` runs the fits on its
+    workers when one of them is stateful (the physics fits: seconds to minutes each); quick fits
+    alone stay in this process. Every fit runs on one thread wherever it runs: the figures do not
+    depend on the workers."""
     from trainer.scoring.evaluate import smooth_for_scoring
 
     rec = rec.without_truth()
@@ -364,39 +410,45 @@ def cross_validate(
     sizes = [s.stop - s.start for s in segments]
     results: dict[str, MethodCV] = {}
 
-    def smooth(x: np.ndarray) -> np.ndarray:
-        return np.asarray(smooth_for_scoring(np.asarray(x, dtype=np.float64), rate, smoothing_s))
-
     raw_folds = []
     for s in segments:
-        raw = smooth(rec.accel_mg[s.start : s.stop])
+        raw = np.asarray(
+            smooth_for_scoring(
+                np.asarray(rec.accel_mg[s.start : s.stop], dtype=np.float64), rate, smoothing_s
+            )
+        )
         mask = training_rows(len(rec), s)
         lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
         raw_folds.append(_score(raw, raw, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
     results[UNCOMPENSATED] = MethodCV(UNCOMPENSATED, raw_folds, natural_cold, sizes)
-    fits, done, began = len(fitters) * len(segments), 0, time.perf_counter()
-    for name, fit in fitters.items():
-        folds: list[FoldScore] = []
-        seconds = 0.0
-        for index, s in enumerate(segments):
-            if log is not None:
-                log(
-                    f"cross-validation: {name}, holding out segment {index + 1}/{len(segments)}: {s.name} "
-                    f"(fit {done + 1} of {fits}, {time.perf_counter() - began:.0f} s so far)"
-                )
-            done += 1
-            mask = training_rows(len(rec), s)
-            train = impute_held_out(rec, mask) if name in stateful else rows(rec, mask)
-            start = time.perf_counter()
-            model = fit(train)
-            seconds += time.perf_counter() - start
-            predict = model.predict_drift  # type: ignore[attr-defined]
-            warm = smooth(rec.accel_mg - predict(rec))[s.start : s.stop]
-            part = rec.slice(s.start, s.stop)
-            cold = smooth(part.accel_mg - predict(part))
-            lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
-            folds.append(_score(warm, cold, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
-        results[name] = MethodCV(name, folds, natural_cold, sizes, seconds / len(segments))
+    fold_tasks = [
+        FoldTask(name, fit, name in stateful, s, index)
+        for name, fit in fitters.items()
+        for index, s in enumerate(segments)
+    ]
+    runner = tasks if tasks is not None else TaskMap()
+    began = time.perf_counter()
+
+    def done(count: int, task: FoldTask, result: tuple[FoldScore, float]) -> None:
+        if log is not None:
+            log(
+                f"cross-validation: {task.method}, segment {task.index + 1}/{len(segments)} held out: "
+                f"{task.segment.name} (fit {count} of {len(fold_tasks)} done in {result[1]:.1f} s, "
+                f"{time.perf_counter() - began:.0f} s so far)"
+            )
+
+    quick = not any(t.stateful for t in fold_tasks)
+    if log is not None and runner.parallel and not quick and len(fold_tasks) > 1:
+        log(f"{len(fold_tasks)} fits of the cross-validation on {runner.width} worker processes (--jobs)")
+    scored = runner.map(
+        run_fold, fold_tasks, shared={"rec": rec, "smoothing_s": smoothing_s}, here=quick, done=done
+    )
+    for name in fitters:
+        mine = [result for task, result in zip(fold_tasks, scored, strict=True) if task.method == name]
+        seconds = sum(result[1] for result in mine)
+        results[name] = MethodCV(
+            name, [result[0] for result in mine], natural_cold, sizes, seconds / len(segments)
+        )
     return CrossValidation(rec.source, unit, segments, results)
 
 

@@ -1,0 +1,106 @@
+"""The cross-validation's fits on worker processes (``--jobs``): the same figures as in this process."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.scoring.test_crossval import chamber_run
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import UserError, run_cli
+from trainer.fitting import fit_compensator
+from trainer.fleet.cluster import task_map
+from trainer.scoring.crossval import cross_validate
+
+
+def figures(cv: object) -> dict[str, object]:
+    """Every figure of a cross-validation except the fit times (which no two runs share)."""
+    data = cv.to_dict()  # type: ignore[attr-defined]
+    for method in data["methods"].values():
+        method.pop("fit_seconds", None)
+    return data
+
+
+def fitters() -> dict[str, object]:
+    return {
+        "poly3": lambda train: fit_compensator("poly3", train),
+        "pla": lambda train: fit_compensator("pla", train),
+    }
+
+
+def test_tasks_run_in_other_processes_and_come_back_in_order() -> None:
+    with task_map(2) as tasks:
+        assert tasks.parallel and tasks.width == 2
+        done: list[int] = []
+        pids = tasks.map(
+            lambda task: (task, os.getpid()),
+            list(range(6)),
+            done=lambda count, _task, _result: done.append(count),
+        )
+    assert [task for task, _ in pids] == list(range(6))
+    assert os.getpid() not in {pid for _, pid in pids}
+    assert done == list(range(1, 7))
+
+
+def test_fits_on_two_workers_give_the_figures_of_one() -> None:
+    rec = chamber_run()
+    rec = Recording(  # a drift no polynomial of the folds fits exactly
+        {**rec.columns, "accel_mg": rec.accel_mg + 0.3 * np.sin(3.0 * rec.temp_c / 20.0)},
+        dict(rec.meta),
+        rec.source,
+    )
+    # "stateful" sends poly3's folds to the workers (the imputed run, as physics is trained)
+    here = cross_validate(rec, fitters(), stateful={"poly3"}, smoothing_s=0.5)  # type: ignore[arg-type]
+    lines: list[str] = []
+    with task_map(2) as tasks:
+        there = cross_validate(
+            rec,
+            fitters(),  # type: ignore[arg-type]
+            stateful={"poly3"},
+            smoothing_s=0.5,
+            tasks=tasks,
+            log=lines.append,
+        )
+    assert figures(there) == figures(here)
+    assert lines[0].startswith("6 fits of the cross-validation on 2 worker processes")
+    assert sum("done" in line for line in lines) == 6
+
+
+def test_a_refusal_on_a_worker_is_the_same_one_line_refusal() -> None:
+    def refuse(train: Recording) -> object:
+        raise UserError(f"{train.source}: cannot fit this fold")
+
+    with task_map(2) as tasks, pytest.raises(UserError, match="cannot fit this fold"):
+        cross_validate(chamber_run(), {"x": refuse}, stateful={"x"}, smoothing_s=0.5, tasks=tasks)
+
+
+def test_jobs_applies_to_auto_only(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    write_recording(chamber_run(), tmp_path / "run.csv")
+    capsys.readouterr()
+    assert run_cli(trainer_main, ["fit", "--method", "poly3", "--jobs", "2", "run.csv", "-o", "x.pt"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--jobs applies to --method auto" in err
+    assert run_cli(trainer_main, ["fit", "--method", "auto", "--jobs", "0", "run.csv", "-o", "x.pt"]) == 2
+    assert "not a positive whole number" in capsys.readouterr().err
+    assert not (tmp_path / "x.pt").exists()
+
+
+def test_auto_writes_the_same_model_file_on_one_worker_and_on_two(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Same inputs, same bytes: the model file (whose sha256 every export carries) keeps no fit time."""
+    monkeypatch.chdir(tmp_path)
+    write_recording(chamber_run(), tmp_path / "run.csv")
+    argv = ["fit", "--method", "auto", "--candidates", "none,poly3,physics-branch-room", "run.csv"]
+    assert run_cli(trainer_main, [*argv, "--jobs", "1", "-o", "one.pt"]) == 0
+    assert run_cli(trainer_main, [*argv, "--jobs", "2", "-o", "two.pt"]) == 0
+    assert "on 2 worker processes" in capsys.readouterr().err
+    assert (tmp_path / "one.pt").read_bytes() == (tmp_path / "two.pt").read_bytes()
