@@ -72,4 +72,5 @@ def test_the_comparison_fitted_side_by_side_equals_one_after_another(
 
 def test_jobs_below_one_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     code = run_cli(trainer_main, ["compare", "a.npz", "b.npz", "--jobs", "0"])
-    assert code == 2 and "--jobs must be >= 1, got 0" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--jobs: '0' is not a positive whole number" in err

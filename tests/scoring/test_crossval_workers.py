@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
 from trainer.errors import UserError, run_cli
 from trainer.fitting import fit_compensator
-from trainer.fleet.cluster import task_map
+from trainer.fleet.cluster import TaskMap, task_map
 from trainer.scoring.crossval import cross_validate
 
 
@@ -33,21 +34,27 @@ def fitters() -> dict[str, object]:
     }
 
 
-def test_tasks_run_in_other_processes_and_come_back_in_order() -> None:
+@pytest.fixture(scope="module")
+def two_workers() -> Iterator[TaskMap]:
+    """One LocalCluster of two workers for the module's tests (it starts in seconds)."""
     with task_map(2) as tasks:
-        assert tasks.parallel and tasks.width == 2
-        done: list[int] = []
-        pids = tasks.map(
-            lambda task: (task, os.getpid()),
-            list(range(6)),
-            done=lambda count, _task, _result: done.append(count),
-        )
+        yield tasks
+
+
+def test_tasks_run_in_other_processes_and_come_back_in_order(two_workers: TaskMap) -> None:
+    assert two_workers.parallel and two_workers.width == 2
+    done: list[int] = []
+    pids = two_workers.map(
+        lambda task: (task, os.getpid()),
+        list(range(6)),
+        done=lambda count, _task, _result: done.append(count),
+    )
     assert [task for task, _ in pids] == list(range(6))
     assert os.getpid() not in {pid for _, pid in pids}
     assert done == list(range(1, 7))
 
 
-def test_fits_on_two_workers_give_the_figures_of_one() -> None:
+def test_fits_on_two_workers_give_the_figures_of_one(two_workers: TaskMap) -> None:
     rec = chamber_run()
     rec = Recording(  # a drift no polynomial of the folds fits exactly
         {**rec.columns, "accel_mg": rec.accel_mg + 0.3 * np.sin(3.0 * rec.temp_c / 20.0)},
@@ -57,26 +64,26 @@ def test_fits_on_two_workers_give_the_figures_of_one() -> None:
     # "stateful" sends poly3's folds to the workers (the imputed run, as physics is trained)
     here = cross_validate(rec, fitters(), stateful={"poly3"}, smoothing_s=0.5)  # type: ignore[arg-type]
     lines: list[str] = []
-    with task_map(2) as tasks:
-        there = cross_validate(
-            rec,
-            fitters(),  # type: ignore[arg-type]
-            stateful={"poly3"},
-            smoothing_s=0.5,
-            tasks=tasks,
-            log=lines.append,
-        )
+    there = cross_validate(
+        rec,
+        fitters(),  # type: ignore[arg-type]
+        stateful={"poly3"},
+        smoothing_s=0.5,
+        tasks=two_workers,
+        log=lines.append,
+    )
     assert figures(there) == figures(here)
     assert lines[0].startswith("6 fits of the cross-validation on 2 worker processes")
     assert sum("done" in line for line in lines) == 6
 
 
-def test_a_refusal_on_a_worker_is_the_same_one_line_refusal() -> None:
+def test_a_refusal_on_a_worker_is_the_same_one_line_refusal(two_workers: TaskMap) -> None:
     def refuse(train: Recording) -> object:
         raise UserError(f"{train.source}: cannot fit this fold")
 
-    with task_map(2) as tasks, pytest.raises(UserError, match="cannot fit this fold"):
-        cross_validate(chamber_run(), {"x": refuse}, stateful={"x"}, smoothing_s=0.5, tasks=tasks)
+    with pytest.raises(UserError, match="cannot fit this fold"):
+        cross_validate(chamber_run(), {"x": refuse}, stateful={"x"}, smoothing_s=0.5, tasks=two_workers)
+    assert two_workers.map(lambda task: task + 1, [1, 2]) == [2, 3]  # the workers go on
 
 
 def test_jobs_applies_to_auto_only(
