@@ -6,6 +6,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+import dask
 import numpy as np
 import pytest
 
@@ -111,3 +112,14 @@ def test_auto_writes_the_same_model_file_on_one_worker_and_on_two(
     assert run_cli(trainer_main, [*argv, "--jobs", "2", "-o", "two.pt"]) == 0
     assert "on 2 worker processes" in capsys.readouterr().err
     assert (tmp_path / "one.pt").read_bytes() == (tmp_path / "two.pt").read_bytes()
+
+
+def test_a_worker_that_dies_is_one_line_naming_the_option() -> None:
+    """A worker killed (the kernel's OOM killer, say) is a refusal that says what to do, not a trace."""
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
+        task_map(2, option="--jobs") as tasks,
+        pytest.raises(UserError) as refused,
+    ):
+        tasks.map(lambda task: os._exit(3), [1, 2])
+    assert "a worker process died" in str(refused.value) and "give --jobs 1" in str(refused.value)

@@ -302,7 +302,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
-    with task_map(args.jobs or default_workers()) as tasks:
+    with task_map(args.jobs or default_workers(), option="--jobs") as tasks:
         cv = cross_validate(
             rec,
             {name: fitter(name) for name in chosen},

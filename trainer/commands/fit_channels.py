@@ -50,7 +50,9 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         checks = check_training(view, method, accept=args.accept_implausible, temp_column=channel.temp_column)
         checked.append((channel, view, checks))
     fitted = []
-    with task_map(args.jobs or default_workers()) as tasks:  # one cluster for every channel, if any
+    with task_map(
+        args.jobs or default_workers(), option="--jobs"
+    ) as tasks:  # one cluster for every channel, if any
         for number, (channel, view, checks) in enumerate(checked, start=1):
             log = progress_log(args, prefix=f"[{channel.name}, channel {number} of {len(checked)}] ")
             model, stats = fit_with_selection(args.method, view, options, policy, log=log, tasks=tasks)

@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         )
     train = read_recording(args.train)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
-    with task_map(args.jobs or default_workers()) as tasks:
+    with task_map(args.jobs or default_workers(), option="--jobs") as tasks:
         model, stats = fit_with_selection(
             args.method, train, options, policy, log=progress_log(args), tasks=tasks
         )

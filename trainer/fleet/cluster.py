@@ -64,12 +64,14 @@ def default_workers() -> int:
 
 
 @contextmanager
-def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+def open_client(
+    scheduler: str | None, workers: int | None, instead: str = "give --scheduler ADDRESS"
+) -> Iterator[Any]:
     """A ``distributed.Client`` on ``scheduler`` (an address), else on a new ``LocalCluster``.
 
     ``workers`` is the LocalCluster's number of single-threaded worker processes (default: the
     machine's cores); with ``scheduler`` the cluster's own workers are used and ``workers`` must
-    not be given.
+    not be given. ``instead``: what the user can do when the LocalCluster cannot start.
     """
     from distributed import Client, LocalCluster
 
@@ -107,7 +109,7 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     except (RuntimeError, OSError) as exc:  # the workers' own failure stays in their processes
         raise UserError(
             f"cannot start the local Dask cluster ({' '.join(str(exc).split())}): a full disk or a file-size "
-            f"limit on {tempfile.gettempdir()}, where its workers write? (or give --scheduler ADDRESS)"
+            f"limit on {tempfile.gettempdir()}, where its workers write? (or {instead})"
         ) from None
     with cluster, Client(cluster) as client:
         yield client
@@ -120,12 +122,17 @@ class TaskMap:
     command whose fits are all quick never starts one) and stops with :func:`task_map`'s block."""
 
     def __init__(
-        self, workers: int = 1, scheduler: str | None = None, stack: ExitStack | None = None
+        self,
+        workers: int = 1,
+        scheduler: str | None = None,
+        stack: ExitStack | None = None,
+        option: str = "--workers",
     ) -> None:
         if scheduler is None and workers < 1:
-            raise UserError(f"--workers must be >= 1, got {workers}")
+            raise UserError(f"{option} must be >= 1, got {workers}")
         self.workers = workers
         self.scheduler = scheduler
+        self.option = option  # the command's option that sets ``workers`` (said in its refusals)
         self._stack = stack
         self._client: Any = None
 
@@ -142,7 +149,11 @@ class TaskMap:
             if self._stack is None:
                 raise RuntimeError("TaskMap: open it with task_map() to run on a cluster")
             self._client = self._stack.enter_context(
-                open_client(self.scheduler, None if self.scheduler is not None else self.workers)
+                open_client(
+                    self.scheduler,
+                    None if self.scheduler is not None else self.workers,
+                    instead=f"give {self.option} 1 to run in this process",
+                )
             )
         return self._client
 
@@ -174,22 +185,29 @@ class TaskMap:
                 if done is not None:
                     done(count, task, results[-1])
             return results
-        from distributed import as_completed
+        from distributed import KilledWorker, as_completed
 
         client = self.client
         sent = {name: client.scatter(value, broadcast=True) for name, value in shared.items()}
         futures = client.map(pinned(function), list(tasks), pure=False, **sent)
         which = {future.key: task for future, task in zip(futures, tasks, strict=True)}
-        for count, future in enumerate(as_completed(futures), start=1):
-            if future.status == "error":
-                future.result()  # the task's own exception, at once (the block's exit stops the rest)
-            if done is not None:
-                done(count, which[future.key], future.result())
+        try:
+            for count, future in enumerate(as_completed(futures), start=1):
+                # a task's own exception is raised here at once (the block's exit stops the rest)
+                result = future.result()
+                if done is not None:
+                    done(count, which[future.key], result)
+        except KilledWorker:
+            raise UserError(
+                f"a worker process died while running a task (out of memory? each of the {self.width} workers "
+                f"holds its own copy of the data): give {self.option} 1 to run in this process"
+            ) from None
         return [future.result() for future in futures]
 
 
 @contextmanager
-def task_map(workers: int = 1, scheduler: str | None = None) -> Iterator[TaskMap]:
-    """A :class:`TaskMap` whose cluster (if it starts one) stops at the end of the block."""
+def task_map(workers: int = 1, scheduler: str | None = None, option: str = "--workers") -> Iterator[TaskMap]:
+    """A :class:`TaskMap` whose cluster (if it starts one) stops at the end of the block; ``option``
+    is the command's name for ``workers``."""
     with ExitStack() as stack:
-        yield TaskMap(workers, scheduler, stack)
+        yield TaskMap(workers, scheduler, stack, option)
