@@ -114,12 +114,21 @@ def test_auto_writes_the_same_model_file_on_one_worker_and_on_two(
     assert (tmp_path / "one.pt").read_bytes() == (tmp_path / "two.pt").read_bytes()
 
 
-def test_a_worker_that_dies_is_one_line_naming_the_option() -> None:
-    """A worker killed (the kernel's OOM killer, say) is a refusal that says what to do, not a trace."""
+@pytest.mark.parametrize("shared", [{}, {"data": np.zeros(1000)}], ids=["alone", "with-shared-data"])
+def test_a_worker_that_dies_is_one_line_naming_the_option(shared: dict[str, object]) -> None:
+    """A worker killed (the kernel's OOM killer, say) is a refusal that says what to do, not a trace;
+    so is every worker killed, which loses the data sent to them (the task is then cancelled)."""
+    import distributed  # noqa: F401  (its config defaults loaded before the set below, which restores them after)
+
     with (
         dask.config.set({"distributed.scheduler.allowed-failures": 0}),
         task_map(2, option="--jobs") as tasks,
         pytest.raises(UserError) as refused,
     ):
-        tasks.map(lambda task: os._exit(3), [1, 2])
-    assert "a worker process died" in str(refused.value) and "give --jobs 1" in str(refused.value)
+        tasks.map(lambda task, **_: os._exit(3), [1, 2], shared=shared)
+    message = str(refused.value)
+    assert (
+        "a worker process died" in message
+        and "each of the 2 workers" in message
+        and "give --jobs 1" in message
+    )

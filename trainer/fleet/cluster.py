@@ -103,7 +103,8 @@ def open_client(
             dashboard_address=None,
             # no dashboard, and the scheduler's HTTP endpoints on a free port rather than on a busy 8787
             scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
-            silence_logs=logging.ERROR,
+            # the scheduler's own ERROR lines (a worker that died) would surround the one-line refusal
+            silence_logs=logging.CRITICAL,
             env=ONE_THREAD_ENV,
         )
     except (RuntimeError, OSError) as exc:  # the workers' own failure stays in their processes
@@ -185,6 +186,8 @@ class TaskMap:
                 if done is not None:
                     done(count, task, results[-1])
             return results
+        from concurrent.futures import CancelledError
+
         from distributed import KilledWorker, as_completed
 
         client = self.client
@@ -197,10 +200,11 @@ class TaskMap:
                 result = future.result()
                 if done is not None:
                     done(count, which[future.key], result)
-        except KilledWorker:
+        except (KilledWorker, CancelledError):  # cancelled: every worker holding the shared data died
+            each = f"each of the {self.workers} workers" if self.scheduler is None else "each worker"
             raise UserError(
-                f"a worker process died while running a task (out of memory? each of the {self.width} workers "
-                f"holds its own copy of the data): give {self.option} 1 to run in this process"
+                f"a worker process died while running a task (out of memory? {each} holds its own copy of "
+                f"the data): give {self.option} 1 to run in this process"
             ) from None
         return [future.result() for future in futures]
 
