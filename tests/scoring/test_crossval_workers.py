@@ -132,3 +132,25 @@ def test_a_worker_that_dies_is_one_line_naming_the_option(shared: dict[str, obje
         and "each of the 2 workers" in message
         and "give --jobs 1" in message
     )
+
+
+def test_compare_per_channel_names_the_users_file_and_the_channel_in_its_outputs_and_progress(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    run = chamber_run()
+    columns = {**run.columns, "accel0_z_mg": run.accel_mg, "gyro0_x_dps": 0.01 * (run.accel_mg - 1000.0)}
+    write_recording(Recording(columns, dict(run.meta), "imu"), tmp_path / "imu.csv")
+    capsys.readouterr()
+    argv = ["compare", "imu.csv", "--channels", "all", "--methods", "poly3,pla", "--out-dir", "cv"]
+    assert run_cli(trainer_main, argv) == 0
+    captured = capsys.readouterr()
+    progress = [line for line in captured.err.splitlines() if "cross-validation:" in line]
+    assert progress and all(line.startswith("[") and " of 2] cross-validation:" in line for line in progress)
+    assert any(line.startswith("[gyro0_x, channel 2 of 2] ") for line in progress)
+    for channel in ("accel0_z", "gyro0_x"):
+        report = (tmp_path / "cv" / channel / "report.md").read_text()
+        data = (tmp_path / "cv" / channel / "crossval.json").read_text()
+        for text in (report, data):
+            assert "channels-" not in text and f"imu.csv (channel {channel})" in text
+    assert "channels-" not in captured.out

@@ -14,7 +14,7 @@ from trainer import methods
 from trainer.data.channels import Channel, method_refusal
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, raise_write_error
-from trainer.options.channels import add_channels_option, run_per_channel
+from trainer.options.channels import PREFIX_ATTR, add_channels_option, run_per_channel
 from trainer.options.dlstm import add_dlstm_options, settings_from_args
 from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.options.workers import workers
@@ -184,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{rec.source}: --input-test needs a true_accel_mg column (a simulated input)")
 
     def log(message: str) -> None:
-        print(message, file=sys.stderr, flush=True)
+        print(f"{getattr(args, PREFIX_ATTR, '')}{message}", file=sys.stderr, flush=True)
 
     comparison = compare(
         train,
@@ -300,7 +300,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
 
     def log(message: str) -> None:
         if not args.quiet:
-            print(message, file=sys.stderr, flush=True)
+            print(f"{getattr(args, PREFIX_ATTR, '')}{message}", file=sys.stderr, flush=True)
 
     with task_map(args.jobs or default_workers(), option="--jobs") as tasks:
         cv = cross_validate(

@@ -23,7 +23,7 @@ from trainer.data.channels import (
     select_channels,
 )
 from trainer.errors import UserError
-from trainer.options.channels import INDEX_FILE, MODEL_SUFFIX
+from trainer.options.channels import INDEX_FILE, MODEL_SUFFIX, channel_prefix
 from trainer.reference import OffsetPolicy
 
 
@@ -54,7 +54,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         args.jobs or default_workers(), option="--jobs"
     ) as tasks:  # one cluster for every channel, if any
         for number, (channel, view, checks) in enumerate(checked, start=1):
-            log = progress_log(args, prefix=f"[{channel.name}, channel {number} of {len(checked)}] ")
+            log = progress_log(args, prefix=channel_prefix(channel.name, number, len(checked)))
             model, stats = fit_with_selection(args.method, view, options, policy, log=log, tasks=tasks)
             fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}

@@ -69,6 +69,14 @@ def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
     return [root / f"{name}{MODEL_SUFFIX}" for name in names]
 
 
+def channel_prefix(name: str, number: int, count: int) -> str:
+    """What a progress line on stderr starts with when a command runs channel by channel."""
+    return f"[{name}, channel {number} of {count}] "
+
+
+PREFIX_ATTR = "progress_prefix"  # the per-channel run sets it on the command's arguments
+
+
 def run_per_channel(
     args: argparse.Namespace,
     run_one: Callable[[argparse.Namespace], int],
@@ -140,6 +148,7 @@ def _each_channel(
         for index, channel in enumerate(channels):
             sub = argparse.Namespace(**vars(args))
             sub.channels = None
+            setattr(sub, PREFIX_ATTR, channel_prefix(channel.name, index + 1, len(channels)))
             views: dict[str, str] = {}
             for attr, rec in recs.items():
                 select_channels(rec, (channel.name,))  # every recording must carry the channel
@@ -170,19 +179,32 @@ def _each_channel(
                 with contextlib.redirect_stdout(captured):
                     status = max(status, run_one(sub))
             except UserError as exc:
-                message = str(exc)
-                for view, named in views.items():
-                    message = message.replace(view, named)
-                raise UserError(message) from None
-            print(relabel_units(captured.getvalue(), channel.unit), end="", flush=True)
-            if channel.unit != "mg":
-                _relabel_outputs(sub, out_dirs, out_files, channel.unit)
+                raise UserError(_as_the_user_named(str(exc), views)) from None
+            print(
+                _as_the_user_named(relabel_units(captured.getvalue(), channel.unit), views),
+                end="",
+                flush=True,
+            )
+            _relabel_outputs(sub, out_dirs, out_files, channel.unit, views)
     return status
 
 
+def _as_the_user_named(text: str, views: dict[str, str]) -> str:
+    """``text`` with each temporary one-channel view's path replaced by the user's file and channel
+    (a report that named ``/tmp/channels-x/imu[gyro0_z].npz`` named a file deleted after the run)."""
+    for view, named in views.items():
+        text = text.replace(view, named)
+    return text
+
+
 def _relabel_outputs(
-    sub: argparse.Namespace, out_dirs: tuple[str, ...], out_files: tuple[str, ...], unit: str
+    sub: argparse.Namespace,
+    out_dirs: tuple[str, ...],
+    out_files: tuple[str, ...],
+    unit: str,
+    views: dict[str, str],
 ) -> None:
+    """The text outputs (.md, .txt, .json) say the channel's unit and the user's file."""
     from trainer.data.channels import relabel_units
 
     paths: list[Path] = []
@@ -192,4 +214,7 @@ def _relabel_outputs(
     paths += [Path(getattr(sub, attr)) for attr in out_files if getattr(sub, attr) is not None]
     for path in paths:
         if path.is_file():
-            path.write_text(relabel_units(path.read_text(encoding="utf-8"), unit), encoding="utf-8")
+            text = path.read_text(encoding="utf-8")
+            relabelled = _as_the_user_named(relabel_units(text, unit) if unit != "mg" else text, views)
+            if relabelled != text:
+                path.write_text(relabelled, encoding="utf-8")
