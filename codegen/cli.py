@@ -218,9 +218,10 @@ def _verify(args: argparse.Namespace) -> int:
     if args.json:
         write_json(result, args.out_dir, args.json)
     if result.mismatches or not result.state_equal:
+        where = [f"{result.mismatches} output samples"] if result.mismatches else []
+        where += [] if result.state_equal else ["the final state"]
         print(
-            f"error: the generated C differs from the golden model ({result.mismatches} samples)",
-            file=sys.stderr,
+            f"error: the generated C differs from the golden model ({' and '.join(where)})", file=sys.stderr
         )
         return EXIT_MISMATCH
     return 0

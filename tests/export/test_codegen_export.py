@@ -239,6 +239,24 @@ def test_verify_detects_a_tampered_module(
     assert "differs from the golden model" in result.stderr
 
 
+def test_verify_says_the_final_state_differs_when_no_output_sample_does(
+    models: dict[str, Path], exported: dict[str, Path], recording: tuple[Recording, Path], tmp_path: Path
+) -> None:
+    """A valid range narrowed by 1 degC in the C raises its out-of-range flag (the state) on this run's
+    warmest samples and changes no output sample: the refusal says so, not "0 samples"."""
+    out = tmp_path / "narrowed"
+    shutil.copytree(exported["pla"], out)
+    source = out / "tdc_pla.c"
+    text = source.read_text()
+    match = re.search(r"temp_mdegc > (-?\d+)\)", text)
+    assert match
+    source.write_text(text[: match.start(1)] + str(int(match.group(1)) - 1000) + text[match.end(1) :])
+    result = _cli("verify", str(models["pla"]), str(out), str(recording[1]), "--no-table")
+    assert result.returncode == 1
+    assert "mismatches: 0\n" in result.stdout and "final state identical: NO" in result.stdout
+    assert result.stderr.strip().endswith("differs from the golden model (the final state)")
+
+
 def test_verify_refuses_a_module_of_another_model(
     models: dict[str, Path], exported: dict[str, Path], recording: tuple[Recording, Path]
 ) -> None:
