@@ -154,3 +154,18 @@ def test_compare_per_channel_names_the_users_file_and_the_channel_in_its_outputs
         for text in (report, data):
             assert "channels-" not in text and f"imu.csv (channel {channel})" in text
     assert "channels-" not in captured.out
+
+
+def test_compare_holdout_writes_the_same_model_files_on_one_job_and_on_two(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model fitted in a worker process and sent back is written byte for byte as one fitted here."""
+    monkeypatch.chdir(tmp_path)
+    write_recording(chamber_run(), tmp_path / "run.csv")
+    argv = ["compare", "run.csv", "--holdout", "0.5", "--methods", "poly3,physics", "--quiet"]
+    assert run_cli(trainer_main, [*argv, "--jobs", "1", "--out-dir", "one"]) == 0
+    assert run_cli(trainer_main, [*argv, "--jobs", "2", "--out-dir", "two"]) == 0
+    for name in ("poly3.pt", "physics.pt"):
+        assert (tmp_path / "one" / "models" / name).read_bytes() == (
+            tmp_path / "two" / "models" / name
+        ).read_bytes()
