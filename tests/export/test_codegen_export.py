@@ -221,19 +221,25 @@ def test_verify_reports_zero_mismatches(
     assert re.search(r"error budget .*RMS [0-9.e-]+ mg, max [0-9.e-]+ mg", result.stdout)
 
 
+def tampered(exported: Path, out: Path, source: str, pattern: str, change: int) -> Path:
+    """A copy of an exported module in ``out`` whose ``source`` has the integer of ``pattern``'s
+    group 1 (its first match) changed by ``change``."""
+    shutil.copytree(exported, out)
+    path = out / source
+    text = path.read_text()
+    match = re.search(pattern, text)
+    assert match
+    path.write_text(text[: match.start(1)] + str(int(match.group(1)) + change) + text[match.end(1) :])
+    return out
+
+
 def test_verify_detects_a_tampered_module(
     models: dict[str, Path], exported: dict[str, Path], recording: tuple[Recording, Path], tmp_path: Path
 ) -> None:
-    out = tmp_path / "tampered"
-    shutil.copytree(exported["dlstm-issa"], out)
-    source = out / "tdc_dlstm_issa.c"
-    text = source.read_text()
     # change the first packed weight pair of layer 0 by 2**10 LSB of its first (int16) weight (one
     # LSB, 2**-15 of the input weight, may change no output sample: only the final state)
-    match = re.search(r"(static const int32_t tdc_dlstm_issa_l0_w\[\d+\] = \{\n    )(-?\d+)", text)
-    assert match
-    text = text[: match.start(2)] + str(int(match.group(2)) + 1024) + text[match.end(2) :]
-    source.write_text(text)
+    weights = r"static const int32_t tdc_dlstm_issa_l0_w\[\d+\] = \{\n    (-?\d+)"
+    out = tampered(exported["dlstm-issa"], tmp_path / "tampered", "tdc_dlstm_issa.c", weights, 1024)
     result = _cli("verify", str(models["dlstm-issa"]), str(out), str(recording[1]), "--no-table")
     assert result.returncode == 1 and "mismatches: 0\n" not in result.stdout
     assert "differs from the golden model" in result.stderr
@@ -244,13 +250,7 @@ def test_verify_says_the_final_state_differs_when_no_output_sample_does(
 ) -> None:
     """A valid range narrowed by 1 degC in the C raises its out-of-range flag (the state) on this run's
     warmest samples and changes no output sample: the refusal says so, not "0 samples"."""
-    out = tmp_path / "narrowed"
-    shutil.copytree(exported["pla"], out)
-    source = out / "tdc_pla.c"
-    text = source.read_text()
-    match = re.search(r"temp_mdegc > (-?\d+)\)", text)
-    assert match
-    source.write_text(text[: match.start(1)] + str(int(match.group(1)) - 1000) + text[match.end(1) :])
+    out = tampered(exported["pla"], tmp_path / "narrowed", "tdc_pla.c", r"temp_mdegc > (-?\d+)\)", -1000)
     result = _cli("verify", str(models["pla"]), str(out), str(recording[1]), "--no-table")
     assert result.returncode == 1
     assert "mismatches: 0\n" in result.stdout and "final state identical: NO" in result.stdout
