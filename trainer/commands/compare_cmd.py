@@ -262,11 +262,12 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     (:mod:`trainer.scoring.crossval`); recursive methods cannot be trained on a run with a hole."""
     import json
 
+    from trainer.commands.selection_output import progress_log
     from trainer.data.channels import signal_of
     from trainer.data.plausibility import WIDER_RUN_HINT, check_scored
     from trainer.data.recording_io import read_recording
     from trainer.fitting import fit_compensator
-    from trainer.fleet.cluster import default_workers, task_map
+    from trainer.options.workers import jobs_task_map
     from trainer.scoring.crossval import cross_validatable, cross_validate, segment_lines, table_lines
 
     if args.inject is not None or args.input_test:
@@ -298,18 +299,14 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
         kwargs = methods.get(name).options.compare_kwargs(settings, False)
         return lambda train: fit_compensator(name, train, kwargs, policy)
 
-    def log(message: str) -> None:
-        if not args.quiet:
-            print(f"{getattr(args, PREFIX_ATTR, '')}{message}", file=sys.stderr, flush=True)
-
-    with task_map(args.jobs or default_workers(), option="--jobs") as tasks:
+    with jobs_task_map(args.jobs) as tasks:
         cv = cross_validate(
             rec,
             {name: fitter(name) for name in chosen},
             stateful={m for m in chosen if methods.get(m).family == methods.TEMPERATURE_DRIVEN},
             smoothing_s=args.smoothing,
             unit=unit,
-            log=log,
+            log=progress_log(args, getattr(args, PREFIX_ATTR, "")),
             tasks=tasks,
         )
     cv.skipped.update(skipped)

@@ -32,7 +32,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
-    from trainer.fleet.cluster import default_workers, task_map
+    from trainer.options.workers import jobs_task_map
     from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
@@ -50,9 +50,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         checks = check_training(view, method, accept=args.accept_implausible, temp_column=channel.temp_column)
         checked.append((channel, view, checks))
     fitted = []
-    with task_map(
-        args.jobs or default_workers(), option="--jobs"
-    ) as tasks:  # one cluster for every channel, if any
+    with jobs_task_map(args.jobs) as tasks:  # one cluster for every channel, if any
         for number, (channel, view, checks) in enumerate(checked, start=1):
             log = progress_log(args, prefix=channel_prefix(channel.name, number, len(checked)))
             model, stats = fit_with_selection(args.method, view, options, policy, log=log, tasks=tasks)

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import RECORDING_SUFFIXES, read_recording
     from trainer.errors import UserError, check_output_path
-    from trainer.fleet.cluster import default_workers, task_map
+    from trainer.options.workers import jobs_task_map
     from trainer.selection import fit_with_selection
 
     for option, value in (("--candidates", args.candidates), ("--jobs", args.jobs)):
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         )
     train = read_recording(args.train)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
-    with task_map(args.jobs or default_workers(), option="--jobs") as tasks:
+    with jobs_task_map(args.jobs) as tasks:
         model, stats = fit_with_selection(
             args.method, train, options, policy, log=progress_log(args), tasks=tasks
         )

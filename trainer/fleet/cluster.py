@@ -178,11 +178,11 @@ class TaskMap:
         ``here`` keeps the tasks in this process (quick ones, where starting workers costs more);
         ``done(count, task, result)`` after each task completes, in the order they complete."""
         shared = shared or {}
+        run = pinned(function)  # the same here as on a worker
         if here or not self.parallel or len(tasks) < 2:
             results = []
             for count, task in enumerate(tasks, start=1):
-                with one_thread():
-                    results.append(function(task, **shared))
+                results.append(run(task, **shared))
                 if done is not None:
                     done(count, task, results[-1])
             return results
@@ -192,7 +192,7 @@ class TaskMap:
 
         client = self.client
         sent = {name: client.scatter(value, broadcast=True) for name, value in shared.items()}
-        futures = client.map(pinned(function), list(tasks), pure=False, **sent)
+        futures = client.map(run, list(tasks), pure=False, **sent)
         which = {future.key: task for future, task in zip(futures, tasks, strict=True)}
         try:
             for count, future in enumerate(as_completed(futures), start=1):

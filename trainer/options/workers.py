@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from contextlib import AbstractContextManager
+
+    from trainer.fleet.cluster import TaskMap
 
 
 def workers(text: str) -> int:
@@ -29,3 +35,11 @@ def add_workers_option(
         metavar="N",
         help=f"{what} on N worker processes, one thread each, with the same results for any N (default {where})",
     )
+
+
+def jobs_task_map(jobs: int | None) -> AbstractContextManager[TaskMap]:
+    """Where ``trainer fit --method auto`` and ``trainer compare`` run a cross-validation's fits:
+    ``--jobs N`` single-threaded workers, one per core when not given."""
+    from trainer.fleet.cluster import default_workers, task_map  # Dask on use, not at --help
+
+    return task_map(jobs or default_workers(), option="--jobs")

@@ -356,14 +356,19 @@ class FoldTask:
     index: int  # the segment's number in the run (from 0)
 
 
-def run_fold(task: FoldTask, rec: Recording, smoothing_s: float) -> tuple[FoldScore, float]:
-    """Fit ``task`` and score its held-out segment warm and cold; also the fit's seconds."""
+def _smoothed(x: np.ndarray, rate_hz: float, smoothing_s: float) -> np.ndarray:
+    """The output as the score reads it (the validation smoothing)."""
     from trainer.scoring.evaluate import smooth_for_scoring
 
+    return np.asarray(smooth_for_scoring(np.asarray(x, dtype=np.float64), rate_hz, smoothing_s))
+
+
+def run_fold(task: FoldTask, rec: Recording, smoothing_s: float) -> tuple[FoldScore, float]:
+    """Fit ``task`` and score its held-out segment warm and cold; also the fit's seconds."""
     rate = rec.sample_rate_hz
 
     def smooth(x: np.ndarray) -> np.ndarray:
-        return np.asarray(smooth_for_scoring(np.asarray(x, dtype=np.float64), rate, smoothing_s))
+        return _smoothed(x, rate, smoothing_s)
 
     s = task.segment
     temp = np.asarray(rec.temp_c, dtype=np.float64)
@@ -399,7 +404,6 @@ def cross_validate(
     workers when one of them is stateful (the physics fits: seconds to minutes each); quick fits
     alone stay in this process. Every fit runs on one thread wherever it runs: the figures do not
     depend on the workers."""
-    from trainer.scoring.evaluate import smooth_for_scoring
 
     rec = rec.without_truth()
     segments = list(fold_segments) if fold_segments is not None else folds_of(rec)
@@ -412,11 +416,7 @@ def cross_validate(
 
     raw_folds = []
     for s in segments:
-        raw = np.asarray(
-            smooth_for_scoring(
-                np.asarray(rec.accel_mg[s.start : s.stop], dtype=np.float64), rate, smoothing_s
-            )
-        )
+        raw = _smoothed(rec.accel_mg[s.start : s.stop], rate, smoothing_s)
         mask = training_rows(len(rec), s)
         lo, hi = float(np.min(temp[mask])), float(np.max(temp[mask]))
         raw_folds.append(_score(raw, raw, temp[s.start : s.stop], branch[s.start : s.stop], (lo, hi)))
