@@ -13,7 +13,6 @@ from functools import partial
 from typing import cast
 
 import numpy as np
-from tqdm import tqdm
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
@@ -74,6 +73,7 @@ from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.units import ChannelScale
 from trainer.physics.config import PhysicsConfig
 from trainer.physics.effects import EFFECT_PARAMETERS, EffectConfig
+from trainer.progress import progress_bar
 
 
 def _param_flags(effect: EffectConfig, scale: ChannelScale | None = None) -> list[str]:
@@ -153,7 +153,7 @@ def _diagnose(
     user_sim = sim
     if sim is not None:  # a gyroscope's or barometer's physics is its [channels.<name>] table
         sim = sim.for_channel(rec.meta.get("channel"), channel_unit(rec))
-    stages = tqdm(total=5, desc="diagnose", unit="stage", disable=None if progress else True, leave=False)
+    stages = progress_bar(progress=progress, total=5, desc="diagnose", unit="stage", leave=False)
     t_axis = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
     probe = build_blocks(rec, max_blocks=max_blocks)
     baseline = build_baseline(sim, t_axis, probe.lattice_lsb_c)

@@ -51,6 +51,7 @@ from trainer.diagnose.candidates import Proposal, confusable, propose, propose_p
 from trainer.diagnose.gls import NoiseState
 from trainer.diagnose.model import ModelFit, fit_model
 from trainer.physics import catalogue
+from trainer.progress import progress_bar
 
 THRESHOLD = 12.0
 AMBIGUOUS = 6.0
@@ -488,7 +489,7 @@ def forward_select(
        without it, when that model's BIC is lower and it has no more ``implausible`` terms (a
        parameter outside the catalogue's plausible range) (:func:`_swap_out`).
     """
-    bar = tqdm(desc="diagnose: search", unit="round", disable=None if progress else True, leave=False)
+    bar = progress_bar(progress=progress, desc="diagnose: search", unit="round", leave=False)
     path = _stepwise(baseline, data, candidates, bar, pairs=pairs)
     if any(t.delta_bic >= THRESHOLD for t in path.noise_tested):
         other = _stepwise(baseline, data, candidates, bar, noise_last=True, pairs=pairs)
@@ -579,12 +580,8 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
     """Importance of each chosen effect (BIC lost when dropped) and ambiguity with confounders."""
     final = selection.final
     indices = final_indices(selection)
-    bar = tqdm(
-        list(indices.items()),
-        desc="diagnose: confounders",
-        unit="effect",
-        disable=None if progress else True,
-        leave=False,
+    bar = progress_bar(
+        list(indices.items()), progress=progress, desc="diagnose: confounders", unit="effect", leave=False
     )
     for (effect, occurrence), index in bar:
         reduced = drop_term(final, index, effect, data)

@@ -22,9 +22,9 @@ from typing import Literal
 
 import torch
 from torch import Tensor
-from tqdm.auto import tqdm
 
 from trainer.dlstm.network import LstmShape, PopulationDLSTM, forward_flat
+from trainer.progress import progress_bar
 
 LossKind = Literal["mse", "half_mse", "mae"]
 # callback(iteration, per-individual losses (P,)) -> True to stop (the paper's "accuracy meets
@@ -141,7 +141,7 @@ def train_population(
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         optimizer = torch.optim.Adam(params, lr=lr)
-        bar = tqdm(range(iterations), desc=f"DLSTM x{P}", unit="it", disable=not progress, leave=False)
+        bar = progress_bar(range(iterations), progress=progress, desc=f"DLSTM x{P}", unit="it", leave=False)
         for it in bar:
             optimizer.zero_grad(set_to_none=True)
             y, _ = model(inputs)

@@ -93,10 +93,9 @@ def run_fleet(
     ``client``: a ``distributed.Client`` to use instead of opening one (``scheduler`` and
     ``workers`` are then ignored); a caller running several fleets keeps one cluster up.
     """
-    from tqdm import tqdm
-
     from trainer.fleet.report import remove_stale_report_parts, write_report
     from trainer.physics.config import parse_config_text
+    from trainer.progress import progress_bar
 
     manifest = load_manifest(manifest_path)
     settings = manifest.settings
@@ -137,7 +136,7 @@ def run_fleet(
             futures = {
                 _submit(active, unit, key, settings, sim_text, run_tag): (unit, key) for unit, key in todo
             }
-            bar = tqdm(total=len(futures), unit="unit", desc="fleet", disable=None if progress else True)
+            bar = progress_bar(progress=progress, total=len(futures), unit="unit", desc="fleet")
             for future in as_completed(futures):
                 unit, key = futures[future]
                 try:

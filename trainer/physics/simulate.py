@@ -10,7 +10,6 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-from tqdm import tqdm
 
 from trainer import __version__
 from trainer.budget import check_rows
@@ -24,6 +23,7 @@ from trainer.physics.inputs import input_signal
 from trainer.physics.noise import noise_term
 from trainer.physics.profiles import build_profile, format_segments
 from trainer.physics.thermal import lowpass
+from trainer.progress import progress_bar
 
 # One random stream per source, derived by SeedSequence spawning: the thermometer, the input, then
 # one per noise term in catalogue order. Indices are permanent: new streams (new noise terms) are
@@ -115,7 +115,7 @@ def _channel_columns(
 def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Recording:
     """Simulate one recording; same ``cfg`` and ``seed`` give bit-identical columns.
 
-    ``progress`` shows a tqdm bar on stderr (only when stderr is a terminal).
+    ``progress`` shows a bar on stderr (timed lines when stderr is not a terminal).
     """
     fs = cfg.recording.sample_rate_hz
     dt = 1.0 / fs
@@ -125,7 +125,7 @@ def simulate(cfg: PhysicsConfig, seed: int, *, progress: bool = False) -> Record
     n = round(profile.duration_s * fs)
     _check(cfg, seed, n, fs)
     rngs = stream_rngs(int(seed))
-    stages = tqdm(total=5, desc="simulate", unit="stage", disable=None if progress else True, leave=False)
+    stages = progress_bar(progress=progress, total=5, desc="simulate", unit="stage", leave=False)
 
     t = np.arange(n) * dt
     setpoint = profile.setpoint(t)

@@ -159,11 +159,9 @@ class Runner:
         return self.tasks.width
 
     def map(self, tasks: Sequence[DrawTask], desc: str) -> list[DrawResult]:
-        from tqdm import tqdm
+        from trainer.progress import progress_bar
 
-        bar = tqdm(
-            total=len(tasks), desc=desc, unit="draw", disable=None if self.progress else True, leave=False
-        )
+        bar = progress_bar(progress=self.progress, total=len(tasks), desc=desc, unit="draw", leave=False)
         with bar:
             return self.tasks.map(run_draw, tasks, done=lambda _count, _task, _result: bar.update())
 

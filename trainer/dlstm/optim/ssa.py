@@ -82,9 +82,9 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
-from tqdm import tqdm
 
 from trainer.dlstm.optim.levy import levy_step
+from trainer.progress import progress_bar
 
 __all__ = [
     "OptimizeResult",
@@ -389,7 +389,7 @@ def minimize(
         )
 
     t = 0
-    bar = tqdm(range(1, iterations + 1), desc=variant.upper(), disable=not progress, leave=False)
+    bar = progress_bar(range(1, iterations + 1), progress=progress, desc=variant.upper(), leave=False)
     for t in bar:
         order = np.argsort(fitnesses, kind="stable")
         population, fitnesses = population[order], fitnesses[order]
