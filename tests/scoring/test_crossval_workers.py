@@ -134,6 +134,54 @@ def test_a_worker_that_dies_is_one_line_naming_the_option(shared: dict[str, obje
     )
 
 
+KILLED_WORKERS_SCRIPT = """
+import multiprocessing, os, sys
+import dask, distributed
+from trainer.errors import UserError
+from trainer.fleet import cluster
+from trainer.fleet.cluster import task_map
+
+def main():
+    if sys.argv[1] == "unfiltered":
+        cluster.quiet_resource_tracker = lambda: None
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        try:
+            with task_map(2, option="--jobs") as tasks:
+                # a worker killed while it holds a semaphore (torch and the finder's libraries do)
+                tasks.map(lambda task, **_: (multiprocessing.Semaphore(), os._exit(3)), [1, 2])
+        except UserError as refusal:
+            print(refusal, file=sys.stderr)
+            sys.exit(2)
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def test_killed_workers_leave_the_one_line_refusal_alone_on_stderr(tmp_path: Path) -> None:
+    """The semaphores a killed worker leaves are freed by multiprocessing's tracker at exit, which
+    used to add its two-line warning under the refusal. A fresh interpreter: the tracker is
+    process-wide and may already run in this one. The unfiltered run shows the check can fail."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "killed.py"
+    script.write_text(KILLED_WORKERS_SCRIPT)
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    env.pop("PYTHONWARNINGS", None)
+
+    def stderr_of(mode: str) -> str:
+        done = subprocess.run(
+            [sys.executable, str(script), mode], capture_output=True, text=True, env=env, timeout=120
+        )
+        assert done.returncode == 2, done.stderr[-2000:]
+        return done.stderr
+
+    filtered = stderr_of("filtered")
+    assert filtered.count("\n") == 1 and "a worker process died" in filtered and "give --jobs 1" in filtered
+    assert "resource_tracker" in stderr_of("unfiltered")
+
+
 def test_compare_per_channel_names_the_users_file_and_the_channel_in_its_outputs_and_progress(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

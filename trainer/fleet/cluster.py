@@ -59,6 +59,30 @@ def pinned(function: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+# the resource tracker's warning when it frees, at exit, what a killed worker left (a semaphore)
+TRACKER_WARNING = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker without its exit warning about leaked semaphores.
+
+    A worker killed mid-task (the OOM killer, Ctrl-C) leaves a semaphore that the tracker frees when
+    the command exits, and its two-line ``UserWarning`` followed the command's one-line refusal. The
+    tracker is its own process and reads its warning filters from the environment it starts with;
+    what it frees is unchanged. Does nothing if the tracker is already running."""
+    from multiprocessing import resource_tracker
+
+    previous = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = ",".join(filter(None, [previous, TRACKER_WARNING]))
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if previous is None:
+            del os.environ["PYTHONWARNINGS"]
+        else:
+            os.environ["PYTHONWARNINGS"] = previous
+
+
 def default_workers() -> int:
     return max(1, os.cpu_count() or 1)
 
@@ -95,6 +119,7 @@ def open_client(
     count = default_workers() if workers is None else workers
     if count < 1:
         raise UserError(f"--workers must be >= 1, got {count}")
+    quiet_resource_tracker()
     try:
         cluster = LocalCluster(
             n_workers=count,
