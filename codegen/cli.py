@@ -29,14 +29,19 @@ def _export(args: argparse.Namespace) -> int:
             raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
         if args.schedule != "step":
             raise UserError("--schedule applies to the C module (--format c), not to parameter files")
+        if args.format == "ardupilot-parm" and args.device_id is not None:
+            raise UserError(
+                "--device-id applies to --format px4-params: ArduPilot's INS_TCAL1..3 apply by IMU index "
+                "(accel0/gyro0 -> INS_TCAL1, accel1/gyro1 -> INS_TCAL2), not by device id"
+            )
         return _export_params(args)
-    for option, given in (
-        ("--channel", args.channel),
-        ("--device-id", args.device_id),
-        ("--keep-constant", args.keep_constant),
+    for option, given, formats in (
+        ("--channel", args.channel, "px4-params/ardupilot-parm"),
+        ("--device-id", args.device_id, "px4-params"),
+        ("--keep-constant", args.keep_constant, "px4-params"),
     ):
         if given not in (None, False):
-            raise UserError(f"{option} applies to --format px4-params/ardupilot-parm, not to the C module")
+            raise UserError(f"{option} applies to --format {formats}, not to the C module")
     if len(args.model) != 1:
         raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
@@ -117,7 +122,7 @@ def _export_imu(args: argparse.Namespace) -> int:
 def _export_params(args: argparse.Namespace) -> int:
     """Flight-stack parameter files: one per command, all models' channels in it."""
     from codegen.export import write_files_atomically
-    from codegen.flightparams import load_channel_cubic, render
+    from codegen.flightparams import NOTE, load_channel_cubic, render
     from codegen.render import validate_name
 
     per_sensor = args.device_id if isinstance(args.device_id, dict) else {}
@@ -152,6 +157,9 @@ def _export_params(args: argparse.Namespace) -> int:
     file_name = name + EXTENSIONS[args.format]
     write_files_atomically({file_name: text}, args.out_dir)
     print(f"wrote {args.out_dir}/{file_name}: {', '.join(c.name for c in channels)} ({args.format})")
+    for line in text.splitlines():
+        if line.startswith(NOTE):
+            print(line[len(NOTE) :])
     if args.format == "px4-params":
         from codegen.px4_republish import lag_bound_lines
 

@@ -43,6 +43,7 @@ from trainer import methods
 from trainer.data.ardupilot_tcal import INSTANCES as ARDUPILOT_INSTANCES  # INS_TCAL1..3
 from trainer.data.ardupilot_tcal import PREFIX as ARDUPILOT_PREFIX
 from trainer.data.ardupilot_tcal import SCALE as ARDUPILOT_SCALE
+from trainer.data.ardupilot_tcal import TEMP_RANGE_C as ARDUPILOT_TEMP_RANGE_C  # @Range of TMIN/TMAX
 from trainer.data.ardupilot_tcal import TEMP_REF_C as ARDUPILOT_TEMP_REF_C  # (the import undoes it)
 from trainer.data.channels import UNIT_LABELS, unit_of_channel_name
 from trainer.data.flightlog import STANDARD_GRAVITY, ChannelName, parse_channel
@@ -181,6 +182,27 @@ class SensorSet:
     axes: dict[str | None, ChannelCubic]  # axis (None for a barometer) -> channel
 
 
+NOTE = "# note: "  # a file comment the export also prints: what the file says, the terminal says
+
+
+def shared_range(members: Sequence[ChannelCubic]) -> tuple[float, float]:
+    """The range one parameter set applies over: the intersection of its compensated channels' ranges
+    (an identity channel's zero coefficients hold at every temperature: it narrows nothing)."""
+    compensated = [c for c in members if not c.identity] or list(members)
+    return max(c.t_min_c for c in compensated), min(c.t_max_c for c in compensated)
+
+
+def narrowed_notes(members: Sequence[ChannelCubic], lo_c: float, hi_c: float, shared_by: str) -> list[str]:
+    """A note per compensated channel whose own range the shared one cuts: the stack holds the edge
+    value beyond it, where the channel's model was fitted."""
+    return [
+        f"{NOTE}{c.name}: fitted over {c.t_min_c:.2f} .. {c.t_max_c:.2f} degC, corrected over {lo_c:.2f} .. "
+        f"{hi_c:.2f} degC only ({shared_by} share one range): outside it the stack holds the edge value"
+        for c in members
+        if not c.identity and (c.t_min_c < lo_c - 0.005 or c.t_max_c > hi_c + 0.005)
+    ]
+
+
 def group_by_instance(channels: Sequence[ChannelCubic]) -> list[SensorSet]:
     """Group channels per sensor instance; the instance's range is the intersection of its channels'."""
     groups: dict[tuple[str, int], list[ChannelCubic]] = defaultdict(list)
@@ -200,8 +222,7 @@ def group_by_instance(channels: Sequence[ChannelCubic]) -> list[SensorSet]:
         ids = {c.device_id for c in members if c.device_id is not None}
         if len(ids) > 1:
             raise UserError(f"{sensor}{instance}: the models name different device ids ({sorted(ids)})")
-        lo = max(c.t_min_c for c in members)
-        hi = min(c.t_max_c for c in members)
+        lo, hi = shared_range(members)
         if not lo < hi:
             raise UserError(f"{sensor}{instance}: the models' temperature ranges do not overlap")
         for cubic in members:
@@ -360,15 +381,24 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
     ]
     lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
     lines += [note for note in map(missing_axes_note, groups) if note is not None]
+    for group in groups:
+        members = list(group.axes.values())
+        lines += narrowed_notes(
+            members, group.t_min_c, group.t_max_c, f"the axes of {group.sensor}{group.instance}"
+        )
     lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
     rows: list[tuple[str, float | int, int]] = []
     for sensor in PX4_PREFIX:
         given = [c for c in channels if c.channel.sensor == sensor]
-        if given:
-            enabled = not all(c.identity for c in given)
-            if not enabled:
-                lines.insert(-2, f"# {sensor}: every model given is the identity (no compensation): disabled")
-            rows.append((f"{PX4_PREFIX[sensor]}_ENABLE", int(enabled), MAV_PARAM_TYPE_INT32))
+        if given and all(c.identity for c in given):
+            # TC_x_ENABLE switches every instance of the sensor type, including ones this file does not carry
+            lines.insert(
+                -2,
+                f"# {sensor}: every model given is the identity (no compensation): zero coefficients; "
+                f"{PX4_PREFIX[sensor]}_ENABLE, which switches every {sensor} instance, is left as the vehicle has it",
+            )
+        elif given:
+            rows.append((f"{PX4_PREFIX[sensor]}_ENABLE", 1, MAV_PARAM_TYPE_INT32))
     for group in groups:
         rows += px4_values(group, keep_constant=keep_constant)
     for name, value, kind in rows:
@@ -414,12 +444,22 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
     lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
     for instance, sensors in sorted(imus.items()):
         prefix = f"INS_TCAL{instance + 1}"
-        lo = max(found.t_min_c for found in sensors.values())
-        hi = min(found.t_max_c for found in sensors.values())
+        members = [c for found in sensors.values() for c in found.axes.values()]
+        lo, hi = shared_range(members)
         if not lo < hi:
             raise UserError(
                 f"IMU {instance}: the accelerometer and gyroscope models' temperature ranges do not overlap"
             )
+        lines += narrowed_notes(members, lo, hi, f"accel{instance} and gyro{instance}")
+        declared_lo, declared_hi = ARDUPILOT_TEMP_RANGE_C
+        if lo < declared_lo or hi > declared_hi:  # a ground station may refuse a value outside @Range
+            clamped = max(lo, declared_lo), min(hi, declared_hi)
+            lines.append(
+                f"{NOTE}{prefix}_TMIN/TMAX: the models' range {lo:.2f} .. {hi:.2f} degC leaves ArduPilot's declared "
+                f"{declared_lo:g} .. {declared_hi:g} degC; written as {clamped[0]:.2f} .. {clamped[1]:.2f}: beyond it "
+                "ArduPilot holds the correction at the edge value"
+            )
+            lo, hi = clamped
         enabled = not all(c.identity for found in sensors.values() for c in found.axes.values())
         if not enabled:
             lines.append(

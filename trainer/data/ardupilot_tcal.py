@@ -25,6 +25,7 @@ import numpy as np
 from trainer.errors import UserError
 
 TEMP_REF_C = 35.0  # TEMP_REFERENCE in AP_InertialSensor_tempcal.cpp
+TEMP_RANGE_C = (-70.0, 80.0)  # @Range of INS_TCALn_TMIN and INS_TCALn_TMAX in AP_InertialSensor_tempcal.cpp
 SCALE = 1.0e6  # SCALE_FACTOR: the parameters hold the coefficients times 1e6
 PREFIX = {"accel": "ACC", "gyro": "GYR"}  # INS_TCALn_ACCk_X, INS_TCALn_GYRk_X
 INSTANCES = 3  # INS_TCAL1..3 correct IMU instances 0..2
