@@ -670,3 +670,44 @@ def test_two_spellings_of_one_channel_must_agree(tmp_path: Path, capsys: pytest.
             )
         else:
             assert sorted(p.name for p in out.glob("*.pt")) == ["accel0_y.pt"]
+
+
+def test_a_one_channel_fit_of_a_multi_channel_file_says_which_column_it_fits(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An import of ``--channels gyro0_z`` still holds the preset's accelerometer axis in accel_mg (the
+    format requires the column): a fit without --channels fitted that axis and exported it as an
+    accelerometer calibration, unsaid."""
+    rec = read_recording(imu["rec"])
+    columns = {k: v for k, v in rec.columns.items() if k in ("time_s", "temp_c", "accel_mg", "gyro0_z_dps")}
+    write_recording(Recording(columns, dict(rec.meta), "gz"), tmp_path / "gz.csv")
+    capsys.readouterr()
+    assert (
+        trainer_main(["fit", "--method", "poly3", str(tmp_path / "gz.csv"), "-o", str(tmp_path / "gz.pt")])
+        == 0
+    )
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "accel_mg (accel0_z)" in notes[0] and "carries gyro0_z" in notes[0]
+    one = tmp_path / "one.csv"
+    write_recording(one_axis(rec, "accel0_x"), one)
+    assert trainer_main(["fit", "--method", "poly3", str(one), "-o", str(tmp_path / "one.pt")]) == 0
+    assert "note:" not in capsys.readouterr().err  # nothing else to fit
+
+
+def test_channels_with_a_model_file_name_is_refused_not_made_a_directory(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "fit",
+        "--method",
+        "poly3",
+        str(imu["rec"]),
+        "--channels",
+        "gyro0_x",
+        "-o",
+        str(tmp_path / "y7.pt"),
+    ]
+    assert run_cli(trainer_main, argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--channels writes a directory of models" in err
+    assert not (tmp_path / "y7.pt").exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from trainer import methods
@@ -36,6 +37,11 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
+    if Path(args.output).suffix.lower() == MODEL_SUFFIX and not Path(args.output).is_dir():
+        raise UserError(
+            f"{args.output}: --channels writes a directory of models (OUT/<channel>{MODEL_SUFFIX}), and this "
+            f"names a model file: give a directory, or leave out --channels to fit the one-channel column"
+        )
     check_output_directory(args.output)  # before a possibly long fit
     train = read_recording(args.train)
     channels = select_channels(train, args.channels)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -60,7 +61,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
-    from trainer.data.channels import channel_unit
+    from trainer.data.channels import channel_unit, other_channels_note
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import RECORDING_SUFFIXES, read_recording
     from trainer.errors import UserError, check_output_path
@@ -96,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
             "written as .pt (arguments swapped? the recording comes first, -o names the model)"
         )
     train = read_recording(args.train)
+    if (note := other_channels_note(train)) is not None:
+        print(note, file=sys.stderr, flush=True)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
     with jobs_task_map(args.jobs) as tasks:
         model, stats = fit_with_selection(

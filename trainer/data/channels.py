@@ -155,6 +155,20 @@ def names_text(channels: dict[str, Channel] | list[str]) -> str:
     return ", ".join(names) if names else "(none)"
 
 
+def other_channels_note(rec: Recording) -> str | None:
+    """What a one-channel command on a multi-channel recording fits, when the recording carries other
+    channels: an import of ``--channels gyro0_z`` still holds the preset's accelerometer axis in
+    ``accel_mg`` (the format requires it), and a fit without ``--channels`` fitted that axis unsaid."""
+    default = rec.meta.get("channel")
+    others = [name for name in recording_channels(rec) if name != default]
+    if not others or "accel_mg" not in rec.columns:  # without it, the command refuses and says so
+        return None
+    return (
+        f"note: {rec.source}: fitting its one-channel column accel_mg ({default or 'no channel name'}); "
+        f"it also carries {names_text(others)}: --channels NAME (or all) fits those"
+    )
+
+
 def select_channels(rec: Recording, wanted: tuple[str, ...]) -> list[Channel]:
     """The channels ``wanted`` (from :func:`parse_channels_option`) of ``rec``, in the order given."""
     available = recording_channels(rec)
