@@ -21,6 +21,7 @@ from pathlib import Path
 from trainer.stale_files import part_prefix, remove_stale_parts, report_removed
 
 EXIT_USER_ERROR = 2
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: what a shell tool exits with when its reader closes the pipe
 # Write failures the user can fix (disk full, file-size or quota limit, permissions, read-only
 # file system): one line naming the path, never a traceback.
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EPERM, errno.EROFS})
@@ -89,6 +90,14 @@ def _ignore_file_size_signal() -> None:
             signal.signal(xfsz, signal.SIG_IGN)
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush does not raise again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    with suppress(OSError, ValueError):
+        os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
 def _print_error(exc: UserError) -> int:
     message = " ".join(_TERMINAL_CODES.sub("", str(exc)).split())  # one line, no terminal codes
     print(f"error: {message}", file=sys.stderr)
@@ -100,9 +109,14 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     and exit code 2."""
     _ignore_file_size_signal()
     try:
-        return main(argv)
+        code = main(argv)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+        return code
     except UserError as exc:
         return _print_error(exc)
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as a shell tool does
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except OSError as exc:
         converted = write_error(exc)
         if converted is None:
