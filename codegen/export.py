@@ -178,7 +178,9 @@ def manifest_name(name: str) -> str:
 def generate(model: LoadedModel, name: str) -> dict[str, str]:
     """File name -> content of the three output files (pure; nothing touches the disk)."""
     name = validate_name(name)
-    files = render_sources(model.quantised, name, model.sha256, notes=model.notes, sensor=model.sensor)
+    files = render_sources(
+        model.quantised, name, model.sha256, notes=model.notes, sensor=model.sensor, shown=model.name
+    )
     manifest = build_manifest(
         model.quantised,
         name=name,

@@ -347,7 +347,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "name": c.name,
                 "upper": c.name.upper(),
                 "unit": UNIT_LABELS[c.unit],
-                "method": c.model.checkpoint.method,
+                "method": c.model.name,  # auto's choice (none, physics-branch) as the user knows it
                 "sensor": c.sensor,
                 "sha256": c.model.sha256,
                 "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "

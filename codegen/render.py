@@ -249,13 +249,16 @@ def kernel_header() -> str:
 
 
 def render_sources(
-    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...], sensor: str
+    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...], sensor: str, shown: str = ""
 ) -> dict[str, str]:
     """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
     (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment,
-    ``sensor`` what its title names."""
+    ``sensor`` what its title names, ``shown`` the name the user knows the model by (auto's choice:
+    ``none``, ``poly2``, ``physics-branch``), where it differs from the registered method."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
+    if shown:
+        ctx["method"] = shown
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
     ctx["sensor"] = sensor
     files = {

@@ -291,6 +291,19 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     }
     assert "TC_G_ENABLE" not in values and values["TC_A_ENABLE"] == "1" and values["TC_G0_X1_0"] == "0"
     assert "TC_G_ENABLE, which switches every gyro instance, is left as the vehicle has it" in params
+    # the C headers name what auto chose (the identity is "none"), not the class that loads it (poly3)
+    assert (
+        _run(codegen_main, "export", "m/gyro0_x.pt", "-o", "one", "--name", "gx", capsys=capsys).returncode
+        == 0
+    )
+    assert 'method "none"' in (tmp_path / "one" / "gx.h").read_text()
+    assert (
+        _run(
+            codegen_main, "export", "m", "--channels", "all", "-o", "imu", "--name", "imu", capsys=capsys
+        ).returncode
+        == 0
+    )
+    assert "1: gyro0_x [deg/s], none," in (tmp_path / "imu" / "imu.h").read_text()
     signoff = _run(
         trainer_main,
         "report",

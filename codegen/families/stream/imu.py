@@ -42,6 +42,7 @@ def embedded_modules(part: ImuPart) -> list[dict[str, object]]:
             channel.model.sha256,
             notes=channel.model.notes,
             sensor=channel.model.sensor,
+            shown=channel.model.name,
         )
         own_include = f'#include "{sub}.h"\n'
         assert files[f"{sub}.c"].count(own_include) == 1
