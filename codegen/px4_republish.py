@@ -19,6 +19,8 @@ from codegen.flightparams import TO_STACK_UNIT, ChannelCubic, cubic_extremes, gr
 from trainer.data.channels import UNIT_LABELS
 
 REPUBLISH_STEP_C = 1.0  # the "> 1.0f" in update_offsets_accel/_gyro/_baro
+POLL_S = 1.0  # TemperatureCompensationModule checks at 1 Hz: the temperature moves on between checks
+FAST_RATE_C_PER_MIN = 10.0  # the heating rate the export's summary quotes (a board warming at power-on)
 NEVER_PUBLISHED_C = -100.0  # PerSensorData's last_temperature before the first publication
 
 
@@ -39,11 +41,15 @@ def republish_error(drift: Callable[[np.ndarray], np.ndarray], temp_c: np.ndarra
     return drift(republished_temperature(temp)) - drift(temp)
 
 
-def lag_bound(cubic: ChannelCubic, lo_c: float, hi_c: float) -> float:
-    """The most a 1 degC-old offset can differ from the exact one over the clamp range ``lo_c .. hi_c``
-    (the steepest slope there times 1 degC; data-independent), in the model's unit."""
+def lag_bound(cubic: ChannelCubic, lo_c: float, hi_c: float, rate_c_per_min: float = 0.0) -> float:
+    """The most the applied offset can differ from the exact one over the clamp range ``lo_c .. hi_c``
+    while the temperature moves at up to ``rate_c_per_min``: the steepest slope there times the
+    temperature it can lag, 1 degC plus what one poll interval adds (PX4 checks the 1 degC at each
+    1 Hz poll, and the samples between polls are corrected with the last published offset), in the
+    model's unit."""
     low, high = cubic_extremes(cubic, lo_c, hi_c, order=1)
-    return max(abs(low), abs(high)) * REPUBLISH_STEP_C / TO_STACK_UNIT[cubic.channel.unit]
+    lag_c = REPUBLISH_STEP_C + abs(rate_c_per_min) / 60.0 * POLL_S
+    return max(abs(low), abs(high)) * lag_c / TO_STACK_UNIT[cubic.channel.unit]
 
 
 def lag_bound_lines(channels: Sequence[ChannelCubic]) -> list[str]:
@@ -52,9 +58,12 @@ def lag_bound_lines(channels: Sequence[ChannelCubic]) -> list[str]:
     for group in group_by_instance(channels):
         for cubic in group.axes.values():
             unit = UNIT_LABELS[cubic.channel.unit]
+            slow = lag_bound(cubic, group.t_min_c, group.t_max_c)
+            fast = lag_bound(cubic, group.t_min_c, group.t_max_c, FAST_RATE_C_PER_MIN)
             lines.append(
-                f"{cubic.name}: PX4 updates the applied offset after > {REPUBLISH_STEP_C:g} degC of change: up "
-                f"to {lag_bound(cubic, group.t_min_c, group.t_max_c):.3g} {unit} off the exact cubic (its "
-                f"steepest slope x {REPUBLISH_STEP_C:g} degC)"
+                f"{cubic.name}: PX4 updates the applied offset after > {REPUBLISH_STEP_C:g} degC of change, checked "
+                f"at {1 / POLL_S:g} Hz: up to {slow:.3g} {unit} off the exact cubic (its steepest slope x "
+                f"{REPUBLISH_STEP_C:g} degC) plus the slope x the change between checks: {fast:.3g} {unit} while "
+                f"the temperature moves {FAST_RATE_C_PER_MIN:g} degC/min"
             )
     return lines

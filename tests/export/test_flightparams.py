@@ -423,10 +423,13 @@ def test_px4_export_prints_the_republish_bound(tmp_path: Path, capsys: pytest.Ca
     linear = fit(ramp_recording(tmp_path / "l.csv", temp, 0.8 * temp, ACCEL_Z), tmp_path / "l.pt")
     capsys.readouterr()
     export(tmp_path / "px4", "px4-params", linear)
+    said = capsys.readouterr().out
     assert (
-        "accel0_z: PX4 updates the applied offset after > 1 degC of change: up to 0.8 mg"
-        in capsys.readouterr().out
+        "accel0_z: PX4 updates the applied offset after > 1 degC of change, checked at 1 Hz: up to 0.8 mg"
+        in said
     )
+    # between two 1 Hz checks a 10 degC/min ramp moves 1/6 degC more: 0.8 x (1 + 1/6) = 0.933 mg
+    assert "0.933 mg while the temperature moves 10 degC/min" in said
     # a cubic: the bound is its steepest slope over the range (numerical derivative on a dense grid)
     from codegen.flightparams import load_channel_cubic
 
