@@ -1,3 +1,5 @@
 """mems-tdc codegen: quantise a trained model and render a fixed-point C99 module."""
 
-__version__ = "0.2.0"
+from trainer import __version__  # one version for the product (generated files and models agree)
+
+__all__ = ["__version__"]

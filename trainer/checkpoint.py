@@ -3,7 +3,7 @@
 The file is a ``torch.save`` of a plain dict::
 
     {"format": "mems-tdc-model", "format_version": 1, "method": "pla", "payload": {...},
-     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.1.0",
+     "train_stats": {...}, "valid_temp_range_c": [lo, hi], "created_by": "mems-tdc 0.2.0",
      "offset": {"mode": "relative", "t_ref_c": ..., "drift_at_t_ref_mg": ...}}
 
 ``train_stats`` is the plain dict of a :class:`trainer.train_stats.TrainStats` (readers take it
