@@ -433,7 +433,11 @@ def schedule_check(
 
 def report_lines(result: VerifyResult) -> list[str]:
     b = result.budget
-    rate = f"{result.rate_millihz / 1000:g} Hz" if result.rate_millihz else "any rate (memoryless)"
+    rate = (
+        f"{result.rate_millihz / 1000:g} Hz"
+        if result.rate_millihz
+        else "any rate (nothing in it depends on the sample rate)"
+    )
     lines = [
         f"module rate: {rate}"
         + (

@@ -234,3 +234,18 @@ def test_a_flight_stack_export_refuses_it_by_the_name_auto_chose(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "method 'physics-branch-room' is not a cubic of the temperature" in err[0], err
     assert not (tmp_path / "px4").exists()
+
+
+def test_a_half_way_start_header_gives_the_branch_terms_power_on_error_in_numbers(tmp_path: Path) -> None:
+    """Started mid-way, the branch term is off by up to its amplitude until T has moved by w/2: the
+    header and manifest say how much and how far, from the model's own parameters."""
+    rec = recording()
+    model, stats = fit_with_stats("physics", rec, {"effects": "hysteresis_offset", "least_squares": True})
+    save_model(model, tmp_path / "half.pt", train_stats=stats, valid_temp_range_c=stats.temp_range_c)
+    assert (
+        codegen_main(["export", str(tmp_path / "half.pt"), "-o", str(tmp_path / "c"), "--name", "half"]) == 0
+    )
+    branch = _params(tmp_path / "half.pt")["hysteresis_offset"]
+    said = f"its amplitude, {abs(branch['amp_mg']):.3g} mg, until T has moved by w/2 = {branch['width_c'] / 2:.3g} degC"
+    header = " ".join((tmp_path / "c" / "half.h").read_text().replace(" * ", " ").split())
+    assert said in header and said in (tmp_path / "c" / "half.manifest.json").read_text()

@@ -7,6 +7,7 @@ from string import Template
 
 from codegen.families.physics.quantise import QPhysics, QTerm
 from codegen.qformats import HEADER as KERNEL_HEADER
+from codegen.quantize import ACCEL_PER_MG
 from codegen.render import Field, bound_text, c_rows
 from trainer.physics.catalogue.streamed import play_words
 from trainer.physics.catalogue.streaming import HI_BITS, FixedPoint, StateWord
@@ -51,7 +52,15 @@ def physics_tables(model: QPhysics) -> dict[str, int]:
 def play_start_text(model: QPhysics) -> str:
     """Where the play operator starts at power-on, as the header and the manifest say it."""
     if model.play_start_q is None:
-        return "P at T_pm, mid-way between the branches (the branch term is then off by at most its amplitude until T has moved by w/2)"
+        sizes = "; ".join(
+            f"its amplitude, {term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG:.3g} mg, until T "
+            f"has moved by w/2 = {term.margin_q / 2**model.temp_frac / 1000:.3g} degC"
+            for term in model.terms
+            if term.margin_q is not None and term.gain is not None
+        )
+        if not sizes:
+            return "no play operator (no branch term)"
+        return f"P at T_pm, mid-way between the branches (the branch term is then off by at most {sizes})"
     start_c = (model.centre_mdegc + model.play_start_q / 2**model.temp_frac) / 1000.0
     return (
         f"P at {start_c:g} degC (x = {model.play_start_q}), clamped into T_pm +- w/2 by the first step: the branch of a sensor "
