@@ -119,3 +119,31 @@ def test_a_candidate_the_finder_cannot_place_is_left_out_and_the_others_judged(g
     first = structure_without.compensated[0].identifier
     later = [n for n in notes_without if n.startswith(f"cross-validation (beside {first})")]
     assert later and all(first not in n.split(": ", 1)[1] for n in later)
+
+
+def test_the_stop_note_says_when_the_best_held_out_term_was_set_aside_as_undetermined(
+    gyro: Recording,
+) -> None:
+    """A user read "no further term beats the noise model (best held out: stress_relaxation, 6.889 ->
+    2.598 mg)" and could not tell why a term that cut the held-out RMS by 60 % was not added: it had
+    beaten the noise and been set aside as undetermined (the note above it). The stop note says so."""
+    from trainer.greybox.fit import add_trial
+    from trainer.greybox.select import extend
+    from trainer.greybox.structure import Structure
+
+    data = build_blocks(gyro)
+    baseline = build_baseline(None, np.asarray(gyro.time_s) - float(gyro.time_s[0]), data.lattice_lsb_c)
+    start = fit_model(baseline.terms, baseline.noise_terms, data)
+    offered = ("thermal_lag", "temp_rate")
+    _, structure, notes = extend(
+        start,
+        data,
+        Structure((), candidates=offered),
+        add_trial,
+        undetermined=lambda trial, name: "for the test",
+    )
+    assert not structure.compensated
+    assert any("not added, undetermined: for the test" in n for n in notes)
+    (stop,) = [n for n in notes if "beats the noise model" in n]
+    assert "no further term this run determines beats the noise model" in stop
+    assert stop.endswith(", undetermined: not added (above))")

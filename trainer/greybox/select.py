@@ -107,15 +107,19 @@ def extend(
         if not trials:
             break
         passing = [item for item in trials if beats_noise(item[2], fit)]
+        set_aside: set[str] = set()  # beat the noise, but the run does not determine them
         if undetermined is not None:
             why = {name: undetermined(trial, name) for _, name, trial in passing}
             notes += [f"{stage}: {name} not added, undetermined: {w}" for name, w in why.items() if w]
-            passing = [item for item in passing if not why[item[1]]]
+            set_aside = {name for name, w in why.items() if w}
+            passing = [item for item in passing if item[1] not in set_aside]
         if not passing:
             best = min(trials, key=lambda item: item[0])
+            which = "term this run determines" if set_aside else "term"
+            aside = ", undetermined: not added (above)" if best[1] in set_aside else ""
             notes.append(
-                f"{stage}: no further term beats the noise model at p < {LR_LEVEL:g} "
-                f"(best held out: {best[1]}, {current:.4g} -> {best[0]:.4g} {label})"
+                f"{stage}: no further {which} beats the noise model at p < {LR_LEVEL:g} "
+                f"(best held out: {best[1]}, {current:.4g} -> {best[0]:.4g} {label}{aside})"
             )
             break
         score, name, trial = min(passing, key=lambda item: item[0])
