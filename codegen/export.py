@@ -20,6 +20,7 @@ from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, quantise_checkpoint
 from codegen.rate import ANY_RATE_MILLIHZ, any_rate_note, declared_rate_millihz, retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
+from codegen.step_units import STEP_UNITS
 from trainer import methods as registry
 from trainer.atomic_dir import atomic_directory
 from trainer.checkpoint import load_checkpoint, load_model
@@ -40,6 +41,7 @@ class LoadedModel:
     notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
     shown: str = ""  # the name the user knows the model by (auto's candidate: poly2, physics-branch)
     sensor: str = ""  # what the header's title names (sensor_of): "accelerometer", or a channel's sensor
+    unit: str = "mg"  # the channel's unit (the step's integers are 1/16000 of it)
 
     @property
     def name(self) -> str:
@@ -80,7 +82,17 @@ def load_for_codegen(
     from trainer.selection import shown_name
 
     shown = shown_name(ckpt.method, TrainStats.of_checkpoint(raw))
-    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown, sensor_of(raw))
+    unit = TrainStats.of_checkpoint(raw).unit or "mg"
+    return LoadedModel(
+        p,
+        sha256,
+        ckpt,
+        quantised,
+        channel_notes(raw, notes),
+        shown,
+        sensor_of(raw),
+        unit if unit in STEP_UNITS else "mg",
+    )
 
 
 UNDETERMINED_WARNING = "WARNING: the model carries what its training run does not determine"
@@ -113,8 +125,8 @@ def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...
         return notes
     label = UNIT_LABELS[unit]
     first = (
-        f"channel {stats.channel}: values in {label}, not acceleration; read '1/16 ug' as 1/16000 "
-        f"{label} (16000 LSB = 1 {label}) and 'mg' as {label}"
+        f"channel {stats.channel}: values in {label}, one LSB 1/16000 {label}; the model's own figures below, "
+        f"where they say mg, are in {label}"
     )
     relabelled = (
         relabel_units(note, unit).replace("accelerometer calibration", "sensor calibration") for note in notes
@@ -179,7 +191,13 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
     """File name -> content of the three output files (pure; nothing touches the disk)."""
     name = validate_name(name)
     files = render_sources(
-        model.quantised, name, model.sha256, notes=model.notes, sensor=model.sensor, shown=model.name
+        model.quantised,
+        name,
+        model.sha256,
+        notes=model.notes,
+        sensor=model.sensor,
+        shown=model.name,
+        unit=model.unit,
     )
     manifest = build_manifest(
         model.quantised,

@@ -25,6 +25,7 @@ from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.qformats import header_with_block
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_SATURATED, FLAG_TEMP_OUT_OF_RANGE
 from codegen.rate import declared_rate_millihz
+from codegen.step_units import STEP_UNITS
 from trainer.errors import UserError
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
@@ -171,6 +172,7 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         "temp_lo": lim.temp_lo_mdegc,
         "temp_hi": lim.temp_hi_mdegc,
         "accel_limit": lim.accel,
+        "step": STEP_UNITS["mg"],  # render_sources names a gyroscope's or barometer's own
     }
     millihz = declared_rate_millihz(model)
     macros: list[tuple[str, object]] = [
@@ -249,16 +251,24 @@ def kernel_header() -> str:
 
 
 def render_sources(
-    model: QuantModel, name: str, sha256: str, notes: tuple[str, ...], sensor: str, shown: str = ""
+    model: QuantModel,
+    name: str,
+    sha256: str,
+    notes: tuple[str, ...],
+    sensor: str,
+    shown: str = "",
+    unit: str = "mg",
 ) -> dict[str, str]:
     """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
     (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment,
     ``sensor`` what its title names, ``shown`` the name the user knows the model by (auto's choice:
-    ``none``, ``poly2``, ``physics-branch``), where it differs from the registered method."""
+    ``none``, ``poly2``, ``physics-branch``), where it differs from the registered method; ``unit``
+    the channel's (the step's words: :mod:`codegen.step_units`)."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     if shown:
         ctx["method"] = shown
+    ctx["step"] = STEP_UNITS[unit]
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
     ctx["sensor"] = sensor
     files = {

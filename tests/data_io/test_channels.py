@@ -711,3 +711,27 @@ def test_channels_with_a_model_file_name_is_refused_not_made_a_directory(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--channels writes a directory of models" in err
     assert not (tmp_path / "y7.pt").exists()
+
+
+def test_a_gyroscope_module_speaks_of_angular_rate_in_its_own_unit(
+    imu: dict[str, Path], tmp_path: Path
+) -> None:
+    """A gyroscope's C module said "acceleration in and out ... 1/16 micro-g, range +-134 g" and took
+    ``accel_q4ug``; its header, argument names and run function now say the channel's own words."""
+    assert (
+        codegen_main(
+            ["export", str(imu["root"] / "poly3" / "gyro0_x.pt"), "-o", str(tmp_path), "--name", "gx"]
+        )
+        == 0
+    )
+    header = (tmp_path / "gx.h").read_text()
+    source = (tmp_path / "gx.c").read_text()
+    assert "angular rate in and out int32 in 1/16000 deg/s" in header
+    assert "int32_t gx_step(gx_state_t *state, int32_t rate_q16k, int32_t temp_mdegc);" in header
+    for text in (header, source):
+        assert "accel_q4ug" not in text and "micro-g" not in text and "acceleration" not in text
+    flags = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Werror", "-c"]
+    built = subprocess.run(
+        ["gcc", *flags, "gx.c", "-o", "gx.o"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert built.returncode == 0 and not built.stderr, built.stderr
