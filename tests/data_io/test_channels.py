@@ -697,16 +697,8 @@ def test_a_one_channel_fit_of_a_multi_channel_file_says_which_column_it_fits(
 def test_channels_with_a_model_file_name_is_refused_not_made_a_directory(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = [
-        "fit",
-        "--method",
-        "poly3",
-        str(imu["rec"]),
-        "--channels",
-        "gyro0_x",
-        "-o",
-        str(tmp_path / "y7.pt"),
-    ]
+    recording, model_file = str(imu["rec"]), str(tmp_path / "y7.pt")
+    argv = ["fit", "--method", "poly3", recording, "--channels", "gyro0_x", "-o", model_file]
     assert run_cli(trainer_main, argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--channels writes a directory of models" in err
