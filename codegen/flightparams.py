@@ -185,6 +185,20 @@ class SensorSet:
 NOTE = "# note: "  # a file comment the export also prints: what the file says, the terminal says
 
 
+def model_lines(channels: Sequence[ChannelCubic]) -> list[str]:
+    """The file's comment per model: its sha256, and for an identity why its coefficients are zero
+    (a reader of the file alone would take zeros for a missing calibration)."""
+    return [
+        f"# {c.name}: model sha256 {c.model_sha256}"
+        + (
+            " (the identity: no compensation left less drift held out, so its coefficients are zero)"
+            if c.identity
+            else ""
+        )
+        for c in channels
+    ]
+
+
 def shared_range(members: Sequence[ChannelCubic]) -> tuple[float, float]:
     """The range one parameter set applies over: the intersection of its compensated channels' ranges
     (an identity channel's zero coefficients hold at every temperature: it narrows nothing)."""
@@ -379,7 +393,7 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
         "# dT = clamp(T, TMIN, TMAX) - TREF; corrected = raw - offset (m/s^2, rad/s, Pa).",
         f"# X0: {'the model constant' if keep_constant else '0, the constant belongs to the ordinary calibration'}.",
     ]
-    lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
+    lines += model_lines(channels)
     lines += [note for note in map(missing_axes_note, groups) if note is not None]
     for group in groups:
         members = list(group.axes.values())
@@ -441,7 +455,7 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
         "# the rest: refresh the parameters (or reboot), load this file again, reboot (ENABLE needs one),",
         "# then redo the accelerometer calibration.",
     ]
-    lines += [f"# {c.name}: model sha256 {c.model_sha256}" for c in channels]
+    lines += model_lines(channels)
     for instance, sensors in sorted(imus.items()):
         prefix = f"INS_TCAL{instance + 1}"
         members = [c for found in sensors.values() for c in found.axes.values()]

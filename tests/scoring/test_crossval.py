@@ -291,6 +291,7 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     }
     assert "TC_G_ENABLE" not in values and values["TC_A_ENABLE"] == "1" and values["TC_G0_X1_0"] == "0"
     assert "TC_G_ENABLE, which switches every gyro instance, is left as the vehicle has it" in params
+    assert "# gyro0_x: model sha256 " in params and "(the identity: no compensation left less drift" in params
     # the C headers name what auto chose (the identity is "none"), not the class that loads it (poly3)
     assert (
         _run(codegen_main, "export", "m/gyro0_x.pt", "-o", "one", "--name", "gx", capsys=capsys).returncode
