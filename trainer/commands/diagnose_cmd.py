@@ -56,16 +56,25 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse bad output paths before a long analysis."""
     from pathlib import Path
 
-    from trainer.errors import UserError
+    from trainer.atomic_dir import check_output_directory
+    from trainer.data.recording_io import RECORDING_SUFFIXES
+    from trainer.errors import UserError, check_output_path
 
+    inputs = [p for p in (args.recording, args.sim) if p]
     if args.json:
         parent = Path(args.json).parent
         if not parent.is_dir():
             raise UserError(f"{args.json}: output directory {parent} does not exist")
+        check_output_path(args.json, inputs=inputs)  # the JSON once overwrote the recording it read
+        if Path(args.json).suffix.lower() in RECORDING_SUFFIXES:
+            raise UserError(
+                f"{args.json}: a recording's name ({Path(args.json).suffix}) for the JSON document "
+                "(arguments swapped? the recording comes first, --json names the document)"
+            )
     if args.report:
-        parent = Path(args.report).parent
-        if not parent.is_dir():
-            raise UserError(f"{args.report}: parent directory {parent} does not exist")
+        check_output_directory(args.report)
+        if any(Path(args.report).resolve() == Path(p).resolve() for p in inputs):
+            raise UserError(f"{args.report}: is also an input (arguments swapped?)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -136,8 +136,10 @@ def _each_channel(
 ) -> int:
     """The channels in turn; every output path created is appended to ``made`` before it is written.
     An error of one channel names the user's file and the channel, not the temporary view."""
+    from trainer.atomic_dir import check_output_directory
     from trainer.data.channels import channel_view, relabel_units, select_channels
     from trainer.data.recording_io import write_recording
+    from trainer.errors import check_output_path
 
     def note(path: Path) -> None:
         if not path.exists():
@@ -159,8 +161,7 @@ def _each_channel(
             for attr in out_dirs:
                 if getattr(args, attr) is not None:
                     directory = Path(getattr(args, attr))
-                    if not directory.parent.is_dir():
-                        raise UserError(f"{directory}: parent directory {directory.parent} does not exist")
+                    check_output_directory(directory)  # a file there is one line, not a traceback
                     note(directory)
                     directory.mkdir(exist_ok=True)
                     note(channel_output(directory, channel.name))
@@ -169,6 +170,7 @@ def _each_channel(
                 if getattr(args, attr) is not None:
                     original = Path(getattr(args, attr))
                     per_channel = original.with_name(f"{original.stem}.{channel.name}{original.suffix}")
+                    check_output_path(per_channel, inputs=list(given.values()))  # never over an input
                     note(per_channel)
                     setattr(sub, attr, str(per_channel))
             if model:
