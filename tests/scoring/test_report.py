@@ -152,6 +152,18 @@ def test_a_threshold_without_its_measurement_fails_as_not_measured(
     assert "| not measured |" in text and "WARNING: the module is of model sha256:00" in text
 
 
+def test_a_held_out_threshold_is_not_passed_on_rows_the_model_was_trained_on(
+    unit: dict[str, Path], tmp_path: Path
+) -> None:
+    """The model is fitted on the whole run: its "held-out" part of that run is in-sample, and a
+    held-out threshold it meets there (any limit above its fit residual) once passed the sign-off."""
+    generous = "[thresholds]\nholdout_rms_mg = 1000\n"
+    assert _report(unit, tmp_path / "r", generous, "--holdout", "last:0.3") == 1
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert "held-out part, in-sample: the model was trained on it" in text and "| not measured |" in text
+    assert "## Verdict: FAIL" in text
+
+
 @pytest.mark.parametrize(
     ("config", "message"),
     [

@@ -343,6 +343,7 @@ def run(args: argparse.Namespace) -> int:
             notes = []
             held_text = None
             held_rows = None
+            held_warning = None
             if holdout is not None:
                 held, held_rows = held_out_rows(rec, holdout)
                 held_text = (
@@ -378,6 +379,7 @@ def run(args: argparse.Namespace) -> int:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
                 holds_training_rows=warning is not None,
+                held_out_in_sample=held_warning is not None,
                 scored_range_c=_temp_range(held if holdout is not None else rec),
                 channel=channel,
                 unit=UNIT_LABELS[channel_unit(rec)],
