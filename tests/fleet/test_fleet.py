@@ -32,6 +32,7 @@ from trainer.fleet.outliers import Z_LIMIT, Finding, find_out_of_family
 from trainer.fleet.result import UnitResult
 from trainer.fleet.run import FleetRun, run_fleet
 from trainer.fleet.simulated import DEFAULT_DEFECTS, write_fleet
+from trainer.reference import value_at_temperature
 
 N_UNITS = 24
 BAD = "BAD01"
@@ -97,9 +98,14 @@ def test_every_unit_processed_and_verified(fleet: tuple[Path, FleetRun]) -> None
             )
             model, checkpoint = load_model(unit / method / "model.pt")
             assert checkpoint["method"] == method
-            # simulated data: the residual against the truth is kept too, under its own name
+            # simulated data: the residual against the truth is kept too, under its own name, as
+            # trainer evaluate scores it: the model's drift is relative to its T_ref, so is the truth
+            # (scored absolute, it reversed the ranking of the two methods against evaluate's)
             valid = read_recording(Path(result.recordings[1]))
-            residual = valid.columns["true_drift_mg"] - model.predict_drift(valid.without_truth())
+            true = valid.columns["true_drift_mg"]
+            assert model.offset is not None and model.offset.relative
+            true = true - value_at_temperature(valid.temp_c, true, model.offset.t_ref_c)
+            residual = true - model.predict_drift(valid.without_truth())
             scores = json.loads((unit / method / "scores.json").read_text())
             truth = float(np.sqrt(np.mean(residual**2)))
             assert scores["residual_vs_truth_mg"] == pytest.approx(truth, rel=1e-9)

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.recording_io import read_recording
     from trainer.scoring.allan import plot_allan
     from trainer.scoring.compare import compensate_after
-    from trainer.scoring.evaluate import evaluate
+    from trainer.scoring.evaluate import evaluate, truth_reference_c
     from trainer.scoring.inject import injected_input, input_kept
     from trainer.scoring.plots import plot_series
     from trainer.selection import shown_name
@@ -111,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
     compensated = compensate_after(model, rec.without_truth(), lead_in)
     lo, hi = checkpoint["valid_temp_range_c"]
     outside = (rec.temp_c < lo) | (rec.temp_c > hi)
-    references = {name: model.offset.t_ref_c} if model.offset is not None and model.offset.relative else {}
+    reference = truth_reference_c(model)
+    references = {} if reference is None else {name: reference}
     result = evaluate(
         rec,
         {name: compensated},

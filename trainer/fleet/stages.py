@@ -269,7 +269,7 @@ def drift_left_summary(scores: Any) -> dict[str, float]:
 
 
 def _scores(method: str, data: UnitData, model: Any, stats: TrainStats) -> dict[str, Any]:
-    from trainer.scoring.evaluate import drift_score, evaluate
+    from trainer.scoring.evaluate import drift_score, evaluate, truth_reference_c
     from trainer.scoring.unit_scores import coverage, score_unit
 
     trained = stats.temp_range_c
@@ -278,8 +278,12 @@ def _scores(method: str, data: UnitData, model: Any, stats: TrainStats) -> dict[
     valid, rows = data.valid_rows()
     compensated = whole_run[rows]
     outside = (valid.temp_c < trained[0]) | (valid.temp_c > trained[1])
-    table = evaluate(valid, {method: compensated}, out_of_range={method: outside}).table
-    truth = drift_score(valid, compensated)
+    reference = truth_reference_c(model)  # as trainer evaluate scores it: one figure under one name
+    references = {} if reference is None else {method: reference}
+    table = evaluate(
+        valid, {method: compensated}, out_of_range={method: outside}, references=references
+    ).table
+    truth = drift_score(valid, compensated, reference)
     left = scores.headline.model
     coefficients = table.compensated[method]
     scored = (float(np.min(valid.temp_c)), float(np.max(valid.temp_c)))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -90,6 +91,14 @@ def smooth_for_scoring(x: np.ndarray, rate_hz: float, smoothing_s: float) -> np.
     if smoothing_s <= 0:
         return np.asarray(x, dtype=np.float64)
     return moving_average(x, window_samples(smoothing_s, rate_hz), mode="trailing")
+
+
+def truth_reference_c(model: Any) -> float | None:
+    """The ``T_ref`` a model's output is relative to (its offset policy), against which the simulator's
+    true drift is scored; None for a model that removes its whole drift. ``trainer evaluate`` and the
+    fleet score with it, so that their ``residual vs truth`` is one figure."""
+    offset = getattr(model, "offset", None)
+    return float(offset.t_ref_c) if offset is not None and offset.relative else None
 
 
 def drift_score(
