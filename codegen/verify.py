@@ -129,7 +129,9 @@ def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]
         found = sorted(out_dir.glob("*.manifest.json"))
         if len(found) != 1:
             what = "no" if not found else f"{len(found)}"
-            raise UserError(f"{out_dir}: {what} generated modules (*.manifest.json) found; pass --name")
+            raise UserError(
+                f"{out_dir}: {what} generated modules (*.manifest.json) found; name one with codegen verify --name, or keep one module per directory"
+            )
         name = found[0].name[: -len(".manifest.json")]
     path = out_dir / manifest_name(name)
     try:

@@ -41,3 +41,30 @@ def test_a_bad_output_path_is_one_line_and_the_inputs_stay(
     assert err.count("\n") == 1 and said in err and "Traceback" not in err
     assert {name: (files / name).read_bytes() for name in before} == before
     assert sorted(p.name for p in files.iterdir()) == ["imu.csv", "victim.csv"]
+
+
+def test_a_new_report_directory_gets_the_usual_mode_not_0700(files: Path) -> None:
+    """Staged in a mkdtemp directory (0700), a report or a per-channel comparison was unreadable to a
+    reviewer on a shared machine; it gets 0777 less the umask, as every other output does."""
+    import os
+    import stat
+
+    previous = os.umask(0o022)
+    try:
+        argv = [
+            "compare",
+            "imu.csv",
+            "--holdout",
+            "0.3",
+            "--methods",
+            "poly3",
+            "--channels",
+            "gyro0_z",
+            "--out-dir",
+            "cmp",
+        ]
+        assert run_cli(trainer_main, argv) == 0
+    finally:
+        os.umask(previous)
+    for directory in (files / "cmp", files / "cmp" / "gyro0_z"):
+        assert stat.S_IMODE(directory.stat().st_mode) == 0o755, directory

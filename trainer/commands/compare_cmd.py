@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 import tempfile
@@ -101,6 +102,10 @@ def publish(staging: Path, out_dir: Path) -> None:
     Existing files of the same names are replaced; nothing else in ``out_dir`` is touched.
     """
     if not out_dir.exists():
+        # mkdtemp made it 0700: a new report directory gets the usual mode (a reviewer reads it)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(staging, 0o777 & ~mask)
         staging.rename(out_dir)
         return
     for source in sorted(staging.rglob("*")):

@@ -312,6 +312,7 @@ def relabel_units(text: str, unit: str) -> str:
     if unit == DEFAULT_UNIT:
         return text
     sensor = next(name for name, suffix in SENSOR_UNITS.items() if suffix == unit)
+    text = re.sub(r"\b([Aa])n accelerometer", rf"\1 {sensor}", text)  # not "an gyro"
     return _SENSOR_WORD.sub(sensor, _UNIT_TOKEN.sub(UNIT_LABELS[unit], text))
 
 

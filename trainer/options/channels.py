@@ -196,6 +196,7 @@ def _as_the_user_named(text: str, views: dict[str, str]) -> str:
     (a report that named ``/tmp/channels-x/imu[gyro0_z].npz`` named a file deleted after the run)."""
     for view, named in views.items():
         text = text.replace(view, named)
+        text = text.replace(Path(view).name, named)  # a title that names the file alone
     return text
 
 

@@ -109,7 +109,7 @@ def report(
     s = choice.summary
     bound = s.lower_bound()
     shown = (
-        f"; on {s.draws} draws the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
+        f"; on {s.draws} draw{'' if s.draws == 1 else 's'} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
         f"bound of {100 * bound:.0f} %"
         + (
             f", below the {100 * target.identify_rate:g} % asked: more --draws to show it"
@@ -118,7 +118,7 @@ def report(
         )
     )
     verdict = (
-        f"meets the target in {s.draws} draws{shown}"
+        f"meets the target in {s.draws} draw{'' if s.draws == 1 else 's'}{shown}"
         if choice.met(target)
         else "does **not** meet the target; it cannot reach: " + "; ".join(s.short_of(target))
     )
@@ -139,7 +139,7 @@ def report(
         "",
         "Cells: identified in % of draws (median largest relative error of the checked parameters where "
         "named); drift left = RMS against the true drift on the validation profile, median over draws. "
-        f"{s.draws} draws per profile, seed {seed}, simulated at {rate_hz:g} Hz; validation profile: "
+        f"{s.draws} draw{'' if s.draws == 1 else 's'} per profile, seed {seed}, simulated at {rate_hz:g} Hz; validation profile: "
         f"{validation.name} ({validation.duration_s / 3600:.2f} h, starting hot, other rates).",
         "",
         table([s, *standard], priors, target),
