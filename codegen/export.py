@@ -125,7 +125,7 @@ def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...
         return notes
     label = UNIT_LABELS[unit]
     first = (
-        f"channel {stats.channel}: values in {label}, one LSB 1/16000 {label}; the model's own figures below, "
+        f"channel {stats.channel}: values in {label}, one LSB {STEP_UNITS[unit].short}; the model's own figures below, "
         f"where they say mg, are in {label}"
     )
     relabelled = (

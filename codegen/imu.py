@@ -50,6 +50,7 @@ from codegen.render import (
     manifest_json,
     validate_name,
 )
+from codegen.step_units import LSB_PER_UNIT as STEP_LSB_PER_UNIT
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
@@ -64,7 +65,7 @@ CHANNEL_HEADER = struct.Struct(
     "<BBBBHHiii"
 )  # kind, sensor, frac, u_shift, intervals, reserved, clip lo/hi, t_ref
 SENSOR_RECORD = struct.Struct("<ii")  # valid range lo, hi (mdegC)
-LSB_PER_UNIT = 16000  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
+LSB_PER_UNIT = STEP_LSB_PER_UNIT  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
 MANIFEST_FORMAT = "mems-tdc-imu-module"
 BLOB_SUFFIX = ".cal.bin"
 

@@ -10,36 +10,34 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from codegen.quantize import ACCEL_PER_MG
+
+LSB_PER_UNIT = ACCEL_PER_MG  # 16000: 1/16 ug for mg, and the same integers for deg/s and Pa
+RANGE_UNITS = (2**31) // LSB_PER_UNIT  # what an int32 holds, in the unit (134217)
+
 
 @dataclass(frozen=True)
 class StepUnits:
     quantity: str  # what goes in and comes out
     argument: str  # the step's input argument
     output: str  # the run function's output array
-    lsb: str  # one LSB, the unit, the int32 range (the header's "Units:" line)
-    short: str  # one LSB, briefly
+    label: str  # the unit
+
+    @property
+    def short(self) -> str:
+        """One LSB, briefly."""
+        return "1/16 ug" if self.label == "mg" else f"1/{LSB_PER_UNIT} {self.label}"
+
+    @property
+    def lsb(self) -> str:
+        """One LSB, the unit and the int32 range (the header's "Units:" line)."""
+        if self.label == "mg":
+            return f"1/16 micro-g (Q4 ug: 16 LSB = 1 ug, {LSB_PER_UNIT} LSB = 1 mg, range +-{RANGE_UNITS // 1000} g)"
+        return f"1/{LSB_PER_UNIT} {self.label} ({LSB_PER_UNIT} LSB = 1 {self.label}, range +-{RANGE_UNITS} {self.label})"
 
 
 STEP_UNITS: dict[str, StepUnits] = {
-    "mg": StepUnits(
-        "acceleration",
-        "accel_q4ug",
-        "out_q4ug",
-        "1/16 micro-g (Q4 ug: 16 LSB = 1 ug, 16000 LSB = 1 mg, range +-134 g)",
-        "1/16 ug",
-    ),
-    "dps": StepUnits(
-        "angular rate",
-        "rate_q16k",
-        "out_q16k",
-        "1/16000 deg/s (16000 LSB = 1 deg/s, range +-134217 deg/s)",
-        "1/16000 deg/s",
-    ),
-    "pa": StepUnits(
-        "pressure",
-        "pressure_q16k",
-        "out_q16k",
-        "1/16000 Pa (16000 LSB = 1 Pa, range +-134217 Pa)",
-        "1/16000 Pa",
-    ),
+    "mg": StepUnits("acceleration", "accel_q4ug", "out_q4ug", "mg"),
+    "dps": StepUnits("angular rate", "rate_q16k", "out_q16k", "deg/s"),
+    "pa": StepUnits("pressure", "pressure_q16k", "out_q16k", "Pa"),
 }

@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from trainer.errors import UserError
+from trainer.errors import UserError, current_umask
 from trainer.stale_files import process_alive, report_removed
 
 STAGING_SUFFIX = ".part"  # the new set being built (or, after the exchange, the old one being removed)
@@ -177,9 +177,7 @@ def atomic_directory(out: str | os.PathLike[str]) -> Iterator[Path]:
                 leftovers += _carry_over(target, staging)
                 os.chmod(staging, stat.S_IMODE(target.stat().st_mode))
             else:
-                mask = os.umask(0)
-                os.umask(mask)
-                os.chmod(staging, 0o777 & ~mask)
+                os.chmod(staging, 0o777 & ~current_umask())
             _swap_in(staging, target)
     except OSError as exc:
         shutil.rmtree(staging, ignore_errors=True)

@@ -14,7 +14,7 @@ from typing import Any
 from trainer import methods
 from trainer.data.channels import Channel, method_refusal
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.errors import UserError, raise_write_error
+from trainer.errors import UserError, current_umask, raise_write_error
 from trainer.options.channels import PREFIX_ATTR, add_channels_option, run_per_channel
 from trainer.options.dlstm import add_dlstm_options, settings_from_args
 from trainer.options.offset import add_offset_options, policy_from_args
@@ -103,9 +103,7 @@ def publish(staging: Path, out_dir: Path) -> None:
     """
     if not out_dir.exists():
         # mkdtemp made it 0700: a new report directory gets the usual mode (a reviewer reads it)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(staging, 0o777 & ~mask)
+        os.chmod(staging, 0o777 & ~current_umask())
         staging.rename(out_dir)
         return
     for source in sorted(staging.rglob("*")):

@@ -72,9 +72,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
                 "(arguments swapped? the recording comes first, --json names the document)"
             )
     if args.report:
-        check_output_directory(args.report)
-        if any(Path(args.report).resolve() == Path(p).resolve() for p in inputs):
-            raise UserError(f"{args.report}: is also an input (arguments swapped?)")
+        check_output_directory(args.report)  # an existing file (an input, say) is refused there
 
 
 def run(args: argparse.Namespace) -> int:

@@ -94,6 +94,10 @@ def table(summaries: Sequence[Summary], priors: Sequence[Prior], target: Target)
     return markdown_table(headers, rows)
 
 
+def draws_text(count: int) -> str:
+    return f"{count} draw{'' if count == 1 else 's'}"
+
+
 def report(
     choice: Choice,
     standard: Sequence[Summary],
@@ -109,7 +113,7 @@ def report(
     s = choice.summary
     bound = s.lower_bound()
     shown = (
-        f"; on {s.draws} draw{'' if s.draws == 1 else 's'} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
+        f"; on {draws_text(s.draws)} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
         f"bound of {100 * bound:.0f} %"
         + (
             f", below the {100 * target.identify_rate:g} % asked: more --draws to show it"
@@ -118,7 +122,7 @@ def report(
         )
     )
     verdict = (
-        f"meets the target in {s.draws} draw{'' if s.draws == 1 else 's'}{shown}"
+        f"meets the target in {draws_text(s.draws)}{shown}"
         if choice.met(target)
         else "does **not** meet the target; it cannot reach: " + "; ".join(s.short_of(target))
     )
@@ -139,7 +143,7 @@ def report(
         "",
         "Cells: identified in % of draws (median largest relative error of the checked parameters where "
         "named); drift left = RMS against the true drift on the validation profile, median over draws. "
-        f"{s.draws} draw{'' if s.draws == 1 else 's'} per profile, seed {seed}, simulated at {rate_hz:g} Hz; validation profile: "
+        f"{draws_text(s.draws)} per profile, seed {seed}, simulated at {rate_hz:g} Hz; validation profile: "
         f"{validation.name} ({validation.duration_s / 3600:.2f} h, starting hot, other rates).",
         "",
         table([s, *standard], priors, target),
