@@ -4,7 +4,9 @@ The candidates (:data:`CANDIDATES`, declared here once): no compensation, polyno
 to 3 in temperature (the flight stacks' cubic and the lower orders that do not over-fit a short
 range), PLA and the physics compensator, with its automatic structure, with the branch offset, and
 with the branch offset fitted by least squares and started, at power-on, on the branch a sensor
-brought from room temperature is on (``physics-branch-room``). Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.crossval`). The rule
+brought from room temperature is on (``physics-branch-room``), and with that offset as a sum of play
+operators of widths an octave apart, a loop that widens after a larger excursion
+(``physics-branches``, :mod:`trainer.greybox.play_sum`). Each is cross-validated over the run's thermal segments (:mod:`trainer.scoring.crossval`). The rule
 (:func:`choose`) judges what a user meets, one held-out segment at a time:
 
 - **A whole cycle** (at least :data:`FULL_CYCLE_SEGMENTS` thermal segments, heating and cooling
@@ -107,6 +109,20 @@ CANDIDATES: tuple[Candidate, ...] = (
             "given_by": f"auto's candidate {methods.PHYSICS}-branch-room",
             "play_start_c": T_REF_C,
             "least_squares": True,
+        },
+        stateful=True,
+    ),
+    # the same offset as a sum of play operators of widths an octave apart (trainer.greybox.play_sum), started
+    # from room temperature: a loop that widens after a larger excursion, as gyro x's of the bundled run does
+    # (its cooling from 74 degC, which one width left worse than no compensation)
+    Candidate(
+        f"{methods.PHYSICS}-branches",
+        methods.PHYSICS,
+        {
+            "effects": BRANCH_OFFSET.identifier,
+            "given_by": f"auto's candidate {methods.PHYSICS}-branches",
+            "play_start_c": T_REF_C,
+            "width_sum": True,
         },
         stateful=True,
     ),

@@ -40,6 +40,8 @@ def _edited(rec: Recording, edit: str) -> dict:
         effects[0][1]["c1_mg_per_c"] = "0.1"
     elif edit == "flag as text":
         payload["with_warmup"] = "yes"
+    elif edit == "a lag twice":  # a second proof-mass temperature: the batch formula would ignore it
+        effects.append(["thermal_lag", {"tau_s": 300.0}])
     elif edit == "reversed range":
         payload["temp_range_c"] = [40.0, -10.0]
     return checkpoint
@@ -51,6 +53,7 @@ EDITS = {
     "parameter as text": "payload.effects[0].c1_mg_per_c must be a finite number, got '0.1'",
     "flag as text": "payload.with_warmup must be true or false, got 'yes'",
     "reversed range": "payload.temp_range_c must be increasing, got [40, -10]",
+    "a lag twice": "payload.effects: thermal_lag appears 2 times; it changes a temperature the other effects read",
 }
 
 

@@ -14,6 +14,7 @@ the accelerometer's own offset calibration, as flight stacks do.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Self
@@ -28,11 +29,13 @@ from trainer.errors import UserError
 from trainer.greybox import structure as structures
 from trainer.greybox.fit import FittedPhysics, fit_physics
 from trainer.greybox.least_squares import fit_least_squares
+from trainer.greybox.play_sum import fit_play_sum
 from trainer.greybox.stream import PhysicsModel, play_start_within
 from trainer.greybox.terms import parse_effects
 from trainer.physics.catalogue import BACKBONE, EFFECTS
+from trainer.physics.catalogue.streamed import instance_suffixes
 from trainer.physics.catalogue.units import CATALOGUE_UNIT, catalogue_names, channel_params
-from trainer.physics.effects import EffectConfig, drift
+from trainer.physics.effects import EffectConfig, check_instances, drift
 
 
 class PhysicsCompensator(Compensator):
@@ -48,6 +51,7 @@ class PhysicsCompensator(Compensator):
         given_by: str = "--effects",  # who gave a forced structure (the summary says): auto's candidate
         play_start_c: float | None = None,  # the branch at power-on: that of a sensor brought from here
         least_squares: bool = False,  # every parameter by least squares (greybox.least_squares), not the finder
+        width_sum: bool = False,  # the effect at several widths, amplitudes by bounded least squares (greybox.play_sum)
     ) -> None:
         structures.check_source(effects, from_sim)
         self.given_by = given_by
@@ -58,6 +62,7 @@ class PhysicsCompensator(Compensator):
         self.progress = progress
         self.play_start_c = play_start_c
         self.least_squares = least_squares
+        self.width_sum = width_sum
         self.effects: tuple[EffectConfig, ...] = ()
         self.temp_range_c = (np.nan, np.nan)
         self.report: dict[str, Any] = {}
@@ -84,8 +89,11 @@ class PhysicsCompensator(Compensator):
         if not hi > lo:
             raise UserError(f"physics: the training temperature does not vary (constant {lo} degC)")
         chosen = self._structure(rec)
-        if self.least_squares:
-            fitted = fit_least_squares(rec, chosen, (lo, hi), play_start_within(self.play_start_c, (lo, hi)))
+        start = play_start_within(self.play_start_c, (lo, hi))
+        if self.width_sum:
+            fitted = fit_play_sum(rec, chosen, (lo, hi), start)
+        elif self.least_squares:
+            fitted = fit_least_squares(rec, chosen, (lo, hi), start)
         else:
             fitted = fit_physics(rec, chosen)
         if self.forced is None and self.from_sim is None:
@@ -210,7 +218,16 @@ def _effects_of(raw: Any, unit: str) -> tuple[EffectConfig, ...]:
                 identifier, {named[k]: payload_fields.number(v, f"{where}.{k}") for k, v in params.items()}
             )
         )
+    try:
+        check_instances(e.identifier for e in effects)
+    except ValueError as error:
+        raise ValueError(f"payload.effects: {error}") from None
     return tuple(effects)
+
+
+def instance_labels(identifiers: list[str]) -> list[str]:
+    """Each effect's name in the report: its identifier, a later instance's with its suffix (``_2``)."""
+    return [k + suffix for k, suffix in zip(identifiers, instance_suffixes(identifiers), strict=True)]
 
 
 def undetermined_terms(fitted: FittedPhysics, rejected: dict[str, str]) -> dict[str, str]:
@@ -263,17 +280,21 @@ def _report(chosen: structures.Structure, fitted: FittedPhysics) -> dict[str, An
     how = chosen.how + (f"; cross-validation added {', '.join(added)}" if added else "")
     unit = fitted.unit  # parameters as the channel names them (amp_dps on a gyroscope)
     report: dict[str, Any] = {} if unit == CATALOGUE_UNIT else {"unit": unit}
+    labels = instance_labels([e.identifier for e in fitted.effects])
     return report | {
         "structure": how,
         "effects": [e.identifier for e in fitted.effects],
-        "params": {e.identifier: channel_params(e.params, unit) for e in fitted.effects},
+        # keyed by instance: an effect's second instance is <effect>_2 (as its C state words are)
+        "params": {
+            label: channel_params(e.params, unit) for label, e in zip(labels, fitted.effects, strict=True)
+        },
         # an undetermined parameter's standard deviation is infinite: left out (the report shows none),
         # so that the model file holds finite numbers only, as every reader requires
         "std": {
-            e.identifier: channel_params(
-                {k: v for k, v in fitted.std.get(e.identifier, {}).items() if np.isfinite(v)}, unit
+            label: channel_params(
+                {k: v for k, v in fitted.std.get(label, {}).items() if np.isfinite(v)}, unit
             )
-            for e in fitted.effects
+            for label in labels
         },
         "nuisance": [e.identifier for e in fitted.nuisance],
         "at_bound": list(fitted.at_bound),
@@ -298,7 +319,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines = [f"physics structure: {report['structure']}"]
     if "unit" in report:
         lines[0] += f" (parameters in {UNIT_LABELS[report['unit']]})"
-    for effect in report["effects"]:
+    for effect in instance_labels(report["effects"]):
         params = report["params"][effect]
         std = report["std"].get(effect, {})
         text = ", ".join(
@@ -312,7 +333,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines += [f"  note: {n}" for n in report["notes"]]
     dropped = report.get("dropped", {})  # absent from checkpoints written before it was recorded
     lines += [f"  dropped {name}: {why}" for name, why in dropped.items()]
-    kept = " + ".join(report["effects"])  # the last word: what the exported compensator carries
+    counts = Counter(report["effects"])  # the last word: what the exported compensator carries
+    kept = " + ".join(f"{n} x {e}" if n > 1 else e for e, n in counts.items())
     undetermined = list(dict.fromkeys(name for key in UNDETERMINED_KEYS for name in report.get(key, [])))
     # an automatic structure drops what the run does not determine (_only_determined); one the user
     # forced (--effects, --from-sim) keeps it, and the last word must not claim otherwise

@@ -34,6 +34,18 @@ from trainer.physics.effects import EffectConfig, drift
 GRID_POINTS = 64
 
 
+def poly_columns(temp_c: np.ndarray) -> np.ndarray:
+    """The finder's backbone columns c0..c3 (powers of the scaled temperature about T_REF_C)."""
+    u = (temp_c - T_REF_C) / POLY_SCALE_C
+    return np.column_stack([u**k for k in range(4)])
+
+
+def backbone(values: np.ndarray) -> dict[str, float]:
+    """Values of the columns c0..c3 as the catalogue's polynomial coefficients (the finder's mapping)."""
+    columns = {f"c{k}": float(v) for k, v in enumerate(values)}
+    return catalogue_params(DEFINITIONS[BACKBONE], Term(BACKBONE), columns)
+
+
 def fit_least_squares(
     rec: Recording, structure: Structure, temp_range_c: tuple[float, float], play_start_c: float | None
 ) -> FittedPhysics:
@@ -59,8 +71,7 @@ def fit_least_squares(
     train = np.ones(len(out), dtype=bool) if held is None else ~held
     data = build_blocks(rec)
     ((lo, hi),) = search_bounds(identifier, data)
-    u = (temp - T_REF_C) / POLY_SCALE_C
-    poly = np.column_stack([u**k for k in range(4)])  # the finder's backbone columns c0..c3
+    poly = poly_columns(temp)
 
     def solve(value: float) -> tuple[float, np.ndarray, np.ndarray]:
         unit_term = drift(
@@ -83,11 +94,6 @@ def fit_least_squares(
     sd = np.sqrt(np.maximum(np.diag((rss_best / dof) * np.linalg.pinv(X.T @ X)), 0.0))
     term = Term(identifier, (value,))
     params = catalogue_params(definition, term, {amplitude: float(beta[4])})
-
-    def backbone(values: np.ndarray) -> dict[str, float]:
-        """Values of the columns c0..c3 as the catalogue's polynomial coefficients (the finder's mapping)."""
-        columns = {f"c{k}": float(v) for k, v in enumerate(values)}
-        return catalogue_params(DEFINITIONS[BACKBONE], Term(BACKBONE), columns)
 
     unit = channel_unit(rec)
     shown = channel_param_name(shape, unit)

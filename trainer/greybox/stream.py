@@ -34,9 +34,14 @@ import numpy as np
 
 from trainer.physics.catalogue import BACKBONE
 from trainer.physics.catalogue.bias_poly import polynomial
-from trainer.physics.catalogue.streamed import STREAMED, in_step_order, play_words
+from trainer.physics.catalogue.streamed import (
+    STREAMED,
+    instance_suffixes,
+    instances_in_step_order,
+    play_words,
+)
 from trainer.physics.catalogue.streaming import BRANCH, CHAIN, Sample, StreamedEffect
-from trainer.physics.effects import EffectConfig
+from trainer.physics.effects import EffectConfig, check_instances
 
 
 def play_start_within(play_start_c: float | None, temp_range_c: tuple[float, float]) -> float | None:
@@ -47,7 +52,8 @@ def play_start_within(play_start_c: float | None, temp_range_c: tuple[float, flo
 @dataclass(frozen=True)
 class PhysicsModel:
     """Plain parameters of one fitted compensator (catalogue units): the bias polynomial, the
-    training range and the streamed effects, in step order."""
+    training range and the streamed effects, in step order (an effect may have several instances:
+    :func:`~trainer.physics.catalogue.streamed.instance_suffixes` names their state words)."""
 
     c_mg: tuple[float, float, float, float]  # bias_poly c0..c3 about T_REF_C
     temp_range_c: tuple[float, float]
@@ -61,9 +67,10 @@ class PhysicsModel:
         temp_range_c: tuple[float, float],
         play_start_c: float | None = None,
     ) -> Self:
-        p = {e.identifier: e.params for e in effects}
-        poly = p.get(BACKBONE, {})
-        terms = tuple(EffectConfig(e.identifier, dict(p[e.identifier])) for e in in_step_order(p))
+        check_instances(e.identifier for e in effects)
+        poly = next((e.params for e in effects if e.identifier == BACKBONE), {})
+        order = instances_in_step_order([e.identifier for e in effects])
+        terms = tuple(EffectConfig(effects[i].identifier, dict(effects[i].params)) for i in order)
         for term in terms:
             check = STREAMED[term.identifier].check
             if check is not None:
@@ -101,10 +108,14 @@ class PhysicsStream:
     def __init__(self, model: PhysicsModel, dt_s: float, *, with_power_on_time: bool = True) -> None:
         self.model = model
         self.dt_s = dt_s
-        parts = [(STREAMED[e.identifier], e.params) for e in model.terms]
-        self.parts: list[tuple[StreamedEffect, Mapping[str, float], tuple[float, ...]]] = [
-            (effect, params, effect.prepare(params, dt_s))
-            for effect, params in parts
+        suffixes = instance_suffixes([e.identifier for e in model.terms])
+        parts = [
+            (STREAMED[e.identifier], e.params, suffix)
+            for e, suffix in zip(model.terms, suffixes, strict=True)
+        ]
+        self.parts: list[tuple[StreamedEffect, Mapping[str, float], tuple[float, ...], str]] = [
+            (effect, params, effect.prepare(params, dt_s), suffix)
+            for effect, params, suffix in parts
             if with_power_on_time or not effect.needs_power_on_time
         ]
         self.state = StreamState()
@@ -121,19 +132,36 @@ class PhysicsStream:
             s.started, s.temp_prev_c = True, T
             play, starts_at_play = (T if m.play_start_c is None else m.play_start_c), play_words()
             s.values = {
-                word: play if word in starts_at_play else T
-                for effect, _, _ in self.parts
+                word + suffix: play if word in starts_at_play else T
+                for effect, _, _, suffix in self.parts
                 for word in effect.state
             }
         sample = Sample(T, s.temp_prev_c, T, T, s.time_s)
         drift = 0.0
-        for effect, params, constants in self.parts:
+        for effect, params, constants, suffix in self.parts:
             if effect.phase in (CHAIN, BRANCH):
-                drift += effect.step(params, constants, s.values, sample)
+                drift += _step(effect, params, constants, s.values, sample, suffix)
         drift += float(polynomial(np.asarray(sample.T_b), *m.c_mg))
-        for effect, params, constants in self.parts:
+        for effect, params, constants, suffix in self.parts:
             if effect.phase not in (CHAIN, BRANCH):
-                drift += effect.step(params, constants, s.values, sample)
+                drift += _step(effect, params, constants, s.values, sample, suffix)
         s.temp_prev_c = T
         s.time_s += self.dt_s
         return drift
+
+
+def _step(
+    effect: StreamedEffect,
+    params: Mapping[str, float],
+    constants: tuple[float, ...],
+    values: dict[str, float],
+    sample: Sample,
+    suffix: str,
+) -> float:
+    """One term's step on its own state words (an effect's later instance keeps them suffixed)."""
+    if not suffix:
+        return effect.step(params, constants, values, sample)
+    own = {word: values[word + suffix] for word in effect.state}
+    drift = effect.step(params, constants, own, sample)
+    values.update({word + suffix: value for word, value in own.items()})
+    return drift

@@ -92,6 +92,22 @@ def effect_contribution(
     return _additive(identifier, params, signals)
 
 
+def check_instances(identifiers: Iterable[str]) -> None:
+    """Several instances of an additive effect add their terms (a sum of branch offsets of several
+    widths); an effect that changes a temperature the others read (a lag giving ``T_pm``, a play
+    output the polynomial reads) is applied once by :func:`drift`, so a second instance would be
+    ignored there and run side by side in the stream: refused (ValueError, one line)."""
+    counts: dict[str, int] = {}
+    for identifier in identifiers:
+        counts[identifier] = counts.get(identifier, 0) + 1
+    for identifier, n in counts.items():
+        definition = EFFECTS[identifier]
+        if n > 1 and (definition.proof_mass is not None or definition.bias_temperature is not None):
+            raise ValueError(
+                f"{identifier} appears {n} times; it changes a temperature the other effects read and may appear once"
+            )
+
+
 def drift(
     effects: Iterable[EffectConfig],
     t: np.ndarray,

@@ -6,10 +6,10 @@ from array import array
 
 import numpy as np
 
-from codegen.families.physics.quantise import QPhysics
+from codegen.families.physics.quantise import QPhysics, QTerm
 from codegen.fixedpoint import INT32_MAX
 from codegen.golden import GoldenBase
-from trainer.physics.catalogue.streamed import STREAMED, play_words
+from trainer.physics.catalogue.streamed import STREAMED
 from trainer.physics.catalogue.streaming import BRANCH, CHAIN, HI_BITS, GoldenStep, IntSample
 
 BLOCK = 1 << 16  # samples the model steps between its bounds checks (and holds as arrays)
@@ -37,8 +37,9 @@ class GoldenPhysics(GoldenBase):
         self.tag = self.model.tag
 
     def present(self) -> tuple[str, ...]:
-        """The state words of the model's terms, in step order (the C state's fields)."""
-        return tuple(w.name for t in self.model.terms for w in t.fixed.state)
+        """The state words of the model's terms (each instance its own), in step order (the C state's
+        fields)."""
+        return tuple(w.name for w in self.model.words)
 
     def state(self) -> dict[str, np.ndarray | int]:
         out: dict[str, np.ndarray | int] = {name: self.values[name] for name in self.present()}
@@ -135,8 +136,8 @@ class GoldenPhysics(GoldenBase):
 
     def _start(self, t: int, x: int) -> None:
         """The first sample after init/reset: every filter starts at x, the play operator at the
-        model's play start (at x when it has none)."""
-        start, play = self.model.play_start_q, play_words()
+        model's play start (at x when it has none), every instance's."""
+        start, play = self.model.play_start_q, self.model.play_words
         self.started, self.temp_prev = 1, t
         for name, wide in self._wide.items():
             self.values[name] = x << HI_BITS if wide else (start if start is not None and name in play else x)
@@ -144,7 +145,7 @@ class GoldenPhysics(GoldenBase):
     @property
     def _wide(self) -> dict[str, bool]:
         """Each state word (in step order) and whether it is an int64 filter state (else int32)."""
-        return {w.name: w.wide for t in self.model.terms for w in t.fixed.state}
+        return {w.name: w.wide for w in self.model.words}
 
     def _steps(self) -> tuple[list[GoldenStep], list[GoldenStep]]:
         """The terms' golden steps (their constants bound) before the polynomial (CHAIN, BRANCH)
@@ -152,9 +153,28 @@ class GoldenPhysics(GoldenBase):
         early = (CHAIN, BRANCH)
         terms = self.model.terms
         return (
-            [t.fixed.golden(t) for t in terms if STREAMED[t.identifier].phase in early],
-            [t.fixed.golden(t) for t in terms if STREAMED[t.identifier].phase not in early],
+            [_own_words(t) for t in terms if STREAMED[t.identifier].phase in early],
+            [_own_words(t) for t in terms if STREAMED[t.identifier].phase not in early],
         )
+
+
+def _own_words(term: QTerm) -> GoldenStep:
+    """The term's golden step on its own state words: an effect's later instance keeps them suffixed
+    (``play_2``), its step (the catalogue's) reads and writes the unsuffixed names."""
+    step, suffix = term.fixed.golden(term), term.suffix
+    if not suffix:
+        return step
+    words = [(w.name, w.name + suffix) for w in term.fixed.state]
+
+    def own(v: dict[str, int], s: IntSample) -> int:
+        mine = {word: v[name] for word, name in words}
+        out = step(mine, s)
+        assert len(mine) == len(words), "a term's step wrote a word not in its state"
+        for word, name in words:
+            v[name] = mine[word]
+        return out
+
+    return own
 
 
 def _within(values: np.ndarray, bound: int) -> bool:

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
@@ -24,8 +25,8 @@ from codegen.families.physics.spec import PhysicsSpec
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, round_half_away
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
 from trainer.errors import UserError
-from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms, play_words
-from trainer.physics.catalogue.streaming import CHAIN, HI_BITS, FixedPoint
+from trainer.physics.catalogue.streamed import STREAMED, c_options, c_terms, instance_suffixes, play_words
+from trainer.physics.catalogue.streaming import CHAIN, HI_BITS, FixedPoint, StateWord
 
 MAX_TEMP_FRAC = 24  # finer int32 temperatures buy nothing (the filters' floors are bounded below)
 MAX_DRIFT_FRAC = 30
@@ -77,12 +78,72 @@ class QTerm:
     filter: QLowpass | None
     gain: QGain | None
     margin_q: int | None  # an int32 temperature offset (the play's half width), Q(tf) mdegC
+    # its state words' suffix: "" for an effect's first instance, "_2", "_3", ... for later ones
+    # (trainer.physics.catalogue.streamed.instance_suffixes)
+    suffix: str = ""
 
     @property
     def fixed(self) -> FixedPoint:
         fixed = STREAMED[self.identifier].fixed
         assert fixed is not None
         return fixed
+
+    @property
+    def words(self) -> tuple[StateWord, ...]:
+        """Its state words as the C state, the golden model and the float stream name them."""
+        return instance_words(self.fixed, self.suffix)
+
+    @property
+    def poly_reads(self) -> str | None:
+        """The state word the polynomial reads after this term's step (None: it does not switch it)."""
+        reads = self.fixed.poly_reads
+        return None if reads is None else reads + self.suffix
+
+    @property
+    def gain_name(self) -> str:
+        return self.fixed.gain_name + self.suffix
+
+    @property
+    def difference_text(self) -> str:
+        return instance_text(self.fixed, self.fixed.difference_text, self.suffix)
+
+
+def instance_words(fixed: FixedPoint, suffix: str) -> tuple[StateWord, ...]:
+    """``fixed``'s state words of the instance with ``suffix`` (its own words, its own symbols)."""
+    if not suffix:
+        return fixed.state
+    return tuple(
+        replace(
+            w,
+            name=w.name + suffix,
+            doc=instance_text(fixed, w.doc, suffix),
+            imu_doc=None if w.imu_doc is None else f"{w.imu_doc}, instance {suffix[1:]}",
+        )
+        for w in fixed.state
+    )
+
+
+def _symbol(fixed: FixedPoint) -> str | None:
+    """The symbol of a term's state in its formula (``P`` of ``(T_pm - P)``), None when it has none."""
+    found = re.fullmatch(r"\(\s*\w+\s*-\s*(\w+)\s*\)", fixed.difference_text)
+    return None if found is None else found.group(1)
+
+
+def instance_text(fixed: FixedPoint, text: str, suffix: str) -> str:
+    """``text`` (a formula or a state word's description) of the instance with ``suffix``: its
+    symbol suffixed too (``P_2``)."""
+    symbol = _symbol(fixed)
+    if not suffix or symbol is None:
+        return text
+    return re.sub(rf"\b{re.escape(symbol)}\b", symbol + suffix, text)
+
+
+def rename_words(fixed: FixedPoint, code: str, suffix: str) -> str:
+    """A term's C step ``code`` on the state words of its instance with ``suffix`` (the catalogue's
+    snippets name the first instance's: ``state->play`` becomes ``state->play_2``)."""
+    for word in fixed.state if suffix else ():
+        code = re.sub(rf"\bstate->{re.escape(word.name)}\b", f"state->{word.name}{suffix}", code)
+    return code
 
 
 @dataclass(frozen=True)
@@ -121,7 +182,18 @@ class QPhysics:
         margin = max((t.margin_q for t in self.terms if t.margin_q is not None), default=0)
         wide = self.reach_mdegc << (self.temp_frac + HI_BITS)
         narrow = (self.reach_mdegc << self.temp_frac) + margin
-        return {w.name: wide if w.wide else narrow for t in self.terms for w in t.fixed.state}
+        return {w.name: wide if w.wide else narrow for w in self.words}
+
+    @property
+    def words(self) -> tuple[StateWord, ...]:
+        """Every state word of its terms (each instance its own), in step order."""
+        return tuple(w for t in self.terms for w in t.words)
+
+    @property
+    def play_words(self) -> frozenset[str]:
+        """Its state words that are a play operator's output (every instance's): where the play starts."""
+        play = play_words()
+        return frozenset(w.name + t.suffix for t in self.terms for w in t.fixed.state if w.name in play)
 
     @property
     def filters(self) -> tuple[QLowpass, ...]:
@@ -133,13 +205,14 @@ class QPhysics:
 
     @property
     def options(self) -> tuple[str, ...]:
-        """The option bits its terms set (what the polynomial reads)."""
-        return tuple(t.fixed.option for t in self.terms if t.fixed.option is not None)
+        """The option bits its terms set (what the polynomial reads), each once."""
+        return tuple(dict.fromkeys(t.fixed.option for t in self.terms if t.fixed.option is not None))
 
     @property
     def poly_reads(self) -> str | None:
-        """The state word the polynomial reads instead of T_pm (None: T_pm)."""
-        return next((t.fixed.poly_reads for t in self.terms if t.fixed.poly_reads is not None), None)
+        """The state word the polynomial reads instead of T_pm (None: T_pm): the last term's in step
+        order that switches it, as the float stream's and the golden model's steps leave T_b."""
+        return next((t.poly_reads for t in reversed(self.terms) if t.poly_reads is not None), None)
 
 
 def state_reach_mdegc(lo_mdegc: int, hi_mdegc: int, centre_mdegc: int) -> int:
@@ -236,17 +309,24 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     grain = 1 if abs(mid) < 4096 else 1 << max(0, abs(mid).bit_length() - 8)
     centre = round_half_away(Fraction(mid, grain)) * grain
     reach = state_reach_mdegc(lo, hi, centre)
-    present: dict[str, tuple[str, FixedPoint, Mapping[str, float]]] = {}
-    for term in m.terms:
-        fixed = STREAMED[term.identifier].fixed
-        if fixed is not None:
-            present[fixed.name] = (term.identifier, fixed, term.params)
+    # the terms the C carries, in step order, keyed by C term and instance (``branch``, ``branch_2``):
+    # each instance of an effect its own constants and state words
+    suffixes = instance_suffixes([term.identifier for term in m.terms])
+    carried = [
+        _Present(term.identifier, fixed, term.params, suffix)
+        for term, suffix in zip(m.terms, suffixes, strict=True)
+        if (fixed := STREAMED[term.identifier].fixed) is not None
+    ]
+    _check_words(carried)
+    present = {v.fixed.name + v.suffix: v for v in carried}
+    first = {v.fixed.name: v for v in present.values() if not v.suffix}  # the registry's layout's
+    later = [(key, v) for key, v in present.items() if v.suffix]  # an effect's further instances
     margins: dict[str, tuple[Fraction, str]] = {}
-    for name, (_, fixed, params) in present.items():
-        if fixed.margin is not None:
-            margins[name] = fixed.margin(params)
-            if not margins[name][0] > 0:
-                raise UserError(f"physics: {margins[name][1]} must be positive")
+    for key, v in present.items():
+        if v.fixed.margin is not None:
+            margins[key] = v.fixed.margin(v.params)
+            if not margins[key][0] > 0:
+                raise UserError(f"physics: {margins[key][1]} must be positive")
     tf = -1
     for k in range(MAX_TEMP_FRAC, -1, -1):
         h_q = max((round_half_away(half * 2**k) for half, _ in margins.values()), default=0)
@@ -256,11 +336,11 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     if tf < 0:
         widest = max(margins.values(), key=lambda v: v[0])[1] if margins else "a margin"
         raise UserError(f"physics: {widest} is too wide for int32 temperatures")
-    margin_q = {name: round_half_away(half * 2**tf) for name, (half, _) in margins.items()}
+    margin_q = {key: round_half_away(half * 2**tf) for key, (half, _) in margins.items()}
     # the play start, a temperature within the range (PhysicsModel clips it) like every other x
     play_start_q = None
     if m.play_start_c is not None and any(
-        w.name in play_words() for _, f, _ in present.values() for w in f.state
+        w.name in play_words() for v in present.values() for w in v.fixed.state
     ):
         start = min(max(round_half_away(Fraction(m.play_start_c) * 1000), lo), hi)
         play_start_q = (start - centre) << tf
@@ -272,30 +352,33 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     c1, c2, c3 = m.c_mg[1:]
     slope = float(np.max(np.abs(c1 + 2 * c2 * grid + 3 * c3 * grid**2)))
     gain_mg_per_c = {
-        name: fixed.gain_mg_per_c(params)
-        for name, (_, fixed, params) in present.items()
-        if fixed.gain_mg_per_c is not None
+        key: v.fixed.gain_mg_per_c(v.params)
+        for key, v in present.items()
+        if v.fixed.gain_mg_per_c is not None
     }
-    proof_mass = slope + sum(
-        fixed.proof_mass_weight * abs(gain_mg_per_c[name])
-        for name, (_, fixed, _) in present.items()
-        if fixed.proof_mass_weight
+    proof_mass = slope + sum(  # every instance's gain on T_pm
+        v.fixed.proof_mass_weight * abs(gain_mg_per_c[key])
+        for key, v in present.items()
+        if v.fixed.proof_mass_weight
     )
-    layout = _c_terms_of(present)
-    filt: dict[str, QLowpass | None] = {}
+
+    def lowpass_of(key: str) -> QLowpass:
+        v = present[key]
+        assert v.fixed.tau_s is not None
+        chain = STREAMED[v.identifier].phase == CHAIN
+        sensitivity = proof_mass if chain else abs(gain_mg_per_c[key])
+        name = v.fixed.filter_name + v.suffix
+        return _lowpass(name, v.fixed.tau_s(v.params), spec.rate_hz, tf, reach, span, sensitivity)
+
+    layout = _c_terms_of(first)
+    filt: dict[str, QLowpass | None] = {}  # the layout's (first instances'), by filter name
     for fixed in layout:
-        if fixed.tau_s is None:
-            continue
-        entry = present.get(fixed.name)
-        if entry is None:
-            filt[fixed.filter_name] = None
-            continue
-        chain = STREAMED[entry[0]].phase == CHAIN
-        sensitivity = proof_mass if chain else abs(gain_mg_per_c[fixed.name])
-        filt[fixed.filter_name] = _lowpass(
-            fixed.filter_name, fixed.tau_s(entry[2]), spec.rate_hz, tf, reach, span, sensitivity
-        )
-    _check_filters_budget([q for q in filt.values() if q is not None], spec.rate_hz)
+        if fixed.tau_s is not None:
+            filt[fixed.filter_name] = lowpass_of(fixed.name) if fixed.name in first else None
+    later_filt = {key: lowpass_of(key) for key, v in later if v.fixed.tau_s is not None}
+    _check_filters_budget(
+        [q for q in filt.values() if q is not None] + list(later_filt.values()), spec.rate_hz
+    )
     # the cubic about the centre, in U = T 2^(tf + u_shift) / 2^31 (T mdegC about the centre)
     u_shift = 0
     while (reach << (tf + u_shift + 1)) <= INT32_MAX:
@@ -307,29 +390,35 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     a = [v * unit**j for j, v in enumerate(about_centre)]  # accel LSB per U^j
     per_mdegc = Fraction(ACCEL_PER_MG, 1000)
     gain_terms = [fixed for fixed in layout if fixed.gain_mg_per_c is not None]
+
+    def gain_of(key: str, frac: int) -> QGain:
+        v = present[key]
+        diff_bound = margin_q[key] if v.fixed.difference == "margin" else (2 * reach) << tf
+        q = round_half_away(Fraction(gain_mg_per_c[key]) * per_mdegc * Fraction(2) ** (frac + HI_BITS - tf))
+        return QGain(v.fixed.gain_name + v.suffix, q, diff_bound, diff_bound * abs(q))
+
     for frac in range(MAX_DRIFT_FRAC, -1, -1):
         d = [round_half_away(v * Fraction(2) ** (frac + k)) for k, v in enumerate(a)]
         horner = _horner_bounds(d)
         if max(horner) > INT32_MAX:
             continue
-        gains: dict[str, QGain | None] = {}
-        for fixed in gain_terms:
-            if fixed.name not in present:
-                gains[fixed.name] = None
-                continue
-            diff_bound = margin_q[fixed.name] if fixed.difference == "margin" else (2 * reach) << tf
-            q = round_half_away(
-                Fraction(gain_mg_per_c[fixed.name]) * per_mdegc * Fraction(2) ** (frac + HI_BITS - tf)
-            )
-            gains[fixed.name] = QGain(fixed.gain_name, q, diff_bound, diff_bound * abs(q))
-        if any(g is not None and abs(g.q) > INT32_MAX for g in gains.values()):
+        gains: dict[str, QGain | None] = {  # the layout's (first instances'), by C term
+            fixed.name: gain_of(fixed.name, frac) if fixed.name in first else None for fixed in gain_terms
+        }
+        later_gains = {key: gain_of(key, frac) for key, v in later if v.fixed.gain_mg_per_c is not None}
+        every_gain = [g for g in gains.values() if g is not None] + list(later_gains.values())
+        if any(abs(g.q) > INT32_MAX for g in every_gain):
             continue
-        bound = (horner[0] << HI_BITS) + sum(g.bound for g in gains.values() if g is not None)
+        bound = (horner[0] << HI_BITS) + sum(g.bound for g in every_gain)  # every instance's term
         if bound >= INT64_SAFE:
             continue
-        options = {o: any(v[1].option == o for v in present.values()) for o in c_options()}
-        # the tag hashes every constant in the registry's layout (a term the model lacks as None)
+        options = {o: any(v.fixed.option == o for v in present.values()) for o in c_options()}
+        # the tag hashes every constant in the registry's layout (a term the model lacks as None), then
+        # an effect's further instances' (a model without any keeps its tag)
         layout_margins = tuple(margin_q.get(f.name) for f in layout if f.margin is not None)
+        instances = tuple(
+            (key, margin_q.get(key), later_filt.get(key), later_gains.get(key)) for key, _ in later
+        )
         constants = (
             lo,
             hi,
@@ -345,16 +434,20 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
             *(
                 () if play_start_q is None else (("play_start", play_start_q),)
             ),  # older models keep their tags
+            *((("instances", instances),) if instances else ()),
         )
         tag = int(hashlib.sha256(repr(constants).encode()).hexdigest()[:8], 16)
         terms = tuple(
             QTerm(
-                identifier,
-                None if fixed.tau_s is None else filt[fixed.filter_name],
-                gains.get(name),
-                margin_q.get(name),
+                v.identifier,
+                None
+                if v.fixed.tau_s is None
+                else (later_filt[key] if v.suffix else filt[v.fixed.filter_name]),
+                later_gains.get(key) if v.suffix else gains.get(v.fixed.name),
+                margin_q.get(key),
+                v.suffix,
             )
-            for name, (identifier, fixed, _) in present.items()
+            for key, v in present.items()
         )
         return QPhysics(
             spec.method,
@@ -377,7 +470,32 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
     raise UserError("physics: coefficients too large for the fixed-point format")
 
 
-def _c_terms_of(present: Mapping[str, tuple[str, FixedPoint, Mapping[str, float]]]) -> list[FixedPoint]:
+@dataclass(frozen=True)
+class _Present:
+    """One term of the model the C carries: its effect, C form, parameters and instance suffix."""
+
+    identifier: str
+    fixed: FixedPoint
+    params: Mapping[str, float]
+    suffix: str
+
+
+def _check_words(present: list[_Present]) -> None:
+    """Each term keeps its own state words: two effects that are the same C term (their first
+    instances would share its words, e.g. the play operator's) cannot both be carried."""
+    owner: dict[str, str] = {}
+    for v in present:
+        for w in v.fixed.state:
+            word = w.name + v.suffix
+            if word in owner:
+                raise UserError(
+                    f"physics: {owner[word]} and {v.identifier} would share the C state word {word!r}; "
+                    "the export carries one of them (they describe the same physics twice)"
+                )
+            owner[word] = v.identifier
+
+
+def _c_terms_of(first: Mapping[str, _Present]) -> list[FixedPoint]:
     """The registry's C terms (:func:`~trainer.physics.catalogue.streamed.c_terms`) with each present
     one as its model's effect declares it (effects that are the same C share a name)."""
-    return [present[f.name][1] if f.name in present else f for f in c_terms()]
+    return [first[f.name].fixed if f.name in first else f for f in c_terms()]

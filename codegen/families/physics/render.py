@@ -5,11 +5,10 @@ from __future__ import annotations
 
 from string import Template
 
-from codegen.families.physics.quantise import QPhysics, QTerm
+from codegen.families.physics.quantise import QPhysics, QTerm, rename_words
 from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.quantize import ACCEL_PER_MG
 from codegen.render import Field, bound_text, c_rows
-from trainer.physics.catalogue.streamed import play_words
 from trainer.physics.catalogue.streaming import HI_BITS, FixedPoint, StateWord
 
 KERNEL_FILE = "tdc_physics_kernels.h"
@@ -33,15 +32,17 @@ def physics_state_fields(model: QPhysics, common: list[Field]) -> list[Field]:
 
 
 def physics_state_words(model: QPhysics) -> list[StateWord]:
-    """The state words a physics model keeps (its terms' filters and play operator), in step order."""
-    return [w for t in model.terms for w in t.fixed.state]
+    """The state words a physics model keeps (its terms' filters and play operators, each instance
+    its own), in step order."""
+    return list(model.words)
 
 
-def physics_snippets(fixed: FixedPoint, values: dict[str, object]) -> dict[str, str]:
-    """A streamed effect's C step before and after the polynomial, its constants filled in."""
+def physics_snippets(fixed: FixedPoint, values: dict[str, object], suffix: str = "") -> dict[str, str]:
+    """A streamed effect's C step before and after the polynomial, its constants filled in, on the
+    state words of its instance with ``suffix`` (``state->play_2``)."""
     return {
-        "before": Template(fixed.before_poly).substitute(values),
-        "after": Template(fixed.after_poly).substitute(values),
+        "before": rename_words(fixed, Template(fixed.before_poly).substitute(values), suffix),
+        "after": rename_words(fixed, Template(fixed.after_poly).substitute(values), suffix),
     }
 
 
@@ -50,21 +51,35 @@ def physics_tables(model: QPhysics) -> dict[str, int]:
 
 
 def play_start_text(model: QPhysics) -> str:
-    """Where the play operator starts at power-on, as the header and the manifest say it."""
+    """Where the play operator starts at power-on, as the header and the manifest say it (every play
+    operator of a model with several instances)."""
+    branches = [t for t in model.terms if t.margin_q is not None and t.gain is not None]
+    several = len(branches) > 1
+    plays = ", ".join(f"P{t.suffix}" for t in branches) if several else "P"
     if model.play_start_q is None:
-        sizes = "; ".join(
-            f"its amplitude, {term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG:.3g} mg, until T "
-            f"has moved by w/2 = {term.margin_q / 2**model.temp_frac / 1000:.3g} degC"
-            for term in model.terms
-            if term.margin_q is not None and term.gain is not None
-        )
+
+        def size(term: QTerm) -> str:
+            assert term.gain is not None and term.margin_q is not None
+            return (
+                f"{f'{term.gain_name}: ' if several else ''}its amplitude, "
+                f"{term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG:.3g} mg, until T "
+                f"has moved by w/2 = {term.margin_q / 2**model.temp_frac / 1000:.3g} degC"
+            )
+
+        sizes = "; ".join(size(term) for term in branches)
         if not sizes:
             return "no play operator (no branch term)"
+        if several:
+            return (
+                f"{plays} each at T_pm, mid-way between its branches (each branch term is then off by at "
+                f"most {sizes})"
+            )
         return f"P at T_pm, mid-way between the branches (the branch term is then off by at most {sizes})"
     start_c = (model.centre_mdegc + model.play_start_q / 2**model.temp_frac) / 1000.0
     return (
-        f"P at {start_c:g} degC (x = {model.play_start_q}), clamped into T_pm +- w/2 by the first step: the branch of a sensor "
-        f"brought to its first temperature from {start_c:g} degC"
+        f"{plays} at {start_c:g} degC (x = {model.play_start_q}), {'each ' if several else ''}clamped into "
+        f"T_pm +- w/2 by the first step: the branch of a sensor brought to its first temperature from "
+        f"{start_c:g} degC"
     )
 
 
@@ -73,10 +88,11 @@ def usage_paragraphs(model: QPhysics, name: str) -> list[str]:
     carries, each symbol said once), power-on and save/restore, only what the model has."""
     words = physics_state_words(model)
     has_lag = any(t.fixed.name == "lag" for t in model.terms)
-    has_branch = any(w.name in play_words() for w in words)
-    reads = "P" if model.poly_reads is not None else ("T_pm" if has_lag else "T")
-    terms = [f"{t.fixed.gain_name} gain {t.fixed.difference_text}" for t in model.terms if t.gain is not None]
-    symbols = ["T clipped to the training range", *(w.doc for t in model.terms for w in t.fixed.state)]
+    has_branch = bool(model.play_words)
+    reader = next((t for t in reversed(model.terms) if t.poly_reads is not None), None)  # the last
+    reads = f"P{reader.suffix}" if reader is not None else ("T_pm" if has_lag else "T")
+    terms = [f"{t.gain_name} gain {t.difference_text}" for t in model.terms if t.gain is not None]
+    symbols = ["T clipped to the training range", *(w.doc for w in words)]
     if not has_lag and any("T_pm" in text for text in terms):
         symbols.append("T_pm = T (no lag)")
     out = [
@@ -116,7 +132,7 @@ def physics_context(model: QPhysics) -> dict[str, object]:
     starts = (
         {}
         if model.play_start_q is None
-        else {w.name: str(model.play_start_q) for w in words if w.name in play_words()}
+        else {w.name: str(model.play_start_q) for w in words if w.name in model.play_words}
     )
 
     def values(t: QTerm) -> dict[str, object]:
@@ -158,7 +174,7 @@ def physics_context(model: QPhysics) -> dict[str, object]:
         "usage": usage_paragraphs(
             model, "{name}"
         ),  # the header's paragraphs, the module's name filled in there
-        "terms": [{"on": True, **physics_snippets(t.fixed, values(t))} for t in model.terms],
+        "terms": [{"on": True, **physics_snippets(t.fixed, values(t), t.suffix)} for t in model.terms],
         "u_source": "t_pm" if model.poly_reads is None else f"state->{model.poly_reads}",
         "u_shift": model.u_shift,
         "coefficients": c_rows(model.coefficients_q, per_line=4),

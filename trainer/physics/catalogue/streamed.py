@@ -9,7 +9,7 @@ time (a test's throwaway effect), as :mod:`trainer.methods` does for methods.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 from trainer.physics.catalogue import (
     hysteresis_offset_stream,
@@ -50,6 +50,27 @@ def in_step_order(identifiers: Iterable[str]) -> list[StreamedEffect]:
     """The streamed effects among ``identifiers``, in the order one step runs them."""
     wanted = set(identifiers)
     return sorted((e for k, e in STREAMED.items() if k in wanted), key=lambda e: e.phase)
+
+
+def instance_suffixes(identifiers: Sequence[str]) -> tuple[str, ...]:
+    """The suffix of each term's state words, in the order given: ``""`` for an effect's first
+    instance, ``"_2"``, ``"_3"``, ... for later ones. A sum of branch offsets of several widths
+    carries one play operator per width; each keeps its own words (``play``, ``play_2``, ...) in the
+    float stream, the golden model and the C state alike."""
+    seen: dict[str, int] = {}
+    out = []
+    for identifier in identifiers:
+        seen[identifier] = seen.get(identifier, 0) + 1
+        out.append("" if seen[identifier] == 1 else f"_{seen[identifier]}")
+    return tuple(out)
+
+
+def instances_in_step_order(identifiers: Sequence[str]) -> list[int]:
+    """Indices of the streamed effects among ``identifiers`` in the order one step runs them: by
+    phase, registry order within a phase, instances of one effect in the order given."""
+    order = list(STREAMED)
+    wanted = [i for i, k in enumerate(identifiers) if k in STREAMED]
+    return sorted(wanted, key=lambda i: (STREAMED[identifiers[i]].phase, order.index(identifiers[i]), i))
 
 
 def c_terms() -> list[FixedPoint]:

@@ -1,0 +1,113 @@
+"""Several instances of a one-effect structure, one per width an octave apart, fitted by bounded
+least squares (``auto``'s ``physics-branches``).
+
+One play operator of width ``w`` gives a loop whose return after a reversal is the same whatever the
+temperature did before: ``amp (T - P) / (w/2)`` crosses from one branch to the other over ``w`` degC.
+A real sensor's loop is wider after a larger excursion: on the bundled run's gyro x, the cooling
+from the 74 degC peak sits 0.5-0.7 deg/s above the cooling from 52 degC at 36..52 degC, and one
+width fitted to the first cooling and the heating leaves more than no compensation on the last
+cooling (0.112 against 0.106 deg/s). A sum of play operators of several widths with amplitudes of
+one sign (the Prandtl-Ishlinskii model of hysteresis; a Preisach model whose loops are nested) has
+exactly that property: the narrow plays saturate after a small excursion, the wide ones only after a
+large one. The widths are a fixed basis, not estimates: :data:`OCTAVES` of them, halving from the
+top of the effect's search range; the bias polynomial and the amplitudes are linear in the data and
+fitted together by bounded least squares (``scipy.optimize.lsq_linear``, amplitudes all >= 0 or all
+<= 0, whichever leaves less), and a width whose amplitude comes out 0 is left out of the model.
+The columns are the simulator's own formula on the clipped temperature with the play operators
+started at ``play_start_c``, exactly as the compensator runs them; a cross-validation fold's
+held-out rows are run through but not fitted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from trainer.data.channels import channel_unit
+from trainer.data.recording import Recording
+from trainer.diagnose.api import build_blocks, search_bounds
+from trainer.errors import UserError
+from trainer.greybox.fit import FittedPhysics
+from trainer.greybox.least_squares import backbone, poly_columns
+from trainer.greybox.structure import Structure
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS
+from trainer.physics.catalogue.streamed import instance_suffixes
+from trainer.physics.catalogue.units import channel_param_name
+from trainer.physics.effects import EffectConfig, drift
+
+OCTAVES = 6  # widths w_max, w_max/2, ..., w_max/32: on the bundled run 80 .. 2.5 degC
+
+
+def fit_play_sum(
+    rec: Recording, structure: Structure, temp_range_c: tuple[float, float], play_start_c: float | None
+) -> FittedPhysics:
+    """``structure`` (one compensated effect with one shape and one amplitude) as a sum of instances
+    at :data:`OCTAVES` shapes, fitted on the training rows of ``rec``."""
+    if len(structure.compensated) != 1 or structure.nuisance:
+        raise UserError("physics: the sum of widths takes one effect; give one in --effects")
+    identifier = structure.compensated[0].identifier
+    definition = DEFINITIONS[identifier]
+    nonlinear = definition.finder.nonlinear
+    linear = [p.name for p in definition.params if p.name not in dict(nonlinear)]
+    if len(nonlinear) != 1 or len(linear) != 1:
+        raise UserError(
+            f"physics: the sum of widths takes an effect with one amplitude and one shape; {identifier} is not one"
+        )
+    (shape, _), amplitude = nonlinear[0], linear[0]
+    rec = rec.without_truth()
+    t = np.asarray(rec.time_s, dtype=np.float64)
+    t = t - t[0]
+    temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *temp_range_c)
+    out = np.asarray(rec.accel_mg, dtype=np.float64)
+    held = rec.held_out()
+    train = np.ones(len(out), dtype=bool) if held is None else ~held
+    ((_, top),) = search_bounds(identifier, build_blocks(rec))
+    shapes = [top / 2.0**k for k in range(OCTAVES)]
+    units = [
+        drift(
+            (EffectConfig(identifier, {amplitude: 1.0, shape: s}),), t, temp, play_start_c=play_start_c
+        ).total
+        for s in shapes
+    ]
+    X = np.column_stack([poly_columns(temp), *units])[train]
+    y = out[train]
+    scale = np.maximum(np.sqrt(np.mean(X**2, axis=0)), 1e-300)  # columns of comparable size for the solver
+    free, n = np.full(4, np.inf), len(shapes)
+    fits = [
+        lsq_linear(X / scale, y, bounds=(np.r_[-free, lo], np.r_[free, hi]), method="bvls")
+        for lo, hi in ((np.zeros(n), np.full(n, np.inf)), (np.full(n, -np.inf), np.zeros(n)))
+    ]
+    best = min(fits, key=lambda f: float(f.cost))
+    beta = best.x / scale
+    kept = [k for k in range(n) if beta[4 + k] != 0.0]
+    columns = [0, 1, 2, 3, *(4 + k for k in kept)]
+    rss = float(np.sum((y - X @ beta) ** 2))
+    dof = max(int(train.sum()) - len(columns), 1)
+    # standard deviations of the linear fit on the kept columns (the bounds inactive there)
+    kept_x = X[:, columns]
+    sd = np.sqrt(np.maximum(np.diag((rss / dof) * np.linalg.pinv(kept_x.T @ kept_x)), 0.0))
+    instances = tuple(
+        EffectConfig(identifier, {amplitude: float(beta[4 + k]), shape: shapes[k]}) for k in kept
+    )
+    suffixes = instance_suffixes([identifier] * len(instances))
+    unit = channel_unit(rec)
+    shown = channel_param_name(shape, unit)
+    widths = ", ".join(f"{shapes[k]:.4g}" for k in kept) or "none"
+    return FittedPhysics(
+        effects=(EffectConfig(BACKBONE, backbone(beta[:4])), *instances),
+        nuisance=(),
+        std={
+            BACKBONE: backbone(sd[:4]),
+            **{identifier + suffix: {amplitude: float(sd[4 + i])} for i, suffix in enumerate(suffixes)},
+        },
+        at_bound=(),
+        implausible=(),
+        blocks=int(train.sum()),
+        block_s=0.0,
+        structure=structure,
+        notes=(
+            f"{identifier} as a sum over {shown} = {', '.join(f'{s:.4g}' for s in shapes)} (a fixed basis, not "
+            f"estimates), amplitudes of one sign by bounded least squares on the samples; kept: {widths}",
+        ),
+        unit=unit,
+    )
