@@ -489,7 +489,7 @@ def forward_select(
        without it, when that model's BIC is lower and it has no more ``implausible`` terms (a
        parameter outside the catalogue's plausible range) (:func:`_swap_out`).
     """
-    bar = progress_bar(progress=progress, desc="diagnose: search", unit="round", leave=False)
+    bar = progress_bar(progress=progress, desc="diagnose: search", unit=" rounds", leave=False)
     path = _stepwise(baseline, data, candidates, bar, pairs=pairs)
     if any(t.delta_bic >= THRESHOLD for t in path.noise_tested):
         other = _stepwise(baseline, data, candidates, bar, noise_last=True, pairs=pairs)

@@ -47,7 +47,7 @@ def _import_args(text: str, where: str) -> argparse.Namespace:
     """``trainer import`` options (``FOREIGN`` and ``-o`` are implied), parsed by its own parser."""
     parser = OneLineArgumentParser(prog=where)
     subparsers = parser.add_subparsers(dest="command", parser_class=OneLineArgumentParser)
-    add_import_arguments(subparsers.add_parser("import"))  # errors name "<where> import", as before
+    add_import_arguments(subparsers.add_parser("import", prog=where))  # errors name "<where>" once
     return parser.parse_args(["import", "FOREIGN", "-o", "unused.npz", *split(text, where)])
 
 
