@@ -103,7 +103,8 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
             else f"{p}: a directory, not a model file (model.pt, written by 'trainer fit')"
         )
     if not p.is_file():
-        raise UserError(f"{p}: no such model file")
+        what = "not a regular file (a device or a pipe)" if p.exists() else "no such model file"
+        raise UserError(f"{p}: {what}; a model file is the model.pt 'trainer fit' writes")
     if p.suffix.lower() in RECORDING_SUFFIXES:
         raise UserError(
             f"{p}: a recording ({p.suffix.lower()}), not a model file written by 'trainer fit' "

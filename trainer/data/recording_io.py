@@ -211,6 +211,8 @@ def recording_format(path: str | Path) -> RecordingFormat:
     suffix = Path(path).suffix.lower()
     if suffix in RECORDING_SUFFIXES:
         return RECORDING_SUFFIXES[suffix]
+    if Path(path).is_dir():
+        raise UserError(f"{path}: a directory, not a recording (.csv or .npz)")
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")
 
 
