@@ -302,3 +302,24 @@ def test_the_rate_bound_of_a_clean_sweep_is_the_rule_of_three(draws: int) -> Non
     assert rate_lower_bound(draws, draws) == pytest.approx(0.05 ** (1.0 / draws), rel=1e-9)
     assert rate_lower_bound(0, draws) == 0.0
     assert rate_lower_bound(draws - 1, draws) < rate_lower_bound(draws, draws)
+
+
+@pytest.mark.parametrize(("draws", "shown"), [(1, False), (2, False), (59, True)])
+def test_a_target_met_in_too_few_draws_to_show_it_is_not_called_met(draws: int, shown: bool) -> None:
+    """Every draw identified every effect: with 1 or 2 draws the one-sided 95 % bound (5 %, 22 %) is
+    below the 95 % asked, and the verdict says so instead of "meets the target"; 59 of 59 show it."""
+    from trainer.plan.design import Choice
+    from trainer.plan.summary import Summary
+
+    program = candidates(ChamberLimits())[0]
+    summary = Summary(
+        program.name, program.duration_s, draws, {"thermal_lag": 1.0}, {"thermal_lag": 0.01}, {}, 0.2, 0.3
+    )
+    choice = Choice(program, summary, ())
+    target = Target()
+    assert choice.met(target)  # the point estimate: every draw
+    text = outputs.verdict_text(choice, target)
+    assert text.startswith("meets the target") is shown, text
+    assert ("too few to show the target" in text) is not shown, text
+    bound = 100 * 0.05 ** (1.0 / draws)
+    assert f"lower bound of {bound:.0f} %" in text, text

@@ -326,7 +326,7 @@ def run(args: argparse.Namespace) -> int:
         )
         (staging / outputs.REPORT_MD).write_text(text, encoding="utf-8")
     verdict = (
-        "meets the target"
+        outputs.verdict_text(choice, target)
         if choice.met(target)
         else "short of the target: " + "; ".join(choice.summary.short_of(target))
     )

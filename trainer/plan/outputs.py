@@ -98,6 +98,23 @@ def draws_text(count: int) -> str:
     return f"{count} draw{'' if count == 1 else 's'}"
 
 
+def verdict_text(choice: Choice, target: Target) -> str:
+    """What a met target shows, for the report and the terminal alike: the draws, and the one-sided
+    lower bound on the least identified effect's rate (1 draw of 1 shows 5 %, not the 80 % asked)."""
+    s = choice.summary
+    bound = s.lower_bound()
+    shown = (
+        f"on {draws_text(s.draws)} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
+        f"bound of {100 * bound:.0f} %"
+    )
+    if bound < target.identify_rate:
+        return (
+            f"met in {draws_text(s.draws)}, too few to show the target: {shown}, below the "
+            f"{100 * target.identify_rate:g} % asked (more --draws)"
+        )
+    return f"meets the target in {draws_text(s.draws)}; {shown}"
+
+
 def report(
     choice: Choice,
     standard: Sequence[Summary],
@@ -111,18 +128,8 @@ def report(
     channel: str | None = None,
 ) -> str:
     s = choice.summary
-    bound = s.lower_bound()
-    shown = (
-        f"; on {draws_text(s.draws)} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
-        f"bound of {100 * bound:.0f} %"
-        + (
-            f", below the {100 * target.identify_rate:g} % asked: more --draws to show it"
-            if bound < target.identify_rate
-            else ""
-        )
-    )
     verdict = (
-        f"meets the target in {draws_text(s.draws)}{shown}"
+        verdict_text(choice, target)
         if choice.met(target)
         else "does **not** meet the target; it cannot reach: " + "; ".join(s.short_of(target))
     )
