@@ -215,6 +215,26 @@ def test_diagnosis_json_targets_its_ambiguous_and_unidentifiable_compensable_eff
     assert all(lo < hi for lo, hi in targets[0].ranges.values())
 
 
+def test_a_gyroscope_diagnosis_plans_for_its_gyroscope_not_the_accelerometer(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    doc = {
+        "channel": {"name": "gyro0_x", "unit": "dps", "label": "deg/s"},
+        "ambiguous": [{"effects": ["thermal_lag", "temp_rate"]}],
+        "not_identifiable": [],
+    }
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    assert priors.diagnosis_channel(path) == "gyro0_x"  # the default --channel
+    code = run_cli(main, ["plan", "--targets", str(path), "--channel", "accel0_z", "-o", str(tmp_path / "p")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "--channel accel0_z but the --targets diagnosis was made on gyro0_x" in err
+    assert not (tmp_path / "p").exists()
+    path.write_text(json.dumps({k: v for k, v in doc.items() if k != "channel"}), encoding="utf-8")
+    assert priors.diagnosis_channel(path) is None  # an accelerometer's document names none
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

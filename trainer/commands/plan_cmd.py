@@ -142,20 +142,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _channel(args: argparse.Namespace, fitted: FittedModel | None) -> tuple[str | None, str]:
-    """The planned channel's table name in the --sim (None: the accelerometer's physics) and unit."""
+def _channel(
+    args: argparse.Namespace, fitted: FittedModel | None, diagnosed: str | None = None
+) -> tuple[str | None, str]:
+    """The planned channel's table name in the --sim (None: the accelerometer's physics) and unit:
+    --channel, else the channel of the --targets model, or of the --targets diagnosis (``diagnosed``)."""
     from trainer.data.channels import unit_of_channel_name
     from trainer.data.flightlog import parse_channel
     from trainer.errors import UserError
     from trainer.physics.catalogue.units import CATALOGUE_UNIT
 
-    name = args.channel if args.channel is not None else (fitted.channel if fitted is not None else None)
+    made_on = fitted.channel if fitted is not None else diagnosed
+    name = args.channel if args.channel is not None else made_on
     if name is None:
         return None, CATALOGUE_UNIT
     if parse_channel(name) is None:
         raise UserError(f"--channel {name!r}: not a channel name (accel0_z, gyro0_x, baro0)")
-    if fitted is not None and fitted.channel is not None and name != fitted.channel:
-        raise UserError(f"--channel {name} but the --targets model was fitted on {fitted.channel}; give one")
+    if made_on is not None and name != made_on:
+        what = "model was fitted" if fitted is not None else "diagnosis was made"
+        raise UserError(f"--channel {name} but the --targets {what} on {made_on}; give one")
     unit = unit_of_channel_name(name)
     if fitted is not None and fitted.unit != unit:
         raise UserError(
@@ -280,7 +285,10 @@ def run(args: argparse.Namespace) -> int:
         if args.effects is not None:
             raise UserError("--targets and --effects both give the targets; give one")
         fitted = priors.from_model(Path(args.targets))
-    channel, unit = _channel(args, fitted)
+    diagnosed = None
+    if args.targets is not None and args.targets.lower().endswith(".json"):
+        diagnosed = priors.diagnosis_channel(Path(args.targets))
+    channel, unit = _channel(args, fitted, diagnosed)
     targets = fitted.priors if fitted is not None else priors.load(args.targets, args.effects, unit)
     limits = ChamberLimits(args.range[0], args.range[1], args.max_rate, args.settling, args.max_hours * 3600)
     target = Target(args.identify_rate, args.tolerance, args.vs_cubic)

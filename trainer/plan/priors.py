@@ -235,6 +235,19 @@ def from_diagnosis(path: Path, unit: str = CATALOGUE_UNIT) -> tuple[Prior, ...]:
     return _checked_set([_check(n, _default_ranges(n, unit), str(path), unit) for n in chosen], str(path))
 
 
+def diagnosis_channel(path: Path) -> str | None:
+    """The channel a diagnosis document was made on, when it names one (a gyroscope's or barometer's
+    does; an accelerometer's leaves it out: the default channel). An unreadable document is
+    :func:`from_diagnosis`'s to refuse."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    channel = doc.get("channel") if isinstance(doc, dict) else None
+    name = channel.get("name") if isinstance(channel, dict) else None
+    return name if isinstance(name, str) else None
+
+
 def _default_ranges(identifier: str, unit: str) -> dict[str, Range]:
     """The bundled run's range on this unit, else 0.5x to 2x the catalogue's test-bench size (mg only)."""
     ranges = MEASURED.get(unit, {}).get(identifier)
