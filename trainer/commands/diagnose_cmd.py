@@ -112,7 +112,7 @@ def every_output(result: Diagnosis) -> str:
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
-    from trainer.diagnose.report import limit_sizes
+    from trainer.diagnose.report import limit_sizes, value_text
     from trainer.diagnose.select import MAX_ADDED, THRESHOLD
     from trainer.diagnose.shared import shared_text
     from trainer.diagnose.verdict import ambiguity_line
@@ -122,7 +122,7 @@ def summary(result: Diagnosis) -> str:
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
     if result.left_out:
         for e in result.left_out:
-            params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(e.params).items())
+            params = ", ".join(f"{k}={value_text(v)}" for k, v in result.params(e.params).items())
             extra = result.label + (
                 f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
             )
@@ -142,7 +142,7 @@ def summary(result: Diagnosis) -> str:
         amp = channel_param_name(u.amp_name, result.unit)
         lines.append(f"not named: {u.effect}{result.label}: this run names it from {amp} = {limit_sizes(u)}")
     for m in result.suggestive:
-        params = ", ".join(f"{k}={v:.4g}" for k, v in result.params(m.params).items())
+        params = ", ".join(f"{k}={value_text(v)}" for k, v in result.params(m.params).items())
         lines.append(
             f"near miss (not named): {m.effect} [{params}] BIC -{m.delta_bic:.1f}{result.label}"
             + (f" (one of {m.joint} placed jointly; the BIC is theirs together)" if m.joint > 1 else "")

@@ -44,7 +44,7 @@ def write_json(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
 
 
 def _fmt_params(params: dict[str, float]) -> str:
-    return ", ".join(f"`{k}` = {v:.4g}" for k, v in params.items())
+    return ", ".join(f"`{k}` = {value_text(v)}" for k, v in params.items())
 
 
 def _fmt_where(where: list[Region | AllanWhere]) -> str:
@@ -175,7 +175,9 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _value(x: float) -> str:
+def value_text(x: float) -> str:
+    """A fitted value as the report and the terminal print it: 4 significant digits, whole numbers from
+    1000 up (a tau of 16982 s, not 1.698e+04: the JSON's figure, to the second)."""
     return f"{x:.0f}" if abs(x) >= 1000 else f"{x:.4g}"
 
 
@@ -184,7 +186,8 @@ def limit_sizes(u: DetectionLimit) -> str:
     constant (the report's and the terminal's one wording)."""
     return (
         ", ".join(
-            f"{'> ' if lim.at_least else ''}{lim.amplitude:.3g} at {_value(lim.nl_value)}" for lim in u.limits
+            f"{'> ' if lim.at_least else ''}{lim.amplitude:.3g} at {value_text(lim.nl_value)}"
+            for lim in u.limits
         )
         + f" ({u.nl_name})"
     )
@@ -227,7 +230,11 @@ def _undetected_line(u: DetectionLimit, unit: str) -> str:
         "columns (the temperature polynomial and the terms found). A smaller one can be present unseen."
     )
     if beyond:
-        where = _value(beyond[0]) if len(beyond) == 1 else f"{_value(min(beyond))}..{_value(max(beyond))}"
+        where = (
+            value_text(beyond[0])
+            if len(beyond) == 1
+            else f"{value_text(min(beyond))}..{value_text(max(beyond))}"
+        )
         out += (
             f" Beyond the catalogue's plausible {u.plausible_amp[1]:g} at `{u.nl_name}` {where}: not "
             "identifiable there at a plausible size."
