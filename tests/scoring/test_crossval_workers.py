@@ -201,6 +201,7 @@ def test_compare_per_channel_names_the_users_file_and_the_channel_in_its_outputs
         data = (tmp_path / "cv" / channel / "crossval.json").read_text()
         for text in (report, data):
             assert "channels-" not in text and f"imu.csv (channel {channel})" in text
+        assert report.splitlines()[0].count(channel) == 1, report.splitlines()[0]  # the title names it once
     assert "channels-" not in captured.out
 
 

@@ -314,7 +314,9 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
         )
     cv.skipped.update(skipped)
     lines = [
-        f"# Cross-validated comparison: {rec.source}, channel {signal.heading}",
+        # a per-channel run's recording is named "FILE (channel NAME)" already (trainer.options.channels)
+        f"# Cross-validated comparison: {rec.source}, "
+        + (f"in {signal.label}" if getattr(args, PREFIX_ATTR, "") else f"channel {signal.heading}"),
         "",
         f"No validation recording and no --holdout: every thermal segment of the run is held out in turn, "
         f"each method trained on the rest (docs/real-data.md). Drift left: RMS of the compensated output about "
