@@ -17,6 +17,7 @@ import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
+from typing import Any, TextIO
 
 from trainer.stale_files import part_prefix, remove_stale_parts, report_removed
 
@@ -98,6 +99,38 @@ def _silence_stdout() -> None:
     os.close(devnull)
 
 
+class _OutlivesReader:
+    """stdout that outlives its reader: once the pipe is closed (``trainer ... | head``) what is still
+    printed goes nowhere and the command goes on to write its files (a per-channel run's later
+    channels, its report); :func:`run_cli` then exits 141. Everything else is the stream's own."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.reader_gone = False
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        self.reader_gone = True
+        _silence_stdout()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.stream, name)
+
+
 def _print_error(exc: UserError) -> int:
     message = " ".join(_TERMINAL_CODES.sub("", str(exc)).split())  # one line, no terminal codes
     print(f"error: {message}", file=sys.stderr)
@@ -108,13 +141,16 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     """Run a CLI ``main`` and turn :class:`UserError` (and a failed write) into a one-line message
     and exit code 2."""
     _ignore_file_size_signal()
+    guard = _OutlivesReader(sys.stdout)
+    sys.stdout = guard
     try:
         code = main(argv)
-        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
-        return code
+        guard.flush()  # a closed pipe shows here, not in the interpreter's exit
+        # the reader went away (``| head``): the work is done, the exit status says the pipe closed
+        return EXIT_BROKEN_PIPE if guard.reader_gone and code == 0 else code
     except UserError as exc:
         return _print_error(exc)
-    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as a shell tool does
+    except BrokenPipeError:  # a closed pipe met outside stdout's writes: stop quietly, as a shell tool does
         _silence_stdout()
         return EXIT_BROKEN_PIPE
     except OSError as exc:
@@ -125,6 +161,9 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if sys.stdout is guard:
+            sys.stdout = guard.stream
 
 
 def check_output_path(path: str | os.PathLike[str], *, inputs: Sequence[str | os.PathLike[str]] = ()) -> None:

@@ -1,5 +1,7 @@
 """A reader that closes the pipe early (``trainer ... | head``, common in CI logs) ends the command
-quietly with 141 (128 + SIGPIPE), as a shell tool does: no traceback, no 'Exception ignored'."""
+quietly with 141 (128 + SIGPIPE), as a shell tool does: no traceback, no 'Exception ignored'; the
+command still writes its files (a per-channel run printed its first channel's lines, then stopped
+before writing the other channels' reports)."""
 
 from __future__ import annotations
 
@@ -8,14 +10,28 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 LOUD = "from trainer.errors import run_cli; import sys; sys.exit(run_cli(lambda argv: [print('line', k) for k in range({n})] and 0))"
+# prints, then writes a file, as a per-channel command prints a channel's lines and then its report
+LOUD_THEN_WRITES = (
+    "from pathlib import Path; from trainer.errors import run_cli; import sys\n"
+    "def main(argv):\n"
+    "    for k in range({n}):\n"
+    "        print('line', k)\n"
+    "    Path('report.md').write_text('done')\n"
+    "    print('wrote report.md')\n"
+    "    return 0\n"
+    "sys.exit(run_cli(main))"
+)
 
 
-def test_a_closed_pipe_ends_the_command_quietly(tmp_path: Path) -> None:
+@pytest.mark.parametrize("script", [LOUD, LOUD_THEN_WRITES], ids=["prints", "prints-then-writes"])
+def test_a_closed_pipe_ends_the_command_quietly(script: str, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     writer = subprocess.Popen(
-        [sys.executable, "-c", LOUD.format(n=200_000)],
+        [sys.executable, "-c", script.format(n=200_000)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         env=env,
@@ -29,6 +45,8 @@ def test_a_closed_pipe_ends_the_command_quietly(tmp_path: Path) -> None:
     assert first == b"line 0\n"
     assert "Traceback" not in err and "Exception ignored" not in err and err == ""
     assert code == 141  # 200 000 lines do not fit the pipe: the writer meets the closed end
+    if script is LOUD_THEN_WRITES:
+        assert (tmp_path / "report.md").read_text() == "done"  # the work went on to the end
 
 
 def test_python_m_runs_both_commands(tmp_path: Path) -> None:
