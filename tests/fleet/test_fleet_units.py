@@ -284,3 +284,22 @@ def test_a_channel_of_a_multi_channel_recording_is_chosen_with_import_channel(
     assert stats["temp_min_c"] == pytest.approx(TEMP_C[0] + GYRO_TEMP_OFFSET_C)  # the gyro's own thermometer
     (error,) = run.results["N"].errors
     assert error.stage == "load" and 'import = "--channel NAME"' in error.error and "gyro0_x" in error.error
+
+
+def test_a_delimited_unit_with_channels_fits_the_channel_it_names_or_refuses_several(real_run: Path) -> None:
+    """``import = "--preset tofupilot --channels gyro0_x"`` on the bundled run: the unit is gyro x in
+    deg/s, not the preset's accelerometer axis (``accel_mg``) it used to score; ``--channels all``
+    makes six channels and a unit fits one: refused in one line, as a flight log's is."""
+    from trainer.data.channels import channel_unit
+    from trainer.data.importer import import_foreign, options_with_preset
+    from trainer.fleet.options import UnitImport
+
+    where = "fleet.toml: unit 1 (U1) import"
+    rec, _ = UnitImport.parse("--preset tofupilot --channels gyro0_x", where).read(real_run)
+    assert channel_unit(rec) == "dps" and rec.meta.get("channel") == "gyro0_x"
+    expected = import_foreign(real_run, options_with_preset("tofupilot", channels=("gyro0_x",)))
+    np.testing.assert_array_equal(rec.accel_mg, expected.columns["gyro0_x_dps"])
+    with pytest.raises(UserError) as caught:
+        UnitImport.parse("--preset tofupilot --channels all", where).read(real_run)
+    message = str(caught.value)
+    assert "\n" not in message and where in message and "makes 6 channels" in message

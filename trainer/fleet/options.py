@@ -148,13 +148,31 @@ class UnitImport:
                 options = self.text_options()
             except UserError as exc:
                 raise self._fail(path, exc) from None
-            return import_foreign(path, options, checks), list(checks.warnings)
+            rec = import_foreign(path, options, checks)
+            return self._one_channel(path, rec), list(checks.warnings)
         if path.suffix.lower() not in (".csv", ".npz"):
             raise UserError(
                 f"{path}: not a recording (.csv/.npz) or a flight log; give the unit 'import' options for a "
                 "foreign file"
             )
         return self._recording(path), []
+
+    def _one_channel(self, path: Path, rec: Recording) -> Recording:
+        """A delimited import with ``--channels``: the one channel it names (a unit fits one; the
+        import's ``accel_mg`` column is the preset's own axis, not the channel asked for), else a
+        one-line refusal, as for a flight log."""
+        from trainer.data.channels import channel_view, recording_channels
+
+        if self.text_options().channels is None:
+            return rec
+        named = recording_channels(rec)
+        if len(named) != 1:
+            raise UserError(
+                f"{self.where} {self.text!r} for {path}: makes {len(named)} channels ({', '.join(named)}) and a "
+                "unit fits one; give --channels NAME (one channel) or a unit per channel"
+            )
+        (channel,) = named.values()
+        return channel_view(rec, channel)
 
     def _is_recording(self, path: Path) -> bool:
         """A .csv/.npz file with no column option: a recording of the spec."""
