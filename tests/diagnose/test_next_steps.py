@@ -41,3 +41,17 @@ def test_an_ambiguous_named_effect_is_one_term_with_its_alternatives() -> None:
         "hysteresis (or thermal_lag / stress_relaxation)",
         "warmup (or temp_rate)",
     ]
+
+
+def test_the_after_figure_says_when_it_includes_terms_the_compensator_does_not_carry() -> None:
+    """The per-branch "after" is the finder's whole model: with a bias step (an event) in it, it is not
+    what the compensator would leave, and the report and the terminal say so."""
+    from trainer.diagnose.next_steps import markdown_lines, terminal_lines
+
+    plain = next_steps(_diagnosis(["temp_rate"], []))
+    assert plain.fit_only == [] and plain.after_text() == "what the compensator would leave"
+    steps = next_steps(_diagnosis(["temp_rate", "bias_step"], []))
+    assert steps.fit_only == ["bias_step"]
+    for text in ("\n".join(markdown_lines(steps)), "\n".join(terminal_lines(steps))):
+        assert "bias_step included, which the compensator does not carry" in text, text
+    assert "what the compensator would leave" not in "\n".join(markdown_lines(steps))

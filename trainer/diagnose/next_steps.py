@@ -3,7 +3,7 @@ branch, and the chamber profile that would settle what remains ambiguous (report
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
@@ -37,6 +37,18 @@ class NextSteps:
     branches: list[BranchResidual]
     profile: list[str]  # tests, most specific first; the generic profile last
     unit: str = "mg"  # the diagnosed channel's unit as printed (the residuals are in it)
+    # terms the final fit holds that the compensator does not carry (events, set-up effects, a term
+    # fitted implausibly): the "after" figures include them, so a compensator leaves more where they act
+    fit_only: list[str] = field(default_factory=list)
+
+    def after_text(self) -> str:
+        """What the per-branch "after" figure is, said where it is shown."""
+        if not self.fit_only:
+            return "what the compensator would leave"
+        return (
+            f"the finder's whole model, {', '.join(self.fit_only)} included, which the compensator does not "
+            "carry: it leaves more where they act"
+        )
 
 
 def compensable(identifier: str) -> bool:
@@ -97,7 +109,11 @@ def next_steps(d: Diagnosis) -> NextSteps:
             profile.append(f"{effect}: {info.test}")
     profile.append(GENERIC_PROFILE)
     not_compensated = list(dict.fromkeys(e for e in named if not compensable(e)))
-    return NextSteps(structure, not_compensated, branches, list(dict.fromkeys(profile)), d.signal.label)
+    implausible = [a.effects[0] for a in d.ambiguous if a.implausible is not None]
+    fit_only = list(dict.fromkeys([*not_compensated, *(f"{e} (implausible)" for e in implausible)]))
+    return NextSteps(
+        structure, not_compensated, branches, list(dict.fromkeys(profile)), d.signal.label, fit_only
+    )
 
 
 def markdown_lines(steps: NextSteps) -> list[str]:
@@ -110,8 +126,7 @@ def markdown_lines(steps: NextSteps) -> list[str]:
         ]
     if steps.branches:
         lines += [
-            f"Residual per branch (block RMS, {steps.unit}), starting model -> after the fit (what the compensator "
-            "would leave):",
+            f"Residual per branch (block RMS, {steps.unit}), starting model -> after the fit ({steps.after_text()}):",
             "",
             markdown_table(
                 ["branch", "blocks", "before", "after"],
@@ -140,6 +155,8 @@ def terminal_lines(steps: NextSteps) -> list[str]:
     return [
         f"next: {steps.structure}",
         *check,
-        f"next: residual per branch (block RMS, {steps.unit}) {per_branch}; next profile: {steps.profile[0]}"
+        f"next: residual per branch (block RMS, {steps.unit}) {per_branch}"
+        + (f" (after: {steps.after_text()})" if steps.fit_only else "")
+        + f"; next profile: {steps.profile[0]}"
         + (f" (+{len(steps.profile) - 1} more in the report)" if len(steps.profile) > 1 else ""),
     ]
