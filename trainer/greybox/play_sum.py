@@ -9,10 +9,12 @@ width fitted to the first cooling and the heating leaves more than no compensati
 cooling (0.112 against 0.106 deg/s). A sum of play operators of several widths with amplitudes of
 one sign (the Prandtl-Ishlinskii model of hysteresis; a Preisach model whose loops are nested) has
 exactly that property: the narrow plays saturate after a small excursion, the wide ones only after a
-large one. The widths are a fixed basis, not estimates: :data:`OCTAVES` of them, halving from the
-top of the effect's search range; the bias polynomial and the amplitudes are linear in the data and
+large one. The widths are a fixed basis, not estimates: an octave apart, halving from the top of
+the catalogue's plausible range while inside it (60, 30, 15, 7.5 and 3.75 degC for the branch
+offset: every width plausible); the bias polynomial and the amplitudes are linear in the data and
 fitted together by bounded least squares (``scipy.optimize.lsq_linear``, amplitudes all >= 0 or all
-<= 0, whichever leaves less), and a width whose amplitude comes out 0 is left out of the model.
+<= 0, whichever leaves less), and a width whose amplitude comes out 0 is left out of the model. An
+amplitude outside the plausible range is flagged by the catalogue's one rule, as any fitted one.
 The columns are the simulator's own formula on the clipped temperature with the play operators
 started at ``play_start_c``, exactly as the compensator runs them; a cross-validation fold's
 held-out rows are run through but not fitted.
@@ -25,24 +27,33 @@ from scipy.optimize import lsq_linear
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
-from trainer.diagnose.api import build_blocks, search_bounds
+from trainer.diagnose.api import build_blocks, channel_scale, search_bounds
 from trainer.errors import UserError
 from trainer.greybox.fit import FittedPhysics
 from trainer.greybox.least_squares import backbone, poly_columns
 from trainer.greybox.structure import Structure
-from trainer.physics.catalogue import BACKBONE, DEFINITIONS
+from trainer.physics.catalogue import BACKBONE, DEFINITIONS, PARAMETERS
+from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.streamed import instance_suffixes
 from trainer.physics.catalogue.units import channel_param_name
 from trainer.physics.effects import EffectConfig, drift
 
-OCTAVES = 6  # widths w_max, w_max/2, ..., w_max/32: on the bundled run 80 .. 2.5 degC
+
+def octave_shapes(identifier: str, shape: str, search: tuple[float, float]) -> list[float]:
+    """The basis: the plausible range's top, halved while inside the range (the search range where
+    the catalogue gives no plausible range)."""
+    lo, hi = PARAMETERS[(identifier, shape)].plausible or search
+    shapes = [hi]
+    while shapes[-1] / 2.0 >= lo:
+        shapes.append(shapes[-1] / 2.0)
+    return shapes
 
 
 def fit_play_sum(
     rec: Recording, structure: Structure, temp_range_c: tuple[float, float], play_start_c: float | None
 ) -> FittedPhysics:
     """``structure`` (one compensated effect with one shape and one amplitude) as a sum of instances
-    at :data:`OCTAVES` shapes, fitted on the training rows of ``rec``."""
+    at the :func:`octave_shapes`, fitted on the training rows of ``rec``."""
     if len(structure.compensated) != 1 or structure.nuisance:
         raise UserError("physics: the sum of widths takes one effect; give one in --effects")
     identifier = structure.compensated[0].identifier
@@ -61,8 +72,9 @@ def fit_play_sum(
     out = np.asarray(rec.accel_mg, dtype=np.float64)
     held = rec.held_out()
     train = np.ones(len(out), dtype=bool) if held is None else ~held
-    ((_, top),) = search_bounds(identifier, build_blocks(rec))
-    shapes = [top / 2.0**k for k in range(OCTAVES)]
+    data = build_blocks(rec)
+    ((search_lo, search_hi),) = search_bounds(identifier, data)
+    shapes = octave_shapes(identifier, shape, (search_lo, search_hi))
     units = [
         drift(
             (EffectConfig(identifier, {amplitude: 1.0, shape: s}),), t, temp, play_start_c=play_start_c
@@ -92,6 +104,12 @@ def fit_play_sum(
     suffixes = instance_suffixes([identifier] * len(instances))
     unit = channel_unit(rec)
     shown = channel_param_name(shape, unit)
+    scale = channel_scale(rec, data)
+    outside = {
+        identifier + suffix: implausible(identifier, e.params, scale)
+        for e, suffix in zip(instances, suffixes, strict=True)
+    }
+    outside = {label: why for label, why in outside.items() if why}
     widths = ", ".join(f"{shapes[k]:.4g}" for k in kept) or "none"
     return FittedPhysics(
         effects=(EffectConfig(BACKBONE, backbone(beta[:4])), *instances),
@@ -101,7 +119,9 @@ def fit_play_sum(
             **{identifier + suffix: {amplitude: float(sd[4 + i])} for i, suffix in enumerate(suffixes)},
         },
         at_bound=(),
-        implausible=(),
+        implausible=tuple(
+            f"{label}.{channel_param_name(n, unit)}" for label, why in outside.items() for n in why
+        ),
         blocks=int(train.sum()),
         block_s=0.0,
         structure=structure,
@@ -110,4 +130,5 @@ def fit_play_sum(
             f"estimates), amplitudes of one sign by bounded least squares on the samples; kept: {widths}",
         ),
         unit=unit,
+        why={label: tuple(why.values()) for label, why in outside.items()},
     )
