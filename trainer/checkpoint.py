@@ -20,7 +20,9 @@ the field, never a traceback inside a command nor a report scored with NaN.
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
 import os
 import pickle
 import re
@@ -45,6 +47,36 @@ _UNSUPPORTED_GLOBAL = re.compile(r"Unsupported global: GLOBAL ([\w.]+)")
 FORMAT_VERSION = 1
 
 
+SELECTED_PAYLOAD = "payload_sha256"  # the selection record's fingerprint of the payload it chose
+
+
+def payload_fingerprint(payload: dict[str, Any]) -> str:
+    """sha256 of a payload's canonical JSON (keys sorted, arrays as lists): a model file whose
+    parameters were edited after the fit no longer matches its selection record."""
+
+    def plain(value: Any) -> Any:
+        if isinstance(value, torch.Tensor | np.ndarray):
+            return value.tolist()
+        if isinstance(value, np.generic):
+            return value.item()
+        raise TypeError(f"{type(value).__name__} in a payload")
+
+    text = json.dumps(payload, sort_keys=True, default=plain)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def cross_validated_selection(checkpoint: dict[str, Any]) -> dict[str, Any] | None:
+    """The checkpoint's selection record when its cross-validation is of this payload (a record written
+    before the fingerprint existed counts as one); None when there is none or the payload was changed."""
+    record = (checkpoint.get("train_stats") or {}).get("selection")
+    if not isinstance(record, dict):
+        return None
+    kept = record.get(SELECTED_PAYLOAD)
+    if kept is not None and kept != payload_fingerprint(checkpoint["payload"]):
+        return None
+    return record
+
+
 def save_model(
     model: Compensator,
     path: str | os.PathLike[str],
@@ -52,13 +84,19 @@ def save_model(
     train_stats: TrainStats,
     valid_temp_range_c: tuple[float, float],
 ) -> None:
-    """Write ``model`` to ``path`` atomically (no partial file on failure)."""
+    """Write ``model`` to ``path`` atomically (no partial file on failure). An ``auto`` model's
+    selection record gets the fingerprint of the payload it chose (:func:`payload_fingerprint`): its
+    cross-validation speaks for these parameters, and for no others."""
+    payload = model.to_payload()
+    stats = train_stats.to_dict()
+    if isinstance(stats.get("selection"), dict):
+        stats["selection"] = {**stats["selection"], SELECTED_PAYLOAD: payload_fingerprint(payload)}
     checkpoint = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
         "method": methods.name_of(model),
-        "payload": model.to_payload(),
-        "train_stats": train_stats.to_dict(),
+        "payload": payload,
+        "train_stats": stats,
         "valid_temp_range_c": [float(valid_temp_range_c[0]), float(valid_temp_range_c[1])],
         "created_by": f"mems-tdc {__version__}",
     }

@@ -333,3 +333,38 @@ def test_evaluate_scores_the_held_out_part_as_the_report_does(imu: dict[str, Pat
     result = evaluate(held, {"poly3": compensated[: len(held)]}, smoothing_s=SMOOTHING_S)
     assert result.static["poly3"] == scores.model and result.static["raw"] == scores.uncompensated
     assert result.noise_floor_mg == scores.noise_floor_mg
+
+
+def test_an_auto_model_edited_after_its_fit_is_judged_on_its_own_figures(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The selection record's cross-validation speaks for the parameters auto chose: a file whose
+    branch amplitude was changed afterwards (the tester's +3 deg/s) was passed on the stored figures
+    (0.118 < 0.238 deg/s) though it leaves several times the uncompensated drift on the same run."""
+    from tests.testmodels import save_checkpoint
+    from trainer.checkpoint import load_checkpoint
+
+    models = tmp_path / "m"
+    fitting = ["fit", "--method", "auto", "--candidates", "none,poly3,physics-branch-room", str(imu["rec"])]
+    assert run_cli(trainer_main, [*fitting, "--channels", "gyro0_x", "-o", str(models)]) == 0
+    chosen = models / "gyro0_x.pt"
+    assert (
+        run_cli(
+            trainer_main, ["report", str(chosen), "--recording", str(imu["rec"]), "-o", str(tmp_path / "r")]
+        )
+        == 0
+    )
+    assert "better than uncompensated: cross-validated" in (tmp_path / "r" / "report.md").read_text()
+    checkpoint = load_checkpoint(chosen)
+    assert checkpoint["payload"]["effects"][1][0] == "hysteresis_offset"
+    checkpoint["payload"]["effects"][1][1]["amp_dps"] = 3.0
+    edited = tmp_path / "edited.pt"
+    save_checkpoint(checkpoint, edited)
+    capsys.readouterr()
+    code = run_cli(
+        trainer_main, ["report", str(edited), "--recording", str(imu["rec"]), "-o", str(tmp_path / "e")]
+    )
+    text = (tmp_path / "e" / "report.md").read_text()
+    assert code == 1 and "## Verdict: FAIL" in text, text
+    assert "worse than uncompensated: all samples (in-sample)" in text
+    assert "not those auto cross-validated (the file was changed after the fit)" in text

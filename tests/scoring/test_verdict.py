@@ -50,8 +50,13 @@ def test_worse_in_range_alone_fails_and_noise_is_not_worse() -> None:
 
 
 def test_a_guard_alone_gives_no_verdict_and_nan_is_not_measured() -> None:
-    unmeasured = Figures("held-out", math.nan, 1.0)
+    unmeasured = Figures("held-out", math.nan, math.nan)  # no samples: neither is measured
     assert worse_than_uncompensated("m", unmeasured).ok
+    # the output measured without the model but not with it: the model's output is NaN (a hand-edited
+    # width of 0 gave NaN everywhere, and the guard used to pass it)
+    broken = worse_than_uncompensated("m", Figures("held-out", math.nan, 1.0))
+    assert not broken.ok and "not finite" in broken.detail
+    assert verdict({"m": Figures("held-out", math.nan, 1.0)}).status == FAIL
     assert verdict({"m": Figures("held-out", 0.5, 1.0)}).status == NO_VERDICT
 
     class Threshold:

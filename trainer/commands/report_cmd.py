@@ -282,7 +282,7 @@ def _labelled(item: tuple[float, str] | None, label: str) -> tuple[float, str] |
 
 def run(args: argparse.Namespace) -> int:
     from trainer import __version__
-    from trainer.checkpoint import load_model
+    from trainer.checkpoint import cross_validated_selection, load_model
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit, model_view
     from trainer.data.holdout import overlap_warning, parse_holdout
@@ -364,10 +364,14 @@ def run(args: argparse.Namespace) -> int:
                 notes.append(faster)
             # an auto model carries the cross-validation that chose it: on its own training run those
             # figures, not an in-sample or single-split one, are what the verdict judges
+            selection = cross_validated_selection(ckpt)
+            if stats.selection is not None and selection is None:
+                notes.append(
+                    "the model's parameters are not those auto cross-validated (the file was changed after the "
+                    "fit): its cross-validation is not used; the figures are this report's own"
+                )
             crossval = (
-                stats.selection
-                if stats.selection is not None and stats.data_sha256 == data_fingerprint(rec)
-                else None
+                selection if selection is not None and stats.data_sha256 == data_fingerprint(rec) else None
             )
             verify, sizes = (
                 (None, None)

@@ -87,6 +87,13 @@ def _worse(model: float, uncompensated: float, floor: float) -> bool:
 def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
     """Fails when the model's drift left (whole part, or in range) exceeds the uncompensated output's."""
     f = figures
+    if not math.isfinite(f.model_rms) and math.isfinite(f.uncompensated_rms):
+        return Guard(
+            subject,
+            False,
+            f"the model's output is not finite ({f.basis} drift left {f.model_rms}): a NaN or an infinity in its "
+            "parameters or its arithmetic",
+        )
     for where, model, raw in (
         (f.basis, f.model_rms, f.uncompensated_rms),
         (f"{f.basis} in range", f.model_in_range_rms, f.uncompensated_in_range_rms),
