@@ -249,3 +249,22 @@ def test_a_half_way_start_header_gives_the_branch_terms_power_on_error_in_number
     said = f"its amplitude, {abs(branch['amp_mg']):.3g} mg, until T has moved by w/2 = {branch['width_c'] / 2:.3g} degC"
     header = " ".join((tmp_path / "c" / "half.h").read_text().replace(" * ", " ").split())
     assert said in header and said in (tmp_path / "c" / "half.manifest.json").read_text()
+
+
+def test_a_room_start_header_bounds_the_error_of_a_sensor_that_came_another_way(tmp_path: Path) -> None:
+    """Started from 25 degC, a sensor that came another way (a reboot after an excursion, a reset
+    mid-run) can be on the other branch: off by up to twice the amplitude until T has moved by the
+    width. The header says how much and how far, from the model's own parameters."""
+    rec = recording()
+    model, stats = fit_with_stats("physics", rec, ROOM)
+    save_model(model, tmp_path / "room.pt", train_stats=stats, valid_temp_range_c=stats.temp_range_c)
+    assert (
+        codegen_main(["export", str(tmp_path / "room.pt"), "-o", str(tmp_path / "c"), "--name", "room"]) == 0
+    )
+    branch = _params(tmp_path / "room.pt")["hysteresis_offset"]
+    header = " ".join((tmp_path / "c" / "room.h").read_text().replace(" * ", " ").split())
+    said = (
+        f"in all at most {2 * abs(branch['amp_mg']):.3g} mg until T has moved by {branch['width_c']:.3g} degC"
+    )
+    assert said in header, header
+    assert f"width {branch['width_c']:.3g} degC" in header

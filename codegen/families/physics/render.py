@@ -56,14 +56,21 @@ def play_start_text(model: QPhysics) -> str:
     branches = [t for t in model.terms if t.margin_q is not None and t.gain is not None]
     several = len(branches) > 1
     plays = ", ".join(f"P{t.suffix}" for t in branches) if several else "P"
+
+    def amplitude_mg(term: QTerm) -> float:
+        assert term.gain is not None and term.margin_q is not None
+        return term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG
+
+    def half_width_c(term: QTerm) -> float:
+        assert term.margin_q is not None
+        return term.margin_q / 2**model.temp_frac / 1000
+
     if model.play_start_q is None:
 
         def size(term: QTerm) -> str:
-            assert term.gain is not None and term.margin_q is not None
             return (
                 f"{f'{term.gain_name}: ' if several else ''}its amplitude, "
-                f"{term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG:.3g} mg, until T "
-                f"has moved by w/2 = {term.margin_q / 2**model.temp_frac / 1000:.3g} degC"
+                f"{amplitude_mg(term):.3g} mg, until T has moved by w/2 = {half_width_c(term):.3g} degC"
             )
 
         sizes = "; ".join(size(term) for term in branches)
@@ -76,10 +83,19 @@ def play_start_text(model: QPhysics) -> str:
             )
         return f"P at T_pm, mid-way between the branches (the branch term is then off by at most {sizes})"
     start_c = (model.centre_mdegc + model.play_start_q / 2**model.temp_frac) / 1000.0
+    each = "; ".join(
+        f"P{t.suffix}: amplitude {amplitude_mg(t):.3g} mg, width {2 * half_width_c(t):.3g} degC"
+        for t in branches
+    )
+    worst = sum(2 * abs(amplitude_mg(t)) for t in branches)
+    widest = max(2 * half_width_c(t) for t in branches)
     return (
         f"{plays} at {start_c:g} degC (x = {model.play_start_q}), {'each ' if several else ''}clamped into "
         f"T_pm +- w/2 by the first step: the branch of a sensor brought to its first temperature from "
-        f"{start_c:g} degC"
+        f"{start_c:g} degC ({each}). A sensor that came another way (a reboot after a warmer or colder "
+        f"excursion, or a reset mid-run) can be on another branch: each branch term is then off by up to "
+        f"twice its amplitude until T has moved by its width, in all at most {worst:.3g} mg until T has moved "
+        f"by {widest:.3g} degC; restore a saved state to keep the branch"
     )
 
 
