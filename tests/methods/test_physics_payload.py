@@ -40,6 +40,8 @@ def _edited(rec: Recording, edit: str) -> dict:
         effects[0][1]["c1_mg_per_c"] = "0.1"
     elif edit == "flag as text":
         payload["with_warmup"] = "yes"
+    elif edit == "a width of 0":  # the play operator of width 0 divides by it: NaN everywhere
+        effects[3][1]["width_c"] = 0.0
     elif edit == "a lag twice":  # a second proof-mass temperature: the batch formula would ignore it
         effects.append(["thermal_lag", {"tau_s": 300.0}])
     elif edit == "reversed range":
@@ -53,6 +55,7 @@ EDITS = {
     "parameter as text": "payload.effects[0].c1_mg_per_c must be a finite number, got '0.1'",
     "flag as text": "payload.with_warmup must be true or false, got 'yes'",
     "reversed range": "payload.temp_range_c must be increasing, got [40, -10]",
+    "a width of 0": "payload.effects[3].width_c must be > 0, got 0.0",
     "a lag twice": "payload.effects: thermal_lag appears 2 times; it changes a temperature the other effects read",
 }
 
