@@ -320,6 +320,8 @@ def test_compare_and_diagnose_per_channel_outputs(
     for channel, unit in (("gyro0_x", "deg/s"), ("baro0", "Pa")):
         report = (out / channel / "report.md").read_text()
         assert f"drift left RMS ({unit})" in report and "(mg)" not in report
+        # the paper's accelerometer figures keep their unit: they are not this channel's
+        assert "5.43e-4 milli-g" in report and f"5.43e-4 {unit}" not in report
         assert load_checkpoint(out / channel / "models" / "poly3.pt")["train_stats"]["channel"] == channel
     code = run_cli(
         trainer_main, [*argv[:-1], "baro0", "--methods", "dlstm,poly3", "--out-dir", str(tmp_path / "x")]

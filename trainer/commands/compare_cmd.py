@@ -43,7 +43,7 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument(
         "--inject",
         choices=INPUT_PRESETS,
-        help="add this known input (steps: tilts of up to 50 mg) to the validation data and report how "
+        help="add this known input (steps: up to 50 in the channel's unit: tilts of 50 mg, 50 deg/s of rotation on a gyroscope) to the validation data and report how "
         "much of it each method keeps",
     )
     parser.add_argument(

@@ -298,9 +298,11 @@ def render_report(
         "",
         paper_side_by_side(comparison),
         "",
-        "The paper's absolute B, K and R (5.43e-4 mg, 4.33e-5 mg/s^1/2, 1.18e-6 mg/s uncompensated) are "
-        "orders of magnitude below what its own 2 h ramp implies (R x 7200 s is only 8.5e-3 mg of drift), "
-        "so only the improvement percentages are compared.",
+        # written in milli-g, not the unit word: a gyroscope's report relabels "mg" to deg/s, and these
+        # are the paper's accelerometer figures whatever channel this report is of
+        "The paper's absolute B, K and R (of its accelerometer: 5.43e-4 milli-g, 4.33e-5 milli-g/s^1/2, "
+        "1.18e-6 milli-g/s uncompensated) are orders of magnitude below what its own 2 h ramp implies (R x "
+        "7200 s is only 8.5e-3 milli-g of drift), so only the improvement percentages are compared.",
         "",
     ]
     warnings = [
