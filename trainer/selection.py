@@ -250,9 +250,14 @@ def choose(cv: CrossValidation) -> tuple[str, str]:
     else:
         label = methods.CUBIC if methods.CUBIC in allowed else NONE
         held, why = _short_run(cv.segments)
+        keeps = (
+            "auto keeps to the cubic unless it leaves more than no compensation"
+            if row_name(methods.CUBIC) in cv.results
+            else "auto chooses between the cubic and no compensation, and the cubic is not among --candidates"
+        )
         reason = (
-            f"{held}: less than a cycle ({CYCLE}); {why} and cannot judge a shape: auto keeps to the cubic "
-            "unless it leaves more than no compensation; record a whole cycle to let it judge the others"
+            f"{held}: less than a cycle ({CYCLE}); {why} and cannot judge a shape: {keeps}; record a whole "
+            "cycle to let it judge the others"
         )
     if unsafe:
         reason += f"; {', '.join(unsafe)} left more than no compensation cross-validated"

@@ -156,6 +156,11 @@ def test_select_on_less_than_a_cycle_judges_only_the_cubic_and_none() -> None:
     lines = record_lines(selection_record(selection))
     assert sum("not judged" in line for line in lines) == 1  # one line for both, with the reason
     assert any(line.startswith("- poly2, pla: not judged") for line in lines)
+    assert "auto keeps to the cubic unless" in selection.reason
+    # without the cubic among the candidates the reason does not claim to keep to it
+    narrowed = select(rec, labels=("none", "pla"))
+    assert narrowed.chosen == "none" and "the cubic is not among --candidates" in narrowed.reason
+    assert "keeps to the cubic" not in narrowed.reason
 
 
 def test_a_candidate_worse_than_none_inside_the_training_range_is_never_chosen() -> None:
