@@ -15,12 +15,14 @@ cross-validation fold's held-out rows are run through (the state crosses them) b
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
-from trainer.diagnose.api import Term, build_blocks, channel_scale, search_bounds
+from trainer.diagnose.api import BlockData, Term, build_blocks, channel_scale, search_bounds
 from trainer.errors import UserError
 from trainer.greybox.fit import FittedPhysics, at_search_bound
 from trainer.greybox.structure import Structure
@@ -46,30 +48,65 @@ def backbone(values: np.ndarray) -> dict[str, float]:
     return catalogue_params(DEFINITIONS[BACKBONE], Term(BACKBONE), columns)
 
 
+@dataclass(frozen=True)
+class OneEffect:
+    """A one-effect structure's effect (one shape, one amplitude) and the samples it is fitted on, as
+    the compensator runs them: the time from the first sample, the temperature clipped to the training
+    range, the output, the training rows (a cross-validation fold's held-out rows are run through,
+    not fitted) and the finder's blocks (its search range, the channel's scale)."""
+
+    identifier: str
+    shape: str
+    on_log: bool
+    amplitude: str
+    t: np.ndarray
+    temp: np.ndarray
+    out: np.ndarray
+    train: np.ndarray
+    data: BlockData
+
+    @classmethod
+    def of(
+        cls, rec: Recording, structure: Structure, temp_range_c: tuple[float, float], what: str
+    ) -> OneEffect:
+        """``what`` names the fit in the one-line refusal of another structure."""
+        if len(structure.compensated) != 1 or structure.nuisance:
+            raise UserError(f"physics: {what} takes one effect; give one in --effects")
+        identifier = structure.compensated[0].identifier
+        definition = DEFINITIONS[identifier]
+        nonlinear = definition.finder.nonlinear
+        linear = [p.name for p in definition.params if p.name not in dict(nonlinear)]
+        if len(nonlinear) != 1 or len(linear) != 1:
+            raise UserError(
+                f"physics: {what} takes an effect with one amplitude and one shape; {identifier} is not one"
+            )
+        (shape, on_log), amplitude = nonlinear[0], linear[0]
+        rec = rec.without_truth()
+        t = np.asarray(rec.time_s, dtype=np.float64)
+        held = rec.held_out()
+        out = np.asarray(rec.accel_mg, dtype=np.float64)
+        return cls(
+            identifier,
+            shape,
+            on_log,
+            amplitude,
+            t - t[0],
+            np.clip(np.asarray(rec.temp_c, dtype=np.float64), *temp_range_c),
+            out,
+            np.ones(len(out), dtype=bool) if held is None else ~held,
+            build_blocks(rec),
+        )
+
+
 def fit_least_squares(
     rec: Recording, structure: Structure, temp_range_c: tuple[float, float], play_start_c: float | None
 ) -> FittedPhysics:
     """``structure`` (one compensated effect with one nonlinear and one linear parameter) fitted by
     least squares on the training rows of ``rec``."""
-    if len(structure.compensated) != 1 or structure.nuisance:
-        raise UserError("physics: the least-squares fit takes one effect; give one in --effects")
-    identifier = structure.compensated[0].identifier
+    one = OneEffect.of(rec, structure, temp_range_c, "the least-squares fit")
+    identifier, shape, amplitude = one.identifier, one.shape, one.amplitude
     definition = DEFINITIONS[identifier]
-    nonlinear = definition.finder.nonlinear
-    linear = [p.name for p in definition.params if p.name not in dict(nonlinear)]
-    if len(nonlinear) != 1 or len(linear) != 1:
-        raise UserError(
-            f"physics: the least-squares fit takes an effect with one amplitude and one shape; {identifier} is not one"
-        )
-    (shape, on_log), amplitude = nonlinear[0], linear[0]
-    rec = rec.without_truth()
-    t = np.asarray(rec.time_s, dtype=np.float64)
-    t = t - t[0]
-    temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *temp_range_c)
-    out = np.asarray(rec.accel_mg, dtype=np.float64)
-    held = rec.held_out()
-    train = np.ones(len(out), dtype=bool) if held is None else ~held
-    data = build_blocks(rec)
+    t, temp, out, train, data = one.t, one.temp, one.out, one.train, one.data
     ((lo, hi),) = search_bounds(identifier, data)
     poly = poly_columns(temp)
 
@@ -81,7 +118,7 @@ def fit_least_squares(
         beta, *_ = np.linalg.lstsq(X, out[train], rcond=None)
         return float(np.sum((out[train] - X @ beta) ** 2)), beta, X
 
-    grid = np.geomspace(lo, hi, GRID_POINTS) if on_log else np.linspace(lo, hi, GRID_POINTS)
+    grid = np.geomspace(lo, hi, GRID_POINTS) if one.on_log else np.linspace(lo, hi, GRID_POINTS)
     rss = [solve(float(v))[0] for v in grid]
     k = int(np.argmin(rss))
     a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]

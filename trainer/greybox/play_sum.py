@@ -27,12 +27,11 @@ from scipy.optimize import lsq_linear
 
 from trainer.data.channels import channel_unit
 from trainer.data.recording import Recording
-from trainer.diagnose.api import build_blocks, channel_scale, search_bounds
-from trainer.errors import UserError
+from trainer.diagnose.api import channel_scale, search_bounds
 from trainer.greybox.fit import FittedPhysics
-from trainer.greybox.least_squares import backbone, poly_columns
+from trainer.greybox.least_squares import OneEffect, backbone, poly_columns
 from trainer.greybox.structure import Structure
-from trainer.physics.catalogue import BACKBONE, DEFINITIONS, PARAMETERS
+from trainer.physics.catalogue import BACKBONE, PARAMETERS
 from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.streamed import instance_suffixes
 from trainer.physics.catalogue.units import channel_param_name
@@ -54,25 +53,9 @@ def fit_play_sum(
 ) -> FittedPhysics:
     """``structure`` (one compensated effect with one shape and one amplitude) as a sum of instances
     at the :func:`octave_shapes`, fitted on the training rows of ``rec``."""
-    if len(structure.compensated) != 1 or structure.nuisance:
-        raise UserError("physics: the sum of widths takes one effect; give one in --effects")
-    identifier = structure.compensated[0].identifier
-    definition = DEFINITIONS[identifier]
-    nonlinear = definition.finder.nonlinear
-    linear = [p.name for p in definition.params if p.name not in dict(nonlinear)]
-    if len(nonlinear) != 1 or len(linear) != 1:
-        raise UserError(
-            f"physics: the sum of widths takes an effect with one amplitude and one shape; {identifier} is not one"
-        )
-    (shape, _), amplitude = nonlinear[0], linear[0]
-    rec = rec.without_truth()
-    t = np.asarray(rec.time_s, dtype=np.float64)
-    t = t - t[0]
-    temp = np.clip(np.asarray(rec.temp_c, dtype=np.float64), *temp_range_c)
-    out = np.asarray(rec.accel_mg, dtype=np.float64)
-    held = rec.held_out()
-    train = np.ones(len(out), dtype=bool) if held is None else ~held
-    data = build_blocks(rec)
+    one = OneEffect.of(rec, structure, temp_range_c, "the sum of widths")
+    identifier, shape, amplitude = one.identifier, one.shape, one.amplitude
+    t, temp, out, train, data = one.t, one.temp, one.out, one.train, one.data
     ((search_lo, search_hi),) = search_bounds(identifier, data)
     shapes = octave_shapes(identifier, shape, (search_lo, search_hi))
     units = [
