@@ -724,6 +724,7 @@ def test_a_gyroscope_module_speaks_of_angular_rate_in_its_own_unit(
     assert "int32_t gx_step(gx_state_t *state, int32_t rate_q16k, int32_t temp_mdegc);" in header
     for text in (header, source):
         assert "accel_q4ug" not in text and "micro-g" not in text and "acceleration" not in text
+        assert "accel LSB" not in text and "1/16 ug" not in text  # the coefficients' comment too
     flags = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Werror", "-c"]
     built = subprocess.run(
         ["gcc", *flags, "gx.c", "-o", "gx.o"], cwd=tmp_path, capture_output=True, text=True

@@ -110,7 +110,7 @@ def manifest(model: QPoly3) -> dict[str, object]:
             "clip_mdegc": [model.clip_lo_mdegc, model.clip_hi_mdegc],
             "t_ref_mdegc": model.t_ref_mdegc,
             "u": f"(T - T_ref) / 2^{model.u_shift}",
-            "coefficients": f"int32 Q{model.frac} accel LSB, of u^0..u^3",
+            "coefficients": f"int32 Q{model.frac} output LSB (1/16000 of the channel's unit), of u^0..u^3",
             "coefficients_q": list(model.coefficients_q),
             "frac_bits": model.frac,
             "horner_bound": model.bound,
