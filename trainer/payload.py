@@ -42,10 +42,15 @@ def count(payload: Mapping[str, Any], key: str, low: int, high: int | None = Non
     return value
 
 
-def number(value: Any, where: str) -> float:
-    """A finite real number (an int or a float, not a flag or text)."""
+def number(value: Any, where: str, rule: str = "finite") -> float:
+    """A finite real number (an int or a float, not a flag or text) obeying ``rule``, a catalogue
+    parameter's (``positive``: > 0, ``nonnegative``: >= 0; :data:`trainer.fields.NUMBER_RULES`)."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"{where} must be a finite number, got {value!r}")
+    if rule == "positive" and not value > 0:
+        raise ValueError(f"{where} must be > 0, got {value!r}")
+    if rule == "nonnegative" and not value >= 0:
+        raise ValueError(f"{where} must be >= 0, got {value!r}")
     return float(value)
 
 

@@ -213,14 +213,11 @@ def _effects_of(raw: Any, unit: str) -> tuple[EffectConfig, ...]:
             raise ValueError(
                 f"{where} ({identifier}) has parameters {sorted(params)}; the catalogue's are {list(named)}"
             )
-        values = {named[k]: payload_fields.number(v, f"{where}.{k}") for k, v in params.items()}
+        # each value by the catalogue's rule (a width, a time constant > 0: a play of width 0 gives NaN)
         rules = {p.name: p.rule for p in definition.params}
-        for (k, v), name in zip(params.items(), (named[k] for k in params), strict=True):
-            # the catalogue's rule (a width, a time constant > 0): a play of width 0 gives NaN, one < 0 a crash
-            if (rules[name] == "positive" and not v > 0) or (rules[name] == "nonnegative" and not v >= 0):
-                raise ValueError(
-                    f"{where}.{k} must be {'> 0' if rules[name] == 'positive' else '>= 0'}, got {v!r}"
-                )
+        values = {
+            named[k]: payload_fields.number(v, f"{where}.{k}", rules[named[k]]) for k, v in params.items()
+        }
         effects.append(EffectConfig(identifier, values))
     try:
         check_instances(e.identifier for e in effects)

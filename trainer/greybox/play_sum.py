@@ -66,14 +66,16 @@ def fit_play_sum(
     ]
     X = np.column_stack([poly_columns(temp), *units])[train]
     y = out[train]
-    scale = np.maximum(np.sqrt(np.mean(X**2, axis=0)), 1e-300)  # columns of comparable size for the solver
+    column_rms = np.maximum(
+        np.sqrt(np.mean(X**2, axis=0)), 1e-300
+    )  # columns of comparable size for the solver
     free, n = np.full(4, np.inf), len(shapes)
     fits = [
-        lsq_linear(X / scale, y, bounds=(np.r_[-free, lo], np.r_[free, hi]), method="bvls")
+        lsq_linear(X / column_rms, y, bounds=(np.r_[-free, lo], np.r_[free, hi]), method="bvls")
         for lo, hi in ((np.zeros(n), np.full(n, np.inf)), (np.full(n, -np.inf), np.zeros(n)))
     ]
     best = min(fits, key=lambda f: float(f.cost))
-    beta = best.x / scale
+    beta = best.x / column_rms
     kept = [k for k in range(n) if beta[4 + k] != 0.0]
     columns = [0, 1, 2, 3, *(4 + k for k in kept)]
     rss = float(np.sum((y - X @ beta) ** 2))
@@ -87,9 +89,9 @@ def fit_play_sum(
     suffixes = instance_suffixes([identifier] * len(instances))
     unit = channel_unit(rec)
     shown = channel_param_name(shape, unit)
-    scale = channel_scale(rec, data)
+    judged_by = channel_scale(rec, data)  # what a gyroscope's or barometer's amplitude is judged against
     outside = {
-        identifier + suffix: implausible(identifier, e.params, scale)
+        identifier + suffix: implausible(identifier, e.params, judged_by)
         for e, suffix in zip(instances, suffixes, strict=True)
     }
     outside = {label: why for label, why in outside.items() if why}

@@ -9,6 +9,7 @@ simulated one are evaluated by the same code.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
@@ -97,10 +98,7 @@ def check_instances(identifiers: Iterable[str]) -> None:
     widths); an effect that changes a temperature the others read (a lag giving ``T_pm``, a play
     output the polynomial reads) is applied once by :func:`drift`, so a second instance would be
     ignored there and run side by side in the stream: refused (ValueError, one line)."""
-    counts: dict[str, int] = {}
-    for identifier in identifiers:
-        counts[identifier] = counts.get(identifier, 0) + 1
-    for identifier, n in counts.items():
+    for identifier, n in Counter(identifiers).items():
         definition = EFFECTS[identifier]
         if n > 1 and (definition.proof_mass is not None or definition.bias_temperature is not None):
             raise ValueError(

@@ -47,9 +47,9 @@ def unregister(identifier: str) -> None:
 
 
 def in_step_order(identifiers: Iterable[str]) -> list[StreamedEffect]:
-    """The streamed effects among ``identifiers``, in the order one step runs them."""
-    wanted = set(identifiers)
-    return sorted((e for k, e in STREAMED.items() if k in wanted), key=lambda e: e.phase)
+    """The streamed effects among ``identifiers``, each once, in the order one step runs them."""
+    once = list(dict.fromkeys(identifiers))
+    return [STREAMED[once[i]] for i in instances_in_step_order(once)]
 
 
 def instance_suffixes(identifiers: Sequence[str]) -> tuple[str, ...]:
