@@ -133,6 +133,24 @@ def candidate(label: str) -> Candidate:
     return next(c for c in CANDIDATES if c.label == label)
 
 
+def variant_labels() -> tuple[str, ...]:
+    """The candidates that are a registered method with fixed options (``poly1``, ``physics-branches``,
+    ...): ``trainer fit --method`` takes them too, so that what auto would ship can be fitted on any
+    part of a run and scored on the rest (``trainer evaluate --holdout``)."""
+    return tuple(c.label for c in CANDIDATES if c.label != NONE and c.label not in methods.REGISTRY)
+
+
+def resolved(method: str, options: dict[str, Any] | None) -> tuple[str, dict[str, Any] | None]:
+    """(registered method, options) of ``method``: a variant's method with its fixed options over
+    ``options`` (its summary names the option that chose it), anything else unchanged."""
+    if method not in variant_labels():
+        return method, options
+    fixed = dict(candidate(method).options)
+    if "given_by" in fixed:
+        fixed["given_by"] = f"method {method}"
+    return candidate(method).method, {**(options or {}), **fixed}
+
+
 def candidate_list(text: str) -> tuple[str, ...]:
     """``--candidates``: a comma list of candidate labels (argparse type: a bad one is one line)."""
     import argparse
@@ -403,7 +421,8 @@ def fit_with_selection(
     from trainer.fitting import fit_with_stats
 
     if method != AUTO:
-        return fit_with_stats(method, train, options, policy)
+        registered, fixed = resolved(method, options)
+        return fit_with_stats(registered, train, fixed, policy)
     selection = select(
         train,
         labels=(options or {}).get("candidates"),

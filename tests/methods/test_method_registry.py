@@ -24,7 +24,7 @@ from trainer.compensator import Compensator
 from trainer.errors import run_cli
 from trainer.options.methods import OptionGroup
 from trainer.scoring.compare import fit_all
-from trainer.selection import AUTO
+from trainer.selection import AUTO, variant_labels
 
 ROOT = REPO_ROOT
 NAME = "linear-t"
@@ -194,7 +194,8 @@ def test_the_registry_order_is_the_comparison_order() -> None:
 
 
 def test_argparse_choices_equal_the_registry(linear_t: methods.Method) -> None:
-    assert _choices("fit", "--method") == (*methods.fit_cli_names(), AUTO)  # auto: a selector, not a method
+    # auto: a selector, not a method; the variants: auto's candidates that fix a method's options
+    assert _choices("fit", "--method") == (*methods.fit_cli_names(), *variant_labels(), AUTO)
     assert set(methods.fit_cli_names()) == {m.name for m in methods.entries() if not m.reference}
     assert NAME in _choices("fit", "--method")
     assert _choices("compare", "--methods") == methods.names()

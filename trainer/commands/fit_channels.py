@@ -31,6 +31,7 @@ from trainer.reference import OffsetPolicy
 def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
     from trainer.checkpoint import save_model
     from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
+    from trainer.data.holdout import part_left_for_training
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.options.workers import jobs_task_map
@@ -43,7 +44,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             f"names a model file: give a directory, or leave out --channels to fit the one-channel column"
         )
     check_output_directory(args.output)  # before a possibly long fit
-    train = read_recording(args.train)
+    train = part_left_for_training(read_recording(args.train), args.holdout)
     channels = select_channels(train, args.channels)
     if (note := one_axis_left_out(train, args.channels, channels)) is not None:
         print(note, file=sys.stderr, flush=True)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from trainer import methods
 from trainer.data.channels import relabel_units
 from trainer.reference import RECURSIVE_NOTE
-from trainer.selection import AUTO, record_lines, shown_name
+from trainer.selection import AUTO, record_lines, resolved, shown_name
 from trainer.train_stats import TrainStats
 
 if TYPE_CHECKING:
@@ -17,8 +17,9 @@ if TYPE_CHECKING:
 
 
 def checked_method(name: str) -> methods.Method:
-    """The method whose training checks apply (auto: the cubic's temperature span, its simplest fit)."""
-    return methods.get(methods.CUBIC if name == AUTO else name)
+    """The method whose training checks apply (auto: the cubic's temperature span, its simplest fit; a
+    variant such as ``physics-branches``: its registered method's)."""
+    return methods.get(methods.CUBIC if name == AUTO else resolved(name, None)[0])
 
 
 def progress_log(args: argparse.Namespace, prefix: str = "") -> Any:

@@ -160,3 +160,8 @@ def overlap_warning(
             "those scores are in-sample"
         )
     return None
+
+
+def part_left_for_training(rec: Recording, spec: str | None) -> Recording:
+    """The part of ``rec`` that ``--holdout spec`` leaves for training (all of it without one)."""
+    return rec if spec is None else split(rec, parse_holdout(spec))[0]
