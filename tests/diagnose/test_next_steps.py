@@ -14,7 +14,7 @@ from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.result import Ambiguity, Diagnosis
 
 
-def _diagnosis(named: list[str], ambiguous: list[Ambiguity]) -> Diagnosis:
+def _diagnosis(named: list[str], ambiguous: list[Ambiguity], unit: str = "mg") -> Diagnosis:
     residual = SimpleNamespace(residual_block=np.zeros(4))
     fake: Any = SimpleNamespace(
         left_out=[SimpleNamespace(effect=e, peak_visible_mg=1.0) for e in named],
@@ -23,7 +23,7 @@ def _diagnosis(named: list[str], ambiguous: list[Ambiguity]) -> Diagnosis:
         after=residual,
         profile=SimpleNamespace(branch=np.zeros(4, dtype=int), identifiability={}),
         not_identifiable=[],
-        signal=SimpleNamespace(label="mg"),
+        signal=SimpleNamespace(label=unit),
     )
     return cast(Diagnosis, fake)
 
@@ -55,3 +55,12 @@ def test_the_after_figure_says_when_it_includes_terms_the_compensator_does_not_c
     for text in ("\n".join(markdown_lines(steps)), "\n".join(terminal_lines(steps))):
         assert "bias_step included, which the compensator does not carry" in text, text
     assert "what the compensator would leave" not in "\n".join(markdown_lines(steps))
+
+
+def test_the_second_input_the_profile_asks_for_is_the_channel_s_own() -> None:
+    """A gyroscope's next steps asked to flip the accelerometer (+1 g / -1 g): each channel's profile
+    names the known second input of its own sensor, and only that one."""
+    inputs = {"mg": "+1 g / -1 g", "deg/s": "rate table", "Pa": "second pressure"}
+    for unit, wanted in inputs.items():
+        generic = next_steps(_diagnosis(["temp_rate"], [], unit)).profile[-1]
+        assert wanted in generic and not any(other in generic for other in inputs.values() if other != wanted)

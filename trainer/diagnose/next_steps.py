@@ -16,10 +16,21 @@ from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
 from trainer.scoring.markdown import markdown_table
 
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"
-GENERIC_PROFILE = (
-    "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a known second input "
-    "at two temperatures (an accelerometer flipped 180 degrees, +1 g / -1 g; a gyroscope on a rate table)"
-)
+# A known second input, by the diagnosed channel's printed unit (what separates a scale factor from a bias)
+SECOND_INPUT = {
+    "mg": "the accelerometer flipped 180 degrees, +1 g / -1 g",
+    "deg/s": "the gyroscope on a rate table, two rates",
+    "Pa": "the barometer at a second pressure",
+}
+
+
+def generic_profile(unit: str) -> str:
+    """The profile that separates the catalogue's effects on any channel, its second input the channel's own."""
+    second = SECOND_INPUT.get(unit, "; ".join(SECOND_INPUT.values()))
+    return (
+        "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a known second input "
+        f"at two temperatures ({second})"
+    )
 
 
 @dataclass(frozen=True)
@@ -107,7 +118,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
     for effect, info in d.profile.identifiability.items():
         if info.test and (effect in unsettled or info.weak) and (not info.identifiable or info.weak):
             profile.append(f"{effect}: {info.test}")
-    profile.append(GENERIC_PROFILE)
+    profile.append(generic_profile(d.signal.label))
     not_compensated = list(dict.fromkeys(e for e in named if not compensable(e)))
     implausible = [a.effects[0] for a in d.ambiguous if a.implausible is not None]
     fit_only = list(dict.fromkeys([*not_compensated, *(f"{e} (implausible)" for e in implausible)]))
