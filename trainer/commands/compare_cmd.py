@@ -20,6 +20,7 @@ from trainer.options.dlstm import add_dlstm_options, settings_from_args
 from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.options.workers import workers
 from trainer.physics.input_presets import INPUT_PRESETS
+from trainer.report_dir import check_report_dir, previous_outputs, record_outputs, remove_stale
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -96,11 +97,15 @@ def _refusal(args: argparse.Namespace) -> Callable[[Channel], str | None]:
     return refuse
 
 
-def publish(staging: Path, out_dir: Path) -> None:
-    """Move a finished report into ``out_dir``: a rename when it is new, else file by file.
+def publish(staging: Path, out_dir: Path, command: str) -> None:
+    """Move a finished report of ``command`` into ``out_dir``: a rename when it is new, else file by file.
 
-    Existing files of the same names are replaced; nothing else in ``out_dir`` is touched.
+    Existing files of the same names are replaced, and the files the same command's earlier report
+    there wrote and this one does not are removed (:mod:`trainer.report_dir`); the user's files stay.
     """
+    written = [p.relative_to(staging).as_posix() for p in staging.rglob("*") if p.is_file()]
+    previous = previous_outputs(out_dir, command)
+    record_outputs(staging, command, written)
     if not out_dir.exists():
         # mkdtemp made it 0700: a new report directory gets the usual mode (a reviewer reads it)
         os.chmod(staging, 0o777 & ~current_umask())
@@ -112,6 +117,13 @@ def publish(staging: Path, out_dir: Path) -> None:
             target.parent.mkdir(parents=True, exist_ok=True)
             source.replace(target)
     shutil.rmtree(staging)
+    if removed := remove_stale(out_dir, previous, written):
+        print(
+            f"{out_dir}: removed {len(removed)} file(s) of the earlier {command} report this one does not write: "
+            + ", ".join(removed),
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -150,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
+    check_report_dir(out_dir, "compare")
     notes = []
     lead_in = None
     if args.holdout is not None:
@@ -228,7 +241,7 @@ def run(args: argparse.Namespace) -> int:
         report = render_report(comparison, settings, frontend, args, figures, signal.heading)
         (staging / "report.md").write_text(relabel_units(report, signal.unit), encoding="utf-8")
         (staging / "table1.txt").write_text(table1 + "\n", encoding="utf-8")
-        publish(staging, out_dir)
+        publish(staging, out_dir, "compare")
     except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
         raise_write_error(exc, out_dir)
@@ -280,6 +293,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     out_dir = Path(args.out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
+    check_report_dir(out_dir, "compare")
     rec = check_scored(read_recording(args.train))
     signal = signal_of(rec)
     unit = signal.label
@@ -333,7 +347,7 @@ def run_crossval(args: argparse.Namespace, requested: tuple[str, ...], policy: A
     try:
         (staging / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
         (staging / "crossval.json").write_text(json.dumps(cv.to_dict(), indent=2) + "\n", encoding="utf-8")
-        publish(staging, out_dir)
+        publish(staging, out_dir, "compare")
     except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
         raise_write_error(exc, out_dir)

@@ -11,6 +11,7 @@ from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, atomic_outputs
 from trainer.options.channels import add_channels_option, run_per_channel
 from trainer.physics.input_presets import INPUT_PRESETS
+from trainer.report_dir import check_report_dir, record_outputs
 
 # Heavy modules (torch, matplotlib) are imported inside run() so that 'trainer --help' starts fast.
 
@@ -96,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
     if args.smoothing < 0:
         raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
     check_output_directory(args.out_dir)  # an existing file there: one line, before any work
+    check_report_dir(Path(args.out_dir), "evaluate")
     model, checkpoint = load_model(args.model)
     stats = TrainStats.of_checkpoint(checkpoint)
     # the model's own channel (gyro0_x of a multi-channel file), never the file's accel_mg
@@ -168,5 +170,6 @@ def run(args: argparse.Namespace) -> int:
             signal=signal,
         )
         plot_allan(result.curves, fig13_tmp, title="Allan deviation after compensation", signal=signal)
+    record_outputs(out_dir, "evaluate", [p.name for p in outputs])
     print(f"report and figures written to {out_dir}/")
     return 0

@@ -289,6 +289,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
+    from trainer.report_dir import check_report_dir
     from trainer.scoring import signoff
     from trainer.scoring.rate_coverage import rate_note
     from trainer.scoring.thresholds import load_thresholds
@@ -308,6 +309,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out-dir {out_dir}: exists and is not a directory")
     if not (out_dir.parent if str(out_dir.parent) else Path(".")).is_dir():
         raise UserError(f"--out-dir {out_dir}: parent directory {out_dir.parent} does not exist")
+    check_report_dir(out_dir, "report")
     unit = args.unit or Path(str(recordings[0])).stem
 
     loaded = {path: check_scored(read_recording(path)) for path in dict.fromkeys(r for r in recordings if r)}
@@ -415,7 +417,7 @@ def run(args: argparse.Namespace) -> int:
             version=__version__,
         )
         (staging / "report.md").write_text(text, encoding="utf-8")
-        publish(staging, out_dir)
+        publish(staging, out_dir, "report")
     except BaseException as exc:
         shutil.rmtree(staging, ignore_errors=True)
         raise_write_error(exc, out_dir)
