@@ -91,7 +91,17 @@ def validate_name(name: str) -> str:
         raise UserError(f"--name {name!r}: is a C keyword")
     if len(name) > MAX_NAME_LENGTH:
         raise UserError(f"--name {name!r}: longer than {MAX_NAME_LENGTH} characters (C99 portability)")
+    if name in kernel_library_names():
+        raise UserError(
+            f"--name {name!r}: the name of a kernel library file the module ships with ({name}.h or {name}.c); "
+            "NAME.h and NAME.c would replace it: choose another"
+        )
     return name
+
+
+def kernel_library_names() -> set[str]:
+    """The stems of the kernel library's files (``tdc_kernels``, ...), which an export writes beside NAME.h."""
+    return {p.stem for p in KERNEL_HEADER.parent.iterdir() if p.suffix in (".h", ".c")}
 
 
 @dataclass(frozen=True)

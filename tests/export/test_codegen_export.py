@@ -281,7 +281,11 @@ def test_export_of_a_recording_says_it_is_not_a_model(
 # ------------------------------------------------------------------------------------- errors
 
 
-@pytest.mark.parametrize("name", ["9lives", "my-model", "int", "_hidden", "a b", "x" * 23, "é"])
+# the kernel library's own file names: NAME.h / NAME.c would replace them (an export that did not build)
+@pytest.mark.parametrize(
+    "name",
+    ["9lives", "my-model", "int", "_hidden", "a b", "x" * 23, "é", "tdc_kernels", "tdc_physics_kernels"],
+)
 def test_invalid_names_are_rejected(models: dict[str, Path], tmp_path: Path, name: str) -> None:
     result = _cli("export", str(models["pla"]), "-o", str(tmp_path / "out"), "--name", name)
     _assert_clean_failure(result, "--name")
