@@ -295,6 +295,51 @@ def test_a_model_directory_without_channels_says_what_to_add(
     assert not (tmp_path / "p").exists()
 
 
+@pytest.mark.parametrize("damage", ["model lost", "index lost", "index garbled"])
+def test_a_model_directory_that_lost_a_file_is_refused_not_exported_short(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], damage: str
+) -> None:
+    """A copy of a fit directory without gyro0_y.pt exported five channels, its PX4 file with the
+    axis's coefficients 0 and the compensation enabled: the index says what the set is."""
+    models = tmp_path / "models"
+    shutil.copytree(imu["root"] / "poly3", models)
+    if damage == "model lost":
+        (models / "gyro0_y.pt").unlink()
+    elif damage == "index lost":
+        (models / "channels.json").unlink()
+    else:
+        (models / "channels.json").write_text('{"channels": [{"channel": "accel0_x"')
+    for cli, args in (
+        (
+            codegen_main,
+            ["export", str(models), "--channels", "all", "--format", "px4-params", "-o", str(tmp_path / "p")],
+        ),
+        (codegen_main, ["export", str(models), "--channels", "all", "-o", str(tmp_path / "c")]),
+        (
+            trainer_main,
+            ["evaluate", str(models), str(imu["rec"]), "--channels", "all", "--out-dir", str(tmp_path / "e")],
+        ),
+    ):
+        code = run_cli(cli, args)
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert {"model lost": "gyro0_y.pt is not there", "index lost": "no channels.json",
+                "index garbled": "not the index"}[damage] in err  # fmt: skip
+    assert not any((tmp_path / d).exists() for d in "pce")
+
+
+def test_a_refit_of_fewer_channels_exports_only_those(imu: dict[str, Path], tmp_path: Path) -> None:
+    """A model of an earlier, wider fit left in the directory is not part of the set the index lists."""
+    models = tmp_path / "models"
+    shutil.copytree(imu["root"] / "poly3", models)
+    index = json.loads((models / "channels.json").read_text())
+    index["channels"] = [c for c in index["channels"] if c["channel"] != "gyro0_z"]
+    (models / "channels.json").write_text(json.dumps(index))
+    assert run_cli(codegen_main, ["export", str(models), "--channels", "all", "-o", str(tmp_path / "c")]) == 0
+    manifest = json.loads(next((tmp_path / "c").glob("*.manifest.json")).read_text())
+    assert "gyro0_z" not in json.dumps(manifest) and "gyro0_y" in json.dumps(manifest)
+
+
 def test_refusals_say_why(imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = run_cli(trainer_main, ["fit", "--method", "dlstm", str(imu["rec"]), "--channels", "baro0", "-o",
                                   str(tmp_path / "d")])  # fmt: skip

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import shutil
 import sys
 import tempfile
@@ -50,15 +51,16 @@ def channel_output(out: str | Path, channel: str, suffix: str = "") -> Path:
 
 
 def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
-    """The per-channel models ``trainer fit --channels`` wrote into ``directory``, as ``wanted``."""
+    """The per-channel models ``trainer fit --channels`` wrote into ``directory``, as ``wanted``: the
+    channels its index (:data:`INDEX_FILE`) lists, each of whose files must be there (a file lost in a
+    copy would otherwise drop its channel from an export without a word)."""
     root = Path(directory)
     if not root.is_dir():
         raise UserError(
             f"{root}: {CHANNELS_OPTION} reads a directory written by 'trainer fit {CHANNELS_OPTION}'"
         )
-    available = sorted((p.stem for p in root.glob(f"*{MODEL_SUFFIX}")), key=sort_key)
-    if not available:
-        raise UserError(f"{root}: no per-channel models (*{MODEL_SUFFIX}) in it")
+    listed = _indexed_models(root)
+    available = sorted(listed, key=sort_key)
     names = available if wanted == ("all",) else list(wanted)
     missing = [name for name in names if name not in available]
     if missing:
@@ -66,7 +68,34 @@ def model_files(directory: str | Path, wanted: tuple[str, ...]) -> list[Path]:
             f"{root}: {CHANNELS_OPTION} {missing[0]!r} has no model in this directory; available: "
             f"{', '.join(available)}"
         )
-    return [root / f"{name}{MODEL_SUFFIX}" for name in names]
+    lost = [name for name in names if not (root / listed[name]).is_file()]
+    if lost:
+        raise UserError(
+            f"{root}: {INDEX_FILE} lists {', '.join(lost)}, but {listed[lost[0]]} is not there (lost in a copy?): "
+            f"copy it back or fit again"
+        )
+    return [root / listed[name] for name in names]
+
+
+def _indexed_models(root: Path) -> dict[str, str]:
+    """``{channel: model file name}`` of the index ``trainer fit --channels`` wrote into ``root``."""
+    index = root / INDEX_FILE
+    if not index.is_file():
+        raise UserError(
+            f"{root}: no {INDEX_FILE}, so not a directory written by 'trainer fit {CHANNELS_OPTION}': "
+            f"give the model files themselves, without {CHANNELS_OPTION}"
+        )
+    try:
+        entries = json.loads(index.read_text(encoding="utf-8"))["channels"]
+        listed = {str(e["channel"]): str(e["model"]) for e in entries}
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) else f"{type(exc).__name__}: {exc}"
+        raise UserError(f"{index}: not the index 'trainer fit {CHANNELS_OPTION}' writes ({why})") from None
+    if not listed:
+        raise UserError(f"{index}: lists no channel")
+    if bad := [m for m in listed.values() if Path(m).name != m or not m.endswith(MODEL_SUFFIX)]:
+        raise UserError(f"{index}: model {bad[0]!r} is not a {MODEL_SUFFIX} file of this directory")
+    return listed
 
 
 def channel_prefix(name: str, number: int, count: int) -> str:
