@@ -203,6 +203,7 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
     for key, (valid, what) in FIELD_CHECKS.items():  # each optional; when present, what readers expect
         if stats.has(key) and not valid(stats.data[key]):
             stats.fail(f"field 'train_stats.{key}' must be {what}, got {show(stats.data[key])}")
+    _check_channel_unit(stats)
     lo, hi = root.numbers("valid_temp_range_c", 2)
     if not lo <= hi:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
@@ -218,14 +219,38 @@ def _check_fields(checkpoint: dict[str, Any], source: str) -> None:
             )
     if "offset" in checkpoint:
         try:
-            OffsetRecord.from_dict(checkpoint["offset"])
+            offset = OffsetRecord.from_dict(checkpoint["offset"])
         except (KeyError, TypeError, ValueError) as exc:
             raise UserError(f"{source}: field 'offset' is malformed ({exc})") from None
+        # one fit sets both: a polynomial about one T_ref with its constant taken at another is garbage
+        if payload.has("t_ref_c") and payload.number("t_ref_c") != offset.t_ref_c:
+            root.fail(
+                f"field 'payload.t_ref_c' {payload.number('t_ref_c'):g} degC differs from 'offset.t_ref_c' "
+                f"{offset.t_ref_c:g} degC, which one fit sets alike (a damaged or hand-edited model file)"
+            )
     bad = _first_non_finite(checkpoint["payload"], "payload")
     if bad is not None:
         raise UserError(
             f"{source}: field {bad!r} holds NaN, inf or a number beyond {PAYLOAD_MAGNITUDE_LIMIT:g} "
             "(a damaged or hand-edited model file)"
+        )
+
+
+def _check_channel_unit(stats: DottedFields) -> None:
+    """``train_stats.unit`` is one the tool knows and is the unit its ``channel`` is named for: a
+    gyroscope model relabelled ``accel0_x`` was exported as an accelerometer, its deg/s read as mg."""
+    from trainer.data.channels import DEFAULT_UNIT, UNITS
+    from trainer.data.flightlog import parse_channel
+
+    unit = stats.data.get("unit")
+    if unit is not None and unit not in UNITS:
+        stats.fail(f"field 'train_stats.unit' is {show(unit)}, not one of {', '.join(UNITS)}")
+    channel = stats.data.get("channel")
+    parsed = parse_channel(channel) if isinstance(channel, str) else None
+    if parsed is not None and parsed.unit != (unit or DEFAULT_UNIT):
+        stats.fail(
+            f"field 'train_stats.channel' {channel!r} is a channel in {parsed.unit}, but 'train_stats.unit' "
+            f"says {unit or DEFAULT_UNIT} (a damaged or hand-edited model file)"
         )
 
 

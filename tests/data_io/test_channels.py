@@ -236,6 +236,37 @@ def test_a_channel_model_on_a_recording_without_its_channel_is_refused_in_one_li
     assert not (tmp_path / "ev").exists() and not (tmp_path / "v.json").exists()
 
 
+def test_a_model_on_a_one_axis_import_of_another_axis_is_refused_in_one_line(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An accel0_x model on the one-axis import of accel0_z (metadata channel=accel0_z, the same
+    unit): evaluate and report scored z with x's cubic, titled accel0_x; verify likewise."""
+    rec = read_recording(imu["rec"])
+    z_only = one_axis(rec, "accel0_z")
+    z_only.meta["channel"] = "accel0_z"  # what trainer import of that one axis writes
+    z_file = tmp_path / "z.csv"
+    write_recording(z_only, z_file)
+    model = str(imu["root"] / "poly3" / "accel0_x.pt")
+    assert codegen_main(["export", model, "-o", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    for cli, args in (
+        (trainer_main, ["evaluate", model, str(z_file), "--out-dir", str(tmp_path / "ev")]),
+        (trainer_main, ["report", model, "--recording", str(z_file), "-o", str(tmp_path / "so")]),
+        (
+            codegen_main,
+            ["verify", model, str(tmp_path / "c"), str(z_file), "--json", str(tmp_path / "v.json")],
+        ),
+    ):
+        code = run_cli(cli, args)
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert "its accel_mg is channel accel0_z" in err and "is of accel0_x" in err, err
+    assert not any((tmp_path / p).exists() for p in ("ev", "so", "v.json"))
+    # the model of that axis is scored as before
+    z_model = str(imu["root"] / "poly3" / "accel0_z.pt")
+    assert run_cli(trainer_main, ["evaluate", z_model, str(z_file), "--out-dir", str(tmp_path / "ok")]) == 0
+
+
 def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

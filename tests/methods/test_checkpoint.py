@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,7 @@ from trainer.dlstm.realtime import TEMPERATURE_KIND, FrontEnd, Standardiser
 from trainer.errors import UserError
 from trainer.fitting import fit_with_stats
 from trainer.methods import name_of
+from trainer.reference import OffsetRecord
 from trainer.train_stats import TrainStats
 
 
@@ -233,6 +235,43 @@ def test_every_field_is_checked_at_load_naming_it(tmp_path: Path, change: Any, f
     change(checkpoint)
     torch.save(checkpoint, path)
     with pytest.raises(UserError, match=rf"model\.pt: field '{field}'"):
+        load_model(path)
+
+
+def _cubic_checkpoint(tmp_path: Path, **stats: Any) -> tuple[Path, dict[str, Any]]:
+    temp = np.linspace(-40, 80, 500)
+    model = CubicPolynomial().fit_arrays(temp, 1e-4 * temp**3)
+    model.offset = OffsetRecord("relative", model.t_ref_c, 1.0)
+    path = tmp_path / "m.pt"
+    save_model(model, path, train_stats=TrainStats(**stats), valid_temp_range_c=(-40.0, 80.0))
+    return path, torch.load(path, weights_only=True)
+
+
+@pytest.mark.parametrize(
+    ("stats", "change", "message"),
+    [
+        # a gyroscope's cubic relabelled as an accelerometer axis: exported in mg, 1.78x too small
+        ({"channel": "gyro0_x", "unit": "dps"}, lambda c: c["train_stats"].update(channel="accel0_x"),
+         "field 'train_stats.channel' 'accel0_x' is a channel in mg, but 'train_stats.unit' says dps"),
+        ({"channel": "gyro0_x", "unit": "dps"}, lambda c: c["train_stats"].update(unit="deg/s"),
+         "field 'train_stats.unit' is 'deg/s', not one of mg, dps, pa"),
+        ({"channel": "accel0_z"}, lambda c: c["train_stats"].update(unit="dps"),
+         "'accel0_z' is a channel in mg, but 'train_stats.unit' says dps"),
+        ({}, lambda c: c["payload"].update(t_ref_c=500.0),
+         "field 'payload.t_ref_c' 500 degC differs from 'offset.t_ref_c'"),
+        ({}, lambda c: c["payload"].update(degree=2),
+         "payload.degree is 2, but coefficients_mg has a non-zero term of a higher order"),
+    ],
+)  # fmt: skip
+def test_contradicting_fields_are_refused_naming_them(
+    tmp_path: Path, stats: dict[str, Any], change: Any, message: str
+) -> None:
+    """Fields one fit sets together must agree: an edited file that breaks that is refused."""
+    path, checkpoint = _cubic_checkpoint(tmp_path, **stats)
+    load_model(path)  # as written, it loads
+    change(checkpoint)
+    torch.save(checkpoint, path)
+    with pytest.raises(UserError, match=re.escape(message)):
         load_model(path)
 
 

@@ -131,6 +131,10 @@ class CubicPolynomial(TemperatureCompensator):
             degree=payload_fields.count(payload, "degree", 0, 3) if "degree" in payload else 3,
         )
         model.coefficients = payload_fields.table(payload, "coefficients_mg", 4)
+        if np.any(model.coefficients[model.degree + 1 :] != 0.0):
+            raise ValueError(
+                f"payload.degree is {model.degree}, but coefficients_mg has a non-zero term of a higher order"
+            )
         model.t_ref_c = payload_fields.number(payload["t_ref_c"], "payload.t_ref_c")
         model.temp_range_c = payload_fields.temp_range(payload)
         return model

@@ -320,7 +320,7 @@ def model_view(rec: Recording, channel: str | None, model_path: object) -> Recor
     """The part of ``rec`` the model compensates: the recording itself (``accel_mg``) when the model
     has no channel, the recording has no channel columns or its ``accel_mg`` is the model's channel
     (metadata ``channel``: a one-axis import), else the channel's one-channel view; a missing
-    channel is a UserError."""
+    channel, or a one-axis recording whose metadata names another channel, is a UserError."""
     available = recording_channels(rec)
     if channel and available and rec.meta.get("channel") != channel:
         if channel not in available:
@@ -330,6 +330,12 @@ def model_view(rec: Recording, channel: str | None, model_path: object) -> Recor
             )
         (found,) = select_channels(rec, (channel,))
         return channel_view(rec, found)
+    held = rec.meta.get("channel")
+    if channel and held and held != channel:
+        raise UserError(
+            f"{rec.source}: its accel_mg is channel {held} (metadata channel={held}), but model {model_path} "
+            f"is of {channel}: score it on a recording of {channel} (trainer import --channels {channel})"
+        )
     if channel and unit_of_channel_name(channel) != channel_unit(rec):
         raise UserError(
             f"{rec.source}: no channel {channel!r} (the channel of model {model_path}); the recording holds "
