@@ -267,6 +267,37 @@ def test_a_model_on_a_one_axis_import_of_another_axis_is_refused_in_one_line(
     assert run_cli(trainer_main, ["evaluate", z_model, str(z_file), "--out-dir", str(tmp_path / "ok")]) == 0
 
 
+def test_a_misspelled_channel_column_is_refused_not_left_out(
+    imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """gyro0_x_dsp (a typo of gyro0_x_dps): --channels all fitted five channels without a word and the
+    IMU shipped with gyro x uncompensated. Refused for its sensor; another sensor's list still fits."""
+    rec = read_recording(imu["rec"])
+    columns = {("gyro0_x_dsp" if k == "gyro0_x_dps" else k): v for k, v in rec.columns.items()}
+    typo = tmp_path / "typo.csv"
+    write_recording(Recording(columns, dict(rec.meta), "typo"), typo)
+    for wanted in ("all", "gyro0_y"):
+        out = tmp_path / f"m_{wanted}"
+        code = run_cli(
+            trainer_main, ["fit", "--method", "poly3", str(typo), "--channels", wanted, "-o", str(out)]
+        )
+        err = capsys.readouterr().err.strip()
+        assert (
+            code == 2
+            and len(err.splitlines()) == 1
+            and "column 'gyro0_x_dsp'" in err
+            and "gyro0_x_dps" in err
+        )
+        assert not out.exists()
+    out = tmp_path / "m_accel"
+    assert (
+        run_cli(
+            trainer_main, ["fit", "--method", "poly3", str(typo), "--channels", "accel0_x", "-o", str(out)]
+        )
+        == 0
+    )
+
+
 def test_a_bad_channel_name_is_one_line_naming_the_available_ones(
     imu: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

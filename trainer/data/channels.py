@@ -169,9 +169,46 @@ def other_channels_note(rec: Recording) -> str | None:
     )
 
 
+_SENSOR_PREFIXED = re.compile(r"(accel|gyro|baro)([0-9]+)_(.*)")  # a column named for a sensor instance
+
+
+def misnamed_columns(names: Collection[str]) -> dict[str, str]:
+    """``{column: why}`` for the columns named for a sensor instance (``gyro0_...``) that are neither
+    one of its channels nor its temperature column: a typo the channel list would drop silently
+    (``gyro0_x_dsp``, ``accel0_tmp_c``)."""
+    channels = {c.column for c in channels_in(names).values()}
+    out: dict[str, str] = {}
+    for column in names:
+        match = _SENSOR_PREFIXED.fullmatch(column)
+        if match is None or column in channels:
+            continue
+        sensor, instance, rest = match.groups()
+        if rest == "temp_c" and len(instance) == 1:
+            continue
+        unit = SENSOR_UNITS[sensor]
+        data = f"{sensor}{instance[0]}_x_{unit}" if sensor != "baro" else f"baro{instance[0]}_{unit}"
+        out[column] = (
+            f"the format names a {sensor} instance's columns {data} (instance 0-9, unit {unit}) and "
+            f"{sensor}{instance[0]}_temp_c"
+        )
+    return out
+
+
 def select_channels(rec: Recording, wanted: tuple[str, ...]) -> list[Channel]:
-    """The channels ``wanted`` (from :func:`parse_channels_option`) of ``rec``, in the order given."""
+    """The channels ``wanted`` (from :func:`parse_channels_option`) of ``rec``, in the order given.
+    A column that looks like a channel or temperature of a wanted sensor instance but is not one of
+    the format's names is refused: ``all`` would have left it out, and a typo in a temperature's
+    name would have sent its channels to ``temp_c``."""
     available = recording_channels(rec)
+    prefixes = None if wanted == (ALL,) else {name.split("_")[0] for name in wanted}
+    for column, why in misnamed_columns(list(rec.columns)).items():
+        match = _SENSOR_PREFIXED.fullmatch(column)
+        assert match is not None
+        if prefixes is None or f"{match.group(1)}{match.group(2)}" in prefixes:
+            raise UserError(
+                f"{rec.source}: column {column!r} is named for a sensor but is not a column of the format "
+                f"({why}): rename it, or list the channels you want with --channels"
+            )
     if not available:
         raise UserError(
             f"{rec.source}: --channels: the recording has no channel columns (accel0_x_mg, gyro0_x_dps, "
