@@ -243,6 +243,16 @@ def test_flagged_units_are_exactly_the_planted_ones(fleet: tuple[Path, FleetRun]
     assert lag_u18["params"]["tau_s"] / float(np.median(taus)) == pytest.approx(3.0, rel=0.25)
 
 
+def test_a_bias_step_is_not_read_as_another_temperature_coefficient(fleet: tuple[Path, FleetRun]) -> None:
+    """The step unit's polynomial is compared as the final model fitted it beside the step: calibrated
+    alone, the polynomial bends to hold the step (tests/diagnose/test_baseline_final.py) and a unit was
+    flagged for c0..c3 as well."""
+    _, run = fleet
+    summary = json.loads((run.out_dir / "fleet.json").read_text())
+    reasons = next(u["out_of_family"] for u in summary["units"] if u["id"] == "U07")
+    assert reasons and not [r for r in reasons if r.startswith("bias_poly.")], reasons
+
+
 def test_bad_file_is_one_line_in_its_unit_and_the_fleet_goes_on(fleet: tuple[Path, FleetRun]) -> None:
     _, run = fleet
     result = run.results[BAD]

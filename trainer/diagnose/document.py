@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from collections.abc import Mapping
 from typing import Any
 
@@ -224,6 +225,18 @@ def effects(calibrated: list[EffectConfig], noise: dict[str, dict[str, float]]) 
     return out
 
 
+def final_baseline(d: Diagnosis) -> list[EffectConfig]:
+    """The user's effects as the final model fitted them beside what the finder added: a bias step the
+    baseline cannot hold bends its polynomial (``baseline_calibrated``), the final model's does not."""
+    wanted = Counter(e.identifier for e in d.baseline_effects)
+    out = []
+    for effect in d.augmented.effects:
+        if wanted[effect.identifier] > 0:
+            wanted[effect.identifier] -= 1
+            out.append(effect)
+    return out
+
+
 def document(d: Diagnosis) -> dict[str, Any]:
     """The ``--json`` document (numbers rounded; NaN left for :func:`json_text`).
 
@@ -263,6 +276,7 @@ def _document(d: Diagnosis) -> dict[str, Any]:
         },
         "baseline": list(d.baseline.identifiers),
         "baseline_calibrated": effects(d.baseline_effects, d.before.noise),
+        "baseline_final": effects(final_baseline(d), d.after.noise),
         "profile": d.profile.to_dict(),
         "criterion": {
             "name": CRITERION,

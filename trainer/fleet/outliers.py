@@ -6,7 +6,7 @@ modified z-score: a few bad units cannot hide themselves by inflating a standard
 when the finder names an effect in it that few units show, or misses one that nearly all show.
 
 The numbers are every fitted parameter of the catalogue's deterministic effects (the calibrated
-baseline and the effects the finder named) and the white-noise density, plus each method's drift
+baseline as the final model fitted it beside the effects the finder named, and those effects) and the white-noise density, plus each method's drift
 left. The other noise terms are left out: fitted to block means of a short run, their estimates
 spread over orders of magnitude between identical units and would flag noise, not units.
 """
@@ -70,7 +70,10 @@ def unit_features(result: UnitResult) -> dict[str, float]:
     features: dict[str, float] = {}
     diagnosis = result.diagnosis or {}
     seen: Counter[str] = Counter()
-    for effect, params in (diagnosis.get("baseline_calibrated") or {}).items():
+    # the final model's baseline: calibrated alone it absorbs what the finder names (a bias step bent
+    # the polynomial of its unit into "c1 17 robust SD above the fleet"); a summary cached before it: as calibrated
+    baseline = diagnosis.get("baseline_final", diagnosis.get("baseline_calibrated")) or {}
+    for effect, params in baseline.items():
         if effect in EFFECTS or effect in SCORED_NOISE:
             _params(features, effect, params, seen)
     for entry in diagnosis.get("left_out", []):

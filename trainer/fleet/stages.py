@@ -193,13 +193,15 @@ def load(unit: UnitSpec, settings: FleetSettings) -> UnitData | Failure:
 
 
 def _diagnosis_summary(doc: dict[str, Any]) -> dict[str, Any]:
-    """What the fleet report reads: the calibrated baseline, the effects named, the fit (its block
+    """What the fleet report reads: the baseline as the final model fitted it beside the effects named
+    (and as calibrated alone), the effects named, the fit (its block
     RMS under the channel's own name, ``rms_block_dps`` on a gyroscope: the diagnosis' naming)."""
     from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 
     rms_key = channel_param_name("rms_block_mg", (doc.get("channel") or {}).get("unit", CATALOGUE_UNIT))
     return {
         "baseline_calibrated": doc["baseline_calibrated"],
+        "baseline_final": doc["baseline_final"],
         "left_out": [
             {"effect": e["effect"], "params": e["params"], "flags": e.get("flags", [])}
             for e in doc["left_out"]
