@@ -90,7 +90,10 @@ class ImuForm:
     (codegen.imu_record.ChannelTables) given the model and the index of the sensor whose temperature it
     reads; ``label``: its channels in messages. The rest says what the module holds for it:
     ``snippets``: its template of macros, each filling one place of imu.h.j2 / imu.c.j2 (the macro of
-    that name; a place it has no macro for gets nothing of it); ``context``: that template's variables
+    that name; a place it has no macro for gets nothing of it; in a module with ``NAME_restore``,
+    ``c_identity``, ``c_saved_ok``, ``c_restore``, ``kept`` and ``bounds_doc`` keep its state, and
+    a form with state but no ``c_restore`` starts afresh there, by its ``c_init`` and ``c_reset``);
+    ``context``: that template's variables
     given its channels (codegen.imu_record.ImuPart); ``manifest``: its keys of the module's manifest;
     ``blob``: its record in the calibration blob after the channel header (None: built-in tables only);
     a family with a blob record is in every module (a blob may put it on any channel), the others only
@@ -128,7 +131,7 @@ class CFamily:
     benchmark harness); ``state``: the state struct's members given the common ones (flags, samples);
     ``schedules``: the ``--schedule`` values it takes; ``kernels``: extra kernel headers shipped with
     its modules (manifest key -> file; each has a ``#define TDC..._VERSION N`` the module checks);
-    ``restore``: it has NAME_restore; ``usage``: its paragraph of the header's comment (a template
+    ``restore``: it has NAME_restore (an IMU module with a channel of it has one too); ``usage``: its paragraph of the header's comment (a template
     beside ``template``; None: a memoryless model's, any rate); ``time_base``: None for a memoryless
     family (any rate); ``imu``: None when it has no IMU-module form; ``clamps_accel``: whether a model's
     step clamps the acceleration to ``--accel-limit-g`` (a network whose input is the acceleration);

@@ -15,6 +15,12 @@ This module and its templates know no family: each C family with an IMU-module f
 blob record, its template variables and its template of macros, which the IMU templates call at
 their places for every form the module holds (codegen/families/<unit>/imu.py, ``_<unit>_imu.j2``).
 
+A module with a channel whose family has ``NAME_restore`` (physics) also has ``NAME_restore(state, cal,
+saved)``: a state carries ``restore_id``, a CRC32 of ``NAME_STATE_TAG`` (the CRC32 of the header's
+text, :func:`with_state_tag`) and of every value of its calibration, and each family's words are
+checked against the bounds its step is proved for under that calibration (the form's macros
+``c_identity``, ``c_saved_ok``, ``c_restore``; docs/imu-module.md, "Save/restore").
+
 Channel units: raw and compensated values are int32 in 1/16000 of the channel's unit (mg -> the
 one-channel modules' 1/16 ug; deg/s; Pa), so the one-channel quantiser applies unchanged.
 """
@@ -319,8 +325,9 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
             for note in c.model.notes
             if note.startswith(UNDETERMINED_WARNING)
         ],
-        # channels whose one-channel module has NAME_restore: state the IMU module cannot save
-        "unsaved": [c.name for c in imu.channels if family_of(c.model.quantised).restore],
+        # channels whose one-channel module has NAME_restore: the IMU module's NAME_restore keeps their state
+        "restorable": [c.name for c in imu.channels if family_of(c.model.quantised).restore],
+        "state_tag": STATE_TAG_UNSET,
         "version": __version__,
         "sha256": imu.sha256,
         "module_id": f"0x{imu.module_id:08x}u",
@@ -377,13 +384,27 @@ def loader_source(name: str) -> str:
     return body.replace("tdcimu_", f"{name}_").replace("TDCIMU_", f"{name.upper()}_")
 
 
+STATE_TAG_UNSET = "0x00000000u"  # NAME_STATE_TAG while the header's CRC32 is taken
+
+
+def with_state_tag(header: str, name: str) -> str:
+    """The header with ``NAME_STATE_TAG``, the CRC32 of its own text with the tag read as
+    :data:`STATE_TAG_UNSET` (a module without restorable channels has no tag: unchanged). A state
+    carries it (in ``restore_id``): ``NAME_restore`` continues only a state its own module made."""
+    unset = f"#define {name.upper()}_STATE_TAG {STATE_TAG_UNSET}"
+    if unset not in header:
+        return header
+    tag = f"0x{zlib.crc32(header.encode()):08x}u"
+    return header.replace(unset, f"#define {name.upper()}_STATE_TAG {tag}", 1)
+
+
 def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, str]:
     """``{NAME.h, NAME.c, tdc_kernels.h, its families' kernel headers, NAME.manifest.json}`` (pure)."""
     env = _environment()
     ctx = _context(imu, validate_name(name), builtin)
     ctx["parts"] = _parts(imu, name, env, ctx)
     files = {
-        f"{name}.h": env.get_template("imu.h.j2").render(ctx),
+        f"{name}.h": with_state_tag(env.get_template("imu.h.j2").render(ctx), name),
         f"{name}.c": env.get_template("imu.c.j2").render(ctx),
         KERNEL_FILE: kernel_header(),
     }

@@ -350,7 +350,7 @@ def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warni
     assert run_cli(codegen_main, ["export", str(path), "-o", str(tmp_path / "out"), "--name", NAME]) == 0
     printed = capsys.readouterr().out
     header = " ".join((tmp_path / "out" / f"{NAME}.h").read_text().replace("*", " ").split())
-    # the IMU module of that channel says it too, in its header, and that it cannot save the branch
+    # the IMU module of that channel says it too, in its header, and how to save the branch
     flagged["train_stats"] = {**flagged["train_stats"], "channel": "accel0_z", "unit": "mg"}
     (tmp_path / "imu").mkdir()
     tm.save_checkpoint(flagged, tmp_path / "imu" / "accel0_z.pt")
@@ -358,9 +358,8 @@ def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warni
     tm.save_checkpoint(plain, tmp_path / "imu" / "accel0_x.pt")
     imu_argv = [
         "export",
-        str(tmp_path / "imu"),
-        "--channels",
-        "all",
+        str(tmp_path / "imu" / "accel0_x.pt"),
+        str(tmp_path / "imu" / "accel0_z.pt"),
         "-o",
         str(tmp_path / "imu_c"),
         "--name",
@@ -369,7 +368,8 @@ def test_a_model_that_carries_an_undetermined_parameter_is_exported_with_a_warni
     assert run_cli(codegen_main, imu_argv) == 0
     imu_header = " ".join((tmp_path / "imu_c" / "imu_w.h").read_text().replace("*", " ").split())
     assert (
-        "No save/restore: the filters and hysteresis branch of accel0_x, accel0_z start afresh" in imu_header
+        "Save/restore (accel0_x, accel0_z): between two imu_w_step calls, copy the whole imu_w_state_t "
+        "byte for byte to non-volatile memory; at power-up, imu_w_restore(state, cal, saved)" in imu_header
     )
     assert imu_header.count("WARNING") == 1 and "accel0_z: WARNING" in imu_header
     for text in (printed, header, imu_header):

@@ -178,7 +178,9 @@ class QPhysics:
         """|state word| at most after any step, per word of the state: what the step's overflow proofs
         assume of a state, and what ``NAME_restore`` checks of a saved one. A filter state (wide) stays
         within the range in Q(tf + 32); a play operator output within the range widened by its half
-        width, in Q(tf)."""
+        width, in Q(tf). The IMU module's ``NAME_restore`` computes the same numbers in C from the
+        calibration it restores under (``_physics_imu.j2``, ``physics_saved_ok``: clip range, centre,
+        ``scale`` = 2^tf, half widths); tests/export/test_imu_restore.py checks they agree."""
         margin = max((t.margin_q for t in self.terms if t.margin_q is not None), default=0)
         wide = self.reach_mdegc << (self.temp_frac + HI_BITS)
         narrow = (self.reach_mdegc << self.temp_frac) + margin
