@@ -43,10 +43,11 @@ def import_error(source: Path, out: Path, *extra: str) -> str:
 @pytest.mark.parametrize(
     ("temp", "accel", "expected"),
     [
-        ("-500", None, f"temperature down to -500 degC is below {TEMP_MIN_C:g} degC"),
-        ("151", None, f"above {TEMP_MAX_C:g} degC"),
-        (None, "1e308", "column 'accel_mg', data row 101: inf mg is outside"),
-        (None, "3.3e2", "data row 101: 3.365e+04 mg is outside the -32000 .. 32000 mg"),  # 33.7 g
+        # the source file's own column and line (the header is line 1): not the recording's accel_mg, row 101
+        ("-500", None, f"column 'T', line 102: temperature down to -500 degC is below {TEMP_MIN_C:g} degC"),
+        ("151", None, f"column 'T', line 102: temperature up to 151 degC is above {TEMP_MAX_C:g} degC"),
+        (None, "1e308", "column 'a', line 102: inf mg is outside"),
+        (None, "3.3e2", "column 'a', line 102: 3.365e+04 mg is outside the -32000 .. 32000 mg"),  # 33.7 g
     ],
 )
 def test_import_refuses_impossible_samples(
@@ -117,3 +118,17 @@ def test_each_channel_against_its_sensor(sensor: str, tmp_path: Path) -> None:
     lo, hi = SENSOR_RANGES[sensor]
     with pytest.raises(UserError, match=rf"data row 8: \S+ {unit} is outside the {lo:g} \.\. {hi:g} {unit}"):
         main(["fit", "--method", "poly3", str(rec_path), "--channels", channel, "-o", str(tmp_path / "m")])
+
+
+def test_a_csv_channel_s_refusal_names_its_column_and_line(tmp_path: Path) -> None:
+    """A multi-channel CSV (metadata lines above the header): fit of the channel named the view's
+    'accel_mg' or another axis and counted data rows; the file's column and line are named now."""
+    temp = np.linspace(-20.0, 40.0, ROWS)
+    values = np.full(ROWS, 1.0)
+    values[7] = 1e5
+    path = tmp_path / "rec.csv"
+    write_recording(recording(temp, {"gyro0_x_dps": values, "accel0_x_mg": 0.1 * temp}), path)
+    line = next(n for n, text in enumerate(path.read_text().splitlines(), start=1) if "100000" in text)
+    for channels in (["--channels", "gyro0_x"], ["--channels", "all"]):
+        with pytest.raises(UserError, match=rf"column 'gyro0_x_dps', line {line}: 1e\+05 dps is outside"):
+            main(["fit", "--method", "poly3", str(path), *channels, "-o", str(tmp_path / "m")])

@@ -262,7 +262,7 @@ def channel_view(rec: Recording, channel: Channel) -> Recording:
     meta = dict(rec.meta)
     meta["channel"] = channel.name
     meta["unit"] = channel.unit
-    return Recording(columns, meta, f"{rec.source}[{channel.name}]")
+    return Recording(columns, meta, f"{rec.source}[{channel.name}]", rec.row_label, channel.column)
 
 
 def channel_unit(rec: Recording) -> str:

@@ -351,8 +351,17 @@ def _finish(
     require_rows(n, source)  # every time base below (median step, retime, resample) needs a step
     time = _time_seconds(table, options)
     columns = {"time_s": time, **columns}
-    checks.temperature(columns["temp_c"], f"{source}: column {options.temp!r}", at_import=True)
-    checks.recording_ranges(columns, extra_meta.get("unit", DEFAULT_UNIT), source, skip=("temp_c",))
+    checks.temperature(
+        columns["temp_c"], f"{source}: column {options.temp!r}", at_import=True, row_label=table.row_label
+    )
+    checks.recording_ranges(
+        columns,
+        extra_meta.get("unit", DEFAULT_UNIT),
+        source,
+        skip=("temp_c",),
+        file_names=_source_columns(options),
+        row_label=table.row_label,
+    )
     meta: dict[str, str] = {}
     time_column = repr(options.time) if options.time else "(row number)"
     if options.retime:
@@ -540,6 +549,15 @@ def _remove_gravity(columns: dict[str, np.ndarray], options: ImportOptions, sour
         columns[options.accel] = columns[options.accel] - offset
         changed.append(options.accel)
     return f"{options.remove_gravity}, subtracted {offset:.10g} mg from {' and '.join(changed)}"
+
+
+def _source_columns(options: ImportOptions) -> dict[str, str]:
+    """``{recording column: the source file's column}`` of the data columns (what a refusal names)."""
+    names = {"accel_mg": options.accel} if options.accel else {}
+    names.update(zip(EXTRA_AXIS_COLUMNS, options.extra_axes or (), strict=False))
+    for channel, column in _selected_channels(options, "<options>"):
+        names[_channel_target(channel, options)[0]] = column
+    return names
 
 
 def _mapping_note(options: ImportOptions, delimiter: str) -> str:

@@ -10,17 +10,19 @@ from __future__ import annotations
 
 import re
 import sys
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from trainer.data.flightlog import SENSOR_RANGES, SENSOR_UNITS, data_column
+from trainer.data.flightlog import SENSOR_RANGES, SENSOR_UNITS
 from trainer.errors import UserError
 
 if TYPE_CHECKING:
     from trainer.data.recording import Recording
     from trainer.methods import Method
 
+RowLabel = Callable[[int], str]  # a row (from 0) as a message names it: "line 209" of a CSV file
 RATE_MIN_HZ = 0.1  # slower than one sample per 10 s: a time column in ms read as s
 RATE_MAX_HZ = 100e3  # faster than any MEMS output data rate: s read as ms/us, or an index
 LIKELY_RATE_HZ = (0.5, 10e3)  # the rates IMU logs are written at: a time unit giving one is the likely one
@@ -88,13 +90,16 @@ class Plausibility:
             )
             self.problem(f"{where}: {rate_hz:.4g} Hz is above {RATE_MAX_HZ / 1e3:g} kHz: {cause}{fix}")
 
-    def temperature(self, temp_c: np.ndarray, where: str, *, at_import: bool) -> None:
-        """Temperatures above 150 degC; all of them within 200..400 suggests kelvin."""
+    def temperature(
+        self, temp_c: np.ndarray, where: str, *, at_import: bool, row_label: RowLabel | None = None
+    ) -> None:
+        """Temperatures above 150 degC; all of them within 200..400 suggests kelvin. A single
+        reading out of range is named by its row (``row_label``: the file's line)."""
         hottest, coldest = float(np.max(temp_c)), float(np.min(temp_c))
         if not coldest >= TEMP_MIN_C:
             self.problem(
-                f"{where}: temperature down to {coldest:.4g} degC is below {TEMP_MIN_C:g} degC: not a temperature "
-                f"in degC? (a sensor's error value, a raw count or the wrong column)"
+                f"{_at_row(where, temp_c, coldest, row_label)}: temperature down to {coldest:.4g} degC is below "
+                f"{TEMP_MIN_C:g} degC: not a temperature in degC? (a sensor's error value, a raw count or the wrong column)"
             )
         if hottest <= TEMP_MAX_C:
             return
@@ -102,11 +107,19 @@ class Plausibility:
         fix = "--temp-unit K" if at_import else "re-import with --temp-unit K"
         if KELVIN_RANGE[0] <= coldest and hottest <= KELVIN_RANGE[1]:
             cause = f"kelvin? ({coldest:.2f} .. {hottest:.2f} K is {coldest - 273.15:.2f} .. {hottest - 273.15:.2f} degC; {fix})"
-        else:
-            cause = "not a temperature in degC? (kelvin, a raw sensor count or the wrong column)"
-        self.problem(f"{where}: temperature up to {hottest:.4g} degC is above {TEMP_MAX_C:g} degC: {cause}")
+            self.problem(
+                f"{where}: temperature up to {hottest:.4g} degC is above {TEMP_MAX_C:g} degC: {cause}"
+            )
+            return
+        cause = "not a temperature in degC? (kelvin, a raw sensor count or the wrong column)"
+        self.problem(
+            f"{_at_row(where, temp_c, hottest, row_label)}: temperature up to {hottest:.4g} degC is above "
+            f"{TEMP_MAX_C:g} degC: {cause}"
+        )
 
-    def sensor_range(self, values: np.ndarray, unit: str, where: str) -> None:
+    def sensor_range(
+        self, values: np.ndarray, unit: str, where: str, row_label: RowLabel | None = None
+    ) -> None:
         """Samples beyond what the sensor of ``unit`` can output (flightlog.SENSOR_RANGES)."""
         sensor = _SENSOR_OF_UNIT[unit]
         lo, hi = SENSOR_RANGES[sensor]
@@ -114,9 +127,8 @@ class Plausibility:
         if lo <= low and high <= hi:
             return
         worst = low if low < lo else high
-        row = int(np.argmax(values == worst)) + 1
         self.problem(
-            f"{where}, data row {row}: {worst:.4g} {unit} is outside the {lo:g} .. {hi:g} {unit} "
+            f"{_at_row(where, values, worst, row_label)}: {worst:.4g} {unit} is outside the {lo:g} .. {hi:g} {unit} "
             f"{_SENSOR_NOUNS[sensor]} outputs: a "
             f"fault value, a unit mistake (check the declared unit) or the wrong column?"
         )
@@ -127,21 +139,23 @@ class Plausibility:
         accel_unit: str,
         source: str,
         skip: tuple[str, ...] = (),
-        output_column: str = "accel_mg",
+        file_names: Mapping[str, str] | None = None,
+        row_label: RowLabel | None = None,
     ) -> None:
         """Every measured column against its sensor's range, every temperature column against
-        the plausible temperatures (``accel_mg`` holds ``accel_unit``: a one-channel view, whose
-        data came from the file's ``output_column``, the name a refusal gives)."""
+        the plausible temperatures (``accel_mg`` holds ``accel_unit``). A refusal names the file's
+        column (``file_names``: a column's name in the file, where it differs: a view's ``accel_mg``
+        is ``gyro0_x_dps`` there, an import's ``imu.acc.z``) and its row (``row_label``: the line)."""
         for name, values in columns.items():
             if not values.size or name in skip:
                 continue
             data = _DATA_COLUMN.fullmatch(name)
+            shown = (file_names or {}).get(name, name)
             if name == "accel_mg" or data is not None:
                 unit = accel_unit if name == "accel_mg" else data.group(1) if data else accel_unit
-                shown = output_column if name == "accel_mg" else name
-                self.sensor_range(values, unit, f"{source}: column {shown!r}")
+                self.sensor_range(values, unit, f"{source}: column {shown!r}", row_label)
             elif name == "temp_c" or _TEMP_COLUMN.fullmatch(name):
-                self.temperature(values, f"{source}: column {name!r}", at_import=False)
+                self.temperature(values, f"{source}: column {shown!r}", at_import=False, row_label=row_label)
 
     def accel_declared_g(self, raw: np.ndarray, unit: str, where: str) -> None:
         """A static axis near 9.8 declared in g is m/s^2."""
@@ -202,6 +216,17 @@ def span_shortfall(temp_c: np.ndarray, method: str, min_span_c: float) -> str | 
     return f"temperature spans {hi - lo:.3g} degC ({lo:.2f} .. {hi:.2f}), too small for {method} (needs {min_span_c:g} degC)"
 
 
+def _at_row(where: str, values: np.ndarray, worst: float, row_label: RowLabel | None) -> str:
+    """``where`` and the first row holding ``worst``: the file's line when known, else its data row."""
+    row = int(np.argmax(values == worst))
+    return f"{where}, {row_label(row) if row_label is not None else f'data row {row + 1}'}"
+
+
+def _file_names(rec: Recording, temp_column: str = "temp_c") -> dict[str, str]:
+    """The file's names of a (view) recording's one-channel columns (``accel_mg``, ``temp_c``)."""
+    return {"accel_mg": rec.file_column(), "temp_c": temp_column}
+
+
 def check_training(
     rec: Recording, method: Method, *, accept: bool = False, temp_column: str = "temp_c"
 ) -> Plausibility:
@@ -211,8 +236,10 @@ def check_training(
     where = rec.source
     checks.rate(rec.sample_rate_hz, f"{where}: sample rate", at_import=False)
     unit = rec.meta.get("unit", "mg")
-    output_column = data_column(rec.meta["channel"], unit) if "channel" in rec.meta else "accel_mg"
-    checks.recording_ranges(rec.columns, unit, where, output_column=output_column)
+    output_column = rec.file_column()
+    checks.recording_ranges(
+        rec.columns, unit, where, file_names=_file_names(rec, temp_column), row_label=rec.row_label
+    )
     if unit == "mg":  # an accelerometer: gravity, and g read as mg (a gyroscope or barometer holds neither)
         checks.gravity_in_mg(rec.accel_mg, f"{where}: column 'accel_mg'")
         checks.accel_moves(rec, f"{where}: column {output_column!r}")
@@ -230,7 +257,13 @@ def check_scored(rec: Recording) -> Recording:
     recording (they take no ``--accept-implausible``): import and fit refuse such samples too, so
     no model of this tool was made from them without that option."""
     checks = Plausibility(way_past=f"repair or remove those rows; {ACCEPT_OPTION} is for import and fit")
-    checks.recording_ranges(rec.columns, rec.meta.get("unit", "mg"), rec.source)
+    checks.recording_ranges(
+        rec.columns,
+        rec.meta.get("unit", "mg"),
+        rec.source,
+        file_names=_file_names(rec),
+        row_label=rec.row_label,
+    )
     # what fit refuses is not scored either (a constant channel's Allan figures are nan)
     Plausibility(way_past="trainer fit refuses it too; leave it out of --channels").output_varies(rec)
     # a warning, not an error: a decimated log may be slow, and these commands have no option to accept it

@@ -8,6 +8,7 @@ shares (required columns, ground-truth columns that fitting must never see).
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +37,10 @@ class Recording:
     columns: dict[str, np.ndarray]
     meta: dict[str, str] = field(default_factory=dict)
     source: str = "<memory>"
+    # Where a row and accel_mg come from in the file, for messages: "line 209" of a CSV row (None: "data
+    # row N"), and the file's column a view's accel_mg holds (None: accel_mg itself, or the channel's column)
+    row_label: Callable[[int], str] | None = field(default=None, compare=False, repr=False)
+    accel_column: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         lengths = {name: len(values) for name, values in self.columns.items()}
@@ -110,11 +115,22 @@ class Recording:
     def without_truth(self) -> Recording:
         """A view for fitting and diagnosis: every ``true_*`` column removed."""
         kept = {k: v for k, v in self.columns.items() if not k.startswith(TRUTH_PREFIX)}
-        return Recording(kept, dict(self.meta), self.source)
+        return Recording(kept, dict(self.meta), self.source, self.row_label, self.accel_column)
 
     def slice(self, start: int, stop: int) -> Recording:
         """Rows ``start:stop`` (views, not copies)."""
-        return Recording({k: v[start:stop] for k, v in self.columns.items()}, dict(self.meta), self.source)
+        label = self.row_label
+        shifted = None if label is None else (lambda row: label(row + start))
+        columns = {k: v[start:stop] for k, v in self.columns.items()}
+        return Recording(columns, dict(self.meta), self.source, shifted, self.accel_column)
+
+    def where_row(self, row: int) -> str:
+        """How a message names row ``row`` (from 0): the file's line, else its data row number."""
+        return self.row_label(row) if self.row_label is not None else f"data row {row + 1}"
+
+    def file_column(self) -> str:
+        """The file's column this recording's ``accel_mg`` holds (``gyro0_x_dps`` of a channel view)."""
+        return self.accel_column or self.channel_column() or "accel_mg"
 
 
 def require_rows(n: int, source: str) -> None:

@@ -232,7 +232,7 @@ def _accel_mg_is_milli_g(rec: Recording) -> Recording:
     if unit == "mg" or rec.channel_column() is not None or "accel_mg" not in rec.columns:
         return rec
     meta = {k: v for k, v in rec.meta.items() if k not in ("unit", "channel")}
-    return Recording(rec.columns, meta, rec.source)
+    return Recording(rec.columns, meta, rec.source, rec.row_label, rec.accel_column)
 
 
 def _read_csv(path: str | Path) -> Recording:
@@ -249,7 +249,7 @@ def _read_csv(path: str | Path) -> Recording:
         )
     if len(table) == 0:
         raise UserError(f"{table.source}: no data rows after the header on line {table.header_line}")
-    rec = Recording(table.columns, table.meta, table.source)
+    rec = Recording(table.columns, table.meta, table.source, table.row_label)
     check_recording(
         rec,
         row_label=table.row_label,
