@@ -19,15 +19,36 @@ from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import plot_fit, plot_series
 from trainer.scoring.static import DEAD_BAND_C_PER_MIN, RATE_WINDOW_S, DriftLeft
 
-HONEST_SCORING = (
-    "An Allan-variance improvement rewards any operation that removes low-frequency content: the "
-    "persistence row subtracts the previous smoothed output with no model at all and still scores "
-    "higher on B, K and R than every method here and than the paper's 96.68 %, although it removes a "
-    "real acceleration as readily as the drift. Methods are therefore ranked by what compensation has "
-    "to achieve: the RMS of the drift left behind against the simulator's ground truth "
-    "(`true_drift_mg`), and the fraction of a true input signal that survives compensation. The "
-    "oracle row removes the exact true drift (evaluation only): it is what perfect compensation scores."
-)
+
+def how_to_read(comparison: Comparison) -> str:
+    """Why the report ranks by drift left, said with this comparison's own figures: the persistence
+    row's Allan score when it was run, ground truth and the oracle row only when the data has them."""
+    averages = comparison.evaluation.table.average_improvement_pct
+    text = (
+        "An Allan-variance improvement rewards any operation that removes low-frequency content, a real "
+        "acceleration as readily as the drift."
+    )
+    persistence = next((m.name for m in registry.entries() if m.reference and m.name in averages), None)
+    if persistence is not None:
+        others = {k: v for k, v in averages.items() if k != persistence and math.isfinite(v)}
+        best = max(others, key=lambda k: others[k], default=None)
+        compared = f"; the best method here, {best}, {others[best]:.2f} %" if best is not None else ""
+        text += (
+            f" The {persistence} row subtracts the previous smoothed output with no model at all: it scores "
+            f"{averages[persistence]:.2f} % on average (Aver){compared}."
+        )
+    if comparison.evaluation.drift:
+        return text + (
+            " Methods are therefore ranked by what compensation has to achieve: the RMS of the drift left "
+            "behind against the simulator's ground truth (`true_drift_mg`), and the fraction of a true input "
+            "signal that survives compensation. The oracle row removes the exact true drift (evaluation "
+            "only): it is what perfect compensation scores."
+        )
+    return text + (
+        " Methods are therefore ranked by the drift left on this recording, which has no ground truth "
+        "(the compensated output's deviation from a constant, below), and, where an input was injected "
+        "(`--inject`), by the fraction of it that survives compensation."
+    )
 
 
 def _sci(value: float) -> str:
@@ -265,7 +286,7 @@ def render_report(
         "",
         "## How to read the scores",
         "",
-        HONEST_SCORING,
+        how_to_read(comparison),
         "",
         "## Headline: drift left and true input kept",
         "",
