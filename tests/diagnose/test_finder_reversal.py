@@ -20,7 +20,10 @@ import pytest
 
 from tests.synthetic_chamber import BLOCKS, DURATION_S, chamber_recording
 from trainer.diagnose import diagnose
+from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.result import Diagnosis
+from trainer.diagnose.select import AMBIGUOUS
+from trainer.diagnose.verdict import ambiguity_line
 from trainer.physics.catalogue import bias_step, temp_rate
 
 STEP = bias_step.DEFINITION.identifier
@@ -52,6 +55,13 @@ def test_a_step_at_the_reversal_under_a_rate_term_is_said_to_be_absorbed(seed: i
     assert absorbed, [a.effects for a in d.ambiguous]
     assert "bias_step is absorbed by temp_rate" in absorbed[0].reason
     assert "hold after the reversal" in absorbed[0].reason  # what would separate them
+    # said as what it is, not as a tie: no "could also be" on the named rate term, no alternative in the
+    # compensator's structure, a line that says absorbed (a tester read "ambiguous, BIC +197" as a contradiction)
+    assert absorbed[0].absorbed and absorbed[0].delta_bic >= AMBIGUOUS
+    rate = next(e for e in d.left_out if e.effect == RATE)
+    assert STEP in rate.absorbs and STEP not in rate.ambiguous_with
+    assert STEP not in next_steps(d).structure
+    assert ambiguity_line(absorbed[0]).startswith(f"absorbed: {STEP} by {RATE}")
 
 
 @pytest.mark.parametrize(("tau_s", "seed"), [(20.0, 21), (60.0, 22)])

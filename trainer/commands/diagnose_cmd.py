@@ -126,6 +126,7 @@ def summary(result: Diagnosis) -> str:
             extra = result.label + (
                 f" (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
             )
+            extra += f" (would absorb a {' or '.join(e.absorbs)} on this profile)" if e.absorbs else ""
             extra += f" (implausible: {'; '.join(e.flags)})" if e.flags else ""
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:

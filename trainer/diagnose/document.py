@@ -114,6 +114,8 @@ def left_out(entry: LeftOut) -> dict[str, Any]:
     out["advice"] = entry.advice
     if entry.ambiguous_with:
         out["ambiguous_with"] = entry.ambiguous_with
+    if entry.absorbs:
+        out["absorbs"] = entry.absorbs
     return out
 
 
@@ -179,6 +181,8 @@ def ambiguity(a: Ambiguity) -> dict[str, Any]:
         "preferred": a.preferred,
         "reason": a.reason,
     }
+    if a.absorbed:
+        out["absorbed"] = True
     if a.implausible is not None:  # the implausible best fit, kept with its flags, not named
         out["best_fit"] = left_out(a.implausible)
         out["alternatives"] = [

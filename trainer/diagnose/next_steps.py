@@ -90,7 +90,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
             )
     alternatives: dict[str, list[str]] = {}
     for a in d.ambiguous:
-        if a.implausible is None:
+        if a.implausible is None and not a.absorbed:  # an absorbed confounder fits worse: no alternative
             alternatives.setdefault(a.preferred, []).extend(e for e in a.effects if e != a.preferred)
     for preferred, others in alternatives.items():
         either = f"{preferred} (or {' / '.join(dict.fromkeys(others))})"

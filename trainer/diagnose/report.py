@@ -69,6 +69,10 @@ def _left_out_lines(entry: LeftOut, d: Diagnosis) -> list[str]:
     ]
     if entry.ambiguous_with:
         lines.append(f"  Could also be: {', '.join(entry.ambiguous_with)} (see below).")
+    if entry.absorbs:
+        lines.append(
+            f"  A {' or '.join(entry.absorbs)} in the data would be merged into it on this profile (see below)."
+        )
     if entry.flags:
         lines.append("  Note: " + "; ".join(entry.flags) + ".")
     if entry.advice:
@@ -110,7 +114,10 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     for entry in d.left_out:
         lines += _left_out_lines(entry, d)
     lines += ["", "## Ambiguous", ""]
-    lines += [f"- {' vs '.join(a.effects)}{d.label}: {a.reason}" for a in d.ambiguous] or ["None."]
+    lines += [
+        f"- {' vs '.join(a.effects)}{d.label}{' (absorbed, not a tie)' if a.absorbed else ''}: {a.reason}"
+        for a in d.ambiguous
+    ] or ["None."]
     lines += ["", "## Not identifiable from this temperature profile", ""]
     lines += [
         f"- {n.effect}{d.label}: {n.reason}."

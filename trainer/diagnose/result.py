@@ -41,7 +41,10 @@ class LeftOut:
     advice: str
     peak_visible_mg: float | None = None  # None for noise terms
     flags: list[str] = field(default_factory=list)  # parameters outside the plausible range
-    ambiguous_with: list[str] = field(default_factory=list)
+    ambiguous_with: list[str] = field(default_factory=list)  # as good a description, within the BIC tie
+    # confounders this effect would absorb on this profile (one present would be merged into its fitted
+    # term): not as good a description, so not "could also be"
+    absorbs: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,9 @@ class Ambiguity:
     reason: str
     alternatives: tuple[Alternative, ...] = ()
     implausible: LeftOut | None = None  # the best-fitting shape, with its flags; not named
+    # effects[1]'s signature is absorbed by effects[0] on this profile: in its place it fits worse by
+    # delta_bic, beside it it earns too little (trainer.diagnose.select, step 4), not a tie
+    absorbed: bool = False
 
 
 @dataclass(frozen=True)

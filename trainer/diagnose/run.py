@@ -329,6 +329,7 @@ def _ambiguous(selection: Selection, implausible: list[Ambiguity]) -> list[Ambig
                 cast(float, a["delta_bic"]),
                 cast(str, a["preferred"]),
                 cast(str, a["reason"]),
+                absorbed=bool(a.get("absorbed")),
             )
         )
     return out
@@ -376,11 +377,9 @@ def _left_out(
             where = list(special)
             peak_visible = float(np.max(np.abs(visible)))
             flags = param_flags(effect)
-        ambiguous_with = [
-            cast(list[str], a["effects"])[1]
-            for a in selection.ambiguous
-            if cast(list[str], a["effects"])[0] == step.effect
-        ]
+        confounded = [a for a in selection.ambiguous if cast(list[str], a["effects"])[0] == step.effect]
+        ambiguous_with = [cast(list[str], a["effects"])[1] for a in confounded if not a.get("absorbed")]
+        absorbs = [cast(list[str], a["effects"])[1] for a in confounded if a.get("absorbed")]
         out.append(
             LeftOut(
                 effect=step.effect,
@@ -391,6 +390,7 @@ def _left_out(
                 peak_visible_mg=peak_visible,
                 flags=flags,
                 ambiguous_with=ambiguous_with,
+                absorbs=absorbs,
             )
         )
     out.sort(key=lambda e: -e.evidence.delta_bic_when_dropped)

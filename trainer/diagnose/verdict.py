@@ -23,6 +23,12 @@ def implausible_effects(d: Diagnosis) -> dict[str, str]:
 
 def ambiguity_line(a: Ambiguity, label: str = "") -> str:
     """One line for an ambiguity (``label``: the channel and unit on a non-mg channel)."""
+    if a.absorbed:
+        effect, other = a.effects
+        return (
+            f"absorbed: {other}{label} by {effect} on this profile (in its place BIC {a.delta_bic:+.1f}, beside it "
+            "too little to name: a real one would be merged into the fitted term)"
+        )
     if a.implausible is None:
         return f"ambiguous: {' vs '.join(a.effects)}{label} (BIC {a.delta_bic:+.1f})"
     shown = [f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags]
