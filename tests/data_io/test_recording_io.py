@@ -431,6 +431,12 @@ def test_npz_good_arrays_are_valid(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- paths
 
 
+def test_a_model_file_given_as_the_recording_is_named_as_swapped_arguments(tmp_path: Path) -> None:
+    """trainer report MODEL --recording REC with the two swapped said "unsupported extension '.pt'"."""
+    message = read_error(write_lines(tmp_path / "m.pt", BASE_LINES))
+    assert "a model file (.pt) where a recording" in message and "arguments swapped?" in message
+
+
 @pytest.mark.parametrize("name", ["rec.txt", "rec", "rec.csv.gz"])
 def test_unsupported_extension(tmp_path: Path, name: str) -> None:
     path = write_lines(tmp_path / name, BASE_LINES)

@@ -112,6 +112,8 @@ def test_same_seed_gives_the_same_file(tmp_path: Path) -> None:
         (["-o", "{tmp}/rec.csv", "--protocol", "oven"], "argument --protocol"),
         (["-o", "{tmp}/rec.csv", "--seed", "-2"], "argument --seed"),
         (["-o", "{tmp}/rec.csv", "--rate", "0"], "argument --rate"),
+        # a recording trainer fit and import would refuse as a time-unit mistake
+        (["-o", "{tmp}/rec.csv", "--rate", "0.01"], "--rate 0.01 Hz is outside the 0.1 Hz .. 100 kHz"),
         (["-o", "{tmp}/rec.csv", "--duration", "nan"], "argument --duration"),
         (
             ["-o", "{tmp}/rec.csv", "--config", "{tmp}/bad.toml"],

@@ -8,7 +8,9 @@ import sys
 import time
 from dataclasses import replace
 
+from trainer.data.plausibility import RATE_MAX_HZ, RATE_MIN_HZ
 from trainer.data.recording_io import recording_format, write_recording
+from trainer.errors import UserError
 from trainer.options.seed import seed
 from trainer.physics.config import load_config, with_overrides
 from trainer.physics.input_presets import INPUT_PRESETS, input_preset
@@ -67,6 +69,13 @@ def run(args: argparse.Namespace) -> int:
     cfg = with_overrides(
         load_config(args.config), protocol=args.protocol, duration_s=args.duration, sample_rate_hz=args.rate
     )
+    rate_hz = cfg.recording.sample_rate_hz
+    if not RATE_MIN_HZ <= rate_hz <= RATE_MAX_HZ:  # what import and fit would refuse as a time-unit mistake
+        given = "--rate" if args.rate is not None else f"{cfg.source}: [recording] sample_rate_hz"
+        raise UserError(
+            f"{given} {rate_hz:g} Hz is outside the {RATE_MIN_HZ:g} Hz .. {RATE_MAX_HZ / 1e3:g} kHz that trainer fit "
+            "and import accept: its recording could not be fitted"
+        )
     rows = nominal_rows(cfg)
     if args.input:
         cfg = replace(cfg, input=input_preset(args.input, rows / cfg.recording.sample_rate_hz))

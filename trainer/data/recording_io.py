@@ -213,6 +213,13 @@ def recording_format(path: str | Path) -> RecordingFormat:
         return RECORDING_SUFFIXES[suffix]
     if Path(path).is_dir():
         raise UserError(f"{path}: a directory, not a recording (.csv or .npz)")
+    from trainer.options.channels import MODEL_SUFFIX  # what trainer fit writes
+
+    if suffix == MODEL_SUFFIX:
+        raise UserError(
+            f"{path}: a model file ({MODEL_SUFFIX}) where a recording (.csv or .npz) is expected "
+            "(arguments swapped? see the command's --help for which comes where)"
+        )
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")
 
 
