@@ -58,14 +58,16 @@ def test_mps2_declared_as_g_is_refused_with_a_hint(tmp_path: Path) -> None:
     assert read_recording(out).accel_mg[0] == pytest.approx(-9810.0)
 
 
+@pytest.mark.parametrize("time_base", [[], ["--retime"], ["--resample", "50"]])
 @pytest.mark.parametrize(("step", "declared", "right"), [(20.0, "s", "ms"), (20_000.0, "ms", "us")])
 def test_a_time_column_in_another_unit_is_refused_naming_the_likely_one(
-    tmp_path: Path, step: float, declared: str, right: str
+    tmp_path: Path, step: float, declared: str, right: str, time_base: list[str]
 ) -> None:
     """A 50 Hz logger's ms column declared as s, or its us column declared as ms: the hint names the
-    unit that gives a rate IMU logs are written at (it said "milliseconds read as seconds?" to both)."""
+    unit that gives a rate IMU logs are written at (it said "milliseconds read as seconds?" to both,
+    and with --retime or --resample still did)."""
     src = logger_file(tmp_path / "log.csv", step=step)
-    message = cli_error("import", src, *IMPORT, "--time-unit", declared, "-o", tmp_path / "o.csv")
+    message = cli_error("import", src, *IMPORT, "--time-unit", declared, *time_base, "-o", tmp_path / "o.csv")
     assert "0.05 Hz is below 0.1 Hz" in message and f"--time-unit {right} gives 50 Hz" in message
     assert message.count("--time-unit") == 1  # the other units give no plausible rate
     rec_path = tmp_path / "ok.csv"

@@ -391,7 +391,13 @@ def _finish(
                 f"missing, --retime"
             )
     if options.retime or options.resample is not None:
-        checks.rate(_median_rate(time), f"{source}: column {time_column}", at_import=True)
+        logged = _median_rate(time)
+        checks.rate(
+            logged,
+            f"{source}: column {time_column}",
+            at_import=True,
+            time_units=_other_units(logged, options),
+        )
 
     gravity_note = _remove_gravity(columns, options, source)
     meta["sample_rate_hz"] = f"{rate:.10g}"
