@@ -511,7 +511,11 @@ def _channel_section(r: ChannelReport) -> list[str]:
         lines.append(
             f"- codegen verify (`{v.source}`): {v.mismatches} mismatches in {v.samples} samples, final "
             f"state {state}: {'bit-exact' if v.ok else 'NOT bit-exact'}; module rate "
-            + (f"{v.rate_millihz / 1000:g} Hz" if v.rate_millihz else "any (memoryless)")
+            + (
+                f"{v.rate_millihz / 1000:g} Hz"
+                if v.rate_millihz
+                else "any (nothing in it depends on the sample rate)"
+            )
             + (f", recording resampled from {v.resampled_from_hz:g} Hz" if v.resampled_from_hz else "")
             + ("" if v.model_id == r.model_id else f"; WARNING: the module is of model {v.model_id}")
         )
