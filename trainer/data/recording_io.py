@@ -32,6 +32,7 @@ from trainer.errors import UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
 RECORDING_SUFFIXES: dict[str, RecordingFormat] = {".csv": "csv", ".npz": "npz"}
+MODEL_SUFFIX = ".pt"  # what trainer fit writes (named when one is given where a recording goes)
 
 JITTER_LIMIT = 0.01  # largest accepted |step - nominal period| / nominal period
 TIME_DECIMALS = 6  # minimum decimals of time_s in CSV output
@@ -213,8 +214,6 @@ def recording_format(path: str | Path) -> RecordingFormat:
         return RECORDING_SUFFIXES[suffix]
     if Path(path).is_dir():
         raise UserError(f"{path}: a directory, not a recording (.csv or .npz)")
-    from trainer.options.channels import MODEL_SUFFIX  # what trainer fit writes
-
     if suffix == MODEL_SUFFIX:
         raise UserError(
             f"{path}: a model file ({MODEL_SUFFIX}) where a recording (.csv or .npz) is expected "

@@ -20,10 +20,10 @@ from pathlib import Path
 
 from trainer.data.channels import Channel, parse_channels_option, sort_key
 from trainer.data.recording import Recording
+from trainer.data.recording_io import MODEL_SUFFIX  # trainer fit --channels writes OUT/<channel>.pt
 from trainer.errors import UserError
 
 CHANNELS_OPTION = "--channels"
-MODEL_SUFFIX = ".pt"  # trainer fit --channels writes OUT/<channel>.pt
 INDEX_FILE = "channels.json"  # ... and OUT/channels.json (what was fitted, units)
 
 
