@@ -13,16 +13,26 @@ from trainer.errors import OneLineArgumentParser, UserError, run_cli
 from trainer.options.channels import add_channels_option
 from trainer.output_lock import command_outputs_locked
 
+# codegen verify's exit status (0: passed; 2: a usage error, trainer.errors): the C differs from its
+# golden model; else the C equals it but its integer arithmetic is over the error budget
 EXIT_MISMATCH = 1
+EXIT_OVER_BUDGET = 3
 
 
 def _export(args: argparse.Namespace) -> int:
-    if args.channels is not None:
+    channels = args.channels is not None
+    if channels:
         from trainer.options.channels import model_files
 
         args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
     _identity_notes(args.model)
-    if args.format == "calibration-blob" or args.blob or (args.format == "c" and len(args.model) > 1):
+    # --channels (any number of channels, one too) or several models: the IMU module, one API for every
+    # channel list; a one-channel module is exported from the model file itself
+    if (
+        args.format == "calibration-blob"
+        or args.blob
+        or (args.format == "c" and (channels or len(args.model) > 1))
+    ):
         return _export_imu(args)
     if args.format != "c":
         if args.rate is not None:
@@ -35,13 +45,7 @@ def _export(args: argparse.Namespace) -> int:
                 "(accel0/gyro0 -> INS_TCAL1, accel1/gyro1 -> INS_TCAL2), not by device id"
             )
         return _export_params(args)
-    for option, given, formats in (
-        ("--channel", args.channel, "px4-params/ardupilot-parm"),
-        ("--device-id", args.device_id, "px4-params"),
-        ("--keep-constant", args.keep_constant, "px4-params"),
-    ):
-        if given not in (None, False):
-            raise UserError(f"{option} applies to --format {formats}, not to the C module")
+    _refuse_parameter_options(args)
     if len(args.model) != 1:
         raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
@@ -68,6 +72,17 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refuse_parameter_options(args: argparse.Namespace) -> None:
+    """The parameter files' options, given for a C module (one channel's or the IMU module)."""
+    for option, given, formats in (
+        ("--channel", args.channel, "px4-params/ardupilot-parm"),
+        ("--device-id", args.device_id, "px4-params"),
+        ("--keep-constant", args.keep_constant, "px4-params"),
+    ):
+        if given not in (None, False):
+            raise UserError(f"{option} applies to --format {formats}, not to the C module")
+
+
 def _identity_notes(paths: list[str]) -> None:
     """Say, one line each, which models are the identity because auto found no compensation that helps."""
     from trainer.checkpoint import load_checkpoint
@@ -81,7 +96,7 @@ def _identity_notes(paths: list[str]) -> None:
 
 
 def _export_imu(args: argparse.Namespace) -> int:
-    """Several channels: one IMU module (docs/imu-module.md) and/or its calibration blob."""
+    """``--channels`` or several models: one IMU module (docs/imu-module.md) and/or its calibration blob."""
     from pathlib import Path
 
     from codegen.imu import export_imu
@@ -90,6 +105,7 @@ def _export_imu(args: argparse.Namespace) -> int:
 
     if args.format not in ("c", "calibration-blob"):
         raise UserError(f"--blob applies to --format c, not {args.format}")
+    _refuse_parameter_options(args)
     if args.schedule != "step":
         raise UserError(
             "--schedule applies to a DLSTM's own module; the IMU module runs its DLSTM channels with step"
@@ -106,7 +122,8 @@ def _export_imu(args: argparse.Namespace) -> int:
     )
     what = "calibration blob" if blob_only else "data-only IMU module and blob" if args.blob else "IMU module"
     print(
-        f"wrote {args.out_dir}/{{{', '.join(written)}}}: {what}, {len(imu.channels)} channels "
+        f"wrote {args.out_dir}/{{{', '.join(written)}}}: {what}, {len(imu.channels)} "
+        f"channel{'' if len(imu.channels) == 1 else 's'} "
         f"({', '.join(f'{c.name} {c.model.name}' for c in imu.channels)}), "
         f"module id 0x{imu.module_id:08x}, calibration sha256:{imu.sha256[:16]}..."
     )
@@ -232,6 +249,21 @@ def _verify(args: argparse.Namespace) -> int:
             f"error: the generated C differs from the golden model ({' and '.join(where)})", file=sys.stderr
         )
         return EXIT_MISMATCH
+    if not result.budget.met:
+        from codegen.verify import ERROR_BUDGET_MAX_MG, ERROR_BUDGET_RMS_MG
+
+        b = result.budget
+        print(
+            relabel_units(
+                f"error: the quantised model is over the error budget: its integer arithmetic strays RMS "
+                f"{b.arithmetic_rms_mg:.3g} mg, max {b.arithmetic_max_abs_mg:.3g} mg from the float model "
+                f"(budget {ERROR_BUDGET_RMS_MG:g} mg RMS, {ERROR_BUDGET_MAX_MG:g} mg max; docs/codegen.md, "
+                f'"Error budget"); the C equals its golden model',
+                result.unit,
+            ),
+            file=sys.stderr,
+        )
+        return EXIT_OVER_BUDGET
     return 0
 
 
@@ -277,7 +309,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="acceleration full scale in g: a recursive DLSTM's front end clamps its input beyond it "
         "(default 16); the other modules subtract the drift from the acceleration as it comes and refuse it",
     )
-    add_channels_option(exp, "take the model from each MODEL directory (written by 'trainer fit --channels')")
+    add_channels_option(
+        exp,
+        "take the model from each MODEL directory (written by 'trainer fit --channels'); --format c renders "
+        "one IMU module (docs/imu-module.md), whatever the number of channels: a one-channel module is "
+        "exported from the model file itself",
+    )
     exp.add_argument(
         "--blob",
         action="store_true",
@@ -303,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--format",
         choices=("c", *EXTENSIONS, "calibration-blob"),
         default="c",
-        help="c: the fixed-point C module (default; one IMU module for several channels); px4-params: a "
+        help="c: the fixed-point C module (default; one IMU module with --channels or several models); px4-params: a "
         "QGroundControl .params file of TC_*; ardupilot-parm: a .parm file of INS_TCALn_* (cubic models only); "
         "calibration-blob: only NAME.cal.bin, a unit's tables for a data-only IMU module",
     )

@@ -41,11 +41,16 @@ class LoadedModel:
     notes: tuple[str, ...] = ()  # what the module does with the offset (printed, and in NAME.h)
     shown: str = ""  # the name the user knows the model by (auto's candidate: poly2, physics-branch)
     sensor: str = ""  # what the header's title names (sensor_of): "accelerometer", or a channel's sensor
-    unit: str = "mg"  # the channel's unit (the step's integers are 1/16000 of it)
 
     @property
     def name(self) -> str:
         return self.shown or self.checkpoint.method
+
+    @property
+    def unit(self) -> str:
+        """The channel's unit (mg, dps, pa): the step's integers are 1/16000 of it."""
+        unit: str = self.quantised.limits.unit
+        return unit
 
 
 def load_for_codegen(
@@ -82,17 +87,7 @@ def load_for_codegen(
     from trainer.selection import shown_name
 
     shown = shown_name(ckpt.method, TrainStats.of_checkpoint(raw))
-    unit = TrainStats.of_checkpoint(raw).unit or "mg"
-    return LoadedModel(
-        p,
-        sha256,
-        ckpt,
-        quantised,
-        channel_notes(raw, notes),
-        shown,
-        sensor_of(raw),
-        unit if unit in STEP_UNITS else "mg",
-    )
+    return LoadedModel(p, sha256, ckpt, quantised, channel_notes(raw, notes), shown, sensor_of(raw))
 
 
 UNDETERMINED_WARNING = "WARNING: the model carries what its training run does not determine"
@@ -116,7 +111,7 @@ def undetermined_notes(raw: dict[str, Any]) -> tuple[str, ...]:
 
 def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...]:
     """A gyroscope or barometer channel's model (trainer fit --channels): its unit in every note and
-    a first note saying how the header's acceleration units read for it."""
+    a first note naming the channel, its unit and LSB (every figure of the header is in that unit)."""
     from trainer.data.channels import UNIT_LABELS, relabel_units
 
     stats = TrainStats.of_checkpoint(raw)
@@ -124,10 +119,7 @@ def channel_notes(raw: dict[str, Any], notes: tuple[str, ...]) -> tuple[str, ...
     if unit is None or unit not in UNIT_LABELS or unit == "mg":
         return notes
     label = UNIT_LABELS[unit]
-    first = (
-        f"channel {stats.channel}: values in {label}, one LSB {STEP_UNITS[unit].short}; the model's own figures below, "
-        f"where they say mg, are in {label}"
-    )
+    first = f"channel {stats.channel}: values in {label}, one LSB {STEP_UNITS[unit].short}"
     relabelled = (
         relabel_units(note, unit).replace("accelerometer calibration", "sensor calibration") for note in notes
     )
@@ -197,7 +189,6 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
         notes=model.notes,
         sensor=model.sensor,
         shown=model.name,
-        unit=model.unit,
     )
     manifest = build_manifest(
         model.quantised,
@@ -245,10 +236,14 @@ def export(
         rate_millihz=rate_millihz,
         schedule=schedule,
     )
-    if accel_limit_g is not None and not family_of(model.quantised).clamps_accel(model.quantised):
+    if (
+        accel_limit_g is not None
+        and family_of(model.quantised).input_clamps(model.quantised).signal_lsb is None
+    ):
+        quantity = STEP_UNITS[model.unit].quantity
         raise UserError(
-            f"--accel-limit-g: a {model.name} module subtracts the drift from the acceleration as it comes and "
-            "never clamps it; the option applies to a module whose network reads the acceleration (dlstm)"
+            f"--accel-limit-g: a {model.name} module subtracts the drift from the {quantity} as it comes and "
+            f"never clamps it; the option applies to a module whose network reads its input (dlstm)"
         )
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)

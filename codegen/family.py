@@ -51,6 +51,7 @@ class Golden(Protocol):
 
     flags: int
     samples: int
+    input_clamped: np.ndarray  # per sample of the last run: an input was clamped (FLAG_INPUT_CLAMPED)
 
     def init(self) -> None: ...
 
@@ -115,12 +116,30 @@ class ImuForm:
     timed_brief: str = ""
 
 
+@dataclass(frozen=True)
+class InputClamps:
+    """Where a module's step clamps its inputs, each clamp setting ``NAME_FLAG_INPUT_CLAMPED``: the one
+    declaration that the C template renders its clamps from (codegen/render.py gives the template
+    ``temp_lo``/``temp_hi`` and ``signal_limit`` only when declared here) and that the manifest's
+    ``input_limits``, the header and ``codegen verify`` state.
+
+    ``temp_mdegc``: the temperature is clamped into [lo, hi] mdegC (None: it is not clamped; the
+    model does not read it beyond the valid-range flag); ``signal_lsb``: the raw input (acceleration,
+    angular rate, pressure) is clamped to +-signal_lsb before the model reads it (None: the model
+    subtracts the drift from the raw input as it comes and never clamps it)."""
+
+    temp_mdegc: tuple[int, int] | None
+    signal_lsb: int | None = None
+
+
+def front_end_temperature(model: Any) -> InputClamps:
+    """The default: the temperature clamped to the front end's range (``Limits.temp_lo_mdegc`` ..
+    ``temp_hi_mdegc``), the raw input never clamped."""
+    return InputClamps((model.limits.temp_lo_mdegc, model.limits.temp_hi_mdegc))
+
+
 def _no_state(model: Any, common: list[Any]) -> list[Any]:
     return common
-
-
-def _never(_: Any) -> bool:
-    return False
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,9 +152,9 @@ class CFamily:
     its modules (manifest key -> file; each has a ``#define TDC..._VERSION N`` the module checks);
     ``restore``: it has NAME_restore (an IMU module with a channel of it has one too); ``usage``: its paragraph of the header's comment (a template
     beside ``template``; None: a memoryless model's, any rate); ``time_base``: None for a memoryless
-    family (any rate); ``imu``: None when it has no IMU-module form; ``clamps_accel``: whether a model's
-    step clamps the acceleration to ``--accel-limit-g`` (a network whose input is the acceleration);
-    the others subtract the drift from the acceleration as it comes."""
+    family (any rate); ``imu``: None when it has no IMU-module form; ``input_clamps``: where a model's
+    step clamps its inputs (:class:`InputClamps`; the raw input only in a network whose input it is,
+    to ``--accel-limit-g``: the others subtract the drift from it as it comes)."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]
@@ -152,7 +171,7 @@ class CFamily:
     usage: Path | None = None
     time_base: TimeBase | None = None
     imu: ImuForm | None = None
-    clamps_accel: Callable[[Any], bool] = _never
+    input_clamps: Callable[[Any], InputClamps] = front_end_temperature
 
 
 _LOADED: dict[str, CFamily] = {}

@@ -35,6 +35,8 @@ class GoldenBase:
         self.model = model
         self.flags = 0
         self.samples = 0
+        # per sample of the last run: an input of that sample was clamped (FLAG_INPUT_CLAMPED, sample by sample)
+        self.input_clamped = np.zeros(0, dtype=bool)
 
     def init(self) -> None:
         self.flags = 0
@@ -50,9 +52,13 @@ class GoldenBase:
             self.flags |= FLAG_TEMP_OUT_OF_RANGE
 
     def _clamp(self, x: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        """``x`` (a chunk's input) clamped into [lo, hi]: the flag, and the samples it clamped."""
         clamped = np.clip(x, lo, hi)
-        if np.any(clamped != x):
+        beyond = clamped != x
+        assert beyond.shape == self.input_clamped.shape, "_clamp takes the whole chunk of run()"
+        if np.any(beyond):
             self.flags |= FLAG_INPUT_CLAMPED
+            self.input_clamped = self.input_clamped | beyond
         return clamped
 
     def _sat(self, x: np.ndarray) -> np.ndarray:
@@ -70,6 +76,7 @@ class GoldenBase:
         accel, temp = _as_int64(accel), _as_int64(temp)
         if accel.shape != temp.shape:
             raise ValueError("accel and temp must have the same length")
+        self.input_clamped = np.zeros(accel.shape, dtype=bool)
         self._range_flag(temp)
         return self._run(accel, temp)
 

@@ -314,7 +314,8 @@ def verify_imu(
 
 def imu_report_lines(result: ImuVerifyResult) -> list[str]:
     lines = [
-        f"{result.name}: {len(result.channels)} channels x {result.samples} samples against each channel's golden model"
+        f"{result.name}: {len(result.channels)} channel{'' if len(result.channels) == 1 else 's'} x "
+        f"{result.samples} samples against each channel's golden model"
     ]
     for run in result.runs:
         per = ", ".join(f"{c} {m}" for c, m in zip(result.channels, run.mismatches, strict=True))

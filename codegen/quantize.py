@@ -44,6 +44,7 @@ class Limits:
     temp_hi_mdegc: int = TEMP_LIMITS_MDEGC[1]
     valid_lo_mdegc: int = TEMP_LIMITS_MDEGC[0]  # the model's valid range, for the flag only
     valid_hi_mdegc: int = TEMP_LIMITS_MDEGC[1]
+    unit: str = "mg"  # the channel's (mg, dps, pa): one LSB of the step's input and output is 1/16000 of it
 
 
 def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
@@ -63,7 +64,10 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
     valid_lo = min(max(round_half_away(Fraction(lo) * 1000), clip[0]), clip[1])
     valid_hi = min(max(round_half_away(Fraction(hi) * 1000), clip[0]), clip[1])
     return Limits(
-        round(accel_limit_g * 1000 * ACCEL_PER_MG), valid_lo_mdegc=valid_lo, valid_hi_mdegc=valid_hi
+        round(accel_limit_g * 1000 * ACCEL_PER_MG),
+        valid_lo_mdegc=valid_lo,
+        valid_hi_mdegc=valid_hi,
+        unit=ckpt.unit,
     )
 
 

@@ -19,13 +19,13 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.family import QuantModel, family_of
+from codegen.family import InputClamps, QuantModel, family_of
 from codegen.family import entries as family_entries
 from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.qformats import header_with_block
 from codegen.quantize import FLAG_INPUT_CLAMPED, FLAG_SATURATED, FLAG_TEMP_OUT_OF_RANGE
 from codegen.rate import declared_rate_millihz
-from codegen.step_units import STEP_UNITS
+from codegen.step_units import LSB_PER_UNIT, STEP_UNITS, StepUnits
 from trainer.errors import UserError
 
 MAX_NAME_LENGTH = 22  # NAME + "_model_id" stays within C99's 31 significant external characters
@@ -165,6 +165,23 @@ def _range_test(model: QuantModel) -> str:
     return f"temp_mdegc < {lim.valid_lo_mdegc} || temp_mdegc > {lim.valid_hi_mdegc}"
 
 
+def clamp_text(clamps: InputClamps, step: StepUnits) -> str:
+    """Where this module clamps its inputs, from its declaration (NAME.h's comment of
+    NAME_FLAG_INPUT_CLAMPED): "temp_mdegc to -17603 .. 73967; rate_q16k is never clamped"."""
+    clamped, never = [], []
+    if clamps.temp_mdegc is not None:
+        lo, hi = clamps.temp_mdegc
+        clamped.append(f"temp_mdegc to {lo} .. {hi}")
+    else:
+        never.append("temp_mdegc")
+    if clamps.signal_lsb is not None:
+        limit = clamps.signal_lsb
+        clamped.append(f"{step.argument} to +-{limit} (+-{limit / LSB_PER_UNIT:g} {step.label})")
+    else:
+        never.append(step.argument)
+    return "; ".join([*clamped, *(f"{name} is never clamped" for name in never)])
+
+
 def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
     lim = model.limits
     ctx: dict[str, object] = {
@@ -179,11 +196,16 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
         "fields": state_fields(model),
         "range_test": _range_test(model),
         "valid_range_text": f"{lim.valid_lo_mdegc / 1000:g} .. {lim.valid_hi_mdegc / 1000:g} degC",
-        "temp_lo": lim.temp_lo_mdegc,
-        "temp_hi": lim.temp_hi_mdegc,
-        "accel_limit": lim.accel,
-        "step": STEP_UNITS["mg"],  # render_sources names a gyroscope's or barometer's own
+        "step": STEP_UNITS[lim.unit],  # the channel's words: accel_q4ug, rate_q16k, pressure_q16k
     }
+    # the clamps, only as declared (CFamily.input_clamps): a template that clamps what the declaration
+    # does not name fails to render (StrictUndefined), so the C and the manifest cannot disagree
+    clamps = family_of(model).input_clamps(model)
+    if clamps.temp_mdegc is not None:
+        ctx["temp_lo"], ctx["temp_hi"] = clamps.temp_mdegc
+    if clamps.signal_lsb is not None:
+        ctx["signal_limit"] = clamps.signal_lsb
+    ctx["clamp_doc"] = clamp_text(clamps, STEP_UNITS[lim.unit])
     millihz = declared_rate_millihz(model)
     macros: list[tuple[str, object]] = [
         ("VALID_TEMP_MIN_MDEGC", lim.valid_lo_mdegc),
@@ -267,18 +289,16 @@ def render_sources(
     notes: tuple[str, ...],
     sensor: str,
     shown: str = "",
-    unit: str = "mg",
 ) -> dict[str, str]:
     """``{NAME.h: text, NAME.c: text, tdc_kernels.h: text}`` and the family's own kernel headers
     (``tdc_physics_kernels.h`` for a physics model); ``notes`` are lines for the header's comment,
     ``sensor`` what its title names, ``shown`` the name the user knows the model by (auto's choice:
-    ``none``, ``poly2``, ``physics-branch``), where it differs from the registered method; ``unit``
-    the channel's (the step's words: :mod:`codegen.step_units`)."""
+    ``none``, ``poly2``, ``physics-branch``), where it differs from the registered method. The step's
+    words are the channel's (``model.limits.unit``: :mod:`codegen.step_units`)."""
     env = _environment()
     ctx = _context(model, validate_name(name), sha256)
     if shown:
         ctx["method"] = shown
-    ctx["step"] = STEP_UNITS[unit]
     ctx["notes"] = [textwrap.wrap(note, 92) for note in notes]
     ctx["sensor"] = sensor
     files = {

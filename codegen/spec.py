@@ -25,6 +25,7 @@ class Checkpoint:
     method: str
     model: ModelSpec
     valid_temp_range_c: tuple[float, float]
+    unit: str = "mg"  # the channel's unit (mg, dps, pa): the step's integers are 1/16000 of it
 
 
 def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
@@ -41,4 +42,15 @@ def parse_checkpoint(checkpoint: dict[str, Any], source: str) -> Checkpoint:
         root.fail(f"field 'valid_temp_range_c' must be increasing, got {[lo, hi]}")
     payload = root.sub("payload")
     model = family.get(entry.renderer).parse(root, payload, entry.name)
-    return Checkpoint(entry.name, model, (lo, hi))
+    return Checkpoint(entry.name, model, (lo, hi), channel_unit_of(checkpoint))
+
+
+def channel_unit_of(checkpoint: dict[str, Any]) -> str:
+    """The unit of the channel the model was fitted on (``train_stats.unit``: mg, dps, pa, the units of
+    ``trainer.data.channels``, each with its words in :mod:`codegen.step_units`); a model without one
+    (an accelerometer's, or a file written before channels) is in mg."""
+    from trainer.data.channels import DEFAULT_UNIT, UNIT_LABELS
+    from trainer.train_stats import TrainStats
+
+    unit = TrainStats.of_checkpoint(checkpoint).unit or DEFAULT_UNIT
+    return unit if unit in UNIT_LABELS else DEFAULT_UNIT

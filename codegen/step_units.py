@@ -22,6 +22,7 @@ class StepUnits:
     argument: str  # the step's input argument
     output: str  # the run function's output array
     label: str  # the unit
+    signal: str  # the input briefly (a DLSTM's network input: "(rate - mean deg/s) / std deg/s")
 
     @property
     def short(self) -> str:
@@ -37,7 +38,7 @@ class StepUnits:
 
 
 STEP_UNITS: dict[str, StepUnits] = {
-    "mg": StepUnits("acceleration", "accel_q4ug", "out_q4ug", "mg"),
-    "dps": StepUnits("angular rate", "rate_q16k", "out_q16k", "deg/s"),
-    "pa": StepUnits("pressure", "pressure_q16k", "out_q16k", "Pa"),
+    "mg": StepUnits("acceleration", "accel_q4ug", "out_q4ug", "mg", "accel"),
+    "dps": StepUnits("angular rate", "rate_q16k", "out_q16k", "deg/s", "rate"),
+    "pa": StepUnits("pressure", "pressure_q16k", "out_q16k", "Pa", "pressure"),
 }

@@ -24,13 +24,15 @@ from codegen.export import LoadedModel, load_for_codegen, manifest_name
 from codegen.families.physics.quantise import QPhysics
 from codegen.families.stream.golden import GoldenStream
 from codegen.families.stream.quantise import QStream
-from codegen.family import QuantModel
+from codegen.family import QuantModel, family_of
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
 from codegen.quantize import ACCEL_PER_MG
 from codegen.rate import declared_rate_millihz, retime_compensator
 from codegen.rate import resample as resample_recording
+from codegen.render import clamp_text
+from codegen.step_units import STEP_UNITS
 from trainer.data.recording import Recording
 from trainer.data.recording_io import RECORDING_SUFFIXES
 from trainer.errors import UserError
@@ -44,8 +46,22 @@ ERROR_BUDGET_MAX_MG = 5e-3
 
 
 @dataclass(frozen=True)
+class ClampedSamples:
+    """The samples whose input the module clamps (``NAME_FLAG_INPUT_CLAMPED``, sample by sample in the
+    golden model), compared apart from the error budget: there the module differs from the float
+    model by what the clamp removes, which is no quantisation error."""
+
+    count: int
+    clamps: str  # where the module clamps (its declaration, as NAME.h says it)
+    rms_mg: float  # golden minus the float model behind the clamp, on these samples (same integer inputs)
+    max_abs_mg: float
+    effect_max_mg: float  # max |float behind the clamp - float on raw inputs|: the clamp's own effect
+
+
+@dataclass(frozen=True)
 class ErrorBudget:
-    """Golden minus float, mg, over every sample of the recording."""
+    """Golden minus float, mg, over the samples of the recording the module does not clamp (the float
+    model fed the inputs as the module's front end clamps them: :func:`behind_clamps`)."""
 
     rms_mg: float
     max_abs_mg: float
@@ -55,6 +71,8 @@ class ErrorBudget:
     smoothed_rms_mg: float  # the arithmetic share after the paper's 0.5 s validation smoothing
     network_rms_mg: float | None = None  # the arithmetic share before the output's rounding to 1/16 ug
     network_max_abs_mg: float | None = None
+    compared: int | None = None  # samples in the figures above (None: every sample)
+    clamped: ClampedSamples | None = None  # the samples beyond the input clamp, compared apart
 
     @property
     def noise_ratio(self) -> float:
@@ -63,7 +81,10 @@ class ErrorBudget:
     @property
     def met(self) -> bool:
         """The generator's share (golden minus float on the same integer inputs) within the budget of
-        docs/codegen.md: what the quantiser is sized for, whatever network it is given."""
+        docs/codegen.md: what the quantiser is sized for, whatever network it is given (vacuously,
+        when the module clamps an input of every sample: nothing left to judge)."""
+        if self.compared == 0:
+            return True
         return (
             self.arithmetic_rms_mg <= ERROR_BUDGET_RMS_MG
             and self.arithmetic_max_abs_mg <= ERROR_BUDGET_MAX_MG
@@ -141,12 +162,31 @@ def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]
     return name, manifest
 
 
+def manifest_input_limit_g(manifest: dict[str, Any], path: Path) -> float:
+    """The ``--accel-limit-g`` the module was exported with, from its manifest's ``input_limits``:
+    what a module that clamps its raw input clamps it to, else the default (no clamp, no limit)."""
+    from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
+
+    try:
+        signal = manifest["input_limits"]["input"]
+        if not signal["clamped"]:
+            return DEFAULT_ACCEL_LIMIT_G
+        return float(signal["lsb"][1]) / ACCEL_PER_MG / 1000
+    except (KeyError, TypeError, IndexError, ValueError):
+        raise UserError(
+            f"{path}: field 'input_limits.input' is missing or malformed (a module of another codegen "
+            "version? export it again)"
+        ) from None
+
+
 def sensor_noise_mg(accel_mg: np.ndarray) -> float:
     """White noise per sample from successive differences (drift cancels out)."""
     return float(np.std(np.diff(accel_mg)) / np.sqrt(2.0))
 
 
 def _rms_max(err: np.ndarray) -> tuple[float, float]:
+    if not err.size:
+        return float("nan"), float("nan")
     return float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err)))
 
 
@@ -157,24 +197,63 @@ def error_budget(
     accel_mg: np.ndarray,
     rate_hz: float,
     fine_mg: np.ndarray | None = None,
+    apart: np.ndarray | None = None,
 ) -> ErrorBudget:
     """Golden minus float on the float recording (total) and on the integer inputs (arithmetic),
     the latter also after the paper's 0.5 s smoothing and, given ``fine_mg`` (the golden output
     before the estimate's rounding to 1/16 ug), before that rounding: the output LSB costs up to
-    one LSB per sample, which the error feedback pushes to high frequencies."""
+    one LSB per sample, which the error feedback pushes to high frequencies. ``apart``: the samples
+    left out of every figure (those the module clamps, :class:`ClampedSamples`)."""
     from trainer.scoring.evaluate import PAPER_VALIDATION_SMOOTHING_S, smooth_for_scoring
 
+    keep = np.ones(golden.size, dtype=bool) if apart is None else ~apart
     golden_mg = golden / ACCEL_PER_MG
     arithmetic = golden_mg - float_on_ints_mg
-    smoothed = smooth_for_scoring(arithmetic, rate_hz, PAPER_VALIDATION_SMOOTHING_S)
-    network = _rms_max(fine_mg - float_on_ints_mg) if fine_mg is not None else (None, None)
+    smoothed = smooth_for_scoring(arithmetic, rate_hz, PAPER_VALIDATION_SMOOTHING_S)[keep]
+    network = _rms_max((fine_mg - float_on_ints_mg)[keep]) if fine_mg is not None else (None, None)
     return ErrorBudget(
-        *_rms_max(golden_mg - float_mg),
+        *_rms_max((golden_mg - float_mg)[keep]),
         sensor_noise_mg(accel_mg),
-        *_rms_max(arithmetic),
-        float(np.sqrt(np.mean(smoothed**2))),
-        *network,
+        *_rms_max(arithmetic[keep]),
+        float(np.sqrt(np.mean(smoothed**2))) if smoothed.size else float("nan"),
+        network_rms_mg=network[0],
+        network_max_abs_mg=network[1],
+        compared=None if apart is None else int(np.count_nonzero(keep)),
     )
+
+
+def behind_clamps(q: QuantModel, accel: np.ndarray, temp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The step's integer inputs as the module's front end clamps them (its family's declaration,
+    ``CFamily.input_clamps``, which its C is rendered from): what its model reads."""
+    clamps = family_of(q).input_clamps(q)
+    if clamps.signal_lsb is not None:
+        accel = np.clip(accel, -clamps.signal_lsb, clamps.signal_lsb)
+    if clamps.temp_mdegc is not None:
+        temp = np.clip(temp, *clamps.temp_mdegc)
+    return accel, temp
+
+
+def float_behind_clamps(
+    float_model: Any, q: QuantModel, rec: Recording, accel: np.ndarray, temp: np.ndarray, *, integers: bool
+) -> np.ndarray:
+    """The float model's output (mg) behind the module's input clamp: fed the inputs as the module
+    clamps them, with what the clamp took off the raw input added back (the module subtracts its
+    drift estimate from the raw input, not from the clamped one). ``integers``: on the step's integer
+    inputs ``accel``, ``temp``; else on the float recording, whose samples the module clamps (their
+    integers beyond a clamp) replaced by the clamp's bound. On a recording the module clamps nowhere
+    both are the float model's output on the recording as it is."""
+    clamped, clamped_temp = behind_clamps(q, accel, temp)
+    if integers:
+        raw_mg, clamped_mg = accel / ACCEL_PER_MG, clamped / ACCEL_PER_MG
+        view = integer_recording(rec, clamped, clamped_temp)
+    else:
+        raw_mg = rec.accel_mg
+        clamped_mg = np.where(clamped != accel, clamped / ACCEL_PER_MG, raw_mg)
+        temp_c = np.where(clamped_temp != temp, clamped_temp / 1000.0, rec.temp_c)
+        columns = {**rec.without_truth().columns, "accel_mg": clamped_mg, "temp_c": temp_c}
+        view = Recording(columns, dict(rec.meta), rec.source)
+    out: np.ndarray = float_model.compensate(view) + (raw_mg - clamped_mg)
+    return out
 
 
 def held_fine_output(accel: np.ndarray, fine_estimates: list[float], decimation: int) -> np.ndarray:
@@ -310,10 +389,7 @@ def verify(
 
     out = Path(out_dir)
     name, manifest = find_manifest(out, name)
-    try:
-        accel_limit_g = float(manifest["input_limits"]["accel_g"][1])
-    except (KeyError, TypeError, IndexError, ValueError):
-        raise UserError(f"{out / manifest_name(name)}: field 'input_limits.accel_g' is missing") from None
+    accel_limit_g = manifest_input_limit_g(manifest, out / manifest_name(name))
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
@@ -371,12 +447,33 @@ def verify(
     offset = float_model.offset
     t_ref = offset.t_ref_c if offset is not None and offset.relative else None
     retime_compensator(float_model, declared_rate_millihz(q))
-    float_out = float_model.compensate(rec.without_truth())
-    float_on_ints = float_model.compensate(integer_recording(rec, accel, temp))
+    # the float model behind the module's input clamp: what the clamp removes is apart from the budget
+    float_out = float_behind_clamps(float_model, q, rec, accel, temp, integers=False)
+    float_on_ints = float_behind_clamps(float_model, q, rec, accel, temp, integers=True)
     fine = None
     if stream is not None and stream.fine_estimates is not None:
         fine = held_fine_output(accel, stream.fine_estimates, stream.model.frontend.decimation)
-    budget = error_budget(step_out, float_out, float_on_ints, rec.accel_mg, rec.sample_rate_hz, fine)
+    apart = np.asarray(step_golden.input_clamped, dtype=bool)
+    budget = error_budget(
+        step_out,
+        float_out,
+        float_on_ints,
+        rec.accel_mg,
+        rec.sample_rate_hz,
+        fine,
+        apart if apart.any() else None,
+    )
+    if apart.any():
+        on_raw = float_model.compensate(integer_recording(rec, accel, temp))  # no clamp: the clamp's effect
+        err = step_out[apart] / ACCEL_PER_MG - float_on_ints[apart]
+        step = STEP_UNITS[q.limits.unit]
+        clamped = ClampedSamples(
+            int(np.count_nonzero(apart)),
+            clamp_text(family_of(q).input_clamps(q), step),
+            *_rms_max(err),
+            float(np.max(np.abs(float_on_ints - on_raw))),
+        )
+        budget = dataclasses.replace(budget, clamped=clamped)
     tables = (
         compare_table1(rec, model.checkpoint.method, float_out, step_out / ACCEL_PER_MG, float_on_ints)
         if table1
@@ -451,6 +548,21 @@ def report_lines(result: VerifyResult) -> list[str]:
         f"mismatches: {result.mismatches}"
         + (f" (first at sample {result.first_mismatch})" if result.first_mismatch is not None else ""),
         f"final state identical: {'yes' if result.state_equal else 'NO'}",
+    ]
+    c = b.clamped
+    if c is not None:
+        lines.append(
+            f"{c.count} samples beyond the input clamp, compared apart ({result.name.upper()}_FLAG_INPUT_CLAMPED: "
+            f"{c.clamps}): "
+            f"the clamp moves the output by up to {c.effect_max_mg:.3g} mg against the float model on the raw "
+            f"inputs, which is the clamp, not the arithmetic; golden - float behind the clamp there: RMS "
+            f"{c.rms_mg:.3g} mg, max {c.max_abs_mg:.3g} mg. The figures below are over the other "
+            f"{b.compared} samples, the float model fed the inputs as the module clamps them"
+        )
+    if b.compared == 0:
+        lines.append("error budget: not measured (the module clamps an input of every sample)")
+        return lines + _schedule_and_table_lines(result)
+    lines += [
         f"error budget (golden - float, {result.method}): RMS {b.rms_mg:.3g} mg, max {b.max_abs_mg:.3g} mg "
         f"(sensor noise {b.noise_mg:.3g} mg per sample, {b.noise_ratio:.3g} x the RMS)",
         f"  of which integer arithmetic (golden - float on the same integer inputs): RMS "
@@ -466,9 +578,15 @@ def report_lines(result: VerifyResult) -> list[str]:
     ]
     if b.network_rms_mg is not None:
         lines.append(
-            f"  before the output's rounding to 1/16 ug (the model's own arithmetic): RMS "
+            f"  before the output's rounding to one LSB (the model's own arithmetic): RMS "
             f"{b.network_rms_mg:.3g} mg, max {b.network_max_abs_mg:.3g} mg"
         )
+    return lines + _schedule_and_table_lines(result)
+
+
+def _schedule_and_table_lines(result: VerifyResult) -> list[str]:
+    """The report's lines on a spread schedule and Table 1."""
+    lines: list[str] = []
     sc = result.schedule
     if sc is not None:
         lines.append(
@@ -532,6 +650,8 @@ def json_document(result: VerifyResult, out_dir: str | os.PathLike[str]) -> dict
             "arithmetic_max_abs": result.budget.arithmetic_max_abs_mg,
             "unit": result.unit,
             "met": result.budget.met,
+            "compared_samples": result.samples if result.budget.compared is None else result.budget.compared,
+            "clamped_samples": 0 if result.budget.clamped is None else result.budget.clamped.count,
         },
         "rate_millihz": result.rate_millihz,
         "resampled_from_hz": result.resampled_from_hz,

@@ -134,17 +134,24 @@ def test_only_a_network_clamps_the_acceleration_and_the_manifest_says_which(
     """16 g + 1 LSB: a recursive DLSTM clamps its network input, the acceleration (flagged); the cubic,
     PLA, physics and temperature-input DLSTM modules subtract the drift from the acceleration as it
     comes (no flag, the output one LSB above the output at full scale), and their manifest says
-    `accel_clamped: false`."""
+    `input_limits.input.clamped: false`."""
     import json
+
+    from codegen.quantize import ACCEL_PER_MG, DEFAULT_ACCEL_LIMIT_G
 
     path = tmp_path / f"{method}.pt"
     tm.save_checkpoint(tm.checkpoint_for(method, rec, hidden=4, layers=1), path)
     export(path, tmp_path / "out", name="full")
     manifest = json.loads((tmp_path / "out" / "full.manifest.json").read_text())
     clamps = method == "dlstm"
-    assert manifest["input_limits"]["accel_clamped"] is clamps
+    signal = manifest["input_limits"]["input"]
+    assert signal["clamped"] is clamps
     host = load_module(tmp_path / "out", "full", flags=("-O1",))
-    full = manifest["input_limits"]["accel_lsb"][1]
+    full = round(DEFAULT_ACCEL_LIMIT_G * 1000 * ACCEL_PER_MG)  # 16 g in 1/16 ug
+    if clamps:
+        assert signal["lsb"] == [-full, full] and signal["range"] == [-16000.0, 16000.0]
+    else:
+        assert "lsb" not in signal
     temp = np.full(50, 20_000, dtype=np.int32)
     outputs = []
     for accel in (full, full + 1):

@@ -246,7 +246,7 @@ def test_a_half_way_start_header_gives_the_branch_terms_power_on_error_in_number
         codegen_main(["export", str(tmp_path / "half.pt"), "-o", str(tmp_path / "c"), "--name", "half"]) == 0
     )
     branch = _params(tmp_path / "half.pt")["hysteresis_offset"]
-    said = f"its amplitude, {abs(branch['amp_mg']):.3g} mg, until T has moved by w/2 = {branch['width_c'] / 2:.3g} degC"
+    said = f"|its amplitude|, {abs(branch['amp_mg']):.3g} mg, until T has moved by w/2 = {branch['width_c'] / 2:.3g} degC"
     header = " ".join((tmp_path / "c" / "half.h").read_text().replace(" * ", " ").split())
     assert said in header and said in (tmp_path / "c" / "half.manifest.json").read_text()
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.family import CFamily, ImuForm
+from codegen.family import CFamily, ImuForm, InputClamps
 from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits, round_half_away, rshift_round
 from codegen.golden import GoldenBase
 from codegen.imu_record import KIND_CUBIC, ChannelTables
@@ -91,14 +91,17 @@ class GoldenPoly3(GoldenBase):
         return self._output(accel, drift)
 
 
+def input_clamps(model: QPoly3) -> InputClamps:
+    """T clipped to the fitted range (the float cubic holds the edge too); the raw input as it comes."""
+    return InputClamps((model.clip_lo_mdegc, model.clip_hi_mdegc))
+
+
 def context(model: QPoly3) -> dict[str, object]:
     return {
         "coefficients": c_rows(model.coefficients_q),
         "frac": model.frac,
         "u_shift": model.u_shift,
         "t_ref": model.t_ref_mdegc,
-        "clip_lo": model.clip_lo_mdegc,
-        "clip_hi": model.clip_hi_mdegc,
     }
 
 
@@ -145,6 +148,7 @@ FAMILY = CFamily(
     context=context,
     manifest=manifest,
     tables=tables,
+    input_clamps=input_clamps,
     imu=ImuForm(
         KIND_CUBIC,
         imu_tables,

@@ -15,10 +15,10 @@ from typing import Any
 from codegen.families.physics.golden import GoldenPhysics
 from codegen.families.physics.imu import FORM
 from codegen.families.physics.manifest import physics_manifest
-from codegen.families.physics.quantise import quantise_physics
+from codegen.families.physics.quantise import QPhysics, quantise_physics
 from codegen.families.physics.render import KERNEL_PATH, physics_context, physics_state_fields, physics_tables
 from codegen.families.physics.spec import parse_physics
-from codegen.family import CFamily, TimeBase
+from codegen.family import CFamily, InputClamps, TimeBase
 from trainer.methods import PHYSICS_RENDERER
 from trainer.train_stats import TrainStats
 
@@ -34,6 +34,11 @@ def trained_hz(raw: dict[str, Any]) -> float:
     if rate_hz is None:
         raise KeyError("train_stats.sample_rate_hz")
     return rate_hz
+
+
+def input_clamps(model: QPhysics) -> InputClamps:
+    """T clipped to the training range (the float stream holds the edge too); the raw input as it comes."""
+    return InputClamps((model.clip_lo_mdegc, model.clip_hi_mdegc))
 
 
 TIME_BASE = TimeBase(
@@ -58,5 +63,6 @@ FAMILY = CFamily(
     kernels={"physics_kernels": KERNEL_PATH},
     restore=True,
     time_base=TIME_BASE,
+    input_clamps=input_clamps,
     imu=FORM,
 )

@@ -72,13 +72,15 @@ class GoldenPhysics(GoldenBase):
 
     def _run(self, accel: np.ndarray, temp: np.ndarray) -> np.ndarray:
         before, after = self._steps()
-        drift = [self._block(temp[lo : lo + BLOCK], before, after) for lo in range(0, temp.size, BLOCK)]
+        m = self.model
+        t = self._clamp(temp, m.clip_lo_mdegc, m.clip_hi_mdegc)  # outside: hold the range's edge
+        drift = [self._block(t[lo : lo + BLOCK], before, after) for lo in range(0, t.size, BLOCK)]
         # |drift| < 2**30: only the output saturates
         return self._output(accel, np.concatenate(drift) if drift else np.empty(0, dtype=np.int64))
 
-    def _block(self, temp: np.ndarray, before: list[GoldenStep], after: list[GoldenStep]) -> np.ndarray:
-        """The C step on each sample of ``temp`` (at most :data:`BLOCK`), in three parts: what no
-        state feeds (the clamp, x, the previous x, the step) on the whole block in numpy int64
+    def _block(self, t: np.ndarray, before: list[GoldenStep], after: list[GoldenStep]) -> np.ndarray:
+        """The C step on each sample of ``t`` (the clamped temperatures, at most :data:`BLOCK`), in three
+        parts: what no state feeds (x, the previous x, the step) on the whole block in numpy int64
         (within int64 as each line says); the terms' recursive steps sample by sample on Python
         integers, recording what the C holds in int32 / int64 (T_b, the terms' sum, every state
         word after the step); then the cubic of the recorded T_b and the accumulator on the whole
@@ -86,7 +88,6 @@ class GoldenPhysics(GoldenBase):
         types hold them (an AssertionError says what overflows)."""
         m = self.model
         tf, centre = m.temp_frac, m.centre_mdegc
-        t = self._clamp(temp, m.clip_lo_mdegc, m.clip_hi_mdegc)  # outside: hold the range's edge
         x = (t - centre) << tf  # |t - centre| < 2**32, tf <= 24: within int64
         assert _within(x, INT32_MAX), "x beyond int32"
         if not self.started:

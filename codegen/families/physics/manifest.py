@@ -52,7 +52,7 @@ def physics_manifest(model: QPhysics) -> dict[str, object]:
                     "frac_bits": 32 + f.shift,
                     "difference_shift": f.shift,
                     "state_error_bound_mdegc": six_digits(f.error_mdegc),
-                    "state_error_bound_drift_mg": six_digits(f.error_mg),
+                    "state_error_bound_drift": six_digits(f.error_mg),  # in the channel's unit (units.unit)
                 }
                 for f in model.filters
             ],

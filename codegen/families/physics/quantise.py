@@ -267,14 +267,18 @@ def _lowpass(
     return QLowpass(name, tau_s, c_q, b_q, shift, float(c), float(b0), float(error), sensitivity)
 
 
-def _check_filters_budget(filters: list[QLowpass], rate_hz: float) -> None:
-    """The filters' state errors, in drift, add up to at most :data:`PHYS_FILTERS_BUDGET_MG`."""
+def _check_filters_budget(filters: list[QLowpass], rate_hz: float, unit: str = "mg") -> None:
+    """The filters' state error bounds, in drift, add up to at most :data:`PHYS_FILTERS_BUDGET_MG`
+    (one pool, in the channel's ``unit``: the budget of docs/codegen.md is in it)."""
+    from codegen.step_units import STEP_UNITS
+
+    label = STEP_UNITS[unit].label
     total_mg = sum(q.error_mg for q in filters)
     if total_mg > PHYS_FILTERS_BUDGET_MG:
         worst = max(filters, key=lambda q: q.error_mg)
         raise UserError(
-            f"physics: the filters would stray {total_mg:.3g} mg of drift from the float model at "
-            f"{rate_hz:g} Hz (budget {PHYS_FILTERS_BUDGET_MG:g} mg), most of it the {worst.name} filter "
+            f"physics: the filters would stray {total_mg:.3g} {label} of drift from the float model at "
+            f"{rate_hz:g} Hz (budget {PHYS_FILTERS_BUDGET_MG:g} {label}), most of it the {worst.name} filter "
             f"(tau {worst.tau_s:g} s: {worst.error_mdegc:.3g} mdegC)"
         )
 
@@ -379,7 +383,7 @@ def quantise_physics(spec: PhysicsSpec, limits: Limits, schedule: str = "step") 
             filt[fixed.filter_name] = lowpass_of(fixed.name) if fixed.name in first else None
     later_filt = {key: lowpass_of(key) for key, v in later if v.fixed.tau_s is not None}
     _check_filters_budget(
-        [q for q in filt.values() if q is not None] + list(later_filt.values()), spec.rate_hz
+        [q for q in filt.values() if q is not None] + list(later_filt.values()), spec.rate_hz, limits.unit
     )
     # the cubic about the centre, in U = T 2^(tf + u_shift) / 2^31 (T mdegC about the centre)
     u_shift = 0

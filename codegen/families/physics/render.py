@@ -7,8 +7,8 @@ from string import Template
 
 from codegen.families.physics.quantise import QPhysics, QTerm, rename_words
 from codegen.qformats import HEADER as KERNEL_HEADER
-from codegen.quantize import ACCEL_PER_MG
 from codegen.render import Field, bound_text, c_rows
+from codegen.step_units import LSB_PER_UNIT, STEP_UNITS
 from trainer.physics.catalogue.streaming import HI_BITS, FixedPoint, StateWord
 
 KERNEL_FILE = "tdc_physics_kernels.h"
@@ -52,14 +52,17 @@ def physics_tables(model: QPhysics) -> dict[str, int]:
 
 def play_start_text(model: QPhysics) -> str:
     """Where the play operator starts at power-on, as the header and the manifest say it (every play
-    operator of a model with several instances)."""
+    operator of a model with several instances); every figure in the channel's unit, every bound a
+    magnitude (an amplitude may be negative)."""
     branches = [t for t in model.terms if t.margin_q is not None and t.gain is not None]
     several = len(branches) > 1
     plays = ", ".join(f"P{t.suffix}" for t in branches) if several else "P"
+    unit = STEP_UNITS[model.limits.unit].label
 
-    def amplitude_mg(term: QTerm) -> float:
+    def amplitude(term: QTerm) -> float:
+        """The branch term's amplitude in the channel's unit (signed, as fitted)."""
         assert term.gain is not None and term.margin_q is not None
-        return term.gain.q * term.margin_q / 2 ** (model.frac + 32) / ACCEL_PER_MG
+        return term.gain.q * term.margin_q / 2 ** (model.frac + 32) / LSB_PER_UNIT
 
     def half_width_c(term: QTerm) -> float:
         assert term.margin_q is not None
@@ -69,8 +72,8 @@ def play_start_text(model: QPhysics) -> str:
 
         def size(term: QTerm) -> str:
             return (
-                f"{f'{term.gain_name}: ' if several else ''}its amplitude, "
-                f"{amplitude_mg(term):.3g} mg, until T has moved by w/2 = {half_width_c(term):.3g} degC"
+                f"{f'{term.gain_name}: ' if several else ''}|its amplitude|, "
+                f"{abs(amplitude(term)):.3g} {unit}, until T has moved by w/2 = {half_width_c(term):.3g} degC"
             )
 
         sizes = "; ".join(size(term) for term in branches)
@@ -84,18 +87,18 @@ def play_start_text(model: QPhysics) -> str:
         return f"P at T_pm, mid-way between the branches (the branch term is then off by at most {sizes})"
     start_c = (model.centre_mdegc + model.play_start_q / 2**model.temp_frac) / 1000.0
     each = "; ".join(
-        f"P{t.suffix}: amplitude {amplitude_mg(t):.3g} mg, width {2 * half_width_c(t):.3g} degC"
+        f"P{t.suffix}: amplitude {amplitude(t):.3g} {unit}, width {2 * half_width_c(t):.3g} degC"
         for t in branches
     )
-    worst = sum(2 * abs(amplitude_mg(t)) for t in branches)
+    worst = sum(2 * abs(amplitude(t)) for t in branches)
     widest = max(2 * half_width_c(t) for t in branches)
     return (
         f"{plays} at {start_c:g} degC (x = {model.play_start_q}), {'each ' if several else ''}clamped into "
         f"T_pm +- w/2 by the first step: the branch of a sensor brought to its first temperature from "
         f"{start_c:g} degC ({each}). A sensor that came another way (a reboot after a warmer or colder "
         f"excursion, or a reset mid-run) can be on another branch: each branch term is then off by up to "
-        f"twice its amplitude until T has moved by its width, in all at most {worst:.3g} mg until T has moved "
-        f"by {widest:.3g} degC; restore a saved state to keep the branch"
+        f"twice |its amplitude| until T has moved by its width, in all at most {worst:.3g} {unit} until T has "
+        f"moved by {widest:.3g} degC; restore a saved state to keep the branch"
     )
 
 
@@ -168,8 +171,6 @@ def physics_context(model: QPhysics) -> dict[str, object]:
         "centre": model.centre_mdegc,
         "frac": model.frac,
         "bound_text": bound_text(model.bound),
-        "clip_lo": model.clip_lo_mdegc,
-        "clip_hi": model.clip_hi_mdegc,
         "filters": [
             {
                 "name": f.name,

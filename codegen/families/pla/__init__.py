@@ -101,8 +101,8 @@ def manifest(model: QPla) -> dict[str, object]:
         "quantisation": {
             "rounding": "half away from zero",
             "split_points_mdegc": list(model.splits_mdegc),
-            "slopes": f"int32 Q{model.frac} accel LSB per mdegC",
-            "intercepts": f"int64 Q{model.frac} accel LSB",
+            "slopes": f"int32 Q{model.frac} output LSB (1/16000 of the channel's unit) per mdegC",
+            "intercepts": f"int64 Q{model.frac} output LSB",
             "frac_bits": model.frac,
             "bound": model.bound,
             "headroom_bits": six_digits(headroom_bits(model.bound, INT64_MAX)),

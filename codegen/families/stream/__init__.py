@@ -19,7 +19,7 @@ from codegen.families.stream.manifest import stream_manifest
 from codegen.families.stream.quantise import SCHEDULES, QStream, quantise_stream
 from codegen.families.stream.render import stream_context, stream_state_fields, stream_tables
 from codegen.families.stream.spec import parse_dlstm, parse_persistence
-from codegen.family import CFamily, TimeBase
+from codegen.family import CFamily, InputClamps, TimeBase
 from codegen.golden import GoldenBase
 from trainer.dlstm.realtime import FrontEnd
 
@@ -38,6 +38,15 @@ TIME_BASE = TimeBase(
     retime=retime_frontend,
     what="windows and decimation",
 )
+
+
+def input_clamps(model: QStream) -> InputClamps:
+    """What the front end smooths is clamped: the temperature (a temperature-input network) to the
+    front end's range, else the raw input (a recursive network, persistence) to ``--accel-limit-g``;
+    the other input is not read beyond the valid-range flag."""
+    if model.kind == "temperature":
+        return InputClamps((model.limits.temp_lo_mdegc, model.limits.temp_hi_mdegc))
+    return InputClamps(None, model.limits.accel)
 
 
 def golden_model(model: QStream) -> GoldenBase:
@@ -59,6 +68,6 @@ LSTM = CFamily(
     schedules=SCHEDULES,
     time_base=TIME_BASE,
     imu=FORM,
-    clamps_accel=lambda model: model.kind != "temperature",  # the network reads the acceleration
+    input_clamps=input_clamps,
 )
 MEAN = dataclasses.replace(LSTM, name="mean-stream", parse=parse_persistence, schedules=("step",))

@@ -43,7 +43,6 @@ def embedded_modules(part: ImuPart) -> list[dict[str, object]]:
             notes=channel.model.notes,
             sensor=channel.model.sensor,
             shown=channel.model.name,
-            unit=channel.model.unit,
         )
         own_include = f'#include "{sub}.h"\n'
         assert files[f"{sub}.c"].count(own_include) == 1

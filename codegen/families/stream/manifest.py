@@ -9,6 +9,7 @@ from codegen.fixedpoint import INT32_MAX, INT64_MAX, headroom_bits
 from codegen.manifest import six_digits
 from codegen.qformats import ACT_SEGMENTS, C_FRAC, GATE_FRAC, H_FRAC, TANH_FRAC, X_FRAC, X_MIN_FRAC
 from codegen.rate import rate_millihz
+from codegen.step_units import STEP_UNITS
 from trainer.dlstm.realtime import PERSISTENCE_KIND
 
 CELL_LIMIT = INT32_MAX / 2.0**C_FRAC
@@ -69,17 +70,19 @@ def stream_manifest(model: QStream) -> dict[str, object]:
         ),
         "frontend": {
             "kind": PERSISTENCE_KIND if not model.layers else model.kind,
-            "smoothed_signal": "temperature" if model.kind == "temperature" else "acceleration",
+            "smoothed_signal": "temperature"
+            if model.kind == "temperature"
+            else STEP_UNITS[model.limits.unit].quantity,
             "window_samples": model.window,
             "accel_window": fe.accel_window,
             "temp_window": fe.temp_window,
             "window_sums": f"running sum from phase {model.chunk_start} and {model.chunks} period sums (exact)",
             "mean": "one rounding division per step"
-            + (f" to Q{model.mean_frac}" if model.layers else " (the estimate, accel LSB)"),
+            + (f" to Q{model.mean_frac}" if model.layers else " (the estimate, output LSB)"),
         },
     }
     if not model.layers:
-        out["quantisation"] = {"rounding": "half away from zero", "estimate": "window mean, accel LSB"}
+        out["quantisation"] = {"rounding": "half away from zero", "estimate": "window mean, output LSB"}
         out["macs_per_network_step"] = 0
         return out
     head = model.head
@@ -95,8 +98,9 @@ def stream_manifest(model: QStream) -> dict[str, object]:
             "g_and_tanh_c": f"Q{TANH_FRAC} (table tanh)",
             "h": f"int16 Q{H_FRAC}",
             "cell_state": f"int32 Q7.{C_FRAC}, saturated at the int32 limits (flagged)",
-            "head": "int32 weights, int64 bias and accumulator, estimate int32 accel LSB (flagged)",
-            "window_mean": f"int64 Q{model.mean_frac} of the input unit (1/16 ug or mdegC)",
+            "head": "int32 weights, int64 bias and accumulator, estimate int32 output LSB (flagged)",
+            "window_mean": f"int64 Q{model.mean_frac} of the input unit "
+            + ("(mdegC)" if model.kind == "temperature" else f"({STEP_UNITS[model.limits.unit].short})"),
         },
         "activation_error_bound_lsb": ACT_ERROR_LSB,
         "inputs": [
@@ -124,8 +128,8 @@ def stream_manifest(model: QStream) -> dict[str, object]:
             "acc_headroom_bits": six_digits(headroom_bits(head.acc_bound, INT64_MAX)),
             "estimate_bound_lsb": six_digits(head.estimate_bound),
             "estimate_headroom_bits": six_digits(headroom_bits(head.estimate_bound, INT32_MAX)),
-            "output_mean_mg": model.frontend.output_mean,
-            "output_std_mg": model.frontend.output_std,
+            "output_mean": model.frontend.output_mean,  # in the channel's unit (units.unit)
+            "output_std": model.frontend.output_std,
         },
     }
     out["activations"] = activation_summary(min(layer.acc_frac for layer in model.layers))

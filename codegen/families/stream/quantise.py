@@ -71,6 +71,7 @@ from codegen.qformats import (
     X_MIN_FRAC,
 )
 from codegen.quantize import ACCEL_PER_MG, INT64_SAFE, Limits
+from codegen.step_units import STEP_UNITS
 from trainer.errors import UserError
 
 EST_LIMIT = INT32_MAX << EST_FRAC  # the estimate saturates at +-(2**31 - 1) LSB (flagged)
@@ -392,9 +393,11 @@ def _input(
     raise UserError(f"input '{name}': mean {mean:g} / std {std:g} {unit} cannot be scaled in int64")
 
 
-def _head(spec: DlstmModelSpec) -> QHead:
-    """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 15)``: y * std + mean folded in, int64."""
+def _head(spec: DlstmModelSpec, unit: str = "mg") -> QHead:
+    """``estimate = rshift_round(bias_q + sum_j w_q h_q, f + 15)``: y * std + mean folded in, int64
+    (``unit``: the channel's, which the mean and std are in)."""
     fe = spec.frontend
+    label = STEP_UNITS[unit].label
     scale = Fraction(fe.output_std) * ACCEL_PER_MG  # accel LSB per unit of y
     w_real = np.asarray(spec.head_w, dtype=np.float64) * float(scale)
     bias = (Fraction(spec.head_b) * Fraction(fe.output_std) + Fraction(fe.output_mean)) * ACCEL_PER_MG
@@ -408,7 +411,7 @@ def _head(spec: DlstmModelSpec) -> QHead:
         if acc_bound < INT64_SAFE:
             return QHead(w, frac + H_FRAC, bias_q, acc_bound, acc_bound / 2.0 ** (frac + H_FRAC))
     raise UserError(
-        f"head: output mean {fe.output_mean:g} mg / std {fe.output_std:g} mg cannot be represented"
+        f"head: output mean {fe.output_mean:g} {label} / std {fe.output_std:g} {label} cannot be represented"
     )
 
 
@@ -439,10 +442,19 @@ def quantise_stream(
     # (name, largest |v| in mean LSB, unit per LSB, mean, std, unit) of each network input
     features: list[tuple[str, int, Fraction, float, float, str]]
     if fe.kind == "recursive":
+        step = STEP_UNITS[limits.unit]
         frac = _mean_frac(fe.accel_window, limits.accel)
         mean_lsb = 1 << frac
         features = [
-            ("accel", limits.accel * mean_lsb, Fraction(1, ACCEL_PER_MG * mean_lsb), 0.0, 0.0, "mg"),
+            # the raw input's window mean, in the channel's unit (mg, deg/s, Pa)
+            (
+                step.signal,
+                limits.accel * mean_lsb,
+                Fraction(1, ACCEL_PER_MG * mean_lsb),
+                0.0,
+                0.0,
+                step.label,
+            ),
         ]
     else:
         t_max = max(-limits.temp_lo_mdegc, limits.temp_hi_mdegc)
@@ -487,4 +499,4 @@ def quantise_stream(
         _layer(layer.w_x, layer.w_h, layer.b, k, slots, tuple(fracs) if k == 0 else (H_FRAC,) * hidden)
         for k, layer in enumerate(spec.layers)
     )
-    return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec), frac, schedule)
+    return QStream(spec.method, fe.kind, fe, limits, inputs, layers, _head(spec, limits.unit), frac, schedule)

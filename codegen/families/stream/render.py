@@ -6,11 +6,13 @@ from codegen.activations import ACT_KNOT
 from codegen.families.stream.quantise import EST_LIMIT, UNIT_TASKS, QStream
 from codegen.qformats import ACT_SEGMENTS, C_FRAC, EST_FRAC
 from codegen.render import Field, bound_text, c_int, c_rows
+from codegen.step_units import STEP_UNITS
 
 
 def stream_state_fields(model: QStream, common: list[Field]) -> list[Field]:
     """The stream family's state members, the common ones (flags, samples) placed among them."""
-    unit = "mdegC" if model.kind == "temperature" else "1/16 ug"
+    lsb = STEP_UNITS[model.limits.unit].short  # the output LSB: 1/16 ug, or 1/16000 deg/s or Pa
+    unit = "mdegC" if model.kind == "temperature" else lsb
     fields = [Field("int64_t", "window_current", (), f"running sum since the window's start phase, {unit}")]
     if model.chunks:
         fields.append(
@@ -24,9 +26,9 @@ def stream_state_fields(model: QStream, common: list[Field]) -> list[Field]:
     if L:
         fields.append(Field("int32_t", "c", (L, H), f"cell states, Q7.{C_FRAC}"))
     fields += [
-        Field("int32_t", "estimate", (), "held drift estimate, 1/16 ug, whole part (floor)"),
-        Field("uint32_t", "estimate_frac", (), "its fraction, 1/2^16 of 1/16 ug"),
-        Field("uint32_t", "shaper", (), "output rounding: accumulated fractions, 1/2^16 of 1/16 ug"),
+        Field("int32_t", "estimate", (), f"held drift estimate, {lsb}, whole part (floor)"),
+        Field("uint32_t", "estimate_frac", (), f"its fraction, 1/2^16 of {lsb}"),
+        Field("uint32_t", "shaper", (), f"output rounding: accumulated fractions, 1/2^16 of {lsb}"),
     ]
     if model.chunks:
         fields.append(Field("uint32_t", "ring_pos", (), "next slot of window_ring"))
