@@ -47,6 +47,13 @@ class Recording:
         if len(set(lengths.values())) > 1:
             raise ValueError(f"{self.source}: columns have unequal lengths {lengths}")
 
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled (to a worker process) without ``row_label``: a closure over the reader's table, and
+        the rows a message names are named by the process that read the file."""
+        state = dict(self.__dict__)
+        state["row_label"] = None
+        return state
+
     def __len__(self) -> int:
         return len(self.time_s)
 
