@@ -98,3 +98,16 @@ def golden_with_resets(
             outputs[a:b, k] = golden.run(raw[a:b, k].astype(np.int64), temp[a:b, sensor].astype(np.int64))
         flags.append(golden.flags)
     return outputs, flags
+
+
+def accel_gyro_columns(seed: int, n: int = 1200) -> dict[str, np.ndarray]:
+    """A 2 Hz two-channel run (accel0_z in mg, gyro0_x in deg/s, each its own curve in temperature over
+    -10..50 degC), accel_mg a copy of accel0_z: what the export and verify tests of one API need."""
+    rng = np.random.default_rng(seed)
+    temp = np.linspace(-10.0, 50.0, n)
+    u = (temp - 20.0) / 30.0
+    columns = {"time_s": np.arange(n) / 2.0, "temp_c": temp}
+    columns["accel0_z_mg"] = -1000.0 + 2.0 * u - u**2 + rng.normal(0, 0.05, n)
+    columns["gyro0_x_dps"] = 0.3 * u + 0.1 * u**3 + rng.normal(0, 0.01, n)
+    columns["accel_mg"] = columns["accel0_z_mg"]
+    return columns

@@ -11,10 +11,10 @@ import json
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from codegen.cli import main as codegen_main
+from tests.imu_checks import accel_gyro_columns
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
@@ -29,14 +29,7 @@ IMU_STEP = re.compile(  # docs/imu-module.md: one step call for every channel, a
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("one_api")
-    rng = np.random.default_rng(4)
-    n = 1200
-    temp = np.linspace(-10.0, 50.0, n)
-    u = (temp - 20.0) / 30.0
-    columns = {"time_s": np.arange(n) / 2.0, "temp_c": temp}
-    columns["accel0_z_mg"] = -1000.0 + 2.0 * u - u**2 + rng.normal(0, 0.05, n)
-    columns["gyro0_x_dps"] = 0.3 * u + 0.1 * u**3 + rng.normal(0, 0.01, n)
-    columns["accel_mg"] = columns["accel0_z_mg"]
+    columns = accel_gyro_columns(4)
     write_recording(
         Recording(columns, {"sample_rate_hz": "2", "channel": "accel0_z"}, "one-api"), root / "rec.csv"
     )
