@@ -8,25 +8,23 @@ from itertools import combinations
 
 import numpy as np
 
+from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose.fit_summary import rms
 from trainer.diagnose.profile import BRANCH_NAMES
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.select import THRESHOLD
 from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
+from trainer.physics.catalogue.units import SECOND_INPUT
 from trainer.scoring.markdown import markdown_table
 
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"
-# A known second input, by the diagnosed channel's printed unit (what separates a scale factor from a bias)
-SECOND_INPUT = {
-    "mg": "the accelerometer flipped 180 degrees, +1 g / -1 g",
-    "deg/s": "the gyroscope on a rate table, two rates",
-    "Pa": "the barometer at a second pressure",
-}
 
 
 def generic_profile(unit: str) -> str:
-    """The profile that separates the catalogue's effects on any channel, its second input the channel's own."""
-    second = SECOND_INPUT.get(unit, "; ".join(SECOND_INPUT.values()))
+    """The profile that separates the catalogue's effects on any channel (``unit``: as printed, deg/s),
+    its second input the channel's own."""
+    suffix = next((k for k, label in UNIT_LABELS.items() if label == unit), None)
+    second = SECOND_INPUT.get(suffix or "", "; ".join(SECOND_INPUT.values()))
     return (
         "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a known second input "
         f"at two temperatures ({second})"

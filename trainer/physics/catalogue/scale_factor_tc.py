@@ -20,6 +20,7 @@ from trainer.physics.catalogue.base import (
     StartContext,
     StartingTerm,
 )
+from trainer.physics.catalogue.units import SECOND_INPUT
 
 
 def scale_error(g_in_mg: np.ndarray | float, T_pm: np.ndarray, sf_ppm_per_c: float) -> np.ndarray:
@@ -65,8 +66,7 @@ def _identifiability(p: FinderProfile) -> Identifiability:
         False,
         "a single static orientation: the scale-factor tempco times a constant input equals the "
         "polynomial's linear term (a fixture tilt is a constant c0 the same way)",
-        "a known second input at several temperatures: an accelerometer turned 180 degrees (+1 g / -1 g) or "
-        "tumbled, a gyroscope on a rate table, a barometer at a second pressure",
+        "a known second input at several temperatures: " + "; ".join(SECOND_INPUT.values()),
     )
 
 
