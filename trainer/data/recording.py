@@ -131,10 +131,6 @@ class Recording:
         columns = {k: v[start:stop] for k, v in self.columns.items()}
         return Recording(columns, dict(self.meta), self.source, shifted, self.accel_column)
 
-    def where_row(self, row: int) -> str:
-        """How a message names row ``row`` (from 0): the file's line, else its data row number."""
-        return self.row_label(row) if self.row_label is not None else f"data row {row + 1}"
-
     def file_column(self) -> str:
         """The file's column this recording's ``accel_mg`` holds (``gyro0_x_dps`` of a channel view)."""
         return self.accel_column or self.channel_column() or "accel_mg"
