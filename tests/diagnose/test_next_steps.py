@@ -14,14 +14,24 @@ from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.result import Ambiguity, Diagnosis
 
 
-def _diagnosis(named: list[str], ambiguous: list[Ambiguity], unit: str = "mg") -> Diagnosis:
+def _diagnosis(
+    named: list[str], ambiguous: list[Ambiguity], unit: str = "mg", profile: Any = None
+) -> Diagnosis:
     residual = SimpleNamespace(residual_block=np.zeros(4))
+    bare = SimpleNamespace(
+        branch=np.zeros(4, dtype=int),
+        identifiability={},
+        holds_after_ramp_s=0.0,
+        ramp_rates=[1.0],
+        reversals=0,
+        known_input_varies=False,
+    )
     fake: Any = SimpleNamespace(
         left_out=[SimpleNamespace(effect=e, peak_visible_mg=1.0) for e in named],
         ambiguous=ambiguous,
         before=residual,
         after=residual,
-        profile=SimpleNamespace(branch=np.zeros(4, dtype=int), identifiability={}),
+        profile=bare if profile is None else profile,
         not_identifiable=[],
         signal=SimpleNamespace(label=unit),
     )
@@ -64,3 +74,28 @@ def test_the_second_input_the_profile_asks_for_is_the_channel_s_own() -> None:
     for unit, wanted in inputs.items():
         generic = next_steps(_diagnosis(["temp_rate"], [], unit)).profile[-1]
         assert wanted in generic and not any(other in generic for other in inputs.values() if other != wanted)
+
+
+def test_the_generic_profile_asks_only_for_what_the_run_lacks() -> None:
+    """A run with 1.5 h holds after its ramps, two ramp rates and a reversal was told to add exactly
+    those: the profile's own features decide which parts of the generic test are asked for."""
+
+    def generic(**features: Any) -> str:
+        run = dict(holds_after_ramp_s=0.0, ramp_rates=[1.0], reversals=0, known_input_varies=False)
+        run.update(features)
+        profile = SimpleNamespace(branch=np.zeros(4, dtype=int), identifiability={}, **run)
+        return next_steps(_diagnosis(["temp_rate"], [], "mg", profile)).profile[-1]
+
+    bare = generic()
+    for wanted in ("holds of >= 1 h", "two ramp rates", "reversal", "+1 g / -1 g"):
+        assert wanted in bare and "already" not in bare
+    chamber = generic(holds_after_ramp_s=5400.0, ramp_rates=[0.5, 1.0], reversals=3)
+    asked, had = chamber.split(" (this run already has ")
+    assert "+1 g / -1 g" in asked and "holds" not in asked and "ramp rates" not in asked
+    assert all(part in had for part in ("holds of >= 1 h", "two ramp rates", "reversal"))
+    short_hold = generic(holds_after_ramp_s=1800.0, ramp_rates=[0.5, 1.0], reversals=3)
+    assert short_hold.startswith("holds of >= 1 h")
+    everything = generic(
+        holds_after_ramp_s=5400.0, ramp_rates=[0.5, 1.0], reversals=1, known_input_varies=True
+    )
+    assert everything.startswith("this run already has") and "second run" in everything

@@ -10,7 +10,7 @@ import numpy as np
 
 from trainer.data.channels import UNIT_LABELS
 from trainer.diagnose.fit_summary import rms
-from trainer.diagnose.profile import BRANCH_NAMES
+from trainer.diagnose.profile import BRANCH_NAMES, Profile
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.select import THRESHOLD
 from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
@@ -20,15 +20,31 @@ from trainer.scoring.markdown import markdown_table
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"
 
 
-def generic_profile(unit: str) -> str:
+HOLD_AFTER_RAMP_S = 3600.0  # a hold this long after a ramp lets a lag, a rate term and a relaxation settle
+
+
+def generic_profile(unit: str, profile: Profile | None = None) -> str:
     """The profile that separates the catalogue's effects on any channel (``unit``: as printed, deg/s),
-    its second input the channel's own."""
+    its second input the channel's own; given the run's ``profile``, only what the run lacks (a run
+    with 1.5 h holds was told to add holds of >= 1 h)."""
     suffix = next((k for k, label in UNIT_LABELS.items() if label == unit), None)
     second = SECOND_INPUT.get(suffix or "", "; ".join(SECOND_INPUT.values()))
-    return (
-        "holds of >= 1 h after a ramp, two ramp rates, a heating/cooling reversal and a known second input "
-        f"at two temperatures ({second})"
-    )
+    wanted = [
+        ("holds of >= 1 h after a ramp", profile is None or profile.holds_after_ramp_s < HOLD_AFTER_RAMP_S),
+        ("two ramp rates", profile is None or len(profile.ramp_rates) < 2),
+        ("a heating/cooling reversal", profile is None or profile.reversals < 1),
+        (
+            f"a known second input at two temperatures ({second})",
+            profile is None or not profile.known_input_varies,
+        ),
+    ]
+    missing = [text for text, lacking in wanted if lacking]
+    if profile is not None and len(missing) < len(wanted):
+        had = [text.split(" (")[0] for text, lacking in wanted if not lacking]
+        if not missing:
+            return f"this run already has {', '.join(had)}: a second run of the same profile"
+        return f"{', '.join(missing)} (this run already has {', '.join(had)})"
+    return ", ".join(missing[:-1]) + " and " + missing[-1]
 
 
 @dataclass(frozen=True)
@@ -116,7 +132,7 @@ def next_steps(d: Diagnosis) -> NextSteps:
     for effect, info in d.profile.identifiability.items():
         if info.test and (effect in unsettled or info.weak) and (not info.identifiable or info.weak):
             profile.append(f"{effect}: {info.test}")
-    profile.append(generic_profile(d.signal.label))
+    profile.append(generic_profile(d.signal.label, d.profile))
     not_compensated = list(dict.fromkeys(e for e in named if not compensable(e)))
     implausible = [a.effects[0] for a in d.ambiguous if a.implausible is not None]
     fit_only = list(dict.fromkeys([*not_compensated, *(f"{e} (implausible)" for e in implausible)]))
