@@ -278,6 +278,8 @@ def _device_ids(text: str) -> int | dict[str, int]:
         match = re.fullmatch(r"\s*((?:accel|gyro|baro)[0-9])=([0-9]+)\s*", item)
         if match is None:
             raise argparse.ArgumentTypeError(f"{item!r} is not ID or SENSOR=ID (e.g. accel0=2490378)")
+        if match.group(1) in ids:  # the last one would win silently
+            raise argparse.ArgumentTypeError(f"{match.group(1)} is given twice")
         ids[match.group(1)] = int(match.group(2))
     return ids
 

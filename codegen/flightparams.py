@@ -92,6 +92,7 @@ class ChannelCubic:
     model_sha256: str
     ahrs_orientation: int | None = None  # the training log's board rotation (ArduPilot), None: not noted
     offset: OffsetRecord | None = None  # the fit's offset policy (None: a file written before it)
+    fitted_channel: str | None = None  # the channel the model was fitted on, where --channel moved it
 
     @property
     def identity(self) -> bool:
@@ -164,8 +165,19 @@ def load_channel_cubic(
     scale = TO_STACK_UNIT[parsed.unit]
     sha = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     offset = OffsetRecord.from_dict(raw["offset"]) if "offset" in raw else None  # checked by load_checkpoint
+    moved = stats.channel if channel is not None and stats.channel not in (None, channel) else None
     return ChannelCubic(
-        parsed, name, device_id, coefficients * scale, t_ref, lo, hi, sha, stats.ahrs_orientation, offset
+        parsed,
+        name,
+        device_id,
+        coefficients * scale,
+        t_ref,
+        lo,
+        hi,
+        sha,
+        stats.ahrs_orientation,
+        offset,
+        moved,
     )
 
 
@@ -188,7 +200,7 @@ NOTE = "# note: "  # a file comment the export also prints: what the file says, 
 def model_lines(channels: Sequence[ChannelCubic]) -> list[str]:
     """The file's comment per model: its sha256, and for an identity why its coefficients are zero
     (a reader of the file alone would take zeros for a missing calibration)."""
-    return [
+    lines = [
         f"# {c.name}: model sha256 {c.model_sha256}"
         + (
             " (the identity: no compensation left less drift held out, so its coefficients are zero)"
@@ -196,6 +208,11 @@ def model_lines(channels: Sequence[ChannelCubic]) -> list[str]:
             else ""
         )
         for c in channels
+    ]
+    return lines + [
+        f"{NOTE}{c.name}: the model was fitted on {c.fitted_channel}, written as {c.name} (--channel)"
+        for c in channels
+        if c.fitted_channel is not None
     ]
 
 
@@ -379,6 +396,43 @@ def _check_holds_constant(cubic: ChannelCubic) -> None:
     )
 
 
+def check_distinct_ids(groups: Sequence[SensorSet]) -> None:
+    """Refuse two instances of a sensor type under one device id: PX4 applies the first TC_x set whose
+    ID matches (``TemperatureCompensation::set_sensor_id``), so the second set would never be applied
+    and the sensor that really has the other id would go uncompensated."""
+    seen: dict[tuple[str, int], SensorSet] = {}
+    for group in groups:
+        if group.device_id is None:
+            continue
+        first = seen.setdefault((group.sensor, group.device_id), group)
+        if first is not group:
+            raise UserError(
+                f"{first.sensor}{first.instance} and {group.sensor}{group.instance} both have device id "
+                f"{group.device_id}: PX4 applies the first {PX4_PREFIX[group.sensor]} set whose ID matches, so "
+                f"{group.sensor}{group.instance}'s would never be applied; give each sensor its own id (--device-id)"
+            )
+
+
+def untouched_sets_notes(groups: Sequence[SensorSet]) -> list[str]:
+    """A note per sensor type naming the PX4 sets this file leaves as the vehicle has them: the file
+    switches ``TC_x_ENABLE`` on for the whole type, so a set left from an earlier calibration with a
+    real device id applies again. They are named, not zeroed: a second file for another instance
+    must not erase the first's set."""
+    notes = []
+    for sensor, prefix in PX4_PREFIX.items():
+        carried = {g.instance for g in groups if g.sensor == sensor}
+        if not carried:
+            continue
+        others = [f"{prefix}{i}" for i in range(PX4_INSTANCES) if i not in carried]
+        if others:
+            notes.append(
+                f"{NOTE}{', '.join(others)}: not in this file, left as the vehicle has them; with "
+                f"{prefix}_ENABLE 1 a set left there by an earlier calibration applies to the sensor whose id "
+                f"is its {prefix}n_ID: set that _ID to 0 unless it is a calibration you keep"
+            )
+    return notes
+
+
 def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False) -> str:
     """A QGroundControl parameter file (``Vehicle-Id Component-Id Name Value Type``, tab-separated)."""
     groups = group_by_instance(channels)
@@ -387,6 +441,7 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
             raise UserError(
                 f"{group.sensor}{group.instance}: PX4 has thermal parameters for instances 0..3 only"
             )
+    check_distinct_ids(groups)
     lines = [
         "# Sensor thermal compensation parameters (mems-tdc codegen export --format px4-params)",
         "# Applied by PX4's TemperatureCompensation: offset = X0 + X1 dT + X2 dT^2 + X3 dT^3,",
@@ -400,6 +455,7 @@ def render_px4(channels: Sequence[ChannelCubic], *, keep_constant: bool = False)
         lines += narrowed_notes(
             members, group.t_min_c, group.t_max_c, f"the axes of {group.sensor}{group.instance}"
         )
+    lines += untouched_sets_notes(groups)
     lines += ["#", "# Vehicle-Id Component-Id Name Value Type"]
     rows: list[tuple[str, float | int, int]] = []
     for sensor in PX4_PREFIX:

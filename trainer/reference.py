@@ -109,6 +109,11 @@ class OffsetRecord:
 
     def describe(self) -> str:
         """The one line ``fit``, ``compare`` and ``codegen export`` print."""
+        if self.relative and self.drift_at_t_ref_mg == 0.0:  # the identity (auto's none): no level to keep
+            return (
+                f"offset: drift relative to T_ref {self.t_ref_c:.2f} degC, constant removed 0 mg "
+                "(the model has no drift: the channel's level stays in the output as it is)"
+            )
         if self.relative:
             return (
                 f"offset: drift relative to T_ref {self.t_ref_c:.2f} degC, constant removed 0 mg "

@@ -374,7 +374,8 @@ def identity_note(train_stats: TrainStats, source: str) -> str | None:
     channel = train_stats.channel or "the channel"
     return (
         f"{source}: {channel} is exported as the identity (C: zero correction; flight-stack parameters: zero "
-        f"coefficients, the sensor disabled where every axis is so): {record.get('reason', 'auto chose none')}"
+        f"coefficients, and ArduPilot's INS_TCALn_ENABLE 0 where the whole IMU is so): "
+        f"{record.get('reason', 'auto chose none')}"
     )
 
 

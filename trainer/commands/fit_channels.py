@@ -22,6 +22,7 @@ from trainer.data.channels import (
     method_refusal,
     one_axis_left_out,
     select_channels,
+    shared_temperature_note,
 )
 from trainer.errors import UserError
 from trainer.options.channels import INDEX_FILE, MODEL_SUFFIX, channel_prefix
@@ -46,8 +47,9 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
     check_output_directory(args.output)  # before a possibly long fit
     train = part_left_for_training(read_recording(args.train), args.holdout)
     channels = select_channels(train, args.channels)
-    if (note := one_axis_left_out(train, args.channels, channels)) is not None:
-        print(note, file=sys.stderr, flush=True)
+    for note in (one_axis_left_out(train, args.channels, channels), shared_temperature_note(train, channels)):
+        if note is not None:
+            print(note, file=sys.stderr, flush=True)
     checked = []
     for channel in channels:  # refuse before the first (possibly long) fit
         refusal = method_refusal(method.name, method.family, channel)

@@ -133,6 +133,34 @@ def one_axis_left_out(rec: Recording, wanted: tuple[str, ...], channels: list[Ch
     )
 
 
+def shared_temperature_note(rec: Recording, channels: list[Channel]) -> str | None:
+    """What a fit says when sensors of more than one device (IMU n: accel n and gyro n; a barometer)
+    share the recording's ``temp_c`` for want of their own temperature column; None otherwise.
+
+    A flight stack evaluates each sensor's set at that sensor's own temperature (PX4's TC_A1 at
+    accel1's, TC_B0 at the barometer's), which can be degrees away from the shared one during a
+    warm-up: a model fitted against another device's temperature is applied off by that much.
+    """
+
+    def device(channel: Channel) -> tuple[str, int]:
+        parsed = parse_channel(channel.name)
+        assert parsed is not None, "a Channel is only built from a parsed name"
+        return ("baro" if parsed.sensor == "baro" else "imu", parsed.instance)
+
+    if len({device(c) for c in channels}) < 2:
+        return None
+    shared = [c for c in channels if c.temp_column == "temp_c"]
+    if not shared:
+        return None
+    missing = list(dict.fromkeys(own_temp_column(c.name) for c in shared))
+    return (
+        f"note: {rec.source}: {names_text([c.name for c in shared])}: fitted against temp_c, the "
+        f"recording's shared temperature, for want of their own ({names_text(missing)}): a flight stack "
+        "applies each sensor's set at that sensor's own temperature, which can be degrees away during a "
+        "warm-up; record each sensor's temperature in its column if they differ"
+    )
+
+
 def parse_channels_option(text: str) -> tuple[str, ...]:
     """``all`` or a comma list of names; the names are checked against the recording (or model
     directory), so that a wrong one is reported with the channels that are there."""
