@@ -34,7 +34,7 @@ import textwrap
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import jinja2
 import numpy as np
@@ -44,6 +44,7 @@ from codegen.export import UNDETERMINED_WARNING, LoadedModel, load_for_codegen
 from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
 from codegen.imu_record import ChannelTables, ImuPart
+from codegen.manifest import input_limits
 from codegen.qformats import HEADER as KERNEL_HEADER
 from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, TEMP_LIMITS_MDEGC
 from codegen.rate import declared_rate_millihz
@@ -73,6 +74,7 @@ CHANNEL_HEADER = struct.Struct(
 SENSOR_RECORD = struct.Struct("<ii")  # valid range lo, hi (mdegC)
 LSB_PER_UNIT = STEP_LSB_PER_UNIT  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
 MANIFEST_FORMAT = "mems-tdc-imu-module"
+MANIFEST_FORMAT_VERSION = 2  # 2: each channel's input_limits
 BLOB_SUFFIX = ".cal.bin"
 
 
@@ -223,7 +225,58 @@ def _tables(q: QuantModel, sensor: int) -> ChannelTables:
     form = family_of(q).imu
     assert form is not None  # load_imu refuses the others
     tables: ChannelTables = form.tables(q, sensor)
+    _check_record_clamp(q, tables)
     return tables
+
+
+def _check_record_clamp(q: QuantModel, t: ChannelTables) -> None:
+    """The IMU C clamps a channel's inputs where its family declares (``CFamily.input_clamps``, what
+    the manifest's ``input_limits`` states): a kind whose arithmetic is in imu.c.j2 clamps the
+    temperature at its record's clip range (``clip_lo``, ``clip_hi``), which must be the declared
+    clamp; a record without a clip range ((0, 0): a DLSTM's) has its clamps in its embedded
+    one-channel module, rendered from the same declaration. A family whose record says otherwise
+    would make the C clamp where the manifest does not say: refused at generation."""
+    if (t.clip_lo, t.clip_hi) == (0, 0):
+        return
+    declared = family_of(q).input_clamps(q)
+    if declared.temp_mdegc != (t.clip_lo, t.clip_hi) or declared.signal_lsb is not None:
+        raise ValueError(
+            f"{q.method}: the IMU record clamps T at {t.clip_lo} .. {t.clip_hi} mdegC and never the raw "
+            f"input, the family declares {declared}"
+        )
+
+
+def clamp_text(limits: dict[str, object]) -> str:
+    """A channel's ``input_limits`` in the header's words: "temp_mdegc[IMU0_SENSOR_ACCEL0] to -10000 ..
+    50000 mdegC; raw[IMU0_CH_ACCEL0_X] never" (the channel list of NAME.h)."""
+    signal, temp = (cast(dict[str, Any], limits[key]) for key in ("input", "temp"))
+    parts = []
+    if temp["clamped"]:
+        parts.append(f"{temp['argument']} to {temp['mdegc'][0]} .. {temp['mdegc'][1]} mdegC")
+    if signal["clamped"]:
+        lo, hi = signal["lsb"]
+        parts.append(f"{signal['argument']} to {lo} .. {hi} (+-{hi / LSB_PER_UNIT:g} {signal['unit']})")
+    never = [side["argument"] for side in (temp, signal) if not side["clamped"]]
+    return "; ".join(parts + ([f"{' and '.join(never)} never"] if never else []))
+
+
+def channel_input_limits(channel: ImuChannel, name: str) -> dict[str, object]:
+    """A channel's ``input_limits`` in the module's manifest: where the module's C clamps the channel's
+    raw input (``raw[NAME_CH_<CHANNEL>]``, int32 LSB and the channel's unit) and its sensor's
+    temperature (``temp_mdegc[NAME_SENSOR_<SENSOR>]``, mdegC), each clamp setting the channel's
+    ``NAME_FLAG_INPUT_CLAMPED``. The IMU C clamps as the channel's one-channel module: a cubic,
+    piecewise-linear or physics channel its temperature at its record's clip range, which is the
+    family's declared clamp (:func:`_check_record_clamp`), a DLSTM channel both inputs in its embedded
+    one-channel module; so this is that module's ``input_limits`` (:func:`codegen.manifest.input_limits`,
+    from ``CFamily.input_clamps``), the arguments named as the IMU step's. A data-only module's
+    cubic and piecewise-linear channels clamp at the clip range of the blob they are given: the
+    limits stated are the calibration's the module was exported with (``calibration.sha256``)."""
+    limits = input_limits(channel.model.quantised)
+    signal, temp = (dict(cast(dict[str, object], limits[key])) for key in ("input", "temp"))
+    signal["argument"] = f"raw[{name.upper()}_CH_{channel.name.upper()}]"
+    signal["unit"] = UNIT_LABELS[channel.unit]  # the module's unit of the channel (its LSB: 1/16000 of it)
+    temp["argument"] = f"temp_mdegc[{name.upper()}_SENSOR_{channel.sensor.upper()}]"
+    return {"input": signal, "temp": temp}
 
 
 def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
@@ -361,6 +414,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "
                 f"{c.model.checkpoint.valid_temp_range_c[1]:.2f} degC",
                 "t": t,
+                "clamps": clamp_text(channel_input_limits(c, name)),
                 "slot": slot(c),
                 "splits": padded(t.splits, max_splits),
                 "slopes": padded(t.slopes, imu.max_intervals),
@@ -417,7 +471,7 @@ def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, s
 def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
     return {
         "format": MANIFEST_FORMAT,
-        "format_version": 1,
+        "format_version": MANIFEST_FORMAT_VERSION,
         "generator": f"mems-tdc codegen {__version__}",
         "name": name,
         "calibration": {"sha256": imu.sha256, "builtin": builtin},
@@ -442,6 +496,7 @@ def _manifest(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "method": c.model.checkpoint.method,
                 "sensor": c.sensor,
                 "model": {"file": c.model.path.name, "sha256": c.model.sha256},
+                "input_limits": channel_input_limits(c, name),
             }
             for c in imu.channels
         ],

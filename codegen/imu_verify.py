@@ -21,8 +21,9 @@ import numpy as np
 from codegen import cortex_m as cm
 from codegen.hostbuild import cdef_from_header, compile_c
 from codegen.imu import BLOB_SUFFIX, MANIFEST_FORMAT, ImuModel, imu_golden, load_imu
+from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
 from codegen.render import _environment
-from codegen.verify import to_step_units
+from codegen.verify import manifest_input_limit_g, to_step_units
 from trainer.data.channels import channel_view, recording_channels
 from trainer.data.recording import Recording
 from trainer.errors import UserError, atomic_output
@@ -107,6 +108,22 @@ def imu_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]] 
         if data.get("format") == MANIFEST_FORMAT and (name is None or data.get("name") == name):
             return str(data["name"]), data
     return None
+
+
+def manifest_accel_limit_g(manifest: dict[str, Any], path: Path) -> float:
+    """The ``--accel-limit-g`` the module was exported with: where its channels that clamp their raw
+    input (a recursive DLSTM's) clamp it, from each channel's ``input_limits`` (manifest format 2);
+    the default when no channel clamps it (the limit then changes nothing) or the manifest has none."""
+
+    def clamps_raw(channel: Any) -> bool:
+        limits = channel.get("input_limits") if isinstance(channel, dict) else None
+        signal = limits.get("input") if isinstance(limits, dict) else None
+        return isinstance(signal, dict) and signal.get("clamped") is True
+
+    limits = {manifest_input_limit_g(c, path) for c in manifest.get("channels", []) if clamps_raw(c)}
+    if len(limits) > 1:
+        raise UserError(f"{path}: the channels clamp their raw inputs at different limits {sorted(limits)} g")
+    return limits.pop() if limits else DEFAULT_ACCEL_LIMIT_G
 
 
 def step_inputs(imu: ImuModel, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
@@ -249,7 +266,9 @@ def verify_imu(
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
-    imu = load_imu(models, rate_millihz=module_rate)  # physics filters, DLSTM windows as exported (--rate)
+    accel_limit_g = manifest_accel_limit_g(manifest, out_dir / f"{name}.manifest.json")
+    # physics filters, DLSTM windows (--rate) and raw-input clamps (--accel-limit-g) as exported
+    imu = load_imu(models, rate_millihz=module_rate, accel_limit_g=accel_limit_g)
     module_channels = [c["name"] for c in manifest["channels"]]
     if [c.name for c in imu.channels] != module_channels:
         raise UserError(
