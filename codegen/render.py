@@ -182,6 +182,36 @@ def clamp_text(clamps: InputClamps, step: StepUnits) -> str:
     return "; ".join([*clamped, *(f"{name} is never clamped" for name in never)])
 
 
+def holds_edge_beyond_range(model: QuantModel) -> bool:
+    """Whether the module's output beyond its valid temperature range holds the correction of the range's
+    nearest edge (``NAME_HOLDS_EDGE_BEYOND_RANGE``), from its declared clamps (``CFamily.input_clamps``):
+    its step clamps the temperature into the valid range (``Limits.valid_lo_mdegc`` .. ``valid_hi_mdegc``,
+    as PX4 and ArduPilot clamp to TMIN .. TMAX) and does not read the raw input beyond subtracting the
+    drift from it. A temperature clamped only to a wider range (the front end's) is extrapolated beyond
+    the valid range; a model whose input is the raw signal corrects by what that signal does."""
+    clamps = family_of(model).input_clamps(model)
+    if clamps.temp_mdegc is None or clamps.signal_lsb is not None:
+        return False
+    lo, hi = clamps.temp_mdegc
+    return model.limits.valid_lo_mdegc <= lo <= hi <= model.limits.valid_hi_mdegc
+
+
+def holds_edge_text(model: QuantModel, step: StepUnits) -> str:
+    """NAME.h's comment of NAME_HOLDS_EDGE_BEYOND_RANGE: what the module does beyond its valid range, and
+    the declared clamp that makes it so."""
+    clamps = family_of(model).input_clamps(model)
+    if clamps.signal_lsb is not None:
+        why = f"{step.argument} is the model's input"
+    elif clamps.temp_mdegc is None:
+        why = "temp_mdegc is never clamped"
+    else:
+        lo, hi = clamps.temp_mdegc
+        if holds_edge_beyond_range(model):
+            return f"beyond the valid range the output holds the edge's correction (temp_mdegc clamped to {lo} .. {hi})"
+        why = f"temp_mdegc clamped to {lo} .. {hi} only"
+    return f"beyond the valid range the output is not the edge's ({why}): use another model or the raw value"
+
+
 def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
     lim = model.limits
     ctx: dict[str, object] = {
@@ -206,6 +236,8 @@ def _context(model: QuantModel, name: str, sha256: str) -> dict[str, object]:
     if clamps.signal_lsb is not None:
         ctx["signal_limit"] = clamps.signal_lsb
     ctx["clamp_doc"] = clamp_text(clamps, STEP_UNITS[lim.unit])
+    ctx["holds_edge"] = int(holds_edge_beyond_range(model))
+    ctx["holds_edge_doc"] = holds_edge_text(model, STEP_UNITS[lim.unit])
     millihz = declared_rate_millihz(model)
     macros: list[tuple[str, object]] = [
         ("VALID_TEMP_MIN_MDEGC", lim.valid_lo_mdegc),

@@ -15,10 +15,19 @@
  *  - A streaming model's first seconds after init are a start-up transient (its LSTM state starts
  *    at zero; docs/trainer.md measures up to 12 s): during PRIMARY_WARMUP_S / ALT_WARMUP_S seconds
  *    (15 for a streaming model, 0 for a memoryless one; set by the Makefile) its output is treated
- *    like an out-of-range one, and the other model or the raw value is used.
- *  - Outside the active model's valid temperature range (the range it was trained on) the
- *    module still computes (clamped inputs, extrapolation): its output is not trusted. The task
- *    uses the other model when that one is in range, else passes the raw value and says so.
+ *    as unusable, in range or not, and the other model or the raw value is used.
+ *  - Outside the active model's valid temperature range (the range it was trained on) the module
+ *    still computes, and its output is not validated. The task uses the other model when that one
+ *    is in range (quality FALLBACK). When neither is, a model that holds its edge
+ *    (NAME_HOLDS_EDGE_BEYOND_RANGE 1u: a cubic or physics module clamps the temperature to its valid
+ *    range and keeps the edge's correction, as PX4 and ArduPilot clamp to TMIN..TMAX) is used, the
+ *    active one first (quality HELD), and the raw value only when neither holds its edge (a PLA
+ *    extends its end segments, a network's inputs are clamped to its front end's limits: their
+ *    output there is extrapolated). Why not raw at once: the accelerometer's ordinary calibration
+ *    (offset, scale) is done on compensated data, so the raw value carries the whole drift from the
+ *    model's T_ref, a bias step into the navigation filter at the range's edge; the held edge keeps
+ *    the correction continuous there and is off only by the drift beyond the edge.
+ *  - A saturated output is never used (FLAG_SATURATED), in range or held.
  */
 #include "gnc_integration.h"
 
@@ -101,15 +110,26 @@ const char *gnc_tdc_active_model_id(void)
     return active == MODEL_ALT ? alt_model_id() : NULL;
 }
 
-/* Read and clear one model's flags; count them; 1 when its output of this sample is usable. */
-static int usable(uint32_t *flags, uint32_t out_of_range, uint32_t clamped, uint32_t saturated)
+/* What one model's output of a sample can be used as. */
+enum { USE_NONE = 0, USE_HELD = 1, USE_IN_RANGE = 2 };
+
+/* Read and clear one model's flags; count them; what its output of this sample is: in range (neither
+ * out of range nor saturated), held (out of range, not saturated, and the module holds its edge
+ * beyond its valid range), or not usable. */
+static int usable(uint32_t *flags, uint32_t out_of_range, uint32_t clamped, uint32_t saturated, int holds_edge)
 {
     uint32_t f = *flags;
     *flags = 0u;
     health.temp_out_of_range += (f & out_of_range) != 0u ? 1u : 0u;
     health.input_clamped += (f & clamped) != 0u ? 1u : 0u;
     health.saturated += (f & saturated) != 0u ? 1u : 0u;
-    return (f & (out_of_range | saturated)) == 0u;
+    if ((f & saturated) != 0u) {
+        return USE_NONE;
+    }
+    if ((f & out_of_range) == 0u) {
+        return USE_IN_RANGE;
+    }
+    return holds_edge ? USE_HELD : USE_NONE;
 }
 
 void gnc_tdc_sensor_task(const int32_t accel_q4ug[GNC_AXES], int32_t temp_mdegc, gnc_accel_sample_t *out)
@@ -123,23 +143,31 @@ void gnc_tdc_sensor_task(const int32_t accel_q4ug[GNC_AXES], int32_t temp_mdegc,
         axis_t *axis = &axes[k];
         int32_t y_primary = primary_step(&axis->primary, accel_q4ug[k], temp_mdegc);
         int32_t y_alt = alt_step(&axis->alt, accel_q4ug[k], temp_mdegc);
-        int ok_primary = usable(&axis->primary.flags, PRIMARY_FLAG_TEMP_OUT_OF_RANGE, PRIMARY_FLAG_INPUT_CLAMPED,
-            PRIMARY_FLAG_SATURATED);
-        int ok_alt = usable(&axis->alt.flags, ALT_FLAG_TEMP_OUT_OF_RANGE, ALT_FLAG_INPUT_CLAMPED,
-            ALT_FLAG_SATURATED);
-        int ok_active;
-        int ok_other;
-        ok_primary = ok_primary && warm_primary;
-        ok_alt = ok_alt && warm_alt;
-        ok_active = active == MODEL_PRIMARY ? ok_primary : ok_alt;
-        ok_other = active == MODEL_PRIMARY ? ok_alt : ok_primary;
-        if (active != MODEL_NONE && ok_active) {
-            out->accel_q4ug[k] = active == MODEL_PRIMARY ? y_primary : y_alt;
+        int use_primary = usable(&axis->primary.flags, PRIMARY_FLAG_TEMP_OUT_OF_RANGE, PRIMARY_FLAG_INPUT_CLAMPED,
+            PRIMARY_FLAG_SATURATED, PRIMARY_HOLDS_EDGE_BEYOND_RANGE != 0u);
+        int use_alt = usable(&axis->alt.flags, ALT_FLAG_TEMP_OUT_OF_RANGE, ALT_FLAG_INPUT_CLAMPED, ALT_FLAG_SATURATED,
+            ALT_HOLDS_EDGE_BEYOND_RANGE != 0u);
+        int use_active;
+        int use_other;
+        int32_t y_active;
+        int32_t y_other;
+        use_primary = warm_primary ? use_primary : USE_NONE;
+        use_alt = warm_alt ? use_alt : USE_NONE;
+        use_active = active == MODEL_PRIMARY ? use_primary : use_alt;
+        use_other = active == MODEL_PRIMARY ? use_alt : use_primary;
+        y_active = active == MODEL_PRIMARY ? y_primary : y_alt;
+        y_other = active == MODEL_PRIMARY ? y_alt : y_primary;
+        if (active != MODEL_NONE && use_active == USE_IN_RANGE) {
+            out->accel_q4ug[k] = y_active;
             out->quality[k] = GNC_ACCEL_COMPENSATED;
-        } else if (active != MODEL_NONE && ok_other) {
-            out->accel_q4ug[k] = active == MODEL_PRIMARY ? y_alt : y_primary;
+        } else if (active != MODEL_NONE && use_other == USE_IN_RANGE) {
+            out->accel_q4ug[k] = y_other;
             out->quality[k] = GNC_ACCEL_FALLBACK;
             health.fallback += 1u;
+        } else if (active != MODEL_NONE && (use_active == USE_HELD || use_other == USE_HELD)) {
+            out->accel_q4ug[k] = use_active == USE_HELD ? y_active : y_other;
+            out->quality[k] = GNC_ACCEL_HELD;
+            health.held += 1u;
         } else {
             out->accel_q4ug[k] = accel_q4ug[k];
             out->quality[k] = GNC_ACCEL_RAW;

@@ -7,7 +7,8 @@
  *   - at 200 Hz, from the sensor task, once per IMU sample: gnc_tdc_sensor_task();
  *   - on a telecommand (new calibration uploaded and verified): gnc_tdc_select(id).
  * Every output sample carries a quality that the navigation filter maps to its measurement noise
- * (compensated / fallback model / raw). Not reentrant: call everything from the sensor task.
+ * (compensated / fallback model / a model holding its edge beyond its valid range / raw). Not
+ * reentrant: call everything from the sensor task.
  *
  * Units as in the generated API: acceleration int32 in 1/16 micro-g, temperature int32 mdegC.
  */
@@ -21,7 +22,10 @@
 typedef enum {
     GNC_ACCEL_COMPENSATED = 0, /* the active model, inside its valid temperature range */
     GNC_ACCEL_FALLBACK = 1,    /* the other model (active one out of range, saturated or warming up) */
-    GNC_ACCEL_RAW = 2          /* no model applies: raw acceleration, inflate its noise */
+    GNC_ACCEL_HELD = 2,        /* a model beyond its valid range holding its edge correction, as PX4 and
+                                  ArduPilot do (NAME_HOLDS_EDGE_BEYOND_RANGE): inflate the noise */
+    GNC_ACCEL_RAW = 3          /* no model applies: raw acceleration (drift from T_ref left in), inflate
+                                  its noise more */
 } gnc_accel_quality_t;
 
 typedef struct {
@@ -34,7 +38,8 @@ typedef struct {
     uint32_t temp_out_of_range; /* a model reported FLAG_TEMP_OUT_OF_RANGE */
     uint32_t input_clamped;     /* a model reported FLAG_INPUT_CLAMPED (beyond full scale) */
     uint32_t saturated;         /* a model reported FLAG_SATURATED */
-    uint32_t fallback;          /* output from the alternative model */
+    uint32_t fallback;          /* output from the other model, in its valid range */
+    uint32_t held;              /* output from a model beyond its valid range, holding its edge */
     uint32_t raw;               /* output uncompensated */
     uint32_t rejected_switches; /* gnc_tdc_select with an unknown model id */
 } gnc_tdc_health_t;

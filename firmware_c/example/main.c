@@ -116,7 +116,7 @@ static void telecommand(uint32_t n)
 
 int main(void)
 {
-    static const char quality_code[] = "CFR"; /* compensated, fallback, raw */
+    static const char quality_code[] = "CFHR"; /* compensated, fallback, held edge, raw */
     uint32_t n;
     uint32_t checksum = 0u;
 #if ON_TARGET
@@ -160,9 +160,10 @@ int main(void)
     }
     {
         const gnc_tdc_health_t *h = gnc_tdc_health();
-        printf("health: out_of_range %lu clamped %lu saturated %lu fallback %lu raw %lu rejected %lu\n",
+        printf("health: out_of_range %lu clamped %lu saturated %lu fallback %lu held %lu raw %lu rejected %lu\n",
             (unsigned long)h->temp_out_of_range, (unsigned long)h->input_clamped, (unsigned long)h->saturated,
-            (unsigned long)h->fallback, (unsigned long)h->raw, (unsigned long)h->rejected_switches);
+            (unsigned long)h->fallback, (unsigned long)h->held, (unsigned long)h->raw,
+            (unsigned long)h->rejected_switches);
     }
     printf("checksum %08lx over %lu samples\n", (unsigned long)checksum, (unsigned long)N_SAMPLES);
 #if ON_TARGET

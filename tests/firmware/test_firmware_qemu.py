@@ -212,7 +212,8 @@ def test_gnc_example_builds_warning_free_and_runs_the_same_on_host_and_target(
     exported: Callable[..., Any], tmp_path: Path
 ) -> None:
     """firmware_c/example: boot by model id, 200 Hz task (SysTick on the target), fallback outside
-    the valid range, switching by model id; host and Cortex-M4 print the same lines."""
+    the valid range, the cubic holding its edge beyond both ranges, switching by model id; host and
+    Cortex-M4 print the same lines (tests/firmware/test_example_out_of_range.py checks the values)."""
     _, primary_dir, primary = exported("dlstm-issa")
     _, alt_dir, alt = exported("poly3", "wide")  # fitted over a wider temperature range
     build = cm.Build(primary_dir, primary, tmp_path / "build")
@@ -228,8 +229,11 @@ def test_gnc_example_builds_warning_free_and_runs_the_same_on_host_and_target(
     text = host.stdout
     assert "active" in text.splitlines()[0]
     assert "refused" in text  # the unknown model id
-    qualities = set("".join(re.findall(r"[xy]=\s*-?\d+ ([CFR])", text)))
-    assert qualities == {"C", "F", "R"}, text  # compensated, fallback model, raw outside both ranges
+    qualities = set("".join(re.findall(r"[xy]=\s*-?\d+ ([CFHR])", text)))
+    # compensated, fallback model, and beyond both ranges the cubic holding its edge (never raw: it holds)
+    assert qualities == {"C", "F", "H"}, text
+    health = re.search(r"^health: .* held (\d+) raw (\d+) ", text, re.MULTILINE)
+    assert health is not None and int(health.group(1)) > 0 and int(health.group(2)) == 0, text
     assert any(line.startswith("cpu:") for line in target.splitlines())
 
 
