@@ -28,6 +28,7 @@ import pickle
 import re
 import sys
 import warnings
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -128,6 +129,31 @@ def _canonical(value: Any) -> Any:
     return value
 
 
+ZIP_END_RECORD = b"PK\x05\x06"  # a zip's end of central directory: 22 bytes and its comment, last in the file
+
+
+def _check_archive(p: Path) -> None:
+    """A model file is the zip archive ``torch.save`` writes, ending where its end record says: a file
+    that is no zip (text, a legacy pickle) or has bytes after the archive (two files concatenated, a
+    transfer that appended) is refused before torch reads it, with what it is."""
+    if not zipfile.is_zipfile(p):
+        raise UserError(
+            f"{p}: not a readable model file: a model is the zip archive 'trainer fit' writes, and this is not "
+            "one (truncated, a text file, or another format?)"
+        )
+    size = p.stat().st_size
+    with p.open("rb") as f:
+        f.seek(max(0, size - (22 + 0xFFFF)))
+        tail = f.read()
+    at = tail.rfind(ZIP_END_RECORD)
+    end = size - len(tail) + at + 22 + int.from_bytes(tail[at + 20 : at + 22], "little")
+    if at >= 0 and end < size:
+        raise UserError(
+            f"{p}: not a readable model file: {size - end} bytes follow the model's zip archive (two files "
+            "joined, or a damaged copy)"
+        )
+
+
 def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read and validate the checkpoint dict; every failure is a one-line :class:`UserError`."""
     p = Path(path)
@@ -148,6 +174,7 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
             f"{p}: a recording ({p.suffix.lower()}), not a model file written by 'trainer fit' "
             "(arguments swapped? the model comes before the recording)"
         )
+    _check_archive(p)
     try:
         with (
             warnings.catch_warnings()

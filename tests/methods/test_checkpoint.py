@@ -324,3 +324,19 @@ def test_every_train_stats_field_is_checked_at_load(tmp_path: Path, name: str) -
     torch.save(checkpoint, path)
     with pytest.raises(UserError, match=rf"field 'train_stats\.{name}' must be"):
         load_model(path)
+
+
+def test_bytes_after_the_archive_and_a_text_file_are_refused_as_such(tmp_path: Path) -> None:
+    """A model with bytes appended loaded as if intact (its id, a hash of the file, changed); a text
+    file named .pt was refused as one that "holds content beyond tensors", which it does not."""
+    path = _save_then(tmp_path)
+    intact = path.read_bytes()
+    path.write_bytes(intact + b"\n# appended by a transfer\n")
+    with pytest.raises(UserError, match=r"model\.pt: not a readable model file: 26 bytes follow"):
+        load_model(path)
+    path.write_text("this is not a model\n")
+    with pytest.raises(UserError, match=r"model\.pt: not a readable model file: .*not one") as caught:
+        load_model(path)
+    assert "beyond tensors" not in str(caught.value)
+    path.write_bytes(intact)  # the file as written loads
+    load_model(path)
