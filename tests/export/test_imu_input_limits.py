@@ -296,3 +296,36 @@ def test_codegen_verify_reads_the_raw_input_limit_the_module_was_exported_with(
     assert result.runs[0].mismatches == [0] * len(CHANNELS) and result.runs[0].state_equal
     flags = [probe(module, k, 5 * LSB_PER_UNIT * 1000, INSIDE_MDEGC)[1] for k in (2, 5)]
     assert all(f & FLAG_INPUT_CLAMPED for f in flags)  # 5000 units: beyond the limit, clamped
+
+
+def test_the_header_says_which_channels_hold_their_edge_beyond_the_valid_range(module: Module) -> None:
+    """``NAME_CH_<channel>_HOLDS_EDGE_BEYOND_RANGE`` against the compiled C: at two temperatures beyond
+    each end of the channel's valid range (the model file's), with two different raw inputs, a channel
+    that holds its edge subtracts the same correction (its edge's); one that extrapolates, reads the
+    temperature beyond the valid range (the cubic fitted wider than it) or reads the raw input does not."""
+    from trainer.checkpoint import load_checkpoint
+
+    said = {
+        name.lower(): int(value)
+        for name, value in re.findall(
+            rf"#define {NAME.upper()}_CH_(\w+)_HOLDS_EDGE_BEYOND_RANGE (\d)u", module.header
+        )
+    }
+    assert sorted(said) == sorted(c for _, c, _ in CHANNELS)
+    for index, (method, channel, _) in enumerate(CHANNELS):
+        if (
+            method == "dlstm"
+        ):  # docs/codegen.md: its input is the raw signal, read as it comes, never a held edge
+            assert said[channel] == 0, (
+                channel
+            )  # (the test's tiny network gives one estimate whatever it reads)
+            continue
+        lo_c, hi_c = load_checkpoint(module.out.parent / f"{channel}.pt")["valid_temp_range_c"]
+        corrections = []
+        for raw, beyond in ((3 * LSB_PER_UNIT, 3_000), (2_000 * LSB_PER_UNIT, 9_000)):
+            for end in (mdegc(lo_c) - beyond, mdegc(hi_c) + beyond):
+                out, _ = probe(module, index, raw, end)
+                corrections.append(raw - out[-1])
+        holds = corrections[0] == corrections[2] and corrections[1] == corrections[3]
+        assert said[channel] == int(holds), (method, channel, corrections)
+    assert set(said.values()) == {0, 1}  # the module has both kinds (physics holds; PLA extrapolates)
