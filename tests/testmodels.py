@@ -26,6 +26,21 @@ from trainer.dlstm.realtime import PERSISTENCE_KIND, TEMPERATURE_KIND
 from trainer.errors import atomic_output
 
 
+def ramp_recording(seed: int, source: str, *, rate_hz: float = 5.0, temp_noise_c: float = 0.0) -> Recording:
+    """3000 samples of a -10 -> 50 degC ramp with a quadratic drift and 0.01 mg of noise: what the
+    export tests fit their small models on (``temp_noise_c``: thermometer noise, drawn first)."""
+    rng = np.random.default_rng(seed)
+    temp = np.linspace(-10.0, 50.0, 3000)
+    if temp_noise_c:
+        temp = temp + rng.normal(0, temp_noise_c, temp.size)
+    signal = 0.02 * (temp - 20.0) + 1e-4 * (temp - 20.0) ** 2 + rng.normal(0, 0.01, temp.size)
+    return Recording(
+        {"time_s": np.arange(temp.size) / rate_hz, "temp_c": temp, "accel_mg": signal},
+        {"sample_rate_hz": f"{rate_hz:g}"},
+        source,
+    )
+
+
 def frontend_fields(
     rate_hz: float, *, run_s: float = 0.5, temp_s: float = 5.0, step_s: float = 1.0, train_s: float = 5.0
 ) -> dict[str, Any]:

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from codegen.export import export
@@ -16,14 +15,7 @@ from trainer.data.recording import Recording
 
 @pytest.fixture(scope="module")
 def rec() -> Recording:
-    rng = np.random.default_rng(3)
-    temp = np.linspace(-10.0, 50.0, 3000)
-    drift = 0.02 * (temp - 20.0) + 1e-4 * (temp - 20.0) ** 2 + rng.normal(0, 0.01, temp.size)
-    return Recording(
-        {"time_s": np.arange(temp.size) / 5.0, "temp_c": temp, "accel_mg": drift},
-        {"sample_rate_hz": "5"},
-        "channel-train",
-    )
+    return tm.ramp_recording(3, "channel-train")
 
 
 @pytest.mark.parametrize(

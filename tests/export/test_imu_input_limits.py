@@ -55,14 +55,7 @@ INSIDE_MDEGC = 20_000  # inside every channel's range
 
 
 def recording() -> Recording:
-    rng = np.random.default_rng(4)
-    temp = np.linspace(-10.0, 50.0, 3000) + rng.normal(0, 0.01, 3000)
-    signal = 0.02 * (temp - 20.0) + 1e-4 * (temp - 20.0) ** 2 + rng.normal(0, 0.01, temp.size)
-    return Recording(
-        {"time_s": np.arange(temp.size) / RATE_HZ, "temp_c": temp, "accel_mg": signal},
-        {"sample_rate_hz": f"{RATE_HZ:g}"},
-        "imu-limits",
-    )
+    return tm.ramp_recording(4, "imu-limits", rate_hz=RATE_HZ, temp_noise_c=0.01)
 
 
 def mdegc(value_c: float) -> int:

@@ -46,14 +46,7 @@ CASES = [  # (method, channel, unit in the model file)
 
 @pytest.fixture(scope="module")
 def rec() -> Recording:
-    rng = np.random.default_rng(11)
-    temp = np.linspace(-10.0, 50.0, 3000)
-    signal = 0.02 * (temp - 20.0) + 1e-4 * (temp - 20.0) ** 2 + rng.normal(0, 0.01, temp.size)
-    return Recording(
-        {"time_s": np.arange(temp.size) / 5.0, "temp_c": temp, "accel_mg": signal},
-        {"sample_rate_hz": "5"},
-        "limits-train",
-    )
+    return tm.ramp_recording(11, "limits-train")
 
 
 def _export(method: str, channel: str, unit: str, rec: Recording, tmp_path: Path) -> dict[str, object]:
