@@ -52,6 +52,7 @@ from codegen.render import (
     FLAGS,
     KERNEL_FILE,
     _environment,
+    clamp_text,
     holds_edge_beyond_range,
     kernel_header,
     kernel_header_checks,
@@ -59,6 +60,7 @@ from codegen.render import (
     validate_name,
 )
 from codegen.step_units import LSB_PER_UNIT as STEP_LSB_PER_UNIT
+from codegen.step_units import STEP_UNITS
 from trainer.data.channels import UNIT_LABELS, sort_key
 from trainer.data.flightlog import parse_channel
 from trainer.errors import UserError
@@ -247,20 +249,6 @@ def _check_record_clamp(q: QuantModel, t: ChannelTables) -> None:
         )
 
 
-def clamp_text(limits: dict[str, object]) -> str:
-    """A channel's ``input_limits`` in the header's words: "temp_mdegc[IMU0_SENSOR_ACCEL0] to -10000 ..
-    50000 mdegC; raw[IMU0_CH_ACCEL0_X] never" (the channel list of NAME.h)."""
-    signal, temp = (cast(dict[str, Any], limits[key]) for key in ("input", "temp"))
-    parts = []
-    if temp["clamped"]:
-        parts.append(f"{temp['argument']} to {temp['mdegc'][0]} .. {temp['mdegc'][1]} mdegC")
-    if signal["clamped"]:
-        lo, hi = signal["lsb"]
-        parts.append(f"{signal['argument']} to {lo} .. {hi} (+-{hi / LSB_PER_UNIT:g} {signal['unit']})")
-    never = [side["argument"] for side in (temp, signal) if not side["clamped"]]
-    return "; ".join(parts + ([f"{' and '.join(never)} never"] if never else []))
-
-
 def channel_input_limits(channel: ImuChannel, name: str) -> dict[str, object]:
     """A channel's ``input_limits`` in the module's manifest: where the module's C clamps the channel's
     raw input (``raw[NAME_CH_<CHANNEL>]``, int32 LSB and the channel's unit) and its sensor's
@@ -274,10 +262,25 @@ def channel_input_limits(channel: ImuChannel, name: str) -> dict[str, object]:
     limits stated are the calibration's the module was exported with (``calibration.sha256``)."""
     limits = input_limits(channel.model.quantised)
     signal, temp = (dict(cast(dict[str, object], limits[key])) for key in ("input", "temp"))
-    signal["argument"] = f"raw[{name.upper()}_CH_{channel.name.upper()}]"
+    signal["argument"], temp["argument"] = step_arguments(channel, name)
     signal["unit"] = UNIT_LABELS[channel.unit]  # the module's unit of the channel (its LSB: 1/16000 of it)
-    temp["argument"] = f"temp_mdegc[{name.upper()}_SENSOR_{channel.sensor.upper()}]"
     return {"input": signal, "temp": temp}
+
+
+def step_arguments(channel: ImuChannel, name: str) -> tuple[str, str]:
+    """(raw input, temperature) of a channel as the IMU step names them."""
+    return (
+        f"raw[{name.upper()}_CH_{channel.name.upper()}]",
+        f"temp_mdegc[{name.upper()}_SENSOR_{channel.sensor.upper()}]",
+    )
+
+
+def header_clamps(channel: ImuChannel, name: str) -> str:
+    """The channel's "clamps:" line of NAME.h: the one-channel header's text, from the same declaration
+    (``CFamily.input_clamps``), with the IMU step's argument names."""
+    q = channel.model.quantised
+    raw, temp = step_arguments(channel, name)
+    return clamp_text(family_of(q).input_clamps(q), STEP_UNITS[q.limits.unit], temp, raw)
 
 
 def channel_tables(imu: ImuModel, channel: ImuChannel) -> ChannelTables:
@@ -415,7 +418,7 @@ def _context(imu: ImuModel, name: str, builtin: bool) -> dict[str, object]:
                 "valid": f"{c.model.checkpoint.valid_temp_range_c[0]:.2f} .. "
                 f"{c.model.checkpoint.valid_temp_range_c[1]:.2f} degC",
                 "t": t,
-                "clamps": clamp_text(channel_input_limits(c, name)),
+                "clamps": header_clamps(c, name),
                 "holds_edge": int(holds_edge_beyond_range(c.model.quantised)),
                 "slot": slot(c),
                 "splits": padded(t.splits, max_splits),

@@ -165,20 +165,27 @@ def _range_test(model: QuantModel) -> str:
     return f"temp_mdegc < {lim.valid_lo_mdegc} || temp_mdegc > {lim.valid_hi_mdegc}"
 
 
-def clamp_text(clamps: InputClamps, step: StepUnits) -> str:
+def clamp_text(
+    clamps: InputClamps,
+    step: StepUnits,
+    temp_argument: str = "temp_mdegc",
+    signal_argument: str | None = None,
+) -> str:
     """Where this module clamps its inputs, from its declaration (NAME.h's comment of
-    NAME_FLAG_INPUT_CLAMPED): "temp_mdegc to -17603 .. 73967; rate_q16k is never clamped"."""
+    NAME_FLAG_INPUT_CLAMPED): "temp_mdegc to -17603 .. 73967; rate_q16k is never clamped". The
+    IMU module names the arguments as its step does (``temp_mdegc[IMU0_SENSOR_GYRO0]``)."""
+    signal = step.argument if signal_argument is None else signal_argument
     clamped, never = [], []
     if clamps.temp_mdegc is not None:
         lo, hi = clamps.temp_mdegc
-        clamped.append(f"temp_mdegc to {lo} .. {hi}")
+        clamped.append(f"{temp_argument} to {lo} .. {hi}")
     else:
-        never.append("temp_mdegc")
+        never.append(temp_argument)
     if clamps.signal_lsb is not None:
         limit = clamps.signal_lsb
-        clamped.append(f"{step.argument} to +-{limit} (+-{limit / LSB_PER_UNIT:g} {step.label})")
+        clamped.append(f"{signal} to +-{limit} (+-{limit / LSB_PER_UNIT:g} {step.label})")
     else:
-        never.append(step.argument)
+        never.append(signal)
     return "; ".join([*clamped, *(f"{name} is never clamped" for name in never)])
 
 

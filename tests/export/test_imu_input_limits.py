@@ -225,17 +225,20 @@ def test_the_c_clamps_the_raw_input_exactly_at_the_stated_limits(module: Module,
 
 
 def test_the_header_names_each_channels_clamps_as_the_manifest(module: Module) -> None:
-    text = " ".join(module.header.replace("*", " ").split())
-    for entry in module.manifest["channels"]:
+    lines = [line.split("clamps:", 1)[1].strip() for line in module.header.splitlines() if "clamps:" in line]
+    assert len(lines) == len(module.manifest["channels"])  # one per channel, in the module's order
+    for line, entry in zip(lines, module.manifest["channels"], strict=True):
         signal, temp = entry["input_limits"]["input"], entry["input_limits"]["temp"]
         if temp["clamped"]:
             lo, hi = temp["mdegc"]
-            assert f"{temp['argument']} to {lo} .. {hi} mdegC" in text, entry["name"]
+            assert f"{temp['argument']} to {lo} .. {hi}" in line, entry["name"]
         if signal["clamped"]:
             lo, hi = signal["lsb"]
-            assert f"{signal['argument']} to {lo} .. {hi}" in text, entry["name"]
-        never = [side["argument"] for side in (temp, signal) if not side["clamped"]]
-        assert f"{' and '.join(never)} never" in text, entry["name"]
+            assert lo == -hi, entry["name"]
+            limit = f"+-{hi / LSB_PER_UNIT:g} {signal['unit']}"
+            assert f"{signal['argument']} to +-{hi} ({limit})" in line, entry["name"]
+        for side in (temp, signal):
+            assert (f"{side['argument']} is never clamped" in line) == (not side["clamped"]), entry["name"]
 
 
 def test_a_data_only_module_clamps_at_the_blobs_records_as_its_manifest_states(tmp_path: Path) -> None:
