@@ -137,7 +137,7 @@ const char *{name}_model_id(void);
         x[0] = (mean - {_f(mean[0])}) / {_f(std[0])};"""
     )
     signal = "temp_mdegc" if temperature else "accel_q4ug"
-    lo, hi = (lim.temp_lo_mdegc, lim.temp_hi_mdegc) if temperature else (-lim.accel, lim.accel)
+    lo, hi = (lim.temp_lo_mdegc, lim.temp_hi_mdegc) if temperature else (-lim.signal_lsb, lim.signal_lsb)
     fill = (
         f"(state->steps >= {q.full_steps}u) ? {q.window}u : state->steps * {fe.decimation}u + 1u"
         if q.full_steps

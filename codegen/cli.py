@@ -9,6 +9,7 @@ import sys
 from codegen import __version__
 from codegen.family import schedules
 from codegen.flightparams import EXTENSIONS
+from codegen.input_limits import add_raw_limit_options
 from trainer.errors import OneLineArgumentParser, UserError, run_cli
 from trainer.options.channels import add_channels_option
 from trainer.output_lock import command_outputs_locked
@@ -39,6 +40,11 @@ def _export(args: argparse.Namespace) -> int:
             raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
         if args.schedule != "step":
             raise UserError("--schedule applies to the C module (--format c), not to parameter files")
+        from codegen.input_limits import RAW_INPUT_LIMITS
+
+        for row in RAW_INPUT_LIMITS.values():
+            if getattr(args, row.dest) is not None:
+                raise UserError(f"{row.option} applies to the C module (--format c), not to parameter files")
         if args.format == "ardupilot-parm" and args.device_id is not None:
             raise UserError(
                 "--device-id applies to --format px4-params: ArduPilot's INS_TCAL1..3 apply by IMU index "
@@ -49,6 +55,7 @@ def _export(args: argparse.Namespace) -> int:
     if len(args.model) != 1:
         raise UserError(f"--format c renders one model per module; {len(args.model)} given")
     from codegen.export import export, manifest_name
+    from codegen.input_limits import given_raw_limits
     from codegen.rate import parse_rate_hz
 
     rate = None if args.rate is None else parse_rate_hz(args.rate)
@@ -56,7 +63,7 @@ def _export(args: argparse.Namespace) -> int:
         args.model[0],
         args.out_dir,
         name=args.name,
-        accel_limit_g=args.accel_limit_g,
+        raw_limits=given_raw_limits(args),
         rate_millihz=rate,
         schedule=args.schedule,
     )
@@ -100,7 +107,7 @@ def _export_imu(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from codegen.imu import export_imu
-    from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
+    from codegen.input_limits import given_raw_limits
     from codegen.rate import parse_rate_hz
 
     if args.format not in ("c", "calibration-blob"):
@@ -115,7 +122,7 @@ def _export_imu(args: argparse.Namespace) -> int:
         [Path(p) for p in args.model],
         args.out_dir,
         name=args.name or "imu_tdc",
-        accel_limit_g=DEFAULT_ACCEL_LIMIT_G if args.accel_limit_g is None else args.accel_limit_g,
+        raw_limits=given_raw_limits(args),
         blob=args.blob,
         blob_only=blob_only,
         rate_millihz=None if args.rate is None else parse_rate_hz(args.rate),
@@ -304,13 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--out-dir", required=True, help="output directory (created; its parent must exist)"
     )
     exp.add_argument("--name", help="C prefix and file name (default tdc_<method>); a C identifier")
-    exp.add_argument(
-        "--accel-limit-g",
-        type=float,
-        default=None,
-        help="acceleration full scale in g: a recursive DLSTM's front end clamps its input beyond it "
-        "(default 16); the other modules subtract the drift from the acceleration as it comes and refuse it",
-    )
+    add_raw_limit_options(exp)  # --accel-limit-g, --gyro-limit-dps: one per row of codegen/input_limits.py
     add_channels_option(
         exp,
         "take the model from each MODEL directory (written by 'trainer fit --channels'); --format c renders "

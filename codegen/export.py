@@ -15,8 +15,16 @@ from pathlib import Path
 from typing import Any
 
 from codegen.family import QuantModel, family_of
+from codegen.input_limits import (
+    DEFAULT_RAW_LIMITS,
+    RawClamp,
+    RawLimits,
+    check_governed,
+    check_raw_limits,
+    signal_lsb,
+)
 from codegen.manifest import build_manifest
-from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, quantise_checkpoint
+from codegen.quantize import quantise_checkpoint
 from codegen.rate import ANY_RATE_MILLIHZ, any_rate_note, declared_rate_millihz, retime_checkpoint
 from codegen.render import default_name, manifest_json, render_sources, validate_name
 from codegen.spec import Checkpoint, parse_checkpoint
@@ -56,12 +64,13 @@ class LoadedModel:
 def load_for_codegen(
     path: str | os.PathLike[str],
     *,
-    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    raw_limits: RawLimits = DEFAULT_RAW_LIMITS,
     rate_millihz: int | None = None,
     schedule: str = "step",
 ) -> LoadedModel:
     """Validate (``load_checkpoint``), re-derive for ``rate_millihz`` when given (codegen/rate.py),
-    parse and quantise; every failure is a one-line UserError."""
+    parse and quantise (a raw input clamped at the limit of the channel's unit, ``raw_limits`` or
+    its default: codegen/input_limits.py); every failure is a one-line UserError."""
     p = Path(path)
     raw = load_checkpoint(p)
     sha256 = hashlib.sha256(p.read_bytes()).hexdigest()
@@ -69,7 +78,8 @@ def load_for_codegen(
     def parsed(checkpoint: dict[str, Any]) -> tuple[Checkpoint, QuantModel]:
         ckpt = parse_checkpoint(checkpoint, str(p))
         try:
-            return ckpt, quantise_checkpoint(ckpt, accel_limit_g=accel_limit_g, schedule=schedule)
+            clamp = signal_lsb(ckpt.unit, raw_limits)
+            return ckpt, quantise_checkpoint(ckpt, signal_lsb=clamp, schedule=schedule)
         except UserError as exc:
             raise UserError(f"{p}: {exc}") from None
 
@@ -221,30 +231,20 @@ def export(
     out_dir: str | os.PathLike[str],
     *,
     name: str | None = None,
-    accel_limit_g: float | None = None,
+    raw_limits: RawLimits = DEFAULT_RAW_LIMITS,
     rate_millihz: int | None = None,
     schedule: str = "step",
 ) -> tuple[LoadedModel, dict[str, str]]:
     """Load, quantise (for ``rate_millihz`` when given), render and write; returns the model and files.
-    ``accel_limit_g`` (None: the default full scale) applies to a module that clamps its acceleration
-    input; given for another, it is refused rather than written into a manifest it does not govern."""
+    ``raw_limits`` (the options given, codegen/input_limits.py; the others at their defaults) applies
+    to a module that clamps its raw input of that unit; given for another, it is refused rather than
+    written into a manifest it does not govern."""
     if name is not None:
         validate_name(name)
-    model = load_for_codegen(
-        model_path,
-        accel_limit_g=DEFAULT_ACCEL_LIMIT_G if accel_limit_g is None else accel_limit_g,
-        rate_millihz=rate_millihz,
-        schedule=schedule,
-    )
-    if (
-        accel_limit_g is not None
-        and family_of(model.quantised).input_clamps(model.quantised).signal_lsb is None
-    ):
-        quantity = STEP_UNITS[model.unit].quantity
-        raise UserError(
-            f"--accel-limit-g: a {model.name} module subtracts the drift from the {quantity} as it comes and "
-            f"never clamps it; the option applies to a module whose network reads its input (dlstm)"
-        )
+    check_raw_limits(raw_limits)
+    model = load_for_codegen(model_path, raw_limits=raw_limits, rate_millihz=rate_millihz, schedule=schedule)
+    clamps = family_of(model.quantised).input_clamps(model.quantised).signal_lsb is not None
+    check_governed(raw_limits, [RawClamp(str(model_path), model.unit, model.name, clamps)], module=False)
     files = generate(model, name or default_name(model.checkpoint.method))
     write_files_atomically(files, out_dir)
     return model, files

@@ -154,7 +154,7 @@ class CFamily:
     beside ``template``; None: a memoryless model's, any rate); ``time_base``: None for a memoryless
     family (any rate); ``imu``: None when it has no IMU-module form; ``input_clamps``: where a model's
     step clamps its inputs (:class:`InputClamps`; the raw input only in a network whose input it is,
-    to ``--accel-limit-g``: the others subtract the drift from it as it comes)."""
+    to the limit of its unit, codegen/input_limits.py: the others subtract the drift from it as it comes)."""
 
     name: str
     parse: Callable[[DottedFields, DottedFields, str], ModelSpec]

@@ -44,9 +44,10 @@ from codegen.export import UNDETERMINED_WARNING, LoadedModel, load_for_codegen
 from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
 from codegen.imu_record import ChannelTables, ImuPart
+from codegen.input_limits import DEFAULT_RAW_LIMITS, RawClamp, RawLimits, check_governed, check_raw_limits
 from codegen.manifest import input_limits
 from codegen.qformats import HEADER as KERNEL_HEADER
-from codegen.quantize import DEFAULT_ACCEL_LIMIT_G, TEMP_LIMITS_MDEGC
+from codegen.quantize import TEMP_LIMITS_MDEGC
 from codegen.rate import declared_rate_millihz
 from codegen.render import (
     FLAGS,
@@ -170,16 +171,17 @@ def _channel_of(raw: dict[str, Any], path: Path) -> str:
 
 
 def load_imu(
-    paths: list[Path], *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, rate_millihz: int | None = None
+    paths: list[Path], *, raw_limits: RawLimits = DEFAULT_RAW_LIMITS, rate_millihz: int | None = None
 ) -> ImuModel:
-    """Load the channels' models (physics ones re-derived for ``rate_millihz`` when given); refuse
-    what one table-driven module cannot hold."""
+    """Load the channels' models (physics ones re-derived for ``rate_millihz`` when given; raw inputs
+    clamped at the limits of their units, ``raw_limits`` or the defaults: codegen/input_limits.py);
+    refuse what one table-driven module cannot hold."""
     from trainer.checkpoint import load_checkpoint
 
     channels = []
     for path in paths:
         name = _channel_of(load_checkpoint(path), path)
-        model = load_for_codegen(path, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
+        model = load_for_codegen(path, raw_limits=raw_limits, rate_millihz=rate_millihz)
         if family_of(model.quantised).imu is None:
             raise UserError(
                 f"{path}: channel {name}: method {model.checkpoint.method!r} has no IMU-module form"
@@ -514,16 +516,28 @@ def export_imu(
     out_dir: str | os.PathLike[str],
     *,
     name: str,
-    accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G,
+    raw_limits: RawLimits = DEFAULT_RAW_LIMITS,
     blob: bool = False,
     blob_only: bool = False,
     rate_millihz: int | None = None,
 ) -> tuple[ImuModel, list[str]]:
-    """Write the module (built-in tables, or data-only with ``blob``) and/or the blob, all or nothing."""
+    """Write the module (built-in tables, or data-only with ``blob``) and/or the blob, all or nothing;
+    ``raw_limits`` (the options given) is refused for a unit none of whose channels clamps its raw input."""
     from codegen.export import write_files_atomically
 
     validate_name(name)
-    imu = load_imu(paths, accel_limit_g=accel_limit_g, rate_millihz=rate_millihz)
+    check_raw_limits(raw_limits)
+    imu = load_imu(paths, raw_limits=raw_limits, rate_millihz=rate_millihz)
+    check_governed(
+        raw_limits,
+        [
+            RawClamp(
+                c.name, c.unit, c.model.name, c.family.input_clamps(c.model.quantised).signal_lsb is not None
+            )
+            for c in imu.channels
+        ],
+        module=True,
+    )
     files: dict[str, str | bytes] = {} if blob_only else dict(render_imu(imu, name, builtin=not blob))
     if blob or blob_only:
         files[f"{name}{BLOB_SUFFIX}"] = encode_blob(imu)

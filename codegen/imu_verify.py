@@ -21,9 +21,9 @@ import numpy as np
 from codegen import cortex_m as cm
 from codegen.hostbuild import cdef_from_header, compile_c
 from codegen.imu import BLOB_SUFFIX, MANIFEST_FORMAT, ImuModel, imu_golden, load_imu
-from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
+from codegen.input_limits import raw_limits_of_clamps
 from codegen.render import _environment
-from codegen.verify import manifest_input_limit_g, to_step_units
+from codegen.verify import manifest_raw_clamp, to_step_units
 from trainer.data.channels import channel_view, recording_channels
 from trainer.data.recording import Recording
 from trainer.errors import UserError, atomic_output
@@ -110,20 +110,20 @@ def imu_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]] 
     return None
 
 
-def manifest_accel_limit_g(manifest: dict[str, Any], path: Path) -> float:
-    """The ``--accel-limit-g`` the module was exported with: where its channels that clamp their raw
-    input (a recursive DLSTM's) clamp it, from each channel's ``input_limits`` (manifest format 2);
-    the default when no channel clamps it (the limit then changes nothing) or the manifest has none."""
+def manifest_raw_limits(manifest: dict[str, Any], path: Path) -> dict[str, float]:
+    """The raw-input limits the module was exported with (unit -> ``--accel-limit-g``,
+    ``--gyro-limit-dps``): where its channels that clamp their raw input (a recursive DLSTM's) clamp
+    it, from each channel's ``input_limits`` (manifest format 2), one limit per unit (channels of
+    one unit at different limits are refused); a unit none of whose channels clamps takes its default
+    (which then changes nothing), as every unit of a manifest without ``input_limits``."""
 
     def clamps_raw(channel: Any) -> bool:
         limits = channel.get("input_limits") if isinstance(channel, dict) else None
         signal = limits.get("input") if isinstance(limits, dict) else None
         return isinstance(signal, dict) and signal.get("clamped") is True
 
-    limits = {manifest_input_limit_g(c, path) for c in manifest.get("channels", []) if clamps_raw(c)}
-    if len(limits) > 1:
-        raise UserError(f"{path}: the channels clamp their raw inputs at different limits {sorted(limits)} g")
-    return limits.pop() if limits else DEFAULT_ACCEL_LIMIT_G
+    clamps = [manifest_raw_clamp(c, path) for c in manifest.get("channels", []) if clamps_raw(c)]
+    return raw_limits_of_clamps([c for c in clamps if c is not None], str(path))
 
 
 def step_inputs(imu: ImuModel, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
@@ -266,9 +266,10 @@ def verify_imu(
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
-    accel_limit_g = manifest_accel_limit_g(manifest, out_dir / f"{name}.manifest.json")
-    # physics filters, DLSTM windows (--rate) and raw-input clamps (--accel-limit-g) as exported
-    imu = load_imu(models, rate_millihz=module_rate, accel_limit_g=accel_limit_g)
+    raw_limits = manifest_raw_limits(manifest, out_dir / f"{name}.manifest.json")
+    # physics filters, DLSTM windows (--rate) and raw-input clamps (--accel-limit-g, --gyro-limit-dps)
+    # as exported
+    imu = load_imu(models, rate_millihz=module_rate, raw_limits=raw_limits)
     module_channels = [c["name"] for c in manifest["channels"]]
     if [c.name for c in imu.channels] != module_channels:
         raise UserError(

@@ -13,7 +13,6 @@ temperature in         int32        milli-degC
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -27,8 +26,6 @@ from trainer.errors import UserError
 ACCEL_FRAC = 4  # the step API's acceleration unit is 2**-4 ug
 ACCEL_PER_MG = 1000 << ACCEL_FRAC
 INT64_SAFE = 1 << 62  # every int64 intermediate stays below this (one bit of margin)
-DEFAULT_ACCEL_LIMIT_G = 16.0
-MAX_ACCEL_LIMIT_G = 128.0  # 128 g * 16e6 LSB/g < 2**31
 TEMP_LIMITS_MDEGC = (-100_000, 200_000)  # the front end clamps temperatures to -100 .. 200 degC
 FLAG_TEMP_OUT_OF_RANGE = 1
 FLAG_INPUT_CLAMPED = 2
@@ -39,7 +36,9 @@ FLAG_SATURATED = 4
 class Limits:
     """Input ranges the front end clamps to (documented edges; clamping sets a flag)."""
 
-    accel: int  # |accel| clamp, in accel LSB (1/16 ug)
+    # |raw input| clamp of a module whose network reads it, in LSB (1/16000 of the unit): the
+    # limit of the channel's unit (codegen/input_limits.py: --accel-limit-g, --gyro-limit-dps)
+    signal_lsb: int
     temp_lo_mdegc: int = TEMP_LIMITS_MDEGC[0]
     temp_hi_mdegc: int = TEMP_LIMITS_MDEGC[1]
     valid_lo_mdegc: int = TEMP_LIMITS_MDEGC[0]  # the model's valid range, for the flag only
@@ -47,9 +46,9 @@ class Limits:
     unit: str = "mg"  # the channel's (mg, dps, pa): one LSB of the step's input and output is 1/16000 of it
 
 
-def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
-    if not (math.isfinite(accel_limit_g) and 0 < accel_limit_g <= MAX_ACCEL_LIMIT_G):
-        raise UserError(f"--accel-limit-g must be in (0, {MAX_ACCEL_LIMIT_G:g}] g, got {accel_limit_g!r}")
+def _limits(ckpt: Checkpoint, signal_lsb: int) -> Limits:
+    if not 0 < signal_lsb <= INT32_MAX:
+        raise ValueError(f"raw-input clamp {signal_lsb} LSB is not in (0, {INT32_MAX}]")
     lo, hi = ckpt.valid_temp_range_c
     clamp_c = [limit / 1000 for limit in TEMP_LIMITS_MDEGC]
     if not clamp_c[0] <= lo <= hi <= clamp_c[1]:
@@ -64,18 +63,18 @@ def _limits(ckpt: Checkpoint, accel_limit_g: float) -> Limits:
     valid_lo = min(max(round_half_away(Fraction(lo) * 1000), clip[0]), clip[1])
     valid_hi = min(max(round_half_away(Fraction(hi) * 1000), clip[0]), clip[1])
     return Limits(
-        round(accel_limit_g * 1000 * ACCEL_PER_MG),
+        signal_lsb,
         valid_lo_mdegc=valid_lo,
         valid_hi_mdegc=valid_hi,
         unit=ckpt.unit,
     )
 
 
-def quantise_checkpoint(
-    ckpt: Checkpoint, *, accel_limit_g: float = DEFAULT_ACCEL_LIMIT_G, schedule: str = "step"
-) -> QuantModel:
-    """The fixed-point model of a parsed checkpoint (deterministic: same input, same integers)."""
-    limits = _limits(ckpt, accel_limit_g)
+def quantise_checkpoint(ckpt: Checkpoint, *, signal_lsb: int, schedule: str = "step") -> QuantModel:
+    """The fixed-point model of a parsed checkpoint (deterministic: same input, same integers);
+    ``signal_lsb``: where a model whose network reads its raw input clamps it, in LSB
+    (:func:`codegen.input_limits.signal_lsb` of the checkpoint's unit)."""
+    limits = _limits(ckpt, signal_lsb)
     model = ckpt.model
     if schedule not in family.schedules():
         raise UserError(f"--schedule must be one of {', '.join(family.schedules())}, got {schedule!r}")

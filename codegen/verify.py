@@ -28,6 +28,7 @@ from codegen.family import QuantModel, family_of
 from codegen.fixedpoint import INT32_MAX, INT32_MIN
 from codegen.golden_select import golden_for
 from codegen.hostbuild import load_module
+from codegen.input_limits import raw_limits_of_clamps
 from codegen.quantize import ACCEL_PER_MG
 from codegen.rate import declared_rate_millihz, retime_compensator
 from codegen.rate import resample as resample_recording
@@ -162,21 +163,31 @@ def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]
     return name, manifest
 
 
-def manifest_input_limit_g(manifest: dict[str, Any], path: Path) -> float:
-    """The ``--accel-limit-g`` the module was exported with, from its manifest's ``input_limits``:
-    what a module that clamps its raw input clamps it to, else the default (no clamp, no limit)."""
-    from codegen.quantize import DEFAULT_ACCEL_LIMIT_G
-
+def manifest_raw_clamp(manifest: dict[str, Any], path: Path) -> tuple[str, int] | None:
+    """Where the module (or an IMU module's channel, its entry) clamps its raw input, from its
+    manifest's ``input_limits``: (channel unit, +-LSB), None when it never clamps it."""
+    units = {step.label: unit for unit, step in STEP_UNITS.items()}
     try:
         signal = manifest["input_limits"]["input"]
         if not signal["clamped"]:
-            return DEFAULT_ACCEL_LIMIT_G
-        return float(signal["lsb"][1]) / ACCEL_PER_MG / 1000
+            return None
+        lsb = signal["lsb"][1]
+        if not isinstance(lsb, int) or signal["lsb"][0] != -lsb:
+            raise ValueError(lsb)
+        return units[signal["unit"]], lsb
     except (KeyError, TypeError, IndexError, ValueError):
         raise UserError(
             f"{path}: field 'input_limits.input' is missing or malformed (a module of another codegen "
             "version? export it again)"
         ) from None
+
+
+def manifest_raw_limits(manifest: dict[str, Any], path: Path) -> dict[str, float]:
+    """The raw-input limits the module was exported with (``--accel-limit-g``, ``--gyro-limit-dps``:
+    unit -> value), read from where its manifest says it clamps; empty (the defaults, which then change
+    nothing) when it never clamps its raw input."""
+    clamp = manifest_raw_clamp(manifest, path)
+    return raw_limits_of_clamps([] if clamp is None else [clamp], str(path))
 
 
 def sensor_noise_mg(accel_mg: np.ndarray) -> float:
@@ -389,13 +400,13 @@ def verify(
 
     out = Path(out_dir)
     name, manifest = find_manifest(out, name)
-    accel_limit_g = manifest_input_limit_g(manifest, out / manifest_name(name))
+    raw_limits = manifest_raw_limits(manifest, out / manifest_name(name))
     rates = manifest.get("rates")
     declared = rates.get("sample_rate_millihz") if isinstance(rates, dict) else None
     module_rate = declared if isinstance(declared, int) and declared > 0 else None
     schedule = str(manifest.get("schedule", {}).get("name", "step"))
     model: LoadedModel = load_for_codegen(
-        model_path, accel_limit_g=accel_limit_g, rate_millihz=module_rate, schedule=schedule
+        model_path, raw_limits=raw_limits, rate_millihz=module_rate, schedule=schedule
     )
     model_entry = manifest.get("model")
     stamped = model_entry.get("sha256") if isinstance(model_entry, dict) else None

@@ -190,7 +190,7 @@ def test_a_registered_family_exports_and_verifies_bit_exact(
     result = verify(model_path, out, recording, table1=False)
     assert result.samples > 0 and result.mismatches == 0 and result.state_equal
     # the golden model is the family's: its drift is the line (1 LSB of rounding)
-    quantised = line_family.quantise(_parse_line(model_path), Limits(16_000_000), "step")
+    quantised = line_family.quantise(_parse_line(model_path), Limits(signal_lsb=16_000_000), "step")
     drift = GoldenLine(quantised).run(np.zeros(3, dtype=np.int64), np.array([10_000, 30_000, 50_000]))
     expected_lsb = -(0.8 * np.array([10.0, 30.0, 50.0]) - 3.0) * ACCEL_PER_MG
     np.testing.assert_allclose(drift, expected_lsb, atol=1.0)

@@ -1,13 +1,14 @@
 """The IMU module's manifest says, per channel, where the module's C clamps its inputs (docs/imu-module.md).
 
 A module of six channels on two sensors at 5 Hz: accel0_x physics (every C term), accel0_y a cubic
-whose fitted range is narrower than the sensor's valid range, accel0_z a recursive DLSTM exported
-with ``--accel-limit-g 4``, gyro0_x a piecewise-linear model, gyro0_y a temperature-input DLSTM and
-gyro0_z a recursive DLSTM. The expected limits come from elsewhere than the code under test: the
-model files (a cubic's and a physics model's fitted range, read in mdegC as the firmware reads it),
-docs/codegen.md (PLA and the temperature-input DLSTM clamp T at the front end's -100 .. 200 degC; a
-recursive DLSTM clamps its raw input at --accel-limit-g and reads T only for the valid-range flag;
-every other channel subtracts its drift from the raw input as it comes). What the limits mean is
+whose fitted range is narrower than the sensor's valid range, accel0_z a recursive DLSTM, gyro0_x a
+piecewise-linear model, gyro0_y a temperature-input DLSTM and gyro0_z a recursive DLSTM, exported
+with ``--accel-limit-g 4 --gyro-limit-dps 500``. The expected limits come from elsewhere than the
+code under test: the model files (a cubic's and a physics model's fitted range, read in mdegC as the
+firmware reads it), docs/codegen.md (PLA and the temperature-input DLSTM clamp T at the front end's
+-100 .. 200 degC; a recursive DLSTM clamps its raw input at the limit of its unit, --accel-limit-g in
+g for an accelerometer channel, --gyro-limit-dps in deg/s for a gyroscope channel, and reads T only
+for the valid-range flag; every other channel subtracts its drift from the raw input as it comes). What the limits mean is
 checked on the compiled C itself: inputs at a stated limit are not flagged, inputs beyond it set the
 channel's input-clamped flag and give what the limit gives, and an input said never to be clamped
 is not flagged however large.
@@ -38,6 +39,9 @@ RATE_HZ = 5.0
 I32_MIN, I32_MAX = -(2**31), 2**31 - 1
 FRONT_END_MDEGC = (-100_000, 200_000)  # docs/codegen.md: PLA and the temperature-input DLSTM clamp T here
 ACCEL_LIMIT_G = 4.0
+GYRO_LIMIT_DPS = 500.0
+# each recursive DLSTM's raw-input limit in its channel's unit: 4 g = 4000 mg, 500 deg/s
+FULL_SCALE_UNITS = {"mg": ACCEL_LIMIT_G * 1000, "dps": GYRO_LIMIT_DPS}
 LSB_PER_UNIT = 16_000  # docs/imu-module.md: raw and out in 1/16000 of the channel's unit
 CUBIC_RANGE_C = (-20.0, 60.0)  # the cubic's fitted range, wider than its sensor's valid range
 # (method, channel, unit): the module's order
@@ -79,9 +83,9 @@ class Module:
     lib: Any
 
 
-def expected_limits(method: str, checkpoint: dict[str, Any]) -> Expected:
+def expected_limits(method: str, unit: str, checkpoint: dict[str, Any]) -> Expected:
     """Where the docs say each family clamps, read from the model file."""
-    full_scale = round(ACCEL_LIMIT_G * 1000 * LSB_PER_UNIT)
+    full_scale = round(FULL_SCALE_UNITS[unit] * LSB_PER_UNIT)
     if method == "physics":
         lo, hi = checkpoint["payload"]["temp_range_c"]
         return Expected((mdegc(lo), mdegc(hi)), None)
@@ -106,7 +110,7 @@ def module(tmp_path_factory: pytest.TempPathFactory) -> Module:
         checkpoint["train_stats"] = {**checkpoint["train_stats"], "channel": channel, "unit": unit}
         paths.append(root / f"{channel}.pt")
         tm.save_checkpoint(checkpoint, paths[-1])
-        expected.append(expected_limits(method, checkpoint))
+        expected.append(expected_limits(method, unit, checkpoint))
     out = root / "c"
     argv = [
         "export",
@@ -117,6 +121,8 @@ def module(tmp_path_factory: pytest.TempPathFactory) -> Module:
         NAME,
         "--accel-limit-g",
         f"{ACCEL_LIMIT_G:g}",
+        "--gyro-limit-dps",
+        f"{GYRO_LIMIT_DPS:g}",
     ]
     assert codegen_main(argv) == 0
     manifest = json.loads((out / f"{NAME}.manifest.json").read_text())
@@ -173,7 +179,8 @@ def test_the_manifest_states_each_channels_clamps_as_the_model_files_and_docs_sa
             full = expected.signal
             assert signal["clamped"] is True
             assert signal["lsb"] == [-full, full]
-            assert signal["range"] == [-full / LSB_PER_UNIT, full / LSB_PER_UNIT]  # 4000 mg, 4000 deg/s
+            assert signal["range"] == [-full / LSB_PER_UNIT, full / LSB_PER_UNIT]  # 4000 mg, 500 deg/s
+            assert signal["range"][1] == {"mg": 4000.0, "dps": 500.0}[unit]
     # the cubic's clamp is its own fitted range, not its sensor's valid range
     valid = next(s for s in m["sensors"] if s["name"] == "accel0")["valid_temp_range_mdegc"]
     assert m["channels"][1]["input_limits"]["temp"]["mdegc"] != valid
@@ -275,9 +282,10 @@ def test_a_data_only_module_clamps_at_the_blobs_records_as_its_manifest_states(t
 def test_codegen_verify_reads_the_raw_input_limit_the_module_was_exported_with(
     module: Module, tmp_path: Path
 ) -> None:
-    """The module clamps its recursive DLSTMs' raw inputs at 4 g (--accel-limit-g 4): verify builds
-    each channel's golden model with the limit its manifest states, so a recording beyond it (up to
-    6 g, 6000 deg/s) is still 0 mismatches on every channel."""
+    """The module clamps its recursive DLSTMs' raw inputs at different limits per unit, 4 g
+    (--accel-limit-g 4) and 500 deg/s (--gyro-limit-dps 500): verify builds each channel's golden
+    model with the limit its manifest states, so a recording beyond both (up to 6 g, 6000 deg/s) is
+    still 0 mismatches on every channel."""
     n = 600
     rng = np.random.default_rng(8)
     temp = np.linspace(-5.0, 45.0, n)

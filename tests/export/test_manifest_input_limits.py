@@ -28,7 +28,10 @@ from trainer.data.channels import UNIT_LABELS
 from trainer.data.recording import Recording
 
 FRONT_END_MDEGC = [-100_000, 200_000]  # docs/codegen.md: PLA and the temperature-input DLSTM clamp T here
-FULL_SCALE_LSB = 16 * 1000 * 16_000  # the default --accel-limit-g, 16 g, in 1/16 ug
+LSB_PER_UNIT = 16_000  # docs/codegen.md: one LSB is 1/16000 of the channel's unit
+# docs/codegen.md: where a network of the raw input clamps it by default, in the channel's unit:
+# --accel-limit-g 16 (16000 mg), --gyro-limit-dps 2000, and a barometer (no option) at 128000 Pa
+DEFAULT_FULL_SCALE = {"mg": 16 * 1000, "dps": 2000, "pa": 128_000}
 
 CASES = [  # (method, channel, unit in the model file)
     ("poly3", "gyro0_x", "dps"),
@@ -41,6 +44,8 @@ CASES = [  # (method, channel, unit in the model file)
     ("dlstm", "gyro0_x", "dps"),
     ("dlstm", "accel0_z", "mg"),
     ("persistence", "accel0_y", "mg"),
+    ("persistence", "gyro0_y", "dps"),
+    ("persistence", "baro0", "pa"),  # made by hand: the trainer refuses the recursive methods on a barometer
 ]
 
 
@@ -128,11 +133,15 @@ def test_input_limits_are_where_the_c_clamps(
     label = UNIT_LABELS[unit]
     assert signal["unit"] == label
     if method in ("dlstm", "persistence"):  # a network (or window mean) of the raw input clamps it
+        full_scale = DEFAULT_FULL_SCALE[unit]
+        full = full_scale * LSB_PER_UNIT
         assert signal["clamped"] is True
-        assert signal["lsb"] == [-FULL_SCALE_LSB, FULL_SCALE_LSB]
-        assert signal["range"] == [-FULL_SCALE_LSB / 16_000, FULL_SCALE_LSB / 16_000]  # in the channel's unit
-        assert not clamped(FULL_SCALE_LSB, inside_t) and not clamped(-FULL_SCALE_LSB, inside_t)
-        assert clamped(FULL_SCALE_LSB + 1, inside_t) and clamped(-FULL_SCALE_LSB - 1, inside_t)
+        assert signal["lsb"] == [-full, full]
+        assert signal["range"] == [-full_scale, full_scale]  # in the channel's unit
+        assert not clamped(full, inside_t) and not clamped(-full, inside_t)
+        assert clamped(full + 1, inside_t) and clamped(-full - 1, inside_t)
+        one_unit_more = (full_scale + 1) * LSB_PER_UNIT  # 16001 mg, 2001 deg/s
+        assert clamped(one_unit_more, inside_t) and clamped(-one_unit_more, inside_t)
     else:
         assert signal["clamped"] is False and "lsb" not in signal and "range" not in signal
         assert not clamped(INT32_MAX, inside_t) and not clamped(-INT32_MAX, inside_t)

@@ -42,11 +42,12 @@ TIME_BASE = TimeBase(
 
 def input_clamps(model: QStream) -> InputClamps:
     """What the front end smooths is clamped: the temperature (a temperature-input network) to the
-    front end's range, else the raw input (a recursive network, persistence) to ``--accel-limit-g``;
-    the other input is not read beyond the valid-range flag."""
+    front end's range, else the raw input (a recursive network, persistence) to the limit of the
+    channel's unit (``--accel-limit-g``, ``--gyro-limit-dps``: codegen/input_limits.py); the other
+    input is not read beyond the valid-range flag."""
     if model.kind == "temperature":
         return InputClamps((model.limits.temp_lo_mdegc, model.limits.temp_hi_mdegc))
-    return InputClamps(None, model.limits.accel)
+    return InputClamps(None, model.limits.signal_lsb)
 
 
 def golden_model(model: QStream) -> GoldenBase:

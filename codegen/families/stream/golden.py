@@ -104,7 +104,7 @@ class GoldenStream(GoldenBase):
         if m.kind == "temperature":
             signal = self._clamp(temp, m.limits.temp_lo_mdegc, m.limits.temp_hi_mdegc)
         else:
-            signal = self._clamp(accel, -m.limits.accel, m.limits.accel)
+            signal = self._clamp(accel, -m.limits.signal_lsb, m.limits.signal_lsb)
         extended = np.concatenate((self.history, signal))
         sums = np.concatenate(([0], np.cumsum(extended)))  # exact: |sum| < 2**52
         step_at = np.arange((D - self.phase) % D, n, D)  # chunk indices where phase == 0

@@ -437,19 +437,19 @@ def quantise_stream(
             f"{MAX_WINDOW_SAMPLES} (shorten the window or export at a lower --rate)"
         )
     if isinstance(spec, PersistenceSpec):  # the estimate is the mean itself, held in Q16
-        frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.accel))
+        frac = min(EST_FRAC, _mean_frac(fe.accel_window, limits.signal_lsb))
         return QStream(spec.method, "recursive", fe, limits, (), (), None, frac, schedule)
     # (name, largest |v| in mean LSB, unit per LSB, mean, std, unit) of each network input
     features: list[tuple[str, int, Fraction, float, float, str]]
     if fe.kind == "recursive":
         step = STEP_UNITS[limits.unit]
-        frac = _mean_frac(fe.accel_window, limits.accel)
+        frac = _mean_frac(fe.accel_window, limits.signal_lsb)
         mean_lsb = 1 << frac
         features = [
             # the raw input's window mean, in the channel's unit (mg, deg/s, Pa)
             (
                 step.signal,
-                limits.accel * mean_lsb,
+                limits.signal_lsb * mean_lsb,
                 Fraction(1, ACCEL_PER_MG * mean_lsb),
                 0.0,
                 0.0,
