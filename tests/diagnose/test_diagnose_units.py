@@ -95,6 +95,38 @@ def test_gls_with_white_noise_only_is_ordinary_least_squares() -> None:
     assert result.loglik == pytest.approx(-100.0 * (math.log(2 * math.pi * s2) + 1.0))
 
 
+def test_correlated_gls_is_the_generalised_least_squares_of_its_covariance() -> None:
+    """With flicker and a random walk: the factor is lower triangular and rebuilds ``I + a F + b R``;
+    beta, the likelihood and the restricted likelihood are those of the dense formulas, whichever
+    data vector the same factor fitted before (it keeps the last one whitened)."""
+    n, block_s, duration_s = 80, 5.0, 400.0
+    state = NoiseState(("bias_instability", "rate_random_walk"), (0.5, -1.0))
+    units = unit_matrices(n, block_s, duration_s)
+    cov = np.eye(n) + 10**0.5 * units["bias_instability"] + 10**-1.0 * units["rate_random_walk"]
+    gls = Gls(n, block_s, duration_s, state)
+    assert np.array_equal(np.triu(gls.chol, 1), np.zeros((n, n)))
+    assert np.allclose(gls.chol @ gls.chol.T, cov, rtol=1e-12, atol=1e-12)
+    assert np.allclose(gls.cov_unit, cov, rtol=1e-15, atol=0.0)
+    rng = np.random.default_rng(3)
+    X = np.column_stack([np.ones(n), np.linspace(-1, 1, n)])
+    inverse = np.linalg.inv(cov)
+    for y in (rng.standard_normal(n), rng.standard_normal(n) + 3.0):
+        beta = np.linalg.solve(X.T @ inverse @ X, X.T @ inverse @ y)
+        r = y - X @ beta
+        rss = float(r @ inverse @ r)
+        _, logdet = np.linalg.slogdet(cov)
+        loglik = -0.5 * n * (math.log(2 * math.pi * rss / n) + 1.0) - 0.5 * logdet
+        _, logdet_xtx = np.linalg.slogdet(X.T @ inverse @ X)
+        dof = n - 2
+        reml = -0.5 * dof * (math.log(2 * math.pi * rss / dof) + 1.0) - 0.5 * logdet - 0.5 * logdet_xtx
+        for _ in range(2):  # the second fit reads the cached whitened y
+            result = gls.fit(X, y, reml=True)
+            assert np.allclose(result.beta, beta, rtol=1e-9)
+            assert result.loglik == pytest.approx(loglik, rel=1e-10)
+            assert result.reml == pytest.approx(reml, rel=1e-10)
+        assert math.isnan(gls.fit(X, y).reml)  # the QR only when asked for
+
+
 # ------------------------------------------------------------------------------------ model
 
 

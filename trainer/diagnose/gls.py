@@ -42,8 +42,11 @@ def covariance_term(term: str) -> tuple[Callable[[int, float, float], np.ndarray
 
 @lru_cache(maxsize=8)
 def unit_matrices(n: int, block_s: float, duration_s: float) -> dict[str, np.ndarray]:
-    """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``."""
-    return {term: covariance_term(term)[0](n, block_s, duration_s) for term in COVARIANCE_NOISE}
+    """``F`` (flicker, b = 1) and ``R`` (random walk, k = 1) for ``n`` blocks of ``block_s``, in
+    Fortran order: LAPACK's, so a covariance built from them is factored in place."""
+    return {
+        term: np.asfortranarray(covariance_term(term)[0](n, block_s, duration_s)) for term in COVARIANCE_NOISE
+    }
 
 
 @dataclass(frozen=True)
@@ -68,39 +71,59 @@ class Gls:
         self.block_s = block_s
         self.duration_s = duration_s
         self.state = state
-        units = unit_matrices(n, block_s, duration_s) if state.terms else {}
+        self.n_weighted = n - (0 if held_out is None else int(np.sum(held_out)))
+        # factored in place (Fortran order, as LAPACK reads it): the same numbers as from a copy of a
+        # C-ordered matrix, without the copy; the covariance is rebuilt when asked for (cov_unit)
+        chol, info = dpotrf(self._unit_covariance(), lower=1, clean=1, overwrite_a=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"noise covariance not positive definite (dpotrf info {info})")
+        self.chol = chol  # lower triangular (the upper triangle zeroed)
+        diag = np.diag(chol)
+        self.half_logdet = float(np.sum(np.log(diag if held_out is None else diag[~held_out])))
+        self._whitened_source: np.ndarray | None = None
+        self._whitened: np.ndarray | None = None
+
+    def _unit_covariance(self) -> np.ndarray:
+        """``I + sum(ratio * unit matrix)`` (Fortran order, as the unit matrices)."""
+        n, held_out = self.n, self.held_out
+        units = unit_matrices(n, self.block_s, self.duration_s) if self.state.terms else {}
         cov: np.ndarray | None = None
-        for term, ratio in state.ratios().items():
+        for term, ratio in self.state.ratios().items():
             if cov is None:
                 cov = units[term] * ratio
             else:
                 cov += units[term] * ratio
         if cov is None:
-            cov = np.zeros((n, n))
+            cov = np.zeros((n, n), order="F")
         cov[np.diag_indices(n)] += 1.0
         if held_out is not None:
             # a held-out block's variance so large that its (imputed) value carries no weight; the
             # likelihood then counts the other blocks only (the constant log-det term cancels below)
             cov[np.flatnonzero(held_out), np.flatnonzero(held_out)] += HELD_OUT_VARIANCE
-        self.n_weighted = n - (0 if held_out is None else int(np.sum(held_out)))
-        self.cov_unit = cov
-        chol, info = dpotrf(cov, lower=1, clean=1, overwrite_a=0)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"noise covariance not positive definite (dpotrf info {info})")
-        self.chol = chol
-        diag = np.diag(chol)
-        self.half_logdet = float(np.sum(np.log(diag if held_out is None else diag[~held_out])))
+        return cov
+
+    @property
+    def cov_unit(self) -> np.ndarray:
+        """The block covariance up to the profiled scale ``s^2`` (rebuilt: the factor overwrote it)."""
+        return self._unit_covariance()
 
     def whiten(self, m: np.ndarray) -> np.ndarray:
         return solve_triangular(self.chol, m, lower=True, check_finite=False)
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> GlsResult:
-        """GLS coefficients and the profiled log-likelihood of ``y = X beta + e``."""
-        Xw = self.whiten(X)
-        yw = self.whiten(y)
-        return self.fit_whitened(Xw, yw)
+    def whiten_data(self, y: np.ndarray) -> np.ndarray:
+        """``whiten(y)``, kept for the last ``y`` object: a model search whitens the same block
+        means at every evaluation of one factor (the result is the same array, bit for bit)."""
+        if y is not self._whitened_source:
+            self._whitened, self._whitened_source = self.whiten(y), y
+        assert self._whitened is not None
+        return self._whitened
 
-    def fit_whitened(self, Xw: np.ndarray, yw: np.ndarray) -> GlsResult:
+    def fit(self, X: np.ndarray, y: np.ndarray, *, reml: bool = False) -> GlsResult:
+        """GLS coefficients and the profiled log-likelihood of ``y = X beta + e`` (and the restricted
+        one when ``reml``: only the noise fit reads it, and it costs a QR)."""
+        return self.fit_whitened(self.whiten(X), self.whiten_data(y), reml=reml)
+
+    def fit_whitened(self, Xw: np.ndarray, yw: np.ndarray, *, reml: bool = False) -> GlsResult:
         if Xw.shape[1]:
             beta, *_ = np.linalg.lstsq(Xw, yw, rcond=None)
             rw = yw - Xw @ beta
@@ -108,7 +131,8 @@ class Gls:
             beta = np.zeros(0)
             rw = yw
         rss = float(rw @ rw)
-        return GlsResult(beta=beta, rss=rss, loglik=self.loglik_from_rss(rss), reml=self._reml(Xw, rss))
+        restricted = self._reml(Xw, rss) if reml else math.nan
+        return GlsResult(beta=beta, rss=rss, loglik=self.loglik_from_rss(rss), reml=restricted)
 
     def _reml(self, Xw: np.ndarray, rss: float) -> float:
         """Restricted likelihood: the noise seen after the regressors took their share. ML variance
@@ -144,7 +168,7 @@ class GlsResult:
     beta: np.ndarray
     rss: float
     loglik: float  # ML, scale profiled: what the BIC uses
-    reml: float  # restricted likelihood: what the noise ratios are estimated by
+    reml: float  # restricted likelihood: what the noise ratios are estimated by (nan: not asked for)
 
 
 def initial_state(terms: Sequence[str], block_s: float, white_n: float) -> NoiseState:
@@ -175,14 +199,14 @@ def fit_noise(
     """
     if not start.terms:
         gls = Gls(n, block_s, duration_s, start, held_out)
-        return gls, gls.fit(X, y)
+        return gls, gls.fit(X, y, reml=True)
     cache: dict[tuple[float, ...], tuple[Gls, GlsResult]] = {}
 
     def evaluate(logs: np.ndarray) -> tuple[Gls, GlsResult]:
         key = tuple(np.round(np.clip(logs, *LOG_RATIO_BOUNDS), 4))
         if key not in cache:
             gls = Gls(n, block_s, duration_s, NoiseState(start.terms, key), held_out)
-            cache[key] = (gls, gls.fit(X, y))
+            cache[key] = (gls, gls.fit(X, y, reml=True))
         return cache[key]
 
     x0 = np.array(start.log_ratios)
