@@ -40,11 +40,11 @@ def _export(args: argparse.Namespace) -> int:
             raise UserError("--rate applies to the C module (--format c); parameter files have no time base")
         if args.schedule != "step":
             raise UserError("--schedule applies to the C module (--format c), not to parameter files")
-        from codegen.input_limits import RAW_INPUT_LIMITS
+        from codegen.input_limits import RAW_INPUT_LIMITS, given_raw_limits
 
-        for row in RAW_INPUT_LIMITS.values():
-            if getattr(args, row.dest) is not None:
-                raise UserError(f"{row.option} applies to the C module (--format c), not to parameter files")
+        for unit in given_raw_limits(args):
+            option = RAW_INPUT_LIMITS[unit].option
+            raise UserError(f"{option} applies to the C module (--format c), not to parameter files")
         if args.format == "ardupilot-parm" and args.device_id is not None:
             raise UserError(
                 "--device-id applies to --format px4-params: ArduPilot's INS_TCAL1..3 apply by IMU index "
