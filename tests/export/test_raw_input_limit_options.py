@@ -20,9 +20,10 @@ from codegen.imu_verify import manifest_raw_limits
 from codegen.quantize import FLAG_INPUT_CLAMPED
 from codegen.verify import verify
 from tests import testmodels as tm
+from tests.cli_capture import run_captured
 from trainer.data.recording import Recording
 from trainer.data.recording_io import write_recording
-from trainer.errors import UserError, run_cli
+from trainer.errors import UserError
 
 LSB_PER_UNIT = 16_000  # docs/codegen.md: one LSB is 1/16000 of the channel's unit
 INSIDE_MDEGC = 20_000
@@ -49,13 +50,6 @@ def models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return paths
 
 
-def _cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = run_cli(codegen_main, list(args))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def _clamped(out: Path, raw: int) -> bool:
     host = load_module(out, "lim", flags=("-O1",))
     state = host.new_state()
@@ -67,7 +61,9 @@ def test_a_gyroscope_network_clamps_at_2000_deg_s_by_default(
     models: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     out = tmp_path / "c"
-    code, _, err = _cli(capsys, "export", str(models["gyro0_z"]), "-o", str(out), "--name", "lim")
+    code, _, err = run_captured(
+        codegen_main, capsys, "export", str(models["gyro0_z"]), "-o", str(out), "--name", "lim"
+    )
     assert code == 0, err
     signal = json.loads((out / "lim.manifest.json").read_text())["input_limits"]["input"]
     assert signal["unit"] == "deg/s" and signal["clamped"] is True
@@ -82,7 +78,7 @@ def test_gyro_limit_dps_sets_the_gyroscope_clamp_in_deg_s(
 ) -> None:
     out = tmp_path / "c"
     argv = ["export", str(models["gyro0_z"]), "-o", str(out), "--name", "lim", "--gyro-limit-dps", "250.5"]
-    code, _, err = _cli(capsys, *argv)
+    code, _, err = run_captured(codegen_main, capsys, *argv)
     assert code == 0, err
     signal = json.loads((out / "lim.manifest.json").read_text())["input_limits"]["input"]
     assert signal["range"] == [-250.5, 250.5] and signal["lsb"] == [-4_008_000, 4_008_000]
@@ -96,7 +92,7 @@ def test_verify_reads_a_one_channel_gyroscope_module_s_limit_back(
     beyond 500 deg/s are the ones compared apart as clamped."""
     out = tmp_path / "c"
     argv = ["export", str(models["gyro0_z"]), "-o", str(out), "--name", "lim", "--gyro-limit-dps", "500"]
-    assert _cli(capsys, *argv)[0] == 0
+    assert run_captured(codegen_main, capsys, *argv)[0] == 0
     n = 400
     rate = np.random.default_rng(3).uniform(-800.0, 800.0, n)
     columns = {"time_s": np.arange(n) / 5.0, "temp_c": np.linspace(0.0, 40.0, n), "gyro0_z_dps": rate}
@@ -137,7 +133,7 @@ def test_an_option_that_governs_nothing_is_refused_in_one_line(
 ) -> None:
     args = [str(models[g]) if g in models else g for g in given]
     out = tmp_path / "c"
-    code, stdout, err = _cli(capsys, "export", *args, "-o", str(out), *options)
+    code, stdout, err = run_captured(codegen_main, capsys, "export", *args, "-o", str(out), *options)
     assert code == 2 and stdout == ""
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), err
@@ -154,7 +150,9 @@ def test_an_imu_module_takes_an_option_when_one_channel_of_its_unit_clamps(
     paths = [str(models[c]) for c in ("accel0_x", "accel0_z", "gyro0_x", "gyro0_z")]
     out = tmp_path / "c"
     options = ("--accel-limit-g", "2.5", "--gyro-limit-dps", "300")
-    code, _, err = _cli(capsys, "export", *paths, "-o", str(out), "--name", "imu", *options)
+    code, _, err = run_captured(
+        codegen_main, capsys, "export", *paths, "-o", str(out), "--name", "imu", *options
+    )
     assert code == 0, err
     manifest = json.loads((out / "imu.manifest.json").read_text())
     ranges = {c["name"]: c["input_limits"]["input"].get("range") for c in manifest["channels"]}

@@ -23,10 +23,10 @@ from codegen.export import export
 from codegen.fixedpoint import round_half_away
 from codegen.verify import verify
 from tests import testmodels as tm
+from tests.cli_capture import run_captured
 from trainer.cli import main as trainer_main
 from trainer.data.recording import Recording
 from trainer.data.recording_io import read_recording, write_recording
-from trainer.errors import run_cli
 
 CLAMP_MG = 16_000.0  # the default --accel-limit-g, 16 g
 OVER_BUDGET = 3  # docs/codegen.md: the C equals its golden model, the arithmetic is over the budget
@@ -57,13 +57,6 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = run_cli(codegen_main, list(args))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def test_samples_beyond_the_acceleration_clamp_are_compared_apart(
     run: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
@@ -77,7 +70,8 @@ def test_samples_beyond_the_acceleration_clamp_are_compared_apart(
     assert budget.compared == len(rec) - beyond
     assert budget.clamped.effect_max_mg > 100.0  # the clamp moves a window mean by hundreds of mg
     assert budget.met and budget.arithmetic_max_abs_mg < verify_module.ERROR_BUDGET_MAX_MG
-    code, out, _ = _cli(
+    code, out, _ = run_captured(
+        codegen_main,
         capsys,
         "verify", str(run / "persistence.pt"), str(run / "persistence"), str(run / "spikes.npz"), "--no-table",
         "--json", str(tmp_path / "v.json"),
@@ -120,11 +114,11 @@ def test_a_budget_the_arithmetic_exceeds_is_exit_status_3(
     """Within the budget: 0; the same module and recording judged by a budget below its arithmetic's
     error (a stand-in for a quantiser that misses it): 3, the C still equal to its golden model."""
     argv = ["verify", str(run / "poly3.pt"), str(run / "poly3"), str(run / "sim.npz"), "--no-table"]
-    code, out, _ = _cli(capsys, *argv)
+    code, out, _ = run_captured(codegen_main, capsys, *argv)
     assert code == 0 and "within the budget" in out
     monkeypatch.setattr(verify_module, "ERROR_BUDGET_RMS_MG", 1e-9)
     monkeypatch.setattr(verify_module, "ERROR_BUDGET_MAX_MG", 1e-9)
-    code, out, err = _cli(capsys, *argv)
+    code, out, err = run_captured(codegen_main, capsys, *argv)
     assert code == OVER_BUDGET
     assert "mismatches: 0" in out and "OVER THE BUDGET" in out
     assert (
