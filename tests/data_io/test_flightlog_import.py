@@ -425,6 +425,34 @@ def test_instance_without_temperature_is_named(tmp_path: Path, capsys: pytest.Ca
     assert "gyro2_x [dps]: 60 samples at 40 Hz, no temperature logged" in capsys.readouterr().out
 
 
+def test_an_imu_without_temperature_does_not_take_the_others_of_its_time_base(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """ArduPilot writes every IMU at the same timestamps, so both IMUs share one time base. IMU1's
+    driver reports 0 degC: IMU1 is left out (or refused when named) and IMU0 is imported as it would
+    be alone (its whole time base was refused, by default and under ``--channels all``)."""
+    writer = DataFlashWriter()
+    acc, gyr, temp = _accel(0), _gyro(0), _ramp(0)
+    for row, t in enumerate(_time_us()):
+        writer.imu(int(t), 0, gyr[row], acc[row], temp[row])
+        writer.imu(int(t), 1, _gyro(1)[row], _accel(1)[row], 0.0)
+    path = writer.write(tmp_path / "00000007.BIN")
+    note = f"note: {path}: left out {{}} (no temperature logged (0.00 degC in all {N} samples))"
+    for extra, output in (((), "z.npz"), (("--channels", "all"), "all.npz")):
+        capsys.readouterr()
+        assert main(["import", str(path), *extra, "-o", str(tmp_path / output)]) == 0
+        rec = read_recording(tmp_path / output)  # one time base left: written under the name asked
+        assert rec.meta["channel"] == "accel0_z"
+        assert list(recording_channels(rec)) == [f"{s}0_{a}" for s in ("accel", "gyro") for a in "xyz"]
+        np.testing.assert_allclose(rec.temp_c, temp, rtol=1e-9)
+        np.testing.assert_allclose(rec.columns["accel0_x_mg"], _accel(0)[:, 0] / G * 1000.0, rtol=1e-6)
+        out = capsys.readouterr().out
+        assert note.format("accel1") in out and note.format("gyro1") in out
+    for named in (("--channel", "gyro1_x"), ("--channels", "accel0_z,accel1_z")):
+        message = import_error(tmp_path / "named.npz", path, *named)
+        assert f"1: no temperature logged (0.00 degC in all {N} samples)" in message
+
+
 def test_older_px4_log_with_sensor_combined_only_says_what_to_log(tmp_path: Path) -> None:
     time_us = _time_us()
     combined = combined_topic(time_us, _gyro(0), _accel(0))

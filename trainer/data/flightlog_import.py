@@ -94,13 +94,17 @@ def _log_groups(
     """(main channel, channels) per time base picked, and one notice per sensor instance left out.
 
     Without ``--channels``: the ``--channel`` (default accel0_z) and everything logged with it.
-    ``--channels all`` leaves out an instance without a temperature and says so; a named one
-    without a temperature is an error.
+    A sensor instance without a temperature is judged on its own, not with its time base (an
+    ArduPilot log writes every IMU at the same timestamps: one IMU whose driver reports no
+    temperature must not take the others with it): one named (``--channel``, ``--channels``) is an
+    error; one only logged beside what was asked, or picked by ``--channels all``, is left out and
+    said.
     """
     requested = log.channel(options.channel) if options.channel else None
     everything = options.channels == (ALL,)
     if options.channels is None:
-        groups = [list(log.siblings(requested or log.channel(DEFAULT_CHANNEL)))]
+        named = [requested or log.channel(DEFAULT_CHANNEL)]
+        groups = [list(log.siblings(named[0]))]
     else:
         picked = list(log.channels.values()) if everything else [log.channel(n) for n in options.channels]
         if requested is not None and requested not in picked:
@@ -108,27 +112,36 @@ def _log_groups(
                 f"{log.source}: --channel {requested.name!r} is not among --channels "
                 f"({names_text([c.name for c in picked])}); it names the channel that becomes accel_mg"
             )
+        named = ([] if everything else picked) + ([requested] if requested is not None else [])
         groups = time_bases(picked)
-    kept: list[tuple[LogChannel, list[LogChannel]]] = []
-    left_out: list[str] = []
-    for group in groups:
-        missing = next(filter(None, (channel.temperature_missing() for channel in group)), None)
-        if missing is None:
-            main = requested if requested in group else None
-            main = main or next((c for c in group if c.sensor == "accel" and c.axis == "z"), group[0])
-            kept.append((main, group))
-        elif everything:
-            left_out.append(f"{group_name(group)} ({missing})")
-        else:
+    for channel in named:
+        if (missing := channel.temperature_missing()) is not None:
             raise UserError(
-                f"{log.source}: {group_name(group)}: {missing}: its driver does not report the sensor "
+                f"{log.source}: {channel.sensor_instance}: {missing}: its driver does not report the sensor "
                 f"temperature, and a drift calibration is fitted against it"
             )
+    kept: list[tuple[LogChannel, list[LogChannel]]] = []
+    left_out: dict[str, str] = {}  # sensor instance -> why
+    for group in groups:
+        with_temperature = []
+        for channel in group:
+            missing = channel.temperature_missing()
+            if missing is None:
+                with_temperature.append(channel)
+            else:
+                left_out.setdefault(channel.sensor_instance, missing)
+        if with_temperature:
+            main = requested if requested in with_temperature else None
+            main = main or next(
+                (c for c in with_temperature if c.sensor == "accel" and c.axis == "z"), with_temperature[0]
+            )
+            kept.append((main, with_temperature))
     if not kept:
         raise UserError(
-            f"{log.source}: --channels all: no sensor instance has a temperature: {'; '.join(left_out)}"
+            f"{log.source}: --channels all: no sensor instance has a temperature: "
+            + "; ".join(f"{instance} ({why})" for instance, why in left_out.items())
         )
-    notices = [f"{log.source}: left out {item}" for item in left_out]
+    notices = [f"{log.source}: left out {instance} ({why})" for instance, why in left_out.items()]
     return kept, notices
 
 
