@@ -34,9 +34,14 @@ def test_every_candidate_auto_can_ship_is_a_fit_method() -> None:
     assert "physics-branches" in variant_labels() and "poly3" not in variant_labels()
 
 
-def test_poly1_is_a_straight_line_in_temperature(recording: Path, tmp_path: Path) -> None:
+def test_poly1_is_a_straight_line_in_temperature(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "m.pt"
     assert run_cli(trainer_main, ["fit", "--method", "poly1", str(recording), "-o", str(out), "--quiet"]) == 0
+    # the summary names the method asked for, not the registered one that loads it (it said poly3)
+    summary = capsys.readouterr().out.splitlines()
+    assert summary[0].startswith("poly1: fitted on") and not any(line.startswith("poly3") for line in summary)
     model, _ = load_model(out)
     rec = read_recording(recording)
     temp = np.asarray(rec.temp_c, dtype=np.float64)
