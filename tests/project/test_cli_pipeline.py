@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.cli_capture import run_captured
 from trainer.checkpoint import load_model
 from trainer.cli import main
 from trainer.data.recording_io import read_recording
-from trainer.errors import run_cli
 from trainer.methods import name_of
 
 
@@ -26,9 +26,8 @@ def _process(*args: str) -> tuple[int, str]:
 
 def _in_process(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
     """The entry point's ``run_cli(main)`` in this interpreter (no start-up): exit code, stderr."""
-    capsys.readouterr()
-    code = run_cli(main, list(args))
-    return code, capsys.readouterr().err
+    code, _, err = run_captured(main, capsys, *args)
+    return code, err
 
 
 @pytest.fixture(scope="module")

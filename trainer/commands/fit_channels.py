@@ -92,12 +92,6 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         if stats.selection is not None:
             print(f"== {channel.name} [{channel.label}]")
             print_selection(stats)
-        print_fitted(
-            model,
-            stats,
-            f"{args.output}/{channel.name}{MODEL_SUFFIX}",
-            channel.unit,
-            channel.name,
-            args.method,
-        )
+        destination = f"{args.output}/{channel.name}{MODEL_SUFFIX}"
+        print_fitted(model, stats, destination, channel.unit, channel.name, asked=args.method)
     return 0
