@@ -40,6 +40,7 @@ from codegen.families.cubic import Poly3Spec
 from codegen.families.pla import PlaSpec
 from codegen.spec import Checkpoint, parse_checkpoint
 from trainer import methods
+from trainer.baselines.poly3 import shift_polynomial
 from trainer.data.ardupilot_tcal import INSTANCES as ARDUPILOT_INSTANCES  # INS_TCAL1..3
 from trainer.data.ardupilot_tcal import PREFIX as ARDUPILOT_PREFIX
 from trainer.data.ardupilot_tcal import SCALE as ARDUPILOT_SCALE
@@ -98,13 +99,6 @@ class ChannelCubic:
     def identity(self) -> bool:
         """No compensation at all (``trainer fit --method auto`` chose none): every coefficient zero."""
         return not bool(np.any(self.coefficients))
-
-
-def shift_polynomial(coefficients: np.ndarray, from_ref: float, to_ref: float) -> np.ndarray:
-    """Coefficients of the same polynomial in ``T - to_ref`` (exact algebra: a binomial re-expansion)."""
-    poly = np.polynomial.Polynomial(coefficients)
-    shifted = poly(np.polynomial.Polynomial([to_ref - from_ref, 1.0])).coef
-    return np.pad(shifted, (0, len(coefficients) - len(shifted)))
 
 
 def _model_cubic(ckpt: Checkpoint, source: str, shown: str) -> tuple[np.ndarray, float, tuple[float, float]]:

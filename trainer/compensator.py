@@ -88,6 +88,15 @@ class Compensator(ABC):
         rec = Recording(columns, {"sample_rate_hz": repr(float(rate_hz))}, f"<constant {t_ref_c:g} degC>")
         return float(self.predict_drift(rec)[-1])
 
+    def expand_about(self, t_ref_c: float) -> None:
+        """Write the model about the offset policy's ``t_ref_c`` (its estimates unchanged).
+
+        A model that is a polynomial about a reference temperature of its own (the cubic, about the
+        training range's mid-point) re-expands about the user's ``--tref``, so that the file holds one
+        T_ref (the one PX4's ``TREF`` carries); the others have none to move.
+        """
+        del t_ref_c
+
     def shift_drift(self, delta_mg: float) -> None:
         """Add ``delta_mg`` to every drift estimate, in the fitted parameters (so the export carries it).
 

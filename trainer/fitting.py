@@ -108,6 +108,7 @@ def apply_offset_policy(
     if removes_sustained_input(method):
         return None
     t_ref = reference_temperature(train.temp_c, policy.t_ref_c)
+    model.expand_about(t_ref)
     constant = model.drift_at_reference(t_ref, train.sample_rate_hz, train)
     record = OffsetRecord(policy.mode, t_ref, constant)
     check_constant(record, f"{method.name} fitted on {train.source}")

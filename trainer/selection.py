@@ -187,10 +187,13 @@ class Selection:
 
 
 def shown_name(method: str, stats: TrainStats) -> str:
-    """The name a user reads for a fitted model: the candidate ``auto`` chose (``poly2``,
-    ``physics-branch``, ``none``: each a registered method with options, which ``method``, the
-    registered name that loads it, would misreport as ``poly3`` or ``physics``), else ``method``."""
-    return str(stats.selection["chosen"]) if stats.selection is not None else method
+    """The name a user reads for a fitted model: the candidate ``auto`` chose or the variant asked
+    for by name (``poly2``, ``physics-branch``, ``none``: each a registered method with options, which
+    ``method``, the registered name that loads it, would misreport as ``poly3`` or ``physics``), else
+    ``method``."""
+    if stats.selection is not None:
+        return str(stats.selection["chosen"])
+    return stats.variant if stats.variant is not None else method
 
 
 def full_cycle(segments: Sequence[Segment]) -> bool:
@@ -423,7 +426,8 @@ def fit_with_selection(
 
     if method != AUTO:
         registered, fixed = resolved(method, options)
-        return fit_with_stats(registered, train, fixed, policy)
+        model, stats = fit_with_stats(registered, train, fixed, policy)
+        return model, (replace(stats, variant=method) if method in variant_labels() else stats)
     selection = select(
         train,
         labels=(options or {}).get("candidates"),

@@ -84,6 +84,9 @@ class TrainStats:
     fit_residual_rms_mg: float | None = field(default=None, metadata=_checked(FINITE))
     # trainer.selection.selection_record: the cross-validation that chose an auto model
     selection: dict[str, Any] | None = field(default=None, metadata=_checked(DICT))
+    # the candidate asked for by name (trainer fit --method poly1): its registered method (poly3)
+    # loads it, this is what the user reads (trainer.selection.shown_name)
+    variant: str | None = field(default=None, metadata=_checked(TEXT))
 
     @property
     def temp_range_c(self) -> tuple[float, float]:

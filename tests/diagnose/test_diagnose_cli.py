@@ -175,7 +175,8 @@ def test_errors_are_one_line_and_leave_nothing(tmp_path: Path, capsys: pytest.Ca
     keep = tmp_path / "keep"
     keep.mkdir()
     (keep / "precious.txt").write_text("x")
-    assert cli("diagnose", str(tmp_path / "rec.npz"), "--report", str(keep)) == 2
+    # refused before the analysis: the JSON it writes before the report was left behind
+    assert cli("diagnose", str(tmp_path / "rec.npz"), "--report", str(keep), "--json", str(out)) == 2
     assert cli("diagnose", str(tmp_path / "rec.npz"), "--json", str(tmp_path / "no" / "d.json")) == 2
     assert cli("diagnose", str(tmp_path / "rec.npz"), "--holdout", "0.9") == 2
     err = capsys.readouterr().err

@@ -76,6 +76,21 @@ def test_the_second_input_the_profile_asks_for_is_the_channel_s_own() -> None:
         assert wanted in generic and not any(other in generic for other in inputs.values() if other != wanted)
 
 
+def test_the_scale_factor_test_a_channel_is_told_is_its_own_sensor_s() -> None:
+    """A gyroscope's diagnosis listed every sensor's second input (flip the accelerometer, a rate
+    table, a second pressure) as the test that would identify its scale-factor tempco."""
+    from trainer.diagnose.profile import in_unit
+    from trainer.physics.catalogue.scale_factor_tc import DEFINITION
+
+    rule = DEFINITION.finder.identifiability
+    assert rule is not None
+    written = {"s": rule(SimpleNamespace(known_input_varies=False))}  # type: ignore[arg-type]
+    inputs = {"mg": "+1 g / -1 g", "dps": "rate table", "pa": "second pressure"}
+    for unit, wanted in inputs.items():
+        test = in_unit(written, unit)["s"].test
+        assert wanted in test and not any(other in test for other in inputs.values() if other != wanted), test
+
+
 def test_the_generic_profile_asks_only_for_what_the_run_lacks() -> None:
     """A run with 1.5 h holds after its ramps, two ramp rates and a reversal was told to add exactly
     those: the profile's own features decide which parts of the generic test are asked for."""

@@ -52,6 +52,26 @@ def test_poly1_is_a_straight_line_in_temperature(
     assert slope == pytest.approx(np.polyfit(temp, np.asarray(rec.accel_mg), 1)[0], rel=0.05)
 
 
+def test_a_variant_model_is_named_as_fitted_by_every_command_that_reads_it(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The model file records the variant (its registered method alone, ``poly3``, misnamed it in
+    ``trainer evaluate`` and the exported module's header)."""
+    from codegen.cli import main as codegen_main
+
+    out = tmp_path / "m.pt"
+    assert run_cli(trainer_main, ["fit", "--method", "poly1", str(recording), "-o", str(out), "--quiet"]) == 0
+    _, checkpoint = load_model(out)
+    assert checkpoint["method"] == "poly3" and checkpoint["train_stats"]["variant"] == "poly1"
+    capsys.readouterr()
+    assert run_cli(trainer_main, ["evaluate", str(out), str(recording)]) == 0
+    header = next(line for line in capsys.readouterr().out.splitlines() if "Validation Data" in line)
+    assert header.split()[2] == "poly1"
+    assert run_cli(codegen_main, ["export", str(out), "-o", str(tmp_path / "c")]) == 0
+    source = next((tmp_path / "c").glob("*.c")).read_text()
+    assert 'method "poly1"' in source and 'method "poly3"' not in source
+
+
 def test_a_physics_variant_fits_its_fixed_effect_and_says_who_fixed_it(
     recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -178,6 +178,34 @@ def test_fit_prints_the_constant_and_keeps_it_in_the_checkpoint(
     assert model.offset is not None and model.offset.drift_at_t_ref_mg < -900
 
 
+@pytest.mark.parametrize("method", ["poly3", "poly1", "pla"])
+def test_a_fit_at_the_users_tref_is_a_model_every_command_reads(
+    method: str, gravity_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The cubic is re-expanded about ``--tref`` (its own T_ref was the range mid-point, and the
+    file, holding two, was refused as damaged by every command after the fit)."""
+    default, moved = tmp_path / "d.pt", tmp_path / "m.pt"
+    assert main(["fit", "--method", method, str(gravity_csv), "-o", str(default), "--quiet"]) == 0
+    assert (
+        main(["fit", "--method", method, "--tref", "5", str(gravity_csv), "-o", str(moved), "--quiet"]) == 0
+    )
+    (at_mid, _), (at_five, checkpoint) = load_model(default), load_model(moved)
+    assert checkpoint["offset"]["t_ref_c"] == 5.0
+    if "t_ref_c" in checkpoint["payload"]:
+        assert checkpoint["payload"]["t_ref_c"] == 5.0
+    # the same fitted curve, zero at 5 degC instead of at the mid-point (20 degC)
+    temp = np.linspace(-10.0, 50.0, 61)
+    curve = at_mid.drift_at(temp)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(
+        at_five.drift_at(temp),  # type: ignore[attr-defined]
+        curve - at_mid.drift_at(np.array([5.0]))[0],  # type: ignore[attr-defined]
+        atol=1e-9 * float(np.max(np.abs(curve))),
+    )
+    assert main(["evaluate", str(moved), str(gravity_csv)]) == 0
+    assert codegen_main(["export", str(moved), "-o", str(tmp_path / "c")]) == 0
+    assert "drift relative to T_ref 5.00 degC" in capsys.readouterr().out
+
+
 def test_fit_refuses_gravity_as_an_absolute_constant(
     gravity_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -454,7 +454,15 @@ def test_invalid_arguments_are_rejected(kwargs: dict, message: str) -> None:
         (dict(variant="pso"), "variant"),
         (dict(producer_contraction="mean"), "producer_contraction"),
         (dict(iterations=-1), "iterations"),
+        (dict(iterations=2.5), "iterations"),
         (dict(scouter_share=1.5), "scouter_share"),
+        (dict(population_size=1), "at least 2"),
+        (dict(safety_threshold=7.0), "safety_threshold"),
+        (dict(safety_threshold=-1.0), "safety_threshold"),
+        (dict(w0=0.0), "w0"),
+        (dict(c=-3.0), "c must"),
+        (dict(c=1.5), "c must"),
+        (dict(levy_beta=2.5), "levy_beta"),
     ],
 )
 def test_invalid_settings_are_rejected(kwargs: dict, message: str) -> None:

@@ -119,6 +119,26 @@ def test_dlstm_size_options(
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["fit", "compare"])
+def test_a_search_over_one_network_is_refused_before_training(
+    command: str, small_recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The sparrow search needs two networks: refused in one line before the gradient training (it
+    was a traceback after it), while plain DLSTM, which has no search, takes one network."""
+    out = tmp_path / "out"
+    small = ["--population", "1", "--iterations", "1", "--cycles", "2", "--quiet"]
+    if command == "fit":
+        argv = ["fit", "--method", "dlstm-ssa", *small, str(small_recording), "-o", str(out)]
+    else:
+        argv = ["compare", str(small_recording), "--holdout", "0.5", "--methods", "dlstm,dlstm-issa", *small]
+        argv += ["--out-dir", str(out)]
+    err = one_line_refusal(capsys, *argv)
+    assert "--population 1" in err and "at least 2" in err and "--method dlstm" in err
+    assert not out.exists()
+    one_network = ["fit", "--method", "dlstm", *small, str(small_recording), "-o", str(tmp_path / "m.pt")]
+    assert run_cli(main, one_network) == 0
+
+
 def test_manifest_options_use_the_budget(tmp_path: Path) -> None:
     manifest = tmp_path / "fleet.toml"
     manifest.write_text(

@@ -50,6 +50,13 @@ def bin_by_temperature(temp: np.ndarray, values: np.ndarray, n_bins: int) -> tup
     return sum_t[keep] / counts[keep], sum_v[keep] / counts[keep]
 
 
+def shift_polynomial(coefficients: np.ndarray, from_ref: float, to_ref: float) -> np.ndarray:
+    """Coefficients of the same polynomial in ``T - to_ref`` (exact algebra: a binomial re-expansion)."""
+    poly = np.polynomial.Polynomial(coefficients)
+    shifted = poly(np.polynomial.Polynomial([to_ref - from_ref, 1.0])).coef
+    return np.pad(shifted, (0, len(coefficients) - len(shifted)))
+
+
 class CubicPolynomial(TemperatureCompensator):
     """PX4-style per-axis cubic thermal calibration (offset only)."""
 
@@ -107,6 +114,11 @@ class CubicPolynomial(TemperatureCompensator):
     def drift_at(self, temp_c: np.ndarray) -> np.ndarray:
         clipped = np.clip(temp_c, *self.temp_range_c)
         return np.polynomial.polynomial.polyval(clipped - self.t_ref_c, self.coefficients)
+
+    def expand_about(self, t_ref_c: float) -> None:
+        if t_ref_c != self.t_ref_c:
+            self.coefficients = shift_polynomial(self.coefficients, self.t_ref_c, t_ref_c)
+            self.t_ref_c = t_ref_c
 
     def shift_drift(self, delta_mg: float) -> None:
         self.coefficients = self.coefficients + np.array([delta_mg, 0.0, 0.0, 0.0])

@@ -58,6 +58,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
     from trainer.atomic_dir import check_output_directory
     from trainer.data.recording_io import RECORDING_SUFFIXES
+    from trainer.diagnose.report import check_report_target
     from trainer.errors import UserError, check_output_path
 
     inputs = [p for p in (args.recording, args.sim) if p]
@@ -73,6 +74,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
             )
     if args.report:
         check_output_directory(args.report)  # an existing file (an input, say) is refused there
+        check_report_target(args.report)  # a directory of the user's files too
 
 
 def run(args: argparse.Namespace) -> int:

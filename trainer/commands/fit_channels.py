@@ -93,5 +93,5 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             print(f"== {channel.name} [{channel.label}]")
             print_selection(stats)
         destination = f"{args.output}/{channel.name}{MODEL_SUFFIX}"
-        print_fitted(model, stats, destination, channel.unit, channel.name, asked=args.method)
+        print_fitted(model, stats, destination, channel.unit, channel.name)
     return 0

@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     print_selection(stats)
     save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
     # a gyro or baro recording holds its own unit in the accel_mg column
-    print_fitted(model, stats, str(args.output), channel_unit(train), asked=args.method)
+    print_fitted(model, stats, str(args.output), channel_unit(train))
     return 0
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from trainer import methods
 from trainer.data.channels import relabel_units
 from trainer.reference import RECURSIVE_NOTE
-from trainer.selection import AUTO, record_lines, resolved, shown_name, variant_labels
+from trainer.selection import AUTO, record_lines, resolved, shown_name
 from trainer.train_stats import TrainStats
 
 if TYPE_CHECKING:
@@ -39,15 +39,12 @@ def print_selection(stats: TrainStats) -> None:
 
 
 def print_fitted(
-    model: Compensator, stats: TrainStats, destination: str, unit: str, channel: str = "", asked: str = ""
+    model: Compensator, stats: TrainStats, destination: str, unit: str, channel: str = ""
 ) -> None:
     """What a fitted model is, in the channel's unit: training rows and range, fit residual, the
     method's own summary (the physics structure, its parameters and warnings) and the offset policy.
-    One channel and each channel of many print the same (``channel``: its name after the method's).
-    ``asked``: the ``--method`` given; one of auto's candidates (``poly1``) is named as asked, not as
-    the registered method that loads it (``poly3``)."""
-    label = asked if asked in variant_labels() else shown_name(methods.name_of(model), stats)
-    name = label + (f" {channel}" if channel else "")
+    One channel and each channel of many print the same (``channel``: its name after the method's)."""
+    name = shown_name(methods.name_of(model), stats) + (f" {channel}" if channel else "")
     lines = [
         f"{name}: fitted on {stats.n_samples} samples ({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} "
         f"degC), fit residual RMS {stats.fit_residual_rms_mg:.4g} mg -> {destination}",

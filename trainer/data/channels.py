@@ -362,6 +362,14 @@ def method_refusal(method_name: str, family: str, channel: Channel) -> str | Non
     return None
 
 
+# A known second input at several temperatures, by the channel's unit suffix: what separates a
+# scale-factor change from a bias change (scale_factor_tc's test, a diagnosis' generic profile); text
+# written for milli-g names the accelerometer's, which relabel_units swaps for the channel's own
+SECOND_INPUT = {
+    "mg": "the accelerometer flipped 180 degrees, +1 g / -1 g, or tumbled",
+    "dps": "the gyroscope on a rate table, two rates",
+    "pa": "the barometer at a second pressure",
+}
 _UNIT_TOKEN = re.compile(r"\bmg\b")  # the unit word; column names (accel_mg, true_drift_mg) never match
 _SENSOR_WORD = re.compile(r"\baccelerometer\b")  # the sensor the mg text was written for
 
@@ -377,6 +385,7 @@ def relabel_units(text: str, unit: str) -> str:
     if unit == DEFAULT_UNIT:
         return text
     sensor = next(name for name, suffix in SENSOR_UNITS.items() if suffix == unit)
+    text = text.replace(SECOND_INPUT[DEFAULT_UNIT], SECOND_INPUT[unit])  # not "the gyro flipped"
     text = re.sub(r"\b([Aa])n accelerometer", rf"\1 {sensor}", text)  # not "an gyro"
     return _SENSOR_WORD.sub(sensor, _UNIT_TOKEN.sub(UNIT_LABELS[unit], text))
 

@@ -8,13 +8,12 @@ from itertools import combinations
 
 import numpy as np
 
-from trainer.data.channels import UNIT_LABELS
+from trainer.data.channels import SECOND_INPUT, UNIT_LABELS
 from trainer.diagnose.fit_summary import rms
 from trainer.diagnose.profile import BRANCH_NAMES, Profile
 from trainer.diagnose.result import Diagnosis
 from trainer.diagnose.select import THRESHOLD
 from trainer.physics.catalogue import BACKBONE, EFFECTS, SEPARATING_SIGNATURE
-from trainer.physics.catalogue.units import SECOND_INPUT
 from trainer.scoring.markdown import markdown_table
 
 COMPENSATOR = "physics compensator (`trainer fit --method physics`, which keeps a term only when cross-validation confirms it)"

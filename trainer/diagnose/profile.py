@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from trainer.data.channels import relabel_units
 from trainer.diagnose.blocks import BlockData
 from trainer.diagnose.branches import classify_branches, runs_of
 from trainer.physics.catalogue import CANDIDATE_ORDER, DEFINITIONS
@@ -163,6 +164,15 @@ def identifiability(p: Profile) -> dict[str, Identifiability]:
     are those with a rule.
     """
     return {k: rule(p) for k in CANDIDATE_ORDER if (rule := DEFINITIONS[k].finder.identifiability)}
+
+
+def in_unit(ident: dict[str, Identifiability], unit: str) -> dict[str, Identifiability]:
+    """The rules' texts, written for milli-g, in the channel's unit and sensor (a gyroscope's
+    scale-factor test is a rate table, not a flip to -1 g)."""
+    return {
+        k: replace(info, reason=relabel_units(info.reason, unit), test=relabel_units(info.test, unit))
+        for k, info in ident.items()
+    }
 
 
 def region(

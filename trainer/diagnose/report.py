@@ -338,12 +338,9 @@ def plot_residuals(diagnosis: Diagnosis, directory: Path) -> dict[str, str]:
 # ------------------------------------------------------------------------------------ directory
 
 
-def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> None:
-    """Write the report directory atomically (build beside it, then rename into place).
-
-    An existing directory is replaced only if it is an earlier diagnosis report (it holds
-    ``diagnosis.json``) or empty; anything else is refused so a typo cannot delete user files.
-    """
+def check_report_target(directory: str | os.PathLike[str]) -> tuple[Path, Path]:
+    """(directory, its parent) when :func:`write_report` may write there: a new directory, an empty
+    one or an earlier diagnosis report (``trainer diagnose`` asks before its analysis, not after)."""
     target = Path(directory)
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
@@ -354,6 +351,16 @@ def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> Non
         raise UserError(
             f"{target}: directory exists and is not an earlier diagnosis report; choose another --report"
         )
+    return target, parent
+
+
+def write_report(diagnosis: Diagnosis, directory: str | os.PathLike[str]) -> None:
+    """Write the report directory atomically (build beside it, then rename into place).
+
+    An existing directory is replaced only if it is an earlier diagnosis report (it holds
+    ``diagnosis.json``) or empty; anything else is refused so a typo cannot delete user files.
+    """
+    target, parent = check_report_target(directory)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=parent))
     try:
         files = {"diagnosis.json": "the machine-readable result (same as --json)"}

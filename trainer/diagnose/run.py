@@ -28,7 +28,7 @@ from trainer.diagnose.model import (
     catalogue_effects,
     fit_model,
 )
-from trainer.diagnose.profile import Profile, Region, analyse_profile
+from trainer.diagnose.profile import Profile, Region, analyse_profile, in_unit
 from trainer.diagnose.result import (
     Ambiguity,
     Diagnosis,
@@ -163,6 +163,7 @@ def _diagnose(
         else build_blocks(rec, known_input=baseline.known_input, max_blocks=max_blocks)
     )
     profile = analyse_profile(data, rec.meta, baseline.input_varies)
+    profile.identifiability = in_unit(profile.identifiability, channel_unit(rec))
     ident = profile.identifiability
     stages.update()
 

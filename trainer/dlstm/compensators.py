@@ -104,6 +104,12 @@ class StreamingDLSTM(Compensator):
         progress: bool = True,
     ) -> None:
         self.settings = settings or FusionSettings()
+        if self.optimiser != "none" and self.settings.population < 2:
+            # refused before the gradient training, not after it: the sparrows are the networks
+            raise UserError(
+                f"--population {self.settings.population}: {self.optimiser.upper()} searches over the "
+                "population's networks and needs at least 2 (one network, no search: --method dlstm)"
+            )
         self.frontend_seconds = frontend_seconds or {}
         self.progress = progress
         self.frontend: FrontEnd | None = None

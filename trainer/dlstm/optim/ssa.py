@@ -132,11 +132,27 @@ class SsaSettings:
             raise ValueError(
                 f"producer_contraction must be 'origin' or 'best', got {self.producer_contraction!r}"
             )
-        if self.iterations < 0:
-            raise ValueError("iterations must be >= 0")
-        for name, share in (("producer_share", self.producer_share), ("scouter_share", self.scouter_share)):
+        if not isinstance(self.iterations, int) or self.iterations < 0:
+            raise ValueError(f"iterations must be a whole number >= 0, got {self.iterations!r}")
+        if self.population_size is not None and (
+            not isinstance(self.population_size, int) or self.population_size < 2
+        ):
+            raise ValueError(f"the population needs at least 2 sparrows, got {self.population_size!r}")
+        unit_interval = (
+            ("producer_share", self.producer_share),
+            ("scouter_share", self.scouter_share),
+            ("safety_threshold", self.safety_threshold),  # ST: an alarm value R2 is drawn in [0, 1]
+        )
+        for name, share in unit_interval:
             if not 0.0 <= share <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {share}")
+        # ISSA's inertia w = w0 * c**t: positive and not growing (c > 1 would throw the producers out)
+        if not 0.0 < self.w0 < math.inf:
+            raise ValueError(f"w0 must be > 0 and finite, got {self.w0}")
+        if not 0.0 < self.c <= 1.0:
+            raise ValueError(f"c must lie in (0, 1], got {self.c}")
+        if not 0.0 < self.levy_beta < 2.0:
+            raise ValueError(f"levy_beta must lie in (0, 2), got {self.levy_beta}")
 
 
 @dataclass(frozen=True)

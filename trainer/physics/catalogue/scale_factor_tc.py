@@ -6,6 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from trainer.data.channels import DEFAULT_UNIT, SECOND_INPUT
 from trainer.physics.catalogue.base import (
     T_REF_C,
     BlockDesign,
@@ -20,7 +21,6 @@ from trainer.physics.catalogue.base import (
     StartContext,
     StartingTerm,
 )
-from trainer.physics.catalogue.units import SECOND_INPUT
 
 
 def scale_error(g_in_mg: np.ndarray | float, T_pm: np.ndarray, sf_ppm_per_c: float) -> np.ndarray:
@@ -66,7 +66,8 @@ def _identifiability(p: FinderProfile) -> Identifiability:
         False,
         "a single static orientation: the scale-factor tempco times a constant input equals the "
         "polynomial's linear term (a fixture tilt is a constant c0 the same way)",
-        "a known second input at several temperatures: " + "; ".join(SECOND_INPUT.values()),
+        # written for milli-g (relabel_units names a gyroscope's or barometer's own)
+        f"a known second input at several temperatures: {SECOND_INPUT[DEFAULT_UNIT]}",
     )
 
 

@@ -22,13 +22,6 @@ import numpy as np
 from trainer.physics.catalogue.base import Param
 
 CATALOGUE_UNIT = "mg"  # the unit the catalogue's parameter names and plausible ranges are written in
-# A known second input at several temperatures, by the channel's unit suffix: what separates a
-# scale-factor change from a bias change (scale_factor_tc's test, a diagnosis' generic profile)
-SECOND_INPUT = {
-    "mg": "the accelerometer flipped 180 degrees, +1 g / -1 g, or tumbled",
-    "dps": "the gyroscope on a rate table, two rates",
-    "pa": "the barometer at a second pressure",
-}
 
 
 def channel_param_name(name: str, unit: str) -> str:
