@@ -134,12 +134,11 @@ def _export_imu(args: argparse.Namespace) -> int:
         f"({', '.join(f'{c.name} {c.model.name}' for c in imu.channels)}), "
         f"module id 0x{imu.module_id:08x}, calibration sha256:{imu.sha256[:16]}..."
     )
-    from codegen.export import UNDETERMINED_WARNING
-
-    for channel in imu.channels:  # what a channel's own module would say in its header
+    for (
+        channel
+    ) in imu.channels:  # what each channel's own module says: its unit, the offset it removes, warnings
         for note in channel.model.notes:
-            if note.startswith(UNDETERMINED_WARNING):
-                print(f"{channel.name}: {note}")
+            print(f"{channel.name}: {note.removeprefix(f'channel {channel.name}: ')}")
     return 0
 
 

@@ -120,3 +120,21 @@ def test_parameter_file_options_are_refused_for_the_imu_module(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--channel applies to --format" in err
     assert not (tmp_path / "c").exists()
+
+
+def test_the_imu_export_says_per_channel_what_its_one_channel_export_says(
+    fitted: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The constant each channel removes (gravity stays in accel z's output) was printed by the
+    one-channel export only: the IMU module's export said nothing of it."""
+    capsys.readouterr()
+    argv = ["export", str(fitted / "fit"), "--channels", "accel0_z,gyro0_x", "-o", str(tmp_path / "imu")]
+    assert run_cli(codegen_main, argv) == 0
+    imu_lines = capsys.readouterr().out.splitlines()[1:]
+    for channel in ("accel0_z", "gyro0_x"):
+        one = ["export", str(fitted / "fit" / f"{channel}.pt"), "-o", str(tmp_path / channel)]
+        assert run_cli(codegen_main, one) == 0
+        notes = [line.removeprefix("poly3: ") for line in capsys.readouterr().out.splitlines()[1:]]
+        offset = next(note for note in notes if note.startswith("offset: drift relative to T_ref"))
+        assert f"{channel}: {offset}" in imu_lines
+        assert len([line for line in imu_lines if line.startswith(f"{channel}: ")]) == len(notes)
