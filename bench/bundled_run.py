@@ -3,7 +3,8 @@
 
 The CSV keeps 10 significant digits; the benches used the import's own float64 arrays instead,
 and on one fold (gyro z, the first cooling held out) the physics finder's structure differs between
-the two (0.0369 against 0.0637 deg/s held out), so a bench would have printed a figure no user gets.
+the two on 2026-11-30's VM (0.0369 against 0.0637 deg/s held out), so a bench would have printed a
+figure no user gets (on 2026-12-02's both give 0.0369: that fold is on a knife edge, docs/real-data.md).
 """
 
 from __future__ import annotations

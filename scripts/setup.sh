@@ -15,15 +15,18 @@ PY="$VENV/bin/python"
 extra=""
 [ "${1:-}" = "test" ] && extra="[test]"
 stamp="$VENV/.setup-stamp${extra:+-test}"
-# Reinstall only when pyproject.toml or the version it reads (trainer/__init__.py) changed since the
+# Reinstall only when pyproject.toml, the pins or the version it reads (trainer/__init__.py) changed since the
 # last successful install, or when the environment's package is another checkout's (an editable
 # install elsewhere).
 installed_here() {
   "$PY" -c 'import os, sys, trainer, codegen
 sys.exit(os.path.dirname(os.path.dirname(os.path.abspath(trainer.__file__))) != os.getcwd())' 2>/dev/null
 }
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ trainer/__init__.py -nt "$stamp" ] || ! installed_here; then
-  "$PY" -m pip install --quiet --disable-pip-version-check -e ".${extra}"
+# The versions are pinned by scripts/constraints.txt (the ones the docs' numbers were measured with).
+constraints=scripts/constraints.txt
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ trainer/__init__.py -nt "$stamp" ] \
+  || [ "$constraints" -nt "$stamp" ] || ! installed_here; then
+  "$PY" -m pip install --quiet --disable-pip-version-check -c "$constraints" -e ".${extra}"
   touch "$stamp"
 fi
 # The tests also need C tools beyond gcc (clang, valgrind; the Arm toolchain and QEMU for the

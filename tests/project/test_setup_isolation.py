@@ -10,8 +10,11 @@ check: the base interpreter is only ever asked to create ``.venv`` (``-m venv``)
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
+import tomllib
+from importlib import metadata
 from pathlib import Path
 
 import pytest
@@ -55,6 +58,7 @@ def scratch(tmp_path: Path) -> tuple[Path, Path, dict[str, str]]:
     for script in SCRIPTS:
         shutil.copy2(REPO / "scripts" / script, repo / "scripts" / script)
     shutil.copy2(REPO / "pyproject.toml", repo / "pyproject.toml")
+    shutil.copy2(REPO / "scripts" / "constraints.txt", repo / "scripts" / "constraints.txt")
     stubs = tmp_path / "stubs"
     stubs.mkdir()
     log = tmp_path / "calls.log"
@@ -117,3 +121,27 @@ def test_scripts_name_no_other_interpreter() -> None:
             if "BASE_PYTHON" in code and not code.strip().startswith("BASE_PYTHON="):
                 assert code.strip().endswith('-m venv "$VENV"'), f"{script}:{number}: {line.strip()}"
     assert os.access(REPO / "scripts" / "setup.sh", os.X_OK)
+
+
+def _name(requirement: str) -> str:
+    """A requirement's distribution name as pip compares them (PEP 503: case and -_. folded)."""
+    return re.sub(r"[-_.]+", "-", re.split(r"[\[<>=!~; ]", requirement, maxsplit=1)[0]).lower()
+
+
+def test_every_dependency_is_pinned_and_the_suite_runs_on_the_pins() -> None:
+    """A clean clone installs the versions the docs' numbers were measured with (a new numpy moved a
+    knife-edge finder fold, a new ruff can fail the lint), and this suite runs on exactly those."""
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+    declared = [*project["dependencies"], *project["optional-dependencies"]["test"]]
+    pins = {}
+    for line in (REPO / "scripts" / "constraints.txt").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, version = line.split("==")
+            pins[_name(name)] = version.strip()
+    for requirement in declared:
+        name = _name(requirement)
+        assert name in pins, f"{requirement}: not pinned in scripts/constraints.txt"
+        assert metadata.version(name) == pins[name], (
+            f"{name}: installed {metadata.version(name)}, pinned {pins[name]}"
+        )
+    assert '-c "$constraints"' in (REPO / "scripts" / "setup.sh").read_text()
