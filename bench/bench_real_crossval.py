@@ -37,7 +37,7 @@ from trainer.data.channels import ONE_AXIS_CHANNEL, channel_view, select_channel
 from trainer.data.recording_io import read_recording
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.scoring.crossval import UNCOMPENSATED
-from trainer.selection import row_name, select
+from trainer.selection import row_name, select, ship
 
 
 def main() -> int:
@@ -59,9 +59,12 @@ def main() -> int:
         start = time.perf_counter()
         selection = select(view, smoothing_s=PAPER_RUN_SMOOTHING_S, unit=label)
         seconds = time.perf_counter() - start
+        _, _, selection = ship(selection, view)  # what auto ships: its fit on the whole run checked
         cv = selection.cv
+        first = len(out)
         out += [f"## {name} ({label}): auto chose {selection.chosen} ({seconds:.0f} s)", ""]
         out += selection.table()
+        out += ["", f"auto: chose {selection.chosen}: {selection.reason}"]
         out += [
             "",
             "fit time per fold (s): "
@@ -92,7 +95,7 @@ def main() -> int:
             f"{name}: median over segments, physics {100 * physics:+.1f} % and auto {100 * auto_vs_cubic:+.1f} % "
             "against the cubic"
         )
-        print("\n".join(out[-len(selection.table()) - 4 :]), flush=True)
+        print("\n".join(out[first:]), flush=True)
     out += ["## Targets", "", *[f"- {c}" for c in checks]]
     text = "\n".join(out)
     print("\n".join(["", "## Targets", *checks]))

@@ -10,16 +10,18 @@ import pytest
 
 from trainer import methods
 from trainer.data.recording import Recording
-from trainer.scoring.crossval import UNCOMPENSATED, CrossValidation, FoldScore, MethodCV, Segment
+from trainer.scoring.crossval import UNCOMPENSATED, CrossValidation, FoldScore, MethodCV, Segment, folds_of
 from trainer.scoring.verdict import NOISE_MARGIN, REVIEW, verdict, worse_on_a_segment
 from trainer.selection import (
     FULL_CYCLE_SEGMENTS,
     NONE,
     POOLED_GAIN,
     TOLERANCE,
+    Selection,
     choose,
     cross_validated_figures,
     full_cycle,
+    own_run_failure,
     record_lines,
     select,
     selection_record,
@@ -204,3 +206,49 @@ class _Passed:
     ok = True
     decisive = True
     name = "a threshold met"
+
+
+def test_a_candidate_refused_on_its_own_run_is_not_chosen_and_the_reason_says_why() -> None:
+    figures = {
+        UNCOMPENSATED: [10.0, 10.0, 10.0],
+        methods.CUBIC: [1.0, 1.0, 1.0],
+        methods.PLA: [0.2, 0.2, 0.9],
+    }
+    assert choose(table(CYCLE, figures))[0] == methods.PLA
+    label, reason = choose(table(CYCLE, figures), {methods.PLA: "pla fitted on the whole run left more"})
+    assert label == methods.CUBIC and reason.count("pla fitted on the whole run left more") == 1
+
+
+def test_a_fit_of_the_whole_run_that_loses_to_none_on_a_segment_of_it_is_refused() -> None:
+    """Cross-validation scores the folds' fits; the model shipped is fitted on the whole run, where
+    the physics finder can choose another structure (the bundled run's gyro z): it must not leave
+    more than no compensation on any segment of the run it was fitted on."""
+    rate_hz = 2.0
+    temp = np.concatenate(
+        [np.linspace(50.0, -10.0, 2400), np.linspace(-10.0, 60.0, 2800), np.linspace(60.0, 20.0, 1600)]
+    )
+    drift = 0.2 * (temp - 25.0)
+    rng = np.random.default_rng(3)
+    columns = {
+        "time_s": np.arange(temp.size) / rate_hz,
+        "temp_c": temp,
+        "accel_mg": drift + rng.normal(0, 0.05, temp.size),
+    }
+    rec = Recording(columns, {"sample_rate_hz": str(rate_hz)}, "cycle")
+    segments = folds_of(rec)
+    assert [x.label for x in segments] == list(CYCLE)
+    results = {
+        UNCOMPENSATED: MethodCV(
+            UNCOMPENSATED, [FoldScore(1, 1, 1, 1, 1)] * 3, [True, False, False], [1, 1, 1]
+        )
+    }
+    selection = Selection(CrossValidation("cycle", "mg", segments, results), methods.PLA, "")
+    assert own_run_failure(selection, drift, rec, 0.5) is None  # it removes the drift everywhere
+    wrong = drift.copy()
+    second = segments[1]
+    wrong[second.start : second.stop] *= -1.0  # twice the drift left on the heating
+    why = own_run_failure(selection, wrong, rec, 0.5)
+    assert why is not None and why.startswith("pla fitted on the whole run") and second.name in why
+    assert (
+        own_run_failure(Selection(selection.cv, NONE, ""), wrong, rec, 0.5) is None
+    )  # none is never refused

@@ -386,6 +386,17 @@ def run_fold(task: FoldTask, rec: Recording, smoothing_s: float) -> tuple[FoldSc
     return _score(warm, cold, temp[s.start : s.stop], branch, (lo, hi)), seconds
 
 
+def own_run_figures(
+    rec: Recording, drift: np.ndarray, segments: Sequence[Segment], smoothing_s: float
+) -> list[float]:
+    """Each segment's drift left by a model fitted on the whole of ``rec`` (its estimate ``drift``
+    over the run, from power-on), scored as a fold's natural start is: the check that the model
+    shipped is not worse on its own run than what cross-validation judged."""
+    out = _smoothed(np.asarray(rec.accel_mg, dtype=np.float64) - drift, rec.sample_rate_hz, smoothing_s)
+    branch = thermal_branch(np.asarray(rec.temp_c, dtype=np.float64), rec.sample_rate_hz)
+    return [static_drift_left(out[s.start : s.stop], branch[s.start : s.stop]).rms_mg for s in segments]
+
+
 def cross_validate(
     rec: Recording,
     fitters: dict[str, Callable[[Recording], object]],
