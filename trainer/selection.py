@@ -253,6 +253,19 @@ def leaves_more_than_none(cv: CrossValidation, label: str) -> bool:
     return not (mine.cv_rms < raw.cv_rms and mine.cv_in_range_rms <= raw.cv_in_range_rms)
 
 
+def _worse_than_none(cv: CrossValidation, label: str) -> str:
+    """Which of :func:`leaves_more_than_none`'s two figures refused ``label``, with both values (the
+    in-range one is not in the table: "poly3 left more" beside a table where it leaves less misled)."""
+    mine, raw = cv.results[label], cv.results[UNCOMPENSATED]
+    if mine.cv_rms >= raw.cv_rms:
+        return f"{label} left more than no compensation cross-validated ({mine.cv_rms:.4g} against {raw.cv_rms:.4g})"
+    return (
+        f"{label} left more than no compensation cross-validated inside the training range "
+        f"({mine.cv_in_range_rms:.4g} against {raw.cv_in_range_rms:.4g}; {mine.cv_rms:.4g} against "
+        f"{raw.cv_rms:.4g} over the whole segments)"
+    )
+
+
 def choose(cv: CrossValidation, refused: dict[str, str] | None = None) -> tuple[str, str]:
     """(label, reason) by the rule of this module's docstring: among the candidates cross-validation
     does not find worse than no compensation, on a whole cycle, of those whose worst held-out
@@ -289,7 +302,7 @@ def choose(cv: CrossValidation, refused: dict[str, str] | None = None) -> tuple[
             "cycle to let it judge the others"
         )
     if unsafe:
-        reason += f"; {', '.join(unsafe)} left more than no compensation cross-validated"
+        reason += "; " + ", ".join(_worse_than_none(cv, x) for x in unsafe)
     reason += "".join(f"; {why}" for why in refused.values())
     mine, raw = cv.results[row_name(label)], cv.results[UNCOMPENSATED]
     if label == NONE:

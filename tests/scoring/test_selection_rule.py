@@ -175,6 +175,8 @@ def test_a_candidate_worse_than_none_inside_the_training_range_is_never_chosen()
     assert cubic.cv_rms < cv.results[UNCOMPENSATED].cv_rms < cubic.cv_in_range_rms
     label, reason = choose(cv)
     assert label == NONE and "poly3 left more than no compensation" in reason
+    # the figure that refused it, which the table does not show, with both values
+    assert "inside the training range (5 against 4; 1 against 4 over the whole segments)" in reason
 
 
 def test_a_flat_channel_is_left_uncompensated_without_dividing_by_zero() -> None:

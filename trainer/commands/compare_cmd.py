@@ -238,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
             name = f"fig_input_survival_{index + 1}_{Path(rec.source).stem}.png"
             write_survival_figure(comparison, rec, staging, name)
             figures.append(name)
-        report = render_report(comparison, settings, frontend, args, figures, signal.heading)
+        report = render_report(comparison, settings, frontend, args, figures, signal.heading, signal.unit)
         (staging / "report.md").write_text(relabel_units(report, signal.unit), encoding="utf-8")
         (staging / "table1.txt").write_text(table1 + "\n", encoding="utf-8")
         publish(staging, out_dir, "compare")

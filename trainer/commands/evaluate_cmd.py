@@ -67,6 +67,13 @@ def drift_lines(result: Any) -> list[str]:
             f"cooling RMS {_mg(left.cooling_rms_mg)}; noise floor {_mg(result.noise_floor_mg)}"
             + ("" if result.drift else " (no true_drift_mg: scored as a static recording)")
         )
+    for name in [n for n in result.static if n != "raw"]:
+        left, raw = result.static[name], result.static["raw"]
+        if left.rms_mg > raw.rms_mg:  # the sign-off would fail it: said where it is measured too
+            lines.append(
+                f"warning [{name}]: it leaves more drift than no compensation here (RMS {_mg(left.rms_mg)} "
+                f"against {_mg(raw.rms_mg)})"
+            )
     for name, fraction in result.out_of_range_fraction.items():
         if fraction > 0:
             share = f"{100 * fraction:.2f} %" if fraction >= 5e-5 else f"{100 * fraction:.1g} %"
@@ -103,9 +110,14 @@ def run(args: argparse.Namespace) -> int:
     # the model's own channel (gyro0_x of a multi-channel file), never the file's accel_mg
     rec = whole = check_scored(model_view(read_recording(args.recording), stats.channel, args.model))
     lead_in = None
+    scored = f"{Path(args.recording).name}, all {len(rec)} rows"
     if args.holdout is not None:
         holdout = parse_holdout(args.holdout)
         train_part, rec = split(rec, holdout)
+        scored = (
+            f"the part of {Path(args.recording).name} --holdout {args.holdout} holds out: {len(rec)} of "
+            f"{len(whole)} rows, t = {rec.time_s[0]:.6g} .. {rec.time_s[-1]:.6g} s"
+        )
         # a held-out end part is scored with the state run through the part before it (firmware that
         # has run since power-on); a held-out start part starts cold, as at power-on
         lead_in = train_part.without_truth() if holdout.side == "last" else None
@@ -127,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     text = f"{signal.heading}\n{result.table.to_text()}"
-    extra = drift_lines(result)
+    extra = [f"scored: {scored}", *drift_lines(result)]
     if args.inject is not None:
         kept = input_kept(model, rec, injected_input(rec, args.inject))
         extra.append(

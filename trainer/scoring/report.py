@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from trainer import methods as registry
-from trainer.data.channels import signal_of
+from trainer.data.channels import DEFAULT_UNIT, signal_of
 from trainer.data.recording import Recording
 from trainer.data.smoothing import moving_average, window_samples
 from trainer.dlstm.realtime import PAPER_TRAIN_SMOOTHING_S
@@ -270,10 +270,12 @@ def render_report(
     args: object,
     figures: list[str],
     channel: str = "",
+    unit: str = DEFAULT_UNIT,
 ) -> str:
     """The Markdown report a reviewer reads: setup, headline table, Table 1, the paper's numbers.
 
-    ``channel``: the compared channel with its unit (``gyro0_z (deg/s)``), named in the title."""
+    ``channel``: the compared channel with its unit (``gyro0_z (deg/s)``), named in the title;
+    ``unit``: its unit suffix (the paper's accelerometer figures are set beside an accelerometer's only)."""
     evaluation = comparison.evaluation
     lines = [
         f"# mems-tdc comparison report{f': channel {channel}' if channel else ''}",
@@ -315,17 +317,23 @@ def render_report(
         "",
         evaluation.table.to_markdown(),
         "",
-        "## Improvements next to the paper's Table 1",
-        "",
-        paper_side_by_side(comparison),
-        "",
-        # written in milli-g, not the unit word: a gyroscope's report relabels "mg" to deg/s, and these
-        # are the paper's accelerometer figures whatever channel this report is of
-        "The paper's absolute B, K and R (of its accelerometer: 5.43e-4 milli-g, 4.33e-5 milli-g/s^1/2, "
-        "1.18e-6 milli-g/s uncompensated) are orders of magnitude below what its own 2 h ramp implies (R x "
-        "7200 s is only 8.5e-3 milli-g of drift), so only the improvement percentages are compared.",
-        "",
     ]
+    if unit == DEFAULT_UNIT:
+        lines += [
+            "## Improvements next to the paper's Table 1",
+            "",
+            paper_side_by_side(comparison),
+            "",
+            "The paper's absolute B, K and R (of its accelerometer: 5.43e-4 mg, 4.33e-5 mg/s^1/2, "
+            "1.18e-6 mg/s uncompensated) are orders of magnitude below what its own 2 h ramp implies (R x "
+            "7200 s is only 8.5e-3 mg of drift), so only the improvement percentages are compared.",
+            "",
+        ]
+    else:  # relabel_units would make the paper's accelerometer a gyroscope, its milli-g deg/s
+        lines += [
+            "The paper's Table 1 is of another kind of sensor: this channel's improvements are not set beside it.",
+            "",
+        ]
     warnings = [
         f"{name}: {100 * f:.2f} % of validation samples outside the trained temperature range"
         for name, f in evaluation.out_of_range_fraction.items()
