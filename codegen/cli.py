@@ -201,8 +201,8 @@ def _verify_imu(args: argparse.Namespace) -> int:
     from trainer.errors import check_output_path
     from trainer.options.channels import model_files
 
-    if args.json:
-        check_output_path(args.json)  # before the build, not after it
+    if args.json:  # before the build, not after it; never over an input
+        check_output_path(args.json, inputs=[args.model, args.recording])
     check_module_dir(Path(args.out_dir))
     rec = check_scored(read_recording(args.recording))
     models = model_files(args.model, args.channels)
@@ -232,7 +232,10 @@ def _verify(args: argparse.Namespace) -> int:
             f"--channels' directory)"
         )
     from codegen.verify import report_lines, verify, write_json
+    from trainer.errors import check_output_path
 
+    if args.json:  # before the build, not after it; never over an input (it once replaced the recording)
+        check_output_path(args.json, inputs=[args.model, args.recording])
     result = verify(
         args.model,
         args.out_dir,

@@ -136,13 +136,16 @@ def check_module_dir(out_dir: Path) -> None:
     """Refuse an ``out_dir`` that is no directory; a recording there is the arguments swapped (both
     forms of ``codegen verify``: checked before the recording is read, which would blame the module)."""
     if not out_dir.is_dir():
-        swapped = out_dir.is_file() and out_dir.suffix.lower() in RECORDING_SUFFIXES
-        raise UserError(
-            f"{out_dir}: a recording, not the generated module's directory (arguments swapped? the order is "
-            "model out_dir recording)"
-            if swapped
-            else f"{out_dir}: no such directory"
-        )
+        order = "the order is model out_dir recording"
+        if out_dir.is_file() and out_dir.suffix.lower() in RECORDING_SUFFIXES:
+            raise UserError(
+                f"{out_dir}: a recording, not the generated module's directory (arguments swapped? {order})"
+            )
+        if out_dir.is_file():  # a model file here is MODEL and OUTDIR swapped
+            raise UserError(
+                f"{out_dir}: a file, not the generated module's directory (arguments swapped? {order})"
+            )
+        raise UserError(f"{out_dir}: no such directory")
 
 
 def find_manifest(out_dir: Path, name: str | None) -> tuple[str, dict[str, Any]]:

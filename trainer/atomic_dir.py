@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from trainer.errors import UserError, current_umask
+from trainer.errors import UserError, current_umask, probe_writable
 from trainer.stale_files import process_alive, report_removed
 
 STAGING_SUFFIX = ".part"  # the new set being built (or, after the exchange, the old one being removed)
@@ -52,6 +52,7 @@ def check_output_directory(out: str | os.PathLike[str]) -> Path:
     base = target if target.is_dir() else parent
     if not os.access(base, os.W_OK | os.X_OK):
         raise UserError(f"{target}: directory {base} is not writable")
+    probe_writable(base, target)
     return base
 
 

@@ -183,6 +183,20 @@ def check_output_path(path: str | os.PathLike[str], *, inputs: Sequence[str | os
         raise UserError(f"{target}: output directory {parent} does not exist")
     if not os.access(parent, os.W_OK) or (target.exists() and not os.access(target, os.W_OK)):
         raise UserError(f"{target}: not writable")
+    probe_writable(parent, target)
+
+
+def probe_writable(directory: Path, target: str | os.PathLike[str]) -> None:
+    """Refuse ``target`` when a file cannot be made in ``directory``: its permissions can say yes where
+    the file system says no (/proc, a read-only mount, root's access). The probe is an unnamed
+    temporary file, gone when closed: nothing is left."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        raise UserError(f"{target}: cannot write in {directory} ({exc.strerror or exc})") from None
 
 
 def _same_path(a: Path, b: Path) -> bool:

@@ -35,7 +35,11 @@ def _previous(out_dir: Path) -> tuple[str, list[str]] | None:
 
 
 def check_report_dir(out_dir: Path, command: str) -> None:
-    """Refuse, before any work, a directory that holds another command's report."""
+    """Refuse, before any work, a directory that holds another command's report (or that cannot be
+    written: :func:`trainer.atomic_dir.check_output_directory`)."""
+    from trainer.atomic_dir import check_output_directory
+
+    check_output_directory(out_dir)
     previous = _previous(out_dir)
     if previous is not None and previous[0] != command:
         other, files = previous

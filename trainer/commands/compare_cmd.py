@@ -17,6 +17,7 @@ from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, current_umask, raise_write_error
 from trainer.options.channels import PREFIX_ATTR, add_channels_option, run_per_channel
 from trainer.options.dlstm import add_dlstm_options, settings_from_args
+from trainer.options.numbers import MAX_SECONDS, check_finite
 from trainer.options.offset import add_offset_options, policy_from_args
 from trainer.options.workers import workers
 from trainer.physics.input_presets import INPUT_PRESETS
@@ -140,8 +141,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(
             f"--methods: unknown {', '.join(unknown) or '(empty)'}; choose from {','.join(known)}"
         )
-    if args.smoothing < 0:
-        raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    check_finite("--smoothing", args.smoothing, maximum=MAX_SECONDS)
     settings, frontend = settings_from_args(args)
     policy = policy_from_args(args)
     if args.valid is not None and args.holdout is not None:

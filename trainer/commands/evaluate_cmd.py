@@ -8,8 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
-from trainer.errors import UserError, atomic_outputs
+from trainer.errors import atomic_outputs
 from trainer.options.channels import add_channels_option, run_per_channel
+from trainer.options.numbers import MAX_SECONDS, check_finite
 from trainer.physics.input_presets import INPUT_PRESETS
 from trainer.report_dir import check_report_dir, record_outputs
 
@@ -101,8 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.selection import shown_name
     from trainer.train_stats import TrainStats
 
-    if args.smoothing < 0:
-        raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    check_finite("--smoothing", args.smoothing, maximum=MAX_SECONDS)
     check_output_directory(args.out_dir)  # an existing file there: one line, before any work
     check_report_dir(Path(args.out_dir), "evaluate")
     model, checkpoint = load_model(args.model)

@@ -243,7 +243,14 @@ def _stderr(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+# A lower bound of what a draw costs (it simulates and diagnoses a program: docs/plan.md's 20 draws of
+# the planned program and its alternatives took 24 min on the 2-core VM), and the columns a draw simulates
+SECONDS_PER_DRAW = 1.0
+PLAN_COLUMNS = 4
+
+
 def _check(args: argparse.Namespace) -> None:
+    from trainer.budget import check_rows, check_time
     from trainer.errors import UserError
 
     if args.screen_draws is None:
@@ -261,6 +268,20 @@ def _check(args: argparse.Namespace) -> None:
         )
     if not (args.rate > 0 and math.isfinite(args.rate)):
         raise UserError(f"--rate must be a finite number > 0 Hz, got {args.rate:g}")
+    if not (args.max_hours > 0 and math.isfinite(args.max_hours)):
+        raise UserError(f"--max-hours must be a finite number > 0, got {args.max_hours:g}")
+    # each draw simulates and diagnoses a program of up to --max-hours: a typo is one line, not a run of years
+    check_rows(
+        args.max_hours * 3600 * args.rate,
+        PLAN_COLUMNS,
+        f"--max-hours {args.max_hours:g} at --rate {args.rate:g}",
+        "give fewer hours or a lower --rate",
+    )
+    check_time(
+        args.draws * SECONDS_PER_DRAW,
+        f"--draws {args.draws}",
+        "give fewer draws (a profile's proof is tens of draws)",
+    )
     if not 0 < args.identify_rate <= 1:
         raise UserError(f"--identify-rate must be a share in (0, 1], got {args.identify_rate:g}")
     for name, value in (("--tolerance", args.tolerance), ("--vs-cubic", args.vs_cubic)):

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.errors import UserError, raise_write_error
+from trainer.options.numbers import MAX_SECONDS, check_finite
 from trainer.train_stats import TrainStats
 
 if TYPE_CHECKING:
@@ -296,8 +297,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.scoring.unit_scores import held_out_rows, score_unit
     from trainer.selection import shown_name
 
-    if args.smoothing < 0:
-        raise UserError(f"--smoothing must be >= 0 s, got {args.smoothing}")
+    check_finite("--smoothing", args.smoothing, maximum=MAX_SECONDS)
     thresholds = load_thresholds(args.config) if args.config else {}
     holdout = parse_holdout(args.holdout) if args.holdout else None
     recordings = _per_model(args.recording, args.models, "--recording")

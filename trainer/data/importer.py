@@ -183,10 +183,12 @@ def sniff_delimiter(path: str | Path, *, decimal_comma: bool = False) -> str:
     try:
         with open(path, encoding="utf-8", errors="replace") as handle:
             lines: list[str] = []
-            for raw in handle:
+            numbers: list[int] = []  # each sniffed line's number in the file
+            for number, raw in enumerate(handle, start=1):
                 text = raw.strip()
                 if text and not text.startswith("#"):
                     lines.append(raw.rstrip("\r\n"))
+                    numbers.append(number)
                     if len(lines) == SNIFF_LINES:
                         break
     except FileNotFoundError:
@@ -203,6 +205,15 @@ def sniff_delimiter(path: str | Path, *, decimal_comma: bool = False) -> str:
         if len(counts) == 1 and (fields := counts.pop() + 1) > best_fields:
             best, best_fields = candidate, fields
     if best is None:
+        header = max(DELIMITER_NAMES, key=lambda c: lines[0].count(c))  # ties: the first declared
+        fields = lines[0].count(header) + 1
+        odd = next((i for i, line in enumerate(lines) if line.count(header) + 1 != fields), None)
+        if fields > 1 and odd is not None and odd > 0:  # the header splits, one line does not: say which
+            raise UserError(
+                f"{path}: line {numbers[odd]}: {lines[odd].count(header) + 1} fields where the header (line "
+                f"{numbers[0]}) has {fields}, split by {DELIMITER_NAMES[header]} (a missing or extra field? "
+                "else pass --delimiter)"
+            )
         raise UserError(
             f"{path}: line 1 onwards: cannot tell the delimiter (tab, comma or semicolon, split alike on "
             f"the first {len(lines)} lines); pass --delimiter"

@@ -212,6 +212,8 @@ def recording_format(path: str | Path) -> RecordingFormat:
     suffix = Path(path).suffix.lower()
     if suffix in RECORDING_SUFFIXES:
         return RECORDING_SUFFIXES[suffix]
+    if not str(path).strip():  # Path("") is ".", a directory: the message named an empty path
+        raise UserError("an empty file name where a recording (.csv or .npz) is expected")
     if Path(path).is_dir():
         raise UserError(f"{path}: a directory, not a recording (.csv or .npz)")
     if suffix == MODEL_SUFFIX:

@@ -24,6 +24,7 @@ import torch
 from trainer.dlstm.network import PopulationDLSTM, packed_groups
 from trainer.dlstm.optim import SsaSettings, minimize
 from trainer.dlstm.train import TrainingHistory, population_loss, train_population
+from trainer.errors import UserError
 
 Optimiser = Literal["none", "ssa", "issa"]
 
@@ -201,6 +202,11 @@ def refine_stage(
         best_loss=float(np.nanmin(losses)),
         seconds_gradient=trained.seconds,
     )
+    if np.all(np.isnan(losses)):  # nothing to choose from: said in one line, not an All-NaN traceback
+        raise UserError(
+            f"every one of the {len(losses)} DLSTMs diverged in training (loss NaN): try a smaller --lr "
+            f"(given {settings.lr:g})"
+        )
     if optimiser == "none" or (settings.target_loss is not None and result.best_loss <= settings.target_loss):
         best = int(np.nanargmin(losses))
         result.weights = model.individual(best)

@@ -239,4 +239,7 @@ def task_map(workers: int = 1, scheduler: str | None = None, option: str = "--wo
     """A :class:`TaskMap` whose cluster (if it starts one) stops at the end of the block; ``option``
     is the command's name for ``workers``."""
     with ExitStack() as stack:
-        yield TaskMap(workers, scheduler, stack, option)
+        tasks = TaskMap(workers, scheduler, stack, option)
+        if scheduler is not None:  # the cluster the user named is checked before any work, even work that
+            tasks.client  # noqa: B018 - stays here (a bad address was ignored when every task was quick)
+        yield tasks

@@ -108,6 +108,11 @@ def run_fleet(
     if settings.sim is not None:
         sim_text = settings.sim.read_text(encoding="utf-8")
         parse_config_text(sim_text, str(settings.sim))  # a bad simulation fails the run before any work
+    if scheduler is not None and client is None:  # the cluster named is checked before any work (a bad
+        from trainer.fleet.cluster import open_client  # address was ignored when no unit reached it)
+
+        with open_client(scheduler, workers):
+            pass
     remove_stale_report_parts(out)
     clean_staging(out)  # OUTDIR itself is created by the first result: a run that cannot start leaves none
     run = FleetRun(manifest, out)

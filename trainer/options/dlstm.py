@@ -13,6 +13,7 @@ from trainer.dlstm.realtime import (
     PAPER_TRAIN_SMOOTHING_S,
 )
 from trainer.errors import UserError
+from trainer.options.numbers import MAX_SECONDS, check_finite, check_threads
 from trainer.options.seed import seed
 
 # Size estimates for the budget, at the size of the paper's run (2 h at the 1 s network step):
@@ -62,20 +63,28 @@ def add_dlstm_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
+MAX_LR = (
+    10.0  # Adam's step on standardised data: above this every network diverges (1e300 overflowed float32)
+)
+
+
 def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]:
     """(FusionSettings, front-end seconds) from parsed options, each checked with a clear message."""
     from trainer.dlstm.fusion import FusionSettings
 
-    positive_ints = ("population", "hidden", "layers", "threads")
+    positive_ints = ("population", "hidden", "layers")
     for name in positive_ints:
         if getattr(args, name) < 1:
             raise UserError(f"--{name} must be >= 1, got {getattr(args, name)}")
+    check_threads(args.threads)
     for name in ("iterations", "cycles"):
         if getattr(args, name) < 0:
             raise UserError(f"--{name} must be >= 0, got {getattr(args, name)}")
-    for name in ("lr", "train_smoothing", "run_smoothing", "temp_smoothing", "step"):
-        if not getattr(args, name) > 0:
-            raise UserError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    check_finite("--lr", args.lr, inclusive=False, maximum=MAX_LR)
+    for name in ("train_smoothing", "run_smoothing", "temp_smoothing", "step"):
+        check_finite(f"--{name.replace('_', '-')}", getattr(args, name), inclusive=False, maximum=MAX_SECONDS)
+    if args.target_loss is not None:
+        check_finite("--target-loss", args.target_loss)
     check_dlstm_size(args.population, args.hidden, args.layers, args.iterations, args.cycles)
     import torch
 

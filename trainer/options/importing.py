@@ -67,20 +67,40 @@ def _positive_hz(text: str) -> float:
 
 
 def _resample(text: str) -> float | str:
-    return text if text in ("auto", "none") else _positive_hz(text)
+    """``--resample``: auto, none or a rate inside the plausible 0.1 Hz .. 100 kHz (0.0001 Hz gave a
+    one-row recording)."""
+    from trainer.data.plausibility import RATE_MAX_HZ, RATE_MIN_HZ
+
+    if text in ("auto", "none"):
+        return text
+    rate_hz = _positive_hz(text)
+    if not RATE_MIN_HZ <= rate_hz <= RATE_MAX_HZ:
+        raise argparse.ArgumentTypeError(f"{text!r} Hz is outside {RATE_MIN_HZ:g} .. {RATE_MAX_HZ:g} Hz")
+    return rate_hz
+
+
+def _sensor_name(text: str) -> str:
+    """``--sensor``: one line of metadata (a line break would end the header line it is written on)."""
+    if not text.strip() or any(ord(c) < 32 for c in text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a one-line name (no line breaks or control characters)"
+        )
+    return text
 
 
 def _channel_map(text: str) -> dict[str, str]:
     """``accel0_x=COL,gyro0_x=COL,...``: recording-format channel names to the file's columns."""
     from trainer.data.flightlog import CHANNEL_NAME
 
-    mapping = {}
+    mapping: dict[str, str] = {}
     for item in text.split(","):
         name, sep, column = (part.strip() for part in item.partition("="))
         if not sep or not column or not CHANNEL_NAME.fullmatch(name):
             raise argparse.ArgumentTypeError(
                 f"{item!r} is not CHANNEL=COLUMN (channels: accelN_x|y|z, gyroN_x|y|z, baroN)"
             )
+        if name in mapping:
+            raise argparse.ArgumentTypeError(f"{name} is mapped twice ({mapping[name]} and {column})")
         mapping[name] = column
     return mapping
 
@@ -150,7 +170,7 @@ def add_import_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--remove-gravity", choices=GRAVITY_MODES, help="subtract +-1 g (nominal) or the mean from accel_mg"
     )
-    parser.add_argument("--sensor", metavar="NAME", help="sensor name for the metadata")
+    parser.add_argument("--sensor", type=_sensor_name, metavar="NAME", help="sensor name for the metadata")
     parser.add_argument(
         "--resample",
         type=_resample,
@@ -193,6 +213,8 @@ def log_import_options(args: argparse.Namespace, kind: str) -> LogImportOptions:
 
 def import_options(args: argparse.Namespace) -> ImportOptions:
     """The parsed ``trainer import`` options of a delimited file (``trainer fleet`` reuses it)."""
+    if getattr(args, "channel_map", None) and not getattr(args, "channels", None):
+        raise UserError("--channel-map maps the channels --channels picks: give --channels too (e.g. all)")
     return options_with_preset(
         args.preset,
         time=args.time,
