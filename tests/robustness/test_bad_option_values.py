@@ -46,6 +46,7 @@ def _refused(capsys: pytest.CaptureFixture[str], main: object, argv: list[str], 
     return lines[0]
 
 
+COLUMNS = ["--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg"]  # the simulated CSV's, for import
 DLSTM = ["fit", "--method", "dlstm", "--iterations", "2", "--cycles", "0", "--quiet"]
 
 
@@ -109,12 +110,7 @@ def test_an_output_place_the_file_system_refuses_is_refused_before_the_work(
             [
                 "import",
                 str(work / "s.csv"),
-                "--time",
-                "time_s",
-                "--temp",
-                "temp_c",
-                "--accel",
-                "accel_mg",
+                *COLUMNS,
                 "-o",
                 "/proc/x.csv",
             ],
@@ -160,7 +156,7 @@ def test_verify_never_writes_its_json_over_an_input(work: Path, capsys: pytest.C
 def test_import_options_that_make_no_recording_or_contradict_are_refused(
     options: list[str], named: str, work: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["import", str(work / "s.csv"), "--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg"]
+    argv = ["import", str(work / "s.csv"), *COLUMNS]
     assert named in _refused(capsys, trainer_main, [*argv, *options, "-o", str(work / "o.csv")], work)
 
 
@@ -176,12 +172,7 @@ def test_an_import_whose_line_has_a_field_too_many_names_the_line(
     argv = [
         "import",
         str(bad),
-        "--time",
-        "time_s",
-        "--temp",
-        "temp_c",
-        "--accel",
-        "accel_mg",
+        *COLUMNS,
         "-o",
         str(work / "o.csv"),
     ]

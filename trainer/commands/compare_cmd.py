@@ -143,6 +143,11 @@ def run(args: argparse.Namespace) -> int:
         )
     check_finite("--smoothing", args.smoothing, maximum=MAX_SECONDS)
     settings, frontend = settings_from_args(args)
+    for name in requested:  # before any fit: a search over one network failed after the training
+        if (optimiser := getattr(methods.get(name).cls, "optimiser", None)) is not None:
+            from trainer.dlstm.compensators import check_search_population
+
+            check_search_population(optimiser, settings.population)
     policy = policy_from_args(args)
     if args.valid is not None and args.holdout is not None:
         raise UserError("compare: give a validation recording VALID or --holdout SPEC, not both")

@@ -104,12 +104,7 @@ class StreamingDLSTM(Compensator):
         progress: bool = True,
     ) -> None:
         self.settings = settings or FusionSettings()
-        if self.optimiser != "none" and self.settings.population < 2:
-            # refused before the gradient training, not after it: the sparrows are the networks
-            raise UserError(
-                f"--population {self.settings.population}: {self.optimiser.upper()} searches over the "
-                "population's networks and needs at least 2 (one network, no search: --method dlstm)"
-            )
+        check_search_population(self.optimiser, self.settings.population)
         self.frontend_seconds = frontend_seconds or {}
         self.progress = progress
         self.frontend: FrontEnd | None = None
@@ -211,6 +206,16 @@ class StreamingDLSTM(Compensator):
             raise KeyError(f"weights {missing}")
         model.weights = {k: weights[k].float() for k in weights}
         return model
+
+
+def check_search_population(optimiser: str, population: int) -> None:
+    """Refuse, before the gradient training, a population the sparrow search cannot run on (the
+    sparrows are the networks: it failed with a traceback after the training)."""
+    if optimiser != "none" and population < 2:
+        raise UserError(
+            f"--population {population}: {optimiser.upper()} searches over the population's networks and "
+            "needs at least 2 (one network, no search: --method dlstm)"
+        )
 
 
 class RecursiveDLSTM(StreamingDLSTM):

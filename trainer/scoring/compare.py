@@ -67,8 +67,6 @@ def fit_all(
     def build(method: registry.Method) -> Compensator:
         return method.cls(**method.options.compare_kwargs(settings, progress and jobs == 1))
 
-    for method in chosen:
-        build(method)  # a method's refusal of the settings comes before any training, not after it
     if jobs > 1:
         import torch
 

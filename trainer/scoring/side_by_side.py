@@ -72,7 +72,15 @@ class Workers:
     def __init__(self, jobs: int, threads: int) -> None:
         # Forked on Linux (as torch's DataLoader does): nothing to import again, and the workers are
         # this process's children, so their CPU time is counted in its own (bench/bench_pipeline.py).
-        context = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
+        # Not after torch ran on more than one thread here: its OpenMP pool does not survive a fork, and
+        # the workers hung at their first torch operation (trainer compare --jobs 2 --threads 2); they
+        # start from a fresh server process then (their CPU time is not counted in this one's).
+        import torch
+
+        forkable = sys.platform == "linux" and torch.get_num_threads() == 1
+        context = multiprocessing.get_context(
+            "fork" if forkable else "forkserver" if sys.platform == "linux" else "spawn"
+        )
         self._pool = context.Pool(jobs, initializer=_worker_init, initargs=(threads,))
         self._done: queue.Queue[tuple[Any, Any, BaseException | None]] = queue.Queue()
         self.pending = 0

@@ -110,8 +110,8 @@ def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
             subject,
             True,
             f"no better than uncompensated: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS, the same "
-            "as without the model (a model holding its edge value outside its trained range shifts the "
-            "output by a constant)",
+            "as without the model (the identity, auto's none; or a model holding its edge value outside its "
+            "trained range, which shifts the output by a constant)",
         )
     return Guard(
         subject,
