@@ -87,7 +87,6 @@ def drift_lines(result: Any) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     if args.channels is not None:
         return run_per_channel(args, run, recordings=("recording",), out_dirs=("out_dir",), model="model")
-    from trainer.atomic_dir import check_output_directory
     from trainer.checkpoint import load_model
     from trainer.data.channels import model_view, relabel_units, signal_of
     from trainer.data.holdout import overlap_warning, parse_holdout, split
@@ -103,8 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.train_stats import TrainStats
 
     check_finite("--smoothing", args.smoothing, maximum=MAX_SECONDS)
-    check_output_directory(args.out_dir)  # an existing file there: one line, before any work
-    check_report_dir(Path(args.out_dir), "evaluate")
+    check_report_dir(Path(args.out_dir), "evaluate")  # an existing file or an unwritable place too
     model, checkpoint = load_model(args.model)
     stats = TrainStats.of_checkpoint(checkpoint)
     # the model's own channel (gyro0_x of a multi-channel file), never the file's accel_mg

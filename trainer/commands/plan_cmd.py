@@ -252,6 +252,7 @@ PLAN_COLUMNS = 4
 def _check(args: argparse.Namespace) -> None:
     from trainer.budget import check_rows, check_time
     from trainer.errors import UserError
+    from trainer.options.numbers import check_finite
 
     if args.screen_draws is None:
         args.screen_draws = min(DEFAULT_SCREEN, args.draws)
@@ -268,8 +269,7 @@ def _check(args: argparse.Namespace) -> None:
         )
     if not (args.rate > 0 and math.isfinite(args.rate)):
         raise UserError(f"--rate must be a finite number > 0 Hz, got {args.rate:g}")
-    if not (args.max_hours > 0 and math.isfinite(args.max_hours)):
-        raise UserError(f"--max-hours must be a finite number > 0, got {args.max_hours:g}")
+    check_finite("--max-hours", args.max_hours, inclusive=False)
     # each draw simulates and diagnoses a program of up to --max-hours: a typo is one line, not a run of years
     check_rows(
         args.max_hours * 3600 * args.rate,
@@ -285,8 +285,7 @@ def _check(args: argparse.Namespace) -> None:
     if not 0 < args.identify_rate <= 1:
         raise UserError(f"--identify-rate must be a share in (0, 1], got {args.identify_rate:g}")
     for name, value in (("--tolerance", args.tolerance), ("--vs-cubic", args.vs_cubic)):
-        if not (value > 0 and math.isfinite(value)):
-            raise UserError(f"{name} must be a finite number > 0, got {value:g}")
+        check_finite(name, value, inclusive=False)
 
 
 def run(args: argparse.Namespace) -> int:
