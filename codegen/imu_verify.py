@@ -24,7 +24,7 @@ from codegen.imu import BLOB_SUFFIX, MANIFEST_FORMAT, ImuModel, imu_golden, load
 from codegen.input_limits import raw_limits_of_clamps
 from codegen.render import _environment
 from codegen.verify import manifest_raw_clamp, to_step_units
-from trainer.data.channels import channel_view, recording_channels
+from trainer.data.channels import UNIT_LABELS, channel_view, recording_channels
 from trainer.data.recording import Recording
 from trainer.errors import UserError, atomic_output
 
@@ -74,7 +74,13 @@ def imu_verify_json(result: ImuVerifyResult) -> dict[str, Any]:
         "state_equal": all(run.state_equal for run in result.runs),
         "rate_millihz": result.rate_millihz,
         "channels": [
-            {"name": name, "unit": unit, "model_id": model_id, "mismatches": result.channel_mismatches(k)}
+            # the unit as the module's manifest spells it (deg/s), not the column suffix (dps)
+            {
+                "name": name,
+                "unit": UNIT_LABELS[unit],
+                "model_id": model_id,
+                "mismatches": result.channel_mismatches(k),
+            }
             for k, (name, unit, model_id) in enumerate(
                 zip(result.channels, result.units, result.model_ids, strict=True)
             )

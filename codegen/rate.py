@@ -20,12 +20,12 @@ from codegen.family import QuantModel, family_of
 from trainer import methods as registry
 from trainer.compensator import Compensator
 from trainer.data.importer import resample_columns
+from trainer.data.plausibility import RATE_MAX_HZ, RATE_MIN_HZ
 from trainer.data.recording import Recording
 from trainer.dlstm.realtime import FrontEnd
 from trainer.errors import UserError
 
 ANY_RATE_MILLIHZ = 0  # NAME_SAMPLE_RATE_MILLIHZ of a memoryless module
-MAX_RATE_HZ = 1_000_000.0
 
 
 def rate_millihz(rate_hz: float) -> int:
@@ -34,9 +34,10 @@ def rate_millihz(rate_hz: float) -> int:
 
 def parse_rate_hz(rate_hz: float) -> int:
     """``--rate HZ`` as whole millihertz (what the header declares), or a one-line refusal."""
-    if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+    if not (math.isfinite(rate_hz) and RATE_MIN_HZ <= rate_hz <= RATE_MAX_HZ):
         raise UserError(
-            f"--rate {rate_hz:g}: must be a sample rate in Hz, above 0 and at most {MAX_RATE_HZ:g}"
+            f"--rate {rate_hz:g}: must be a sample rate in Hz within {RATE_MIN_HZ:g} Hz .. {RATE_MAX_HZ / 1e3:g} kHz "
+            "(the rates a recording may have: trainer import refuses others as a time unit read wrongly)"
         )
     millihz = rate_millihz(rate_hz)
     if millihz == 0 or abs(rate_hz * 1000 - millihz) > 1e-6 * max(1.0, rate_hz):

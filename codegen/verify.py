@@ -662,7 +662,7 @@ def json_document(result: VerifyResult, out_dir: str | os.PathLike[str]) -> dict
         "error_budget": {
             "arithmetic_rms": result.budget.arithmetic_rms_mg,
             "arithmetic_max_abs": result.budget.arithmetic_max_abs_mg,
-            "unit": result.unit,
+            "unit": STEP_UNITS[result.unit].label,  # as the manifest spells it (deg/s, not dps)
             "met": result.budget.met,
             "compared_samples": result.samples if result.budget.compared is None else result.budget.compared,
             "clamped_samples": 0 if result.budget.clamped is None else result.budget.clamped.count,

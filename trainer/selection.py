@@ -319,9 +319,10 @@ def own_run_failure(
     """Why the chosen candidate, fitted on the whole run (its estimate ``drift``), is not shipped, or
     None: it must not leave more than no compensation (by more than :data:`TOLERANCE`, and above
     the sign-off's noise margin) on any segment of its own run. Cross-validation scored the fits of the folds; the whole run can give the
-    physics finder another structure (the bundled run's gyro z: a warm-up and a step fitted beside the
-    bias polynomial and not compensated, 0.102 deg/s left on the first cooling against 0.088 without
-    compensation, where the fold's fit left 0.037)."""
+    physics finder another structure (the bundled run's gyro z, before weakly identified nuisance
+    terms were left out of the fit: a warm-up fitted beside the bias polynomial and not compensated,
+    0.102 deg/s left on the first cooling against 0.088 without compensation, where the fold's fit
+    left 0.037)."""
     from trainer.data.smoothing import window_samples
     from trainer.scoring.static import noise_floor_mg
     from trainer.scoring.verdict import NOISE_MARGIN

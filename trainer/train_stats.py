@@ -87,6 +87,9 @@ class TrainStats:
     # the candidate asked for by name (trainer fit --method poly1): its registered method (poly3)
     # loads it, this is what the user reads (trainer.selection.shown_name)
     variant: str | None = field(default=None, metadata=_checked(TEXT))
+    # a model fitted with --holdout: its drift left on the part held out, beside the uncompensated output's
+    # (trainer.scoring.fit_holdout.held_out_record); codegen export refuses one worse than none there
+    held_out: dict[str, Any] | None = field(default=None, metadata=_checked(DICT))
 
     @property
     def temp_range_c(self) -> tuple[float, float]:

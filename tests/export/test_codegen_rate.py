@@ -99,7 +99,9 @@ def test_a_recording_of_the_training_rate_is_resampled_on_request(
     [
         (["--rate", "75"], "multiples of 2 Hz, e.g. 72, 74, 76"),  # 25 samples at 50 Hz = 37.5 at 75 Hz
         (["--rate", "1.98"], "multiples of 2 Hz"),
-        (["--rate", "0.0001"], "whole millihertz"),
+        (["--rate", "20.0001"], "whole millihertz"),
+        (["--rate", "0.0001"], "within 0.1 Hz .. 100 kHz"),  # a recording at that rate is refused at import
+        (["--rate", "200000"], "within 0.1 Hz .. 100 kHz"),
         (["--rate", "200", "--format", "px4-params"], "--rate applies to the C module"),
     ],
 )

@@ -123,3 +123,41 @@ def test_the_imu_module_s_verify_names_them_too(
         "all",
     )
     assert _where(err) == ("gyro0_x_dps", f"line {_line_of_bad_value(files['bad'])}")
+
+
+def test_verify_json_names_the_unit_as_the_manifest_does(
+    files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The JSON's error budget is in the channel's unit, spelt as the module's manifest spells it
+    (``deg/s``), not by the column suffix (``dps``) a program reading both would not match."""
+    import json
+
+    root = files["root"]
+    out = root / "gx-verify.json"
+    argv = [
+        "verify",
+        str(root / "fit" / "gyro0_x.pt"),
+        str(root / "c"),
+        str(root / "good.csv"),
+        "--json",
+        str(out),
+    ]
+    assert run_cli(codegen_main, argv) == 0
+    capsys.readouterr()
+    manifest = json.loads((root / "c" / "gx.manifest.json").read_text())
+    assert manifest["input_limits"]["input"]["unit"] == "deg/s"
+    assert json.loads(out.read_text())["error_budget"]["unit"] == manifest["input_limits"]["input"]["unit"]
+    imu_out = root / "imu-verify.json"
+    argv = [
+        "verify",
+        str(root / "fit"),
+        str(root / "imu"),
+        str(root / "good.csv"),
+        "--channels",
+        "all",
+        "--json",
+        str(imu_out),
+    ]
+    assert run_cli(codegen_main, argv) == 0
+    capsys.readouterr()
+    assert {c["name"]: c["unit"] for c in json.loads(imu_out.read_text())["channels"]} == {"gyro0_x": "deg/s"}

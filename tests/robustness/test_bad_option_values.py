@@ -61,6 +61,7 @@ DLSTM = ["fit", "--method", "dlstm", "--iterations", "2", "--cycles", "0", "--qu
         (["--target-loss", "nan"], "--target-loss"),
         (["--target-loss", "-5"], "--target-loss"),
         (["--threads", "1000000"], "--threads"),  # a segmentation fault, and a lock file left
+        (["--iterations", "0"], "--iterations"),  # wrote an untrained network (its initial weights)
     ],
 )
 def test_a_dlstm_option_that_is_no_usable_number_is_refused(

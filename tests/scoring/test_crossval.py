@@ -414,3 +414,20 @@ def test_a_thermometer_read_to_one_degree_cuts_the_same_segments() -> None:
     assert [s.label for s in rounded] == [s.label for s in reference]
     for a, b in zip(rounded[1:], reference[1:], strict=True):
         assert abs(a.t0_s - b.t0_s) <= 120.0
+
+
+def test_a_part_s_segments_are_named_on_the_run_s_clock() -> None:
+    """A part cut by --holdout names its segments in the times --holdout counts in (from the run's
+    start), not from the part's own first sample: the user reads them against the recording."""
+    from trainer.data.holdout import parse_holdout, split
+
+    rec = chamber_run()
+    t = rec.time_s - rec.time_s[0]
+    train, _ = split(rec, parse_holdout("first:0.3"))
+    start_s = float(train.time_s[0] - rec.time_s[0])
+    assert start_s > 0.0
+    segments = folds_of(train)
+    for segment in segments:
+        assert segment.t0_s == pytest.approx(float(t[len(rec) - len(train) + segment.start]))
+        assert f"{segment.t0_s:.0f}-" in segment.name
+    assert segments[0].t0_s == pytest.approx(start_s)

@@ -368,3 +368,24 @@ def test_an_auto_model_edited_after_its_fit_is_judged_on_its_own_figures(
     assert code == 1 and "## Verdict: FAIL" in text, text
     assert "worse than uncompensated: all samples (in-sample)" in text
     assert "not those auto cross-validated (the file was changed after the fit)" in text
+
+
+def test_a_model_fitted_on_part_of_the_run_says_what_share_of_the_whole_is_in_sample(
+    unit: dict[str, Path], tmp_path: Path
+) -> None:
+    """Fitted with --holdout last:0.25 and reported on the whole run without one, the figures are
+    in-sample on the training rows only: the basis gives their share, counted here from the times."""
+    part = tmp_path / "part.pt"
+    fit = ["fit", "--method", "poly3", str(unit["rec"]), "--holdout", "last:0.25", "-o", str(part)]
+    assert trainer_main(fit) == 0
+    args = ["report", str(part), "--recording", str(unit["rec"]), "-o", str(tmp_path / "rep")]
+    assert run_cli(trainer_main, args) == 0
+    text = (tmp_path / "rep" / "report.md").read_text()
+    from trainer.checkpoint import load_checkpoint
+
+    lo, hi = load_checkpoint(part)["train_stats"]["time_range_s"]
+    t = read_recording(unit["rec"]).time_s
+    share = float(np.mean((t >= lo) & (t <= hi)))
+    assert 0.7 < share < 0.8
+    assert f"all samples ({100 * share:.0f} % of them training rows, in-sample there)" in text
+    assert "all samples (in-sample)" not in text

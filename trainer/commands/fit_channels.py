@@ -31,11 +31,18 @@ from trainer.reference import OffsetPolicy
 
 def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: OffsetPolicy) -> int:
     from trainer.checkpoint import save_model
-    from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
+    from trainer.commands.selection_output import (
+        checked_method,
+        print_fitted,
+        print_held_out,
+        print_selection,
+        progress_log,
+    )
     from trainer.data.holdout import part_left_for_training
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import read_recording
     from trainer.options.workers import jobs_task_map
+    from trainer.scoring.fit_holdout import with_held_out_score
     from trainer.selection import fit_with_selection
 
     method = checked_method(args.method)
@@ -45,7 +52,8 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             f"names a model file: give a directory, or leave out --channels to fit the one-channel column"
         )
     check_output_directory(args.output)  # before a possibly long fit
-    train = part_left_for_training(read_recording(args.train), args.holdout)
+    whole = read_recording(args.train)
+    train = part_left_for_training(whole, args.holdout)
     channels = select_channels(train, args.channels)
     for note in (one_axis_left_out(train, args.channels, channels), shared_temperature_note(train, channels)):
         if note is not None:
@@ -63,6 +71,7 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         for number, (channel, view, checks) in enumerate(checked, start=1):
             log = progress_log(args, prefix=channel_prefix(channel.name, number, len(checked)))
             model, stats = fit_with_selection(args.method, view, options, policy, log=log, tasks=tasks)
+            stats = with_held_out_score(model, stats, channel_view(whole, channel), args.holdout)
             fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
     with atomic_directory(args.output) as staging:  # old set or new set, never a mix
@@ -94,4 +103,5 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             print_selection(stats)
         destination = f"{args.output}/{channel.name}{MODEL_SUFFIX}"
         print_fitted(model, stats, destination, channel.unit, channel.name)
+        print_held_out(stats, destination, channel.unit)
     return 0

@@ -8,7 +8,13 @@ from pathlib import Path
 from typing import Any
 
 from trainer import methods
-from trainer.commands.selection_output import checked_method, print_fitted, print_selection, progress_log
+from trainer.commands.selection_output import (
+    checked_method,
+    print_fitted,
+    print_held_out,
+    print_selection,
+    progress_log,
+)
 from trainer.options.channels import add_channels_option
 from trainer.options.methods import NO_OPTIONS, OptionGroup, option_defaults, options_not_applying
 from trainer.options.offset import add_offset_options, policy_from_args
@@ -108,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
         )
     from trainer.data.holdout import part_left_for_training
 
-    train = part_left_for_training(read_recording(args.train), args.holdout)
+    whole = read_recording(args.train)
+    train = part_left_for_training(whole, args.holdout)
     if (note := other_channels_note(train)) is not None:
         print(note, file=sys.stderr, flush=True)
     checks = check_training(train, checked_method(args.method), accept=args.accept_implausible)
@@ -116,11 +123,15 @@ def run(args: argparse.Namespace) -> int:
         model, stats = fit_with_selection(
             args.method, train, options, policy, log=progress_log(args), tasks=tasks
         )
+    from trainer.scoring.fit_holdout import with_held_out_score
+
+    stats = with_held_out_score(model, stats, whole, args.holdout)
     checks.print_warnings()
     print_selection(stats)
     save_model(model, args.output, train_stats=stats, valid_temp_range_c=stats.temp_range_c)
     # a gyro or baro recording holds its own unit in the accel_mg column
     print_fitted(model, stats, str(args.output), channel_unit(train))
+    print_held_out(stats, str(args.output), channel_unit(train))
     return 0
 
 

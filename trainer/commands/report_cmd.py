@@ -286,7 +286,7 @@ def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import cross_validated_selection, load_model
     from trainer.commands.compare_cmd import publish
     from trainer.data.channels import UNIT_LABELS, channel_unit, model_view
-    from trainer.data.holdout import overlap_warning, parse_holdout
+    from trainer.data.holdout import overlap_warning, parse_holdout, training_row_share
     from trainer.data.plausibility import check_scored
     from trainer.data.recording import data_fingerprint
     from trainer.data.recording_io import read_recording
@@ -384,7 +384,7 @@ def run(args: argparse.Namespace) -> int:
             if bench_path is not None and entry is None:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
-                holds_training_rows=warning is not None,
+                training_row_share=training_row_share(stats, rec, data_fingerprint(rec)),
                 held_out_in_sample=held_warning is not None,
                 scored_range_c=_temp_range(held if holdout is not None else rec),
                 channel=channel,

@@ -53,3 +53,13 @@ def print_fitted(
     ]
     for line in lines:
         print(relabel_units(line, unit))
+
+
+def print_held_out(stats: TrainStats, destination: str, unit: str) -> None:
+    """``trainer fit --holdout``: the model's figures on the part it held out, the sign-off guard's line."""
+    from trainer.data.channels import UNIT_LABELS
+    from trainer.scoring.fit_holdout import held_out_line
+
+    line = held_out_line(stats, destination, UNIT_LABELS[unit])
+    if line is not None:
+        print(line)

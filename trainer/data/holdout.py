@@ -20,7 +20,7 @@ from typing import Literal
 
 import numpy as np
 
-from trainer.data.recording import Recording, data_fingerprint
+from trainer.data.recording import TIME_ORIGIN_META, Recording, data_fingerprint
 from trainer.errors import UserError
 from trainer.train_stats import TrainStats
 
@@ -88,6 +88,8 @@ def split(rec: Recording, holdout: Holdout) -> tuple[Recording, Recording]:
         assert holdout.boundary_s is not None
         cut = int(np.searchsorted(rec.time_s - rec.time_s[0], holdout.boundary_s, side="left"))
     first, last = rec.slice(0, cut), rec.slice(cut, n)
+    for part in (first, last):  # its times count from the run's start, as --holdout's T does
+        part.meta[TIME_ORIGIN_META] = repr(rec.time_origin_s)
     if min(len(first), len(last)) < MIN_ROWS:
         duration_s = float(rec.time_s[-1] - rec.time_s[0])
         beyond = (
@@ -144,6 +146,24 @@ def overlap_warning(
             f"warning: the {what} data is the training data: every score is in-sample and says "
             "nothing about a new run (use another recording or --holdout)"
         )
+    share = training_row_share(train_stats, valid, fingerprint, whole=whole)
+    if share is None or train_stats.time_range_s is None:
+        return None
+    lo, hi = train_stats.time_range_s
+    return (
+        f"warning: {100 * share:.1f} % of the {what} rows are training rows (the model was trained on "
+        f"t = {lo:g} .. {hi:g} s of this recording, {train_stats.source or 'source unnamed'}): "
+        "those scores are in-sample"
+    )
+
+
+def training_row_share(
+    train_stats: TrainStats, valid: Recording, fingerprint: str, *, whole: Recording | None = None
+) -> float | None:
+    """The share of ``valid``'s rows the model was trained on (1.0: it is the training data), or None
+    when it holds none (:func:`overlap_warning`'s proof: content, or the same file and times)."""
+    if train_stats.data_sha256 == fingerprint:
+        return 1.0
     if train_stats.time_range_s is None:
         return None
     lo, hi = train_stats.time_range_s
@@ -154,11 +174,7 @@ def overlap_warning(
     if (source and _same_file(source, valid.source)) or training_part(
         train_stats, whole or valid
     ) is not None:
-        return (
-            f"warning: {100 * float(np.mean(inside)):.1f} % of the {what} rows are training rows (the "
-            f"model was trained on t = {lo:g} .. {hi:g} s of this recording, {source or 'source unnamed'}): "
-            "those scores are in-sample"
-        )
+        return float(np.mean(inside))
     return None
 
 

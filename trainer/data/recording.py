@@ -24,6 +24,8 @@ TRUTH_PREFIX = "true_"
 # was imputed so that a method with state sees the run's whole temperature history. Every fit that
 # reads it scores the training rows alone (the finder's blocks, the temperature-input DLSTM's loss).
 HELD_OUT_COLUMN = "held_out"
+# Metadata of a part cut by --holdout: the first time of the run it was cut from (Recording.time_origin_s)
+TIME_ORIGIN_META = "time_origin_s"
 
 
 @dataclass
@@ -106,6 +108,15 @@ class Recording:
             return float(self.meta["sample_rate_hz"])
         require_rows(len(self.time_s), self.source)  # user data: one line, not a traceback
         return float(1.0 / np.median(np.diff(self.time_s)))
+
+    @property
+    def time_origin_s(self) -> float:
+        """Where the recording's clock counts from (s): its first sample, or, for a part cut by
+        ``--holdout`` (:func:`trainer.data.holdout.split`), the first sample of the run it was cut from,
+        so that a part's segments are named on the times the user gave ``--holdout`` in."""
+        if TIME_ORIGIN_META in self.meta:
+            return float(self.meta[TIME_ORIGIN_META])
+        return float(self.time_s[0])
 
     def has(self, name: str) -> bool:
         return name in self.columns

@@ -77,9 +77,10 @@ def settings_from_args(args: argparse.Namespace) -> tuple[Any, dict[str, float]]
         if getattr(args, name) < 1:
             raise UserError(f"--{name} must be >= 1, got {getattr(args, name)}")
     check_threads(args.threads)
-    for name in ("iterations", "cycles"):
-        if getattr(args, name) < 0:
-            raise UserError(f"--{name} must be >= 0, got {getattr(args, name)}")
+    if args.iterations < 1:  # 0 trained nothing: the networks' initial weights were written as a model
+        raise UserError(f"--iterations must be >= 1 (the networks train by it), got {args.iterations}")
+    if args.cycles < 0:
+        raise UserError(f"--cycles must be >= 0, got {args.cycles}")
     check_finite("--lr", args.lr, inclusive=False, maximum=MAX_LR)
     for name in ("train_smoothing", "run_smoothing", "temp_smoothing", "step"):
         check_finite(f"--{name.replace('_', '-')}", getattr(args, name), inclusive=False, maximum=MAX_SECONDS)

@@ -110,7 +110,7 @@ def thermal_segments(rec: Recording) -> list[Segment]:
     branch = thermal_branch(temp, rec.sample_rate_hz, window_s=rate_window_s(temp, rec.sample_rate_hz))
     edges = np.flatnonzero(np.diff(branch)) + 1
     starts, stops = np.r_[0, edges], np.r_[edges, len(branch)]
-    t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
+    t = np.asarray(rec.time_s, dtype=np.float64) - rec.time_origin_s  # a --holdout part: the run's clock
     shortest = max(MIN_SEGMENT_FRACTION * len(branch), MIN_SEGMENT_S * rec.sample_rate_hz)
     runs: list[list[int]] = []  # [start, stop, branch]
     for start, stop in zip(starts.tolist(), stops.tolist(), strict=True):
@@ -267,7 +267,7 @@ def folds_of(rec: Recording) -> list[Segment]:
             "on another recording (VALID) or give --holdout"
         )
     temp = np.asarray(rec.temp_c, dtype=np.float64)
-    t = np.asarray(rec.time_s, dtype=np.float64) - float(rec.time_s[0])
+    t = np.asarray(rec.time_s, dtype=np.float64) - rec.time_origin_s  # a --holdout part: the run's clock
     ramps = [s.label for s in segments if s.label != LABELS[NEITHER]]
     label = ramps[0] if ramps else LABELS[NEITHER]
     edges = _temperature_parts(temp, rising=label == LABELS[HEATING]) if ramps else None

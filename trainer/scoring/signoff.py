@@ -95,9 +95,9 @@ class ChannelReport:
     figures: list[str] = field(default_factory=list)
     shown: str = ""  # the name the reader knows it by (auto's candidate: poly2, physics-branch), else method
     undetermined: list[str] = field(default_factory=list)  # Compensator.undetermined(): a review reason
-    # whether the recording holds the model's training rows (trainer.data.holdout.overlap_warning): without
-    # a hold-out, the figures are then in-sample; otherwise they are of another run
-    holds_training_rows: bool = True
+    # the share of the recording's rows the model was trained on (trainer.data.holdout.training_row_share),
+    # None for none: without a hold-out the figures are in-sample on that share, else of another run
+    training_row_share: float | None = 1.0
     # the --holdout part holds training rows (overlap_warning): its figures are in-sample, so a held-out
     # threshold is not measured by them (a model trained on the whole run passed one on its own data)
     held_out_in_sample: bool = False
@@ -141,8 +141,12 @@ class ChannelReport:
             )
         if self.scores.held_out is not None:
             basis = "held-out"
-        elif self.holds_training_rows:
+        elif self.training_row_share is not None and self.training_row_share >= 1.0:
             basis = "all samples (in-sample)"
+        elif self.training_row_share is not None:  # a model fitted with --holdout, scored on the whole run
+            basis = (
+                f"all samples ({100 * self.training_row_share:.0f} % of them training rows, in-sample there)"
+            )
         else:
             basis = "all samples of a recording not trained on"
         return Figures(

@@ -1,0 +1,91 @@
+"""A model fitted with ``--holdout`` keeps its held-out score, and one worse than none there is not exported.
+
+The recording: a chamber cycle whose drift is +k (T - 25) in its first half and -k (T - 25) in its
+second (a loop that flips). A cubic fitted on the first half removes +k (T - 25) from the second,
+which leaves 2k (T - 25): twice no compensation's drift, held out. ``fit`` must say so, keep the
+figures (the same ``trainer evaluate --holdout`` prints) and ``codegen export`` must refuse the
+model in one line, writing nothing, whatever the format; the same fit on a run without the flip
+exports.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.cli import main as codegen_main
+from trainer.checkpoint import load_checkpoint
+from trainer.cli import main as trainer_main
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
+from trainer.errors import run_cli
+
+RATE_HZ = 2.0
+K_MG_PER_C = 0.3
+
+
+def _run(path: Path, *, flip: bool) -> Path:
+    t = np.arange(0.0, 8000.0, 1.0 / RATE_HZ)
+    temp = 25.0 + 30.0 * np.sin(2.0 * np.pi * t / 4000.0)  # two cycles, -5..55 degC
+    sign = np.where(t < t[-1] / 2.0, 1.0, -1.0) if flip else np.ones_like(t)
+    noise = np.random.default_rng(5).normal(0.0, 0.05, t.size)
+    accel = 1000.0 + sign * K_MG_PER_C * (temp - 25.0) + noise
+    write_recording(
+        Recording(
+            {"time_s": t, "temp_c": temp, "accel_mg": accel}, {"sample_rate_hz": repr(RATE_HZ)}, path.name
+        ),
+        path,
+    )
+    return path
+
+
+def _fit(rec: Path, model: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    capsys.readouterr()
+    argv = ["fit", "--method", "poly3", str(rec), "--holdout", "last:0.5", "-o", str(model)]
+    assert run_cli(trainer_main, argv) == 0
+    return capsys.readouterr().out
+
+
+def test_a_model_worse_than_none_held_out_is_refused_by_every_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec, model = _run(tmp_path / "flip.csv", flip=True), tmp_path / "flip.pt"
+    out = _fit(rec, model, capsys)
+    assert (
+        "worse than uncompensated: held-out part (--holdout last:0.5)" in out
+        and "codegen export refuses" in out
+    )
+    record = load_checkpoint(model)["train_stats"]["held_out"]
+    assert record["holdout"] == "last:0.5"
+    # the held-out drift is twice no compensation's, of the same shape: the model leaves about 2x
+    assert record["model_rms"] == pytest.approx(2.0 * record["uncompensated_rms"], rel=0.1)
+    # the same figures trainer evaluate --holdout prints for the model
+    capsys.readouterr()
+    argv = ["evaluate", str(model), str(rec), "--holdout", "last:0.5", "--out-dir", str(tmp_path / "ev")]
+    assert run_cli(trainer_main, argv) == 0
+    found = re.search(
+        r"drift left, deviation from a constant \[poly3\]: RMS (\S+) mg \(uncompensated (\S+) mg\)",
+        capsys.readouterr().out,
+    )
+    assert found is not None
+    assert (f"{record['model_rms']:.4g}", f"{record['uncompensated_rms']:.4g}") == found.groups()
+    for extra in ([], ["--format", "px4-params"], ["--format", "ardupilot-parm"]):
+        target = tmp_path / f"out{len(extra)}{extra[-1] if extra else ''}"
+        capsys.readouterr()
+        assert run_cli(codegen_main, ["export", str(model), "-o", str(target), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "must not reach firmware" in err and str(model) in err, err
+        assert not target.exists()
+
+
+def test_the_same_fit_without_the_flip_exports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rec, model = _run(tmp_path / "same.csv", flip=False), tmp_path / "same.pt"
+    out = _fit(rec, model, capsys)
+    assert "better than uncompensated: held-out part (--holdout last:0.5)" in out
+    record = load_checkpoint(model)["train_stats"]["held_out"]
+    assert record["model_rms"] < 0.1 * record["uncompensated_rms"]
+    assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c"), "--name", "same"]) == 0
+    assert (tmp_path / "c" / "same.h").is_file()
