@@ -46,12 +46,37 @@ def _is_dict(value: Any) -> bool:
     return isinstance(value, dict)
 
 
+# the figures of trainer.scoring.fit_holdout.held_out_record (None: not measured, e.g. all in range, or
+# not finite: a model whose output is not, which the guard then refuses)
+HELD_OUT_FIGURES = (
+    "model_rms",
+    "uncompensated_rms",
+    "model_in_range_rms",
+    "uncompensated_in_range_rms",
+    "noise_floor",
+)
+
+
+def _is_held_out(value: Any) -> bool:
+    """What ``codegen export`` judges: a spec and the figures, each a finite number or None (a hand-edited
+    record with a figure of text would otherwise pass the guard unjudged)."""
+    return (
+        isinstance(value, dict)
+        and is_text(value.get("holdout"))
+        and all(k in value and (value[k] is None or is_finite(value[k])) for k in HELD_OUT_FIGURES)
+    )
+
+
 TEXT: Check = (is_text, "a string")
 COUNT: Check = (is_count, "a whole number >= 0")
 FINITE: Check = (is_finite, "a finite number")
 RATE: Check = (_is_rate, "a finite number > 0")
 TIME_RANGE: Check = (_is_time_range, "[start, end], finite and increasing")
 DICT: Check = (_is_dict, "a dict")
+HELD_OUT: Check = (
+    _is_held_out,
+    f"a dict of 'holdout' (text) and {', '.join(HELD_OUT_FIGURES)} (each a finite number, or null: not measured)",
+)
 
 
 def _checked(check: Check) -> dict[str, Check]:
@@ -89,7 +114,7 @@ class TrainStats:
     variant: str | None = field(default=None, metadata=_checked(TEXT))
     # a model fitted with --holdout: its drift left on the part held out, beside the uncompensated output's
     # (trainer.scoring.fit_holdout.held_out_record); codegen export refuses one worse than none there
-    held_out: dict[str, Any] | None = field(default=None, metadata=_checked(DICT))
+    held_out: dict[str, Any] | None = field(default=None, metadata=_checked(HELD_OUT))
 
     @property
     def temp_range_c(self) -> tuple[float, float]:

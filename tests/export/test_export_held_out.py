@@ -89,3 +89,22 @@ def test_the_same_fit_without_the_flip_exports(tmp_path: Path, capsys: pytest.Ca
     assert record["model_rms"] < 0.1 * record["uncompensated_rms"]
     assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c"), "--name", "same"]) == 0
     assert (tmp_path / "c" / "same.h").is_file()
+
+
+def test_a_hand_edited_held_out_record_is_named_not_judged(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A figure of text would make the guard's comparison false and let the model through: the file
+    is refused on loading, in one line naming the field."""
+    import torch
+
+    rec, model = _run(tmp_path / "flip.csv", flip=True), tmp_path / "flip.pt"
+    _fit(rec, model, capsys)
+    checkpoint = torch.load(model, weights_only=True)
+    checkpoint["train_stats"]["held_out"]["model_rms"] = "small"
+    torch.save(checkpoint, model)
+    capsys.readouterr()
+    assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "train_stats.held_out" in err, err
+    assert not (tmp_path / "c").exists()
