@@ -23,7 +23,7 @@ import re
 import shutil
 import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -86,13 +86,13 @@ def _link_or_copy(source: str, destination: str) -> None:
         shutil.copy2(source, destination)
 
 
-def _carry_over(target: Path, staging: Path) -> list[str]:
-    """Link the entries of ``target`` the new set does not replace into ``staging``; returns the
-    partial files of killed runs found in ``target`` (left out of the new set)."""
+def _carry_over(target: Path, staging: Path, drop: Collection[str] = ()) -> list[str]:
+    """Link the entries of ``target`` the new set does not replace into ``staging``, but those named in
+    ``drop``; returns the partial files of killed runs found in ``target`` (left out of the new set)."""
     partial = []
     for entry in sorted(target.iterdir()):
         destination = staging / entry.name
-        if os.path.lexists(destination):
+        if os.path.lexists(destination) or entry.name in drop:
             continue
         if _PARTIAL.match(entry.name) or _SIBLING.match(entry.name):
             partial.append(entry.name)
@@ -149,9 +149,10 @@ def _renameable(target: Path) -> bool:
 
 
 @contextmanager
-def atomic_directory(out: str | os.PathLike[str]) -> Iterator[Path]:
+def atomic_directory(out: str | os.PathLike[str], drop: Collection[str] = ()) -> Iterator[Path]:
     """Yield an empty staging folder; when the block succeeds its entries become ``out``'s (other
-    entries of an existing ``out`` are kept) as one set, else nothing of it remains.
+    entries of an existing ``out`` are kept, but the files named in ``drop``: the previous set's own
+    outputs the new set does not hold) as one set, else nothing of it remains.
 
     A write error (disk full, permissions) is a one-line :class:`UserError` naming ``out``."""
     given = Path(out)
@@ -170,12 +171,16 @@ def atomic_directory(out: str | os.PathLike[str]) -> Iterator[Path]:
     try:
         yield staging
         if in_place:
-            for item in sorted(staging.iterdir()):
+            new_set = sorted(staging.iterdir())
+            for item in new_set:
                 os.replace(item, target / item.name)
             staging.rmdir()
+            for name in set(drop) - {item.name for item in new_set}:
+                if (target / name).is_file():
+                    (target / name).unlink()
         else:
             if target.is_dir():
-                leftovers += _carry_over(target, staging)
+                leftovers += _carry_over(target, staging, drop)
                 os.chmod(staging, stat.S_IMODE(target.stat().st_mode))
             else:
                 os.chmod(staging, 0o777 & ~current_umask())

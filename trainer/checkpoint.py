@@ -162,7 +162,8 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
 
         raise UserError(
             f"{p}: a directory, not a model file; for the per-channel models 'trainer fit --channels' wrote "
-            "there, add --channels all (or a list such as accel0_z,gyro0_x)"
+            f"there, add --channels all (or a list such as accel0_z,gyro0_x), or give the model files ({p}/*.pt: "
+            "trainer report takes several)"
             if (p / INDEX_FILE).is_file()
             else f"{p}: a directory, not a model file (model.pt, written by 'trainer fit')"
         )

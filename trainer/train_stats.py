@@ -47,7 +47,7 @@ def _is_dict(value: Any) -> bool:
 
 
 # the figures of trainer.scoring.fit_holdout.held_out_record (None: not measured, e.g. all in range, or
-# not finite: a model whose output is not, which the guard then refuses)
+# not finite: a model whose output is not, which the guard then refuses as such)
 HELD_OUT_FIGURES = (
     "model_rms",
     "uncompensated_rms",
@@ -63,7 +63,11 @@ def _is_held_out(value: Any) -> bool:
     return (
         isinstance(value, dict)
         and is_text(value.get("holdout"))
-        and all(k in value and (value[k] is None or is_finite(value[k])) for k in HELD_OUT_FIGURES)
+        and all(
+            k in value and (value[k] is None or (is_finite(value[k]) and value[k] >= 0))
+            for k in HELD_OUT_FIGURES
+        )
+        and value["uncompensated_rms"] is not None  # the recording's own output: always measured
     )
 
 
@@ -75,7 +79,8 @@ TIME_RANGE: Check = (_is_time_range, "[start, end], finite and increasing")
 DICT: Check = (_is_dict, "a dict")
 HELD_OUT: Check = (
     _is_held_out,
-    f"a dict of 'holdout' (text) and {', '.join(HELD_OUT_FIGURES)} (each a finite number, or null: not measured)",
+    f"a dict of 'holdout' (text) and {', '.join(HELD_OUT_FIGURES)} (each a finite RMS >= 0, or null where not "
+    "measured: the model's output not finite, or no sample outside the trained range; uncompensated_rms never null)",
 )
 
 

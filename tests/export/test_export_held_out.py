@@ -55,7 +55,7 @@ def test_a_model_worse_than_none_held_out_is_refused_by_every_export(
     rec, model = _run(tmp_path / "flip.csv", flip=True), tmp_path / "flip.pt"
     out = _fit(rec, model, capsys)
     assert (
-        "worse than uncompensated: held-out part (--holdout last:0.5)" in out
+        "worse than uncompensated: held-out part (--holdout last:0.5 " in out
         and "codegen export refuses" in out
     )
     record = load_checkpoint(model)["train_stats"]["held_out"]
@@ -84,27 +84,45 @@ def test_a_model_worse_than_none_held_out_is_refused_by_every_export(
 def test_the_same_fit_without_the_flip_exports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rec, model = _run(tmp_path / "same.csv", flip=False), tmp_path / "same.pt"
     out = _fit(rec, model, capsys)
-    assert "better than uncompensated: held-out part (--holdout last:0.5)" in out
+    assert "better than uncompensated: held-out part (--holdout last:0.5 " in out
     record = load_checkpoint(model)["train_stats"]["held_out"]
     assert record["model_rms"] < 0.1 * record["uncompensated_rms"]
     assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c"), "--name", "same"]) == 0
     assert (tmp_path / "c" / "same.h").is_file()
 
 
+@pytest.mark.parametrize(
+    ("key", "value"), [("model_rms", "small"), ("model_rms", -1.0), ("uncompensated_rms", None)]
+)
 def test_a_hand_edited_held_out_record_is_named_not_judged(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    key: str, value: object, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """A figure of text would make the guard's comparison false and let the model through: the file
-    is refused on loading, in one line naming the field."""
+    """A figure of text, a negative RMS or no uncompensated figure would make the guard's comparison
+    meaningless and could let the model through: the file is refused on loading, in one line naming
+    the field."""
     import torch
 
     rec, model = _run(tmp_path / "flip.csv", flip=True), tmp_path / "flip.pt"
     _fit(rec, model, capsys)
     checkpoint = torch.load(model, weights_only=True)
-    checkpoint["train_stats"]["held_out"]["model_rms"] = "small"
+    checkpoint["train_stats"]["held_out"][key] = value
     torch.save(checkpoint, model)
     capsys.readouterr()
     assert run_cli(codegen_main, ["export", str(model), "-o", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "train_stats.held_out" in err, err
     assert not (tmp_path / "c").exists()
+
+
+def test_the_sign_off_of_its_training_run_judges_the_part_its_fit_held_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Reported on its own run without --holdout, the model's whole-run figures are mostly in-sample
+    and look better than none; the verdict judges the part the fit held out, as export does."""
+    rec, model = _run(tmp_path / "flip.csv", flip=True), tmp_path / "flip.pt"
+    _fit(rec, model, capsys)
+    argv = ["report", str(model), "--recording", str(rec), "-o", str(tmp_path / "rep")]
+    assert run_cli(trainer_main, argv) == 1
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "## Verdict: FAIL" in text
+    assert "worse than uncompensated: held-out part (--holdout last:0.5 of the training run" in text

@@ -19,6 +19,8 @@ import pytest
 
 from tests.flightlogs import imu_topic, write_ulog
 from trainer.checkpoint import load_checkpoint
+from trainer.data.recording import Recording
+from trainer.data.recording_io import write_recording
 from trainer.errors import UserError
 from trainer.fleet import stages
 from trainer.fleet.manifest import load_manifest
@@ -303,3 +305,31 @@ def test_a_delimited_unit_with_channels_fits_the_channel_it_names_or_refuses_sev
         UnitImport.parse("--preset tofupilot --channels all", where).read(real_run)
     message = str(caught.value)
     assert "\n" not in message and where in message and "makes 6 channels" in message
+
+
+def test_a_method_worse_than_none_on_the_held_out_part_is_not_exported(tmp_path: Path, client: Any) -> None:
+    """As ``codegen export`` refuses it after ``trainer fit --holdout``: a loop that flips sign half-way
+    (+k (T - 25) then -k (T - 25)) leaves a cubic fitted on the first half twice no compensation's
+    drift on the second. The fleet keeps the model's held-out figures in its model file, writes no C
+    for it, and the unit fails the guard."""
+    t = np.arange(0.0, 8000.0, 0.5)
+    temp = 25.0 + 30.0 * np.sin(2.0 * np.pi * t / 4000.0)
+    sign = np.where(t < t[-1] / 2.0, 1.0, -1.0)
+    accel = 1000.0 + sign * 0.3 * (temp - 25.0) + np.random.default_rng(5).normal(0.0, 0.05, t.size)
+    rec = tmp_path / "flip.csv"
+    write_recording(
+        Recording({"time_s": t, "temp_c": temp, "accel_mg": accel}, {"sample_rate_hz": "2"}, "flip"), rec
+    )
+    manifest = tmp_path / "fleet.toml"
+    manifest.write_text(
+        f'[fleet]\nmethods = ["poly3"]\ndiagnose_blocks = 50\nholdout = "last:0.5"\n'
+        f'[[unit]]\nid = "F1"\nrecordings = ["{rec.as_posix()}"]\n'
+    )
+    run = run_fleet(manifest, tmp_path / "out", progress=False, client=client)
+    method = run.out_dir / "units" / "F1" / "poly3"
+    record = load_checkpoint(method / "model.pt")["train_stats"]["held_out"]
+    assert record["holdout"] == "last:0.5" and record["model_rms"] > 1.5 * record["uncompensated_rms"]
+    assert not (method / "c").exists()
+    verify = run.results["F1"].methods["poly3"]["verify"]
+    assert verify["passed"] is None and "must not reach firmware" in verify["error"]
+    assert "| F1 | FAIL |" in (run.out_dir / "report.md").read_text()

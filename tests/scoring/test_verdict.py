@@ -63,3 +63,13 @@ def test_a_guard_alone_gives_no_verdict_and_nan_is_not_measured() -> None:
         ok, decisive, name = True, True, "holdout <= 1 mg"
 
     assert verdict({"m": Figures("held-out", 0.5, 1.0)}, [Threshold()]).status == PASS
+
+
+def test_a_model_not_worse_only_by_the_noise_margin_is_not_called_better() -> None:
+    """0.00854 against 0.008532 with a noise floor of 0.0118: not worse (noise), and not "better ... <"
+    either, which the figures contradict."""
+    guard = worse_than_uncompensated(
+        "u", Figures("held-out", 0.00854, 0.008532, noise_floor=0.0118, unit="deg/s")
+    )
+    assert guard.ok and guard.detail.startswith("at the noise floor") and "better" not in guard.detail
+    assert "0.00854" in guard.detail and "0.008532" in guard.detail

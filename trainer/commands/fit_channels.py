@@ -74,7 +74,8 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
             stats = with_held_out_score(model, stats, channel_view(whole, channel), args.holdout)
             fitted.append((channel, model, stats, checks))
     index: dict[str, Any] = {"method": args.method, "train": str(args.train), "channels": []}
-    with atomic_directory(args.output) as staging:  # old set or new set, never a mix
+    # old set or new set, never a mix: the models an earlier fit listed that this one does not fit go
+    with atomic_directory(args.output, drop=previous_models(Path(args.output))) as staging:
         for channel, model, stats, _ in fitted:
             save_model(
                 model,
@@ -105,3 +106,13 @@ def fit_channels(args: argparse.Namespace, options: dict[str, Any], policy: Offs
         print_fitted(model, stats, destination, channel.unit, channel.name)
         print_held_out(stats, destination, channel.unit)
     return 0
+
+
+def previous_models(out: Path) -> list[str]:
+    """The model files the index of an earlier ``fit --channels`` into ``out`` lists (none when it has
+    none, or one that cannot be read: then nothing is dropped)."""
+    try:
+        entries = json.loads((out / INDEX_FILE).read_text(encoding="utf-8"))["channels"]
+        return [str(e["model"]) for e in entries if Path(str(e["model"])).name == str(e["model"])]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []

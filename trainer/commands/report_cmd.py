@@ -384,7 +384,8 @@ def run(args: argparse.Namespace) -> int:
             if bench_path is not None and entry is None:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
-                training_row_share=training_row_share(stats, rec, data_fingerprint(rec)),
+                training_row_share=(share := training_row_share(stats, rec, data_fingerprint(rec))),
+                fit_held_out=stats.held_out if share is not None else None,
                 held_out_in_sample=held_warning is not None,
                 scored_range_c=_temp_range(held if holdout is not None else rec),
                 channel=channel,

@@ -36,6 +36,13 @@ class Holdout:
     fraction: float | None = None
     boundary_s: float | None = None
 
+    @property
+    def spec(self) -> str:
+        """The ``--holdout`` text that gives this split (``last:0.5``, ``:1500``: the part before 1500 s)."""
+        if self.fraction is not None:
+            return f"{self.side}:{self.fraction:g}"
+        return f":{self.boundary_s:g}" if self.side == "first" else f"{self.boundary_s:g}:"
+
     def describe(self) -> str:
         amount = f"{100 * self.fraction:g} %" if self.fraction is not None else f"{self.boundary_s:g} s"
         if self.boundary_s is not None:

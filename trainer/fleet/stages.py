@@ -22,7 +22,7 @@ import math
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -348,10 +348,17 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
         from trainer import methods
         from trainer.checkpoint import save_model
         from trainer.fitting import fit_with_stats
+        from trainer.scoring.fit_holdout import record_of
+        from trainer.scoring.verdict import Figures, worse_than_uncompensated
 
         started = time.perf_counter()
         model, stats = fit_with_stats(name, data.train, unit.fit_kwargs.get(name, {}))
         scores = _scores(name, data, model, stats)
+        figures = [scores[key] for key in DRIFT_LEFT_KEYS]
+        if data.holdout is not None:  # as trainer fit --holdout: the model file keeps its held-out figures
+            stats = replace(stats, held_out=record_of(data.holdout, figures))
+        # the sign-off's guard on the scored part: a compensator worse than none there is not exported
+        guard = worse_than_uncompensated(name, Figures(data.evaluated_on, *figures))
         files: dict[str, bytes] = {}
         failures: tuple[Failure, ...] = ()
         with tempfile.TemporaryDirectory(prefix="fleet-") as tmp_name:
@@ -365,6 +372,11 @@ def method(data: UnitData | Failure, unit: UnitSpec, name: str) -> StageOutput |
             files["model.pt"] = (tmp / "model.pt").read_bytes()
             if methods.get(name).renderer is None:
                 verified: dict[str, Any] = {"passed": None, "error": f"{name} has no code generator"}
+            elif not guard.ok:
+                verified = {
+                    "passed": None,
+                    "error": f"not exported: {guard.detail}: a compensator worse than none must not reach firmware",
+                }
             else:
                 outcome = _guarded(
                     "export", lambda: _export_and_verify(tmp / "model.pt", data.valid, unit.export_name, tmp)

@@ -98,6 +98,10 @@ class ChannelReport:
     # the share of the recording's rows the model was trained on (trainer.data.holdout.training_row_share),
     # None for none: without a hold-out the figures are in-sample on that share, else of another run
     training_row_share: float | None = 1.0
+    # train_stats.held_out of a model fitted with --holdout, when the recording is its training run: the
+    # figures of the part that fit held out (trainer.scoring.fit_holdout), judged when the report has
+    # no held-out part of its own that is not training rows
+    fit_held_out: dict[str, Any] | None = None
     # the --holdout part holds training rows (overlap_warning): its figures are in-sample, so a held-out
     # threshold is not measured by them (a model trained on the whole run passed one on its own data)
     held_out_in_sample: bool = False
@@ -139,6 +143,10 @@ class ChannelReport:
                 noise_floor=part.noise_floor_mg,
                 unit=self.unit,
             )
+        if self.fit_held_out is not None and (self.scores.held_out is None or self.held_out_in_sample):
+            from trainer.scoring.fit_holdout import held_out_figures
+
+            return held_out_figures(self.fit_held_out, self.unit)
         if self.scores.held_out is not None:
             basis = "held-out"
         elif self.training_row_share is not None and self.training_row_share >= 1.0:

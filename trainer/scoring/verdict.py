@@ -113,6 +113,14 @@ def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
             "as without the model (the identity, auto's none; or a model holding its edge value outside its "
             "trained range, which shifts the output by a constant)",
         )
+    if f.model_rms >= f.uncompensated_rms:  # not worse only because it is noise (_worse's margin)
+        return Guard(
+            subject,
+            True,
+            f"at the noise floor: {f.basis} drift left {f.model_rms:.4g} {f.unit} RMS, {f.uncompensated_rms:.4g} "
+            f"{f.unit} without the model, within {NOISE_MARGIN:g}x the noise floor ({f.noise_floor:.4g} {f.unit}): "
+            "not worse",
+        )
     return Guard(
         subject,
         True,
