@@ -100,14 +100,19 @@ def _refuse_worse_than_none_held_out(paths: list[str]) -> None:
     from trainer.scoring.fit_holdout import held_out_guard
     from trainer.train_stats import TrainStats
 
+    refused = []
     for path in paths:
         stats = TrainStats.of_checkpoint(load_checkpoint(path))
         guard = held_out_guard(stats, path, UNIT_LABELS.get(stats.unit or "mg", stats.unit or "mg"))
         if guard is not None and not guard.ok:
-            raise UserError(
-                f"{path}: {guard.detail}: a compensator worse than none must not reach firmware (refit it on a "
-                "whole cycle, e.g. trainer fit --method auto, which leaves a channel uncompensated where nothing helps)"
-            )
+            refused.append((path, guard.detail))
+    if refused:
+        path, detail = refused[0]
+        others = f" (likewise {', '.join(p for p, _ in refused[1:])})" if len(refused) > 1 else ""
+        raise UserError(
+            f"{path}: {detail}{others}: a compensator worse than none must not reach firmware (refit it on a "
+            "whole cycle, e.g. trainer fit --method auto, which leaves a channel uncompensated where nothing helps)"
+        )
 
 
 def _identity_notes(paths: list[str]) -> None:

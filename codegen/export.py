@@ -34,7 +34,7 @@ from trainer.atomic_dir import atomic_directory
 from trainer.checkpoint import load_checkpoint, load_model
 from trainer.errors import UserError
 from trainer.fitting import removes_sustained_input
-from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, RECURSIVE_NOTE, OffsetRecord, check_constant
+from trainer.reference import OFFSET_LIMIT_MG, OFFSET_OPTION, OffsetRecord, check_constant, recursive_note
 from trainer.train_stats import TrainStats
 
 
@@ -145,7 +145,9 @@ def offset_notes(path: Path, raw: dict[str, Any]) -> tuple[str, ...]:
     """
     method = registry.REGISTRY[raw["method"]]
     if removes_sustained_input(method):
-        return (RECURSIVE_NOTE,)
+        stats = raw.get("train_stats")
+        unit = stats.get("unit") if isinstance(stats, dict) else None
+        return (recursive_note(unit if isinstance(unit, str) else "mg"),)
     if "offset" in raw:
         try:
             record = OffsetRecord.from_dict(raw["offset"])

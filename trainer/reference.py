@@ -46,6 +46,21 @@ RECURSIVE_NOTE = (
     "(a tilt, a change of attitude, gravity) along with the drift; use a temperature-driven method "
     "where the true input can be constant for long"
 )
+# the same warning in the words of each channel's sustained input (RECURSIVE_NOTE is the accelerometer's)
+_SUSTAINED_INPUT = {
+    "dps": "any sustained rotation rate (a steady turn, the Earth's rotation)",
+    "pa": "any sustained pressure (an altitude held, the weather)",
+}
+
+
+def recursive_note(unit: str = "mg") -> str:
+    """:data:`RECURSIVE_NOTE` for a channel of ``unit`` (mg, dps, pa: what the method removes there)."""
+    sustained = _SUSTAINED_INPUT.get(unit)
+    if sustained is None:
+        return RECURSIVE_NOTE
+    return RECURSIVE_NOTE.replace(
+        "any sustained acceleration (a tilt, a change of attitude, gravity)", sustained
+    )
 
 
 def reference_temperature(temp_c: np.ndarray, t_ref_c: float | None = None) -> float:

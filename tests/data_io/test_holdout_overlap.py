@@ -134,3 +134,19 @@ def test_report_notes_a_held_out_part_that_was_trained_on(
         "held-out part: warning: 100.0 % of the held-out rows are training rows"
         in (out / "report.md").read_text()
     )
+
+
+def test_a_split_that_leaves_too_few_rows_says_which_part_is_which(run: dict[str, Path]) -> None:
+    """Held out before the second sample (one row), or all but the first (one row to train on): the
+    message names the rows to train on and those held out, not "N and M rows"."""
+    from trainer.errors import UserError
+
+    rec = read_recording(run["run"])
+    n = len(rec)
+    second_s = float(rec.time_s[1] - rec.time_s[0])
+    for spec, train, held in ((f":{second_s / 2:g}", n - 1, 1), (f"last:{(n - 1) / n:.9f}", 1, n - 1)):
+        with pytest.raises(UserError) as refused:
+            split(rec, parse_holdout(spec))
+        assert f"leaves {train} rows to train on and {held} held out" in str(refused.value), str(
+            refused.value
+        )

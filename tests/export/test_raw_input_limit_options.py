@@ -180,3 +180,27 @@ def test_verify_reads_one_limit_per_unit_and_refuses_two_in_one_unit(tmp_path: P
     two = {"channels": [_entry("deg/s", 500 * 16_000), _entry("deg/s", 250 * 16_000)]}
     with pytest.raises(UserError, match=r"gyroscope channels clamp their raw inputs at different limits"):
         manifest_raw_limits(two, path)
+
+
+def test_a_recursive_model_s_warning_names_what_it_removes_on_its_own_channel(
+    models: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """A recursive network removes any sustained input along with the drift: on a gyroscope a steady
+    turn, not gravity, which its export said."""
+    for channel, removes, not_said in (
+        ("gyro0_z", "rotation rate", "gravity"),
+        ("accel0_z", "gravity", "rotation"),
+    ):
+        code, out, err = run_captured(
+            codegen_main,
+            capsys,
+            "export",
+            str(models[channel]),
+            "-o",
+            str(tmp_path / channel),
+            "--name",
+            "rec",
+        )
+        assert code == 0, err
+        note = next(line for line in out.splitlines() if "recursive method" in line)
+        assert removes in note and not_said not in note, note

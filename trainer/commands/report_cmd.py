@@ -349,7 +349,8 @@ def run(args: argparse.Namespace) -> int:
             if holdout is not None:
                 held, held_rows = held_out_rows(rec, holdout)
                 held_text = (
-                    f"{holdout.describe()}: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s of `{rec_path}`"
+                    f"{holdout.describe()}; the part held out: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s "
+                    f"of `{rec_path}`"
                 )
                 held_warning = overlap_warning(
                     stats, held, data_fingerprint(held), whole=rec, what="held-out"

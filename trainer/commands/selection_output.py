@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from trainer import methods
 from trainer.data.channels import relabel_units
-from trainer.reference import RECURSIVE_NOTE
+from trainer.reference import recursive_note
 from trainer.selection import AUTO, record_lines, resolved, shown_name
 from trainer.train_stats import TrainStats
 
@@ -49,7 +49,7 @@ def print_fitted(
         f"{name}: fitted on {stats.n_samples} samples ({stats.temp_range_c[0]:.2f} .. {stats.temp_range_c[1]:.2f} "
         f"degC), fit residual RMS {stats.fit_residual_rms_mg:.4g} mg -> {destination}",
         *model.describe(),
-        f"{name}: {model.offset.describe() if model.offset else RECURSIVE_NOTE}",
+        f"{name}: {model.offset.describe() if model.offset else recursive_note(unit)}",
     ]
     for line in lines:
         print(relabel_units(line, unit))

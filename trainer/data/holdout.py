@@ -104,9 +104,10 @@ def split(rec: Recording, holdout: Holdout) -> tuple[Recording, Recording]:
             if holdout.boundary_s is not None and not 0.0 < holdout.boundary_s < duration_s
             else ""
         )
+        train_rows, held_rows = (len(first), len(last)) if holdout.side == "last" else (len(last), len(first))
         raise UserError(
-            f"{rec.source}: --holdout leaves {len(first)} and {len(last)} rows; each part needs at least "
-            f"{MIN_ROWS}{beyond}"
+            f"{rec.source}: --holdout leaves {train_rows} rows to train on and {held_rows} held out; each "
+            f"part needs at least {MIN_ROWS}{beyond}"
         )
     return (first, last) if holdout.side == "last" else (last, first)
 

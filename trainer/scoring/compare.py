@@ -22,7 +22,7 @@ from trainer.data.recording import Recording
 from trainer.dlstm.fusion import FusionSettings, train_stage
 from trainer.dlstm.realtime import PAPER_RUN_SMOOTHING_S
 from trainer.fitting import apply_offset_policy
-from trainer.reference import RECURSIVE_NOTE, OffsetPolicy
+from trainer.reference import OffsetPolicy, recursive_note
 from trainer.scoring.evaluate import Evaluation, InputSurvival, evaluate, input_survival
 from trainer.scoring.inject import injected_input, input_kept
 
@@ -111,7 +111,8 @@ def _with_policy(
         record = apply_offset_policy(models[method.name], method, train, policy or OffsetPolicy())
         log(
             relabel_units(
-                f"{method.name}: {record.describe() if record else RECURSIVE_NOTE}", channel_unit(train)
+                f"{method.name}: {record.describe() if record else recursive_note(channel_unit(train))}",
+                channel_unit(train),
             )
         )
     return {m.name: models[m.name] for m in chosen}, seconds
