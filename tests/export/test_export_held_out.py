@@ -66,9 +66,14 @@ def test_a_model_worse_than_none_held_out_is_refused_by_every_export(
     capsys.readouterr()
     argv = ["evaluate", str(model), str(rec), "--holdout", "last:0.5", "--out-dir", str(tmp_path / "ev")]
     assert run_cli(trainer_main, argv) == 0
+    evaluated = capsys.readouterr().out
     found = re.search(
-        r"drift left, deviation from a constant \[poly3\]: RMS (\S+) mg \(uncompensated (\S+) mg\)",
-        capsys.readouterr().out,
+        r"drift left, deviation from a constant \[poly3\]: RMS (\S+) mg \(uncompensated (\S+) mg\)", evaluated
+    )
+    # and evaluate warns with the sign-off guard's words, as fit did
+    assert (
+        "warning [poly3]: it leaves more drift than no compensation here: worse than uncompensated"
+        in evaluated
     )
     assert found is not None
     assert (f"{record['model_rms']:.4g}", f"{record['uncompensated_rms']:.4g}") == found.groups()
@@ -126,3 +131,29 @@ def test_the_sign_off_of_its_training_run_judges_the_part_its_fit_held_out(
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "## Verdict: FAIL" in text
     assert "worse than uncompensated: held-out part (--holdout last:0.5 of the training run" in text
+
+
+def test_evaluate_prints_the_in_range_figure_fit_recorded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A held-out part partly beyond the trained range (30 -> 60 degC after training up to 50): the
+    figure inside the range is what export also judges; evaluate prints it, equal to fit's record."""
+    t = np.arange(0.0, 8000.0, 1.0 / RATE_HZ)
+    temp = np.interp(t / t[-1], [0.0, 0.5, 0.7, 1.0], [0.0, 50.0, 30.0, 60.0])
+    accel = 1000.0 + 0.01 * (temp - 25.0) ** 2 + np.random.default_rng(6).normal(0.0, 0.05, t.size)
+    rec, model = tmp_path / "beyond.csv", tmp_path / "beyond.pt"
+    columns = {"time_s": t, "temp_c": temp, "accel_mg": accel}
+    write_recording(Recording(columns, {"sample_rate_hz": repr(RATE_HZ)}, "beyond"), rec)
+    argv = ["fit", "--method", "poly3", str(rec), "--holdout", "last:0.3", "-o", str(model)]
+    assert run_cli(trainer_main, argv) == 0
+    record = load_checkpoint(model)["train_stats"]["held_out"]
+    assert record["model_in_range_rms"] is not None
+    capsys.readouterr()
+    argv = ["evaluate", str(model), str(rec), "--holdout", "last:0.3", "--out-dir", str(tmp_path / "ev")]
+    assert run_cli(trainer_main, argv) == 0
+    out = capsys.readouterr().out
+    expected = (
+        f"drift left inside the trained range [poly3]: RMS {record['model_in_range_rms']:.4g} mg "
+        f"(uncompensated {record['uncompensated_in_range_rms']:.4g} mg)"
+    )
+    assert expected in out, out

@@ -52,6 +52,8 @@ def _mg(value: float) -> str:
 
 def drift_lines(result: Any) -> list[str]:
     """The headline (drift left, always), ground-truth details and warnings, one line each."""
+    from trainer.scoring.verdict import Figures, worse_than_uncompensated
+
     lines = []
     for name, score in result.drift.items():
         reference = "" if score.t_ref_c is None else f" relative to T_ref {score.t_ref_c:.2f} degC"
@@ -68,13 +70,28 @@ def drift_lines(result: Any) -> list[str]:
             f"cooling RMS {_mg(left.cooling_rms_mg)}; noise floor {_mg(result.noise_floor_mg)}"
             + ("" if result.drift else " (no true_drift_mg: scored as a static recording)")
         )
+    for name in [n for n in result.static_in_range if n != "raw"]:
+        left, raw = result.static_in_range[name], result.static_in_range["raw"]
+        lines.append(
+            f"drift left inside the trained range [{name}]: RMS {_mg(left.rms_mg)} (uncompensated {_mg(raw.rms_mg)})"
+        )
     for name in [n for n in result.static if n != "raw"]:
-        left, raw = result.static[name], result.static["raw"]
-        if left.rms_mg > raw.rms_mg:  # the sign-off would fail it: said where it is measured too
-            lines.append(
-                f"warning [{name}]: it leaves more drift than no compensation here (RMS {_mg(left.rms_mg)} "
-                f"against {_mg(raw.rms_mg)})"
-            )
+        # the sign-off's guard (trainer report, codegen export of a --holdout fit): said where it is measured too
+        model_in, raw_in = (
+            math.nan if x is None else x.rms_mg
+            for x in (result.static_in_range.get(name), result.static_in_range.get("raw"))
+        )
+        figures = Figures(
+            "scored part",
+            result.static[name].rms_mg,
+            result.static["raw"].rms_mg,
+            model_in,
+            raw_in,
+            result.noise_floor_mg,
+        )
+        guard = worse_than_uncompensated(name, figures)
+        if not guard.ok:
+            lines.append(f"warning [{name}]: it leaves more drift than no compensation here: {guard.detail}")
     for name, fraction in result.out_of_range_fraction.items():
         if fraction > 0:
             share = f"{100 * fraction:.2f} %" if fraction >= 5e-5 else f"{100 * fraction:.1g} %"
