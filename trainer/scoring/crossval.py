@@ -489,6 +489,10 @@ def table_lines(cv: CrossValidation, chosen: str | None = None) -> list[str]:
 def segment_lines(segments: Sequence[Segment]) -> list[str]:
     return [
         f"- segment {i + 1}: {s.name}, {s.stop - s.start} samples, scored "
-        + ("cold (it starts the run)" if s.start == 0 else "warm (the model runs from the recording's start)")
+        + (
+            "cold (it starts the recording cross-validated)"
+            if s.start == 0
+            else "warm (the model runs from the start of the recording cross-validated)"
+        )
         for i, s in enumerate(segments)
     ]
