@@ -576,7 +576,8 @@ def _part_rows(part: PartScores, prefix: str) -> list[list[str]]:
     rows = [[prefix + row[0], *row[1:]] for row in _branch_cells(part.model, part.uncompensated)]
     if part.model_in_range is not None and part.uncompensated_in_range is not None:
         cells = _branch_cells(part.model_in_range, part.uncompensated_in_range)[0]
-        rows.append([f"{prefix}in trained range", *cells[1:]])
+        # the samples inside the range, scored about their own constant (so its max can exceed "all"'s)
+        rows.append([f"{prefix}in trained range (about its own constant)", *cells[1:]])
     return rows
 
 
