@@ -26,8 +26,7 @@ def _export(args: argparse.Namespace) -> int:
         from trainer.options.channels import model_files
 
         args.model = [str(path) for directory in args.model for path in model_files(directory, args.channels)]
-    _refuse_worse_than_none_held_out(args.model)
-    _identity_notes(args.model)
+    _check_models(args.model)
     # --channels (any number of channels, one too) or several models: the IMU module, one API for every
     # channel list; a one-channel module is exported from the model file itself
     if (
@@ -91,18 +90,20 @@ def _refuse_parameter_options(args: argparse.Namespace) -> None:
             raise UserError(f"{option} applies to --format {formats}, not to the C module")
 
 
-def _refuse_worse_than_none_held_out(paths: list[str]) -> None:
-    """A model fitted with ``--holdout`` that left more than no compensation on the part it held out
-    (``train_stats.held_out``, the sign-off's guard) must not reach firmware: refused in one line,
-    before anything is written."""
+def _check_models(paths: list[str]) -> None:
+    """Each model's record, read once: a model fitted with ``--holdout`` that left more than no
+    compensation on the part it held out (``train_stats.held_out``, the sign-off's guard) must not reach
+    firmware, refused in one line before anything is written; then, one line each, the models that are
+    the identity because auto found no compensation that helps."""
     from trainer.checkpoint import load_checkpoint
     from trainer.data.channels import UNIT_LABELS
     from trainer.scoring.fit_holdout import held_out_guard
+    from trainer.selection import identity_note
     from trainer.train_stats import TrainStats
 
+    records = [(path, TrainStats.of_checkpoint(load_checkpoint(path))) for path in paths]
     refused = []
-    for path in paths:
-        stats = TrainStats.of_checkpoint(load_checkpoint(path))
+    for path, stats in records:
         guard = held_out_guard(stats, path, UNIT_LABELS.get(stats.unit or "mg", stats.unit or "mg"))
         if guard is not None and not guard.ok:
             refused.append((path, guard.detail))
@@ -113,16 +114,8 @@ def _refuse_worse_than_none_held_out(paths: list[str]) -> None:
             f"{path}: {detail}{others}: a compensator worse than none must not reach firmware (refit it on a "
             "whole cycle, e.g. trainer fit --method auto, which leaves a channel uncompensated where nothing helps)"
         )
-
-
-def _identity_notes(paths: list[str]) -> None:
-    """Say, one line each, which models are the identity because auto found no compensation that helps."""
-    from trainer.checkpoint import load_checkpoint
-    from trainer.selection import identity_note
-    from trainer.train_stats import TrainStats
-
-    for path in paths:
-        note = identity_note(TrainStats.of_checkpoint(load_checkpoint(path)), path)
+    for path, stats in records:
+        note = identity_note(stats, path)
         if note is not None:
             print(note)
 

@@ -46,7 +46,8 @@ def _is_dict(value: Any) -> bool:
     return isinstance(value, dict)
 
 
-# the figures of trainer.scoring.fit_holdout.held_out_record (None: not measured, e.g. all in range, or
+# the figures of trainer.scoring.fit_holdout.held_out_record, in the order of trainer.scoring.verdict.Figures
+# (as trainer.fleet.stages.DRIFT_LEFT_KEYS; None: not measured, e.g. all in range, or
 # not finite: a model whose output is not, which the guard then refuses as such)
 HELD_OUT_FIGURES = (
     "model_rms",

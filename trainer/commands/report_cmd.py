@@ -357,7 +357,8 @@ def run(args: argparse.Namespace) -> int:
                 )
                 if held_warning:
                     notes.append(f"held-out part: {held_warning}")
-            warning = overlap_warning(stats, rec, data_fingerprint(rec))
+            fingerprint = data_fingerprint(rec)  # the scored run's: the overlap, selection and share read it
+            warning = overlap_warning(stats, rec, fingerprint)
             if warning:
                 notes.append(f"whole recording: {warning}")
             faster = rate_note(
@@ -373,9 +374,7 @@ def run(args: argparse.Namespace) -> int:
                     "the model's parameters are not those auto cross-validated (the file was changed after the "
                     "fit): its cross-validation is not used; the figures are this report's own"
                 )
-            crossval = (
-                selection if selection is not None and stats.data_sha256 == data_fingerprint(rec) else None
-            )
+            crossval = selection if selection is not None and stats.data_sha256 == fingerprint else None
             verify, sizes = (
                 (None, None)
                 if target is None
@@ -385,7 +384,7 @@ def run(args: argparse.Namespace) -> int:
             if bench_path is not None and entry is None:
                 notes.append(f"{bench_path} has no module of this model id: instructions not measured")
             report = signoff.ChannelReport(
-                training_row_share=(share := training_row_share(stats, rec, data_fingerprint(rec))),
+                training_row_share=(share := training_row_share(stats, rec, fingerprint)),
                 fit_held_out=stats.held_out if share is not None else None,
                 held_out_in_sample=held_warning is not None,
                 scored_range_c=_temp_range(held if holdout is not None else rec),
