@@ -204,6 +204,28 @@ def test_a_full_disk_during_export_is_retried_on_the_next_run(
     assert third.computed == [] and third.skipped == ["A1"]  # a finished unit stays cached
 
 
+def test_a_named_scheduler_is_connected_to_once_per_run(
+    tmp_path: Path, ulog: Path, client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The cluster named by --scheduler is checked before any work and then runs the units: one
+    connection (it was opened, closed and opened again)."""
+    import trainer.fleet.cluster as cluster
+
+    opened: list[str | None] = []
+    original = cluster.open_client
+
+    def counted(scheduler: str | None, workers: int | None, *args: Any) -> Any:
+        opened.append(scheduler)
+        return original(scheduler, workers, *args)
+
+    monkeypatch.setattr(cluster, "open_client", counted)
+    manifest = _manifest(tmp_path, ulog, '[[unit]]\nid = "A1"\nrecordings = ["LOG"]\n', 'import = "--retime"')
+    address = client.scheduler.address
+    run = run_fleet(manifest, tmp_path / "out", progress=False, scheduler=address)
+    assert run.computed == ["A1"] and run.results["A1"].status == "ok"
+    assert opened == [address]
+
+
 def test_a_failed_write_of_the_client_is_one_line_naming_the_path(
     tmp_path: Path, ulog: Path, client: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:

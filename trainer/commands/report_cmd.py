@@ -346,15 +346,16 @@ def run(args: argparse.Namespace) -> int:
             held_text = None
             held_rows = None
             held_warning = None
+            held_share = None
             if holdout is not None:
                 held, held_rows = held_out_rows(rec, holdout)
                 held_text = (
                     f"{holdout.describe()}; the part held out: t = {held.time_s[0]:g} .. {held.time_s[-1]:g} s "
                     f"of `{rec_path}`"
                 )
-                held_warning = overlap_warning(
-                    stats, held, data_fingerprint(held), whole=rec, what="held-out"
-                )
+                held_fingerprint = data_fingerprint(held)
+                held_warning = overlap_warning(stats, held, held_fingerprint, whole=rec, what="held-out")
+                held_share = training_row_share(stats, held, held_fingerprint, whole=rec)
                 if held_warning:
                     notes.append(f"held-out part: {held_warning}")
             fingerprint = data_fingerprint(rec)  # the scored run's: the overlap, selection and share read it
@@ -386,7 +387,7 @@ def run(args: argparse.Namespace) -> int:
             report = signoff.ChannelReport(
                 training_row_share=(share := training_row_share(stats, rec, fingerprint)),
                 fit_held_out=stats.held_out if share is not None else None,
-                held_out_in_sample=held_warning is not None,
+                held_out_training_share=held_share,
                 scored_range_c=_temp_range(held if holdout is not None else rec),
                 channel=channel,
                 unit=UNIT_LABELS[channel_unit(rec)],

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import uuid
 from collections.abc import Callable
-from contextlib import nullcontext
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -108,35 +108,36 @@ def run_fleet(
     if settings.sim is not None:
         sim_text = settings.sim.read_text(encoding="utf-8")
         parse_config_text(sim_text, str(settings.sim))  # a bad simulation fails the run before any work
-    if scheduler is not None and client is None:  # the cluster named is checked before any work (a bad
-        from trainer.fleet.cluster import open_client  # address was ignored when no unit reached it)
+    from trainer.fleet.cluster import open_client
 
-        with open_client(scheduler, workers):
-            pass
-    remove_stale_report_parts(out)
-    clean_staging(out)  # OUTDIR itself is created by the first result: a run that cannot start leaves none
-    run = FleetRun(manifest, out)
+    # one connection per run: the cluster named is checked before any work (a bad address was ignored
+    # when no unit reached it) and then runs the units
+    with ExitStack() as cluster:
+        if scheduler is not None and client is None:
+            client = cluster.enter_context(open_client(scheduler, workers))
+        remove_stale_report_parts(out)
+        # OUTDIR itself is created by the first result: a run that cannot start leaves none
+        clean_staging(out)
+        run = FleetRun(manifest, out)
 
-    todo: list[tuple[UnitSpec, str]] = []
-    for unit in manifest.units:
-        try:
-            key = unit_key(unit, settings)
-        except UserError as exc:  # a missing or unreadable recording: this unit fails, the fleet goes on
-            files = _failed(unit, None, "load", exc).files
-            _written(out / UNITS_DIR, partial(publish_unit, out, unit.id, files))
-            run.computed.append(unit.id)
-            continue
-        if is_done(out, unit.id, key):
-            run.skipped.append(unit.id)
-        else:
-            todo.append((unit, key))
+        todo: list[tuple[UnitSpec, str]] = []
+        for unit in manifest.units:
+            try:
+                key = unit_key(unit, settings)
+            except UserError as exc:  # a missing or unreadable recording: this unit fails, the fleet goes on
+                files = _failed(unit, None, "load", exc).files
+                _written(out / UNITS_DIR, partial(publish_unit, out, unit.id, files))
+                run.computed.append(unit.id)
+                continue
+            if is_done(out, unit.id, key):
+                run.skipped.append(unit.id)
+            else:
+                todo.append((unit, key))
 
-    if todo:
-        from distributed import as_completed
+        if todo:
+            from distributed import as_completed
 
-        from trainer.fleet.cluster import open_client
-
-        with nullcontext(client) if client is not None else open_client(scheduler, workers) as active:
+            active = client if client is not None else cluster.enter_context(open_client(scheduler, workers))
             run_tag = uuid.uuid4().hex[:8]
             futures = {
                 _submit(active, unit, key, settings, sim_text, run_tag): (unit, key) for unit, key in todo

@@ -102,14 +102,19 @@ class ChannelReport:
     # figures of the part that fit held out (trainer.scoring.fit_holdout), judged when the report has
     # no held-out part of its own that is not training rows
     fit_held_out: dict[str, Any] | None = None
-    # the --holdout part holds training rows (overlap_warning): its figures are in-sample, so a held-out
-    # threshold is not measured by them (a model trained on the whole run passed one on its own data)
-    held_out_in_sample: bool = False
+    # the share of the --holdout part's rows that are training rows (overlap_warning), None when it holds
+    # none: its figures are in-sample there, so a held-out threshold is not measured by them (a model
+    # trained on the whole run passed one on its own data) and the guard says so
+    held_out_training_share: float | None = None
     scored_range_c: tuple[float, float] | None = None  # the temperatures the figures are of (None: not kept)
 
     @property
     def name(self) -> str:
         return self.shown or self.method
+
+    @property
+    def held_out_in_sample(self) -> bool:
+        return self.held_out_training_share is not None
 
     @property
     def label(self) -> str:
@@ -147,7 +152,11 @@ class ChannelReport:
             from trainer.scoring.fit_holdout import held_out_figures
 
             return held_out_figures(self.fit_held_out, self.unit)
-        if self.scores.held_out is not None:
+        if self.scores.held_out is not None and self.held_out_training_share is not None:
+            basis = (
+                f"held-out ({100 * self.held_out_training_share:.0f} % of it training rows, in-sample there)"
+            )
+        elif self.scores.held_out is not None:
             basis = "held-out"
         elif self.training_row_share is not None and self.training_row_share >= 1.0:
             basis = "all samples (in-sample)"
