@@ -4,6 +4,7 @@ against the paper's oven, priors, and one-line errors (docs/plan.md)."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -338,8 +339,47 @@ def test_a_target_met_in_too_few_draws_to_show_it_is_not_called_met(draws: int, 
     choice = Choice(program, summary, ())
     target = Target()
     assert choice.met(target)  # the point estimate: every draw
-    text = outputs.verdict_text(choice, target)
+    text = summary.verdict_text(target)
     assert text.startswith("meets the target") is shown, text
     assert ("too few to show the target" in text) is not shown, text
     bound = 100 * 0.05 ** (1.0 / draws)
     assert f"lower bound of {bound:.0f} %" in text, text
+
+
+def test_a_plan_of_too_few_draws_says_nowhere_that_the_target_is_met(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The user's ``--draws 3 --screen-draws 2`` run, every draw identifying every effect within 1 % with
+    physics at 0.2x the cubic (a stand-in runner): the point estimates reach the target, but 3 of 3
+    bound the rate at 37 %. The headline, the table's target column and the candidate log, on the
+    terminal (stdout, stderr) and in report.md alike, say what was measured, not that it is met."""
+    from collections.abc import Iterator
+    from contextlib import contextmanager
+
+    from trainer.plan import montecarlo
+    from trainer.plan.montecarlo import CUBIC, PHYSICS, DrawResult
+
+    class Runner:
+        width = 2
+
+        def map(self, tasks: list[DrawTask], desc: str) -> list[DrawResult]:
+            left = {PHYSICS: 0.2, CUBIC: 1.0}
+            return [DrawResult(t.index, {}, {}, {p.identifier: 0.01 for p in t.priors}, left) for t in tasks]
+
+    @contextmanager
+    def runner(workers: int, scheduler: str | None, progress: bool) -> Iterator[Runner]:
+        yield Runner()
+
+    monkeypatch.setattr(montecarlo, "runner", runner)
+    out = tmp_path / "plan"
+    argv = ["-o", str(out), "--max-hours", "3", "--draws", "3", "--screen-draws", "2", "--rate", "0.2"]
+    assert _cli("plan", *argv, "--no-standard", "--no-progress") == 0
+    captured = capsys.readouterr()
+    texts = {"stdout": captured.out, "stderr": captured.err, "report.md": (out / "report.md").read_text()}
+    for where, text in texts.items():
+        said_met = re.findall(r"meets the target|(?<!not )\bmet\b", text)
+        assert not said_met, (where, said_met, text)
+        assert "not shown, too few draws (lower bound 37 %)" in text, (where, text)  # column or log
+    for where in ("stdout", "report.md"):  # the headline
+        assert "3 draws, too few to show the target" in texts[where], texts[where]
+        assert "identified in 100 % of them and physics left 0.20x the cubic" in texts[where]

@@ -353,11 +353,7 @@ def run(args: argparse.Namespace) -> int:
             channel=channel,
         )
         (staging / outputs.REPORT_MD).write_text(text, encoding="utf-8")
-    verdict = (
-        outputs.verdict_text(choice, target)
-        if choice.met(target)
-        else "short of the target: " + "; ".join(choice.summary.short_of(target))
-    )
+    verdict = choice.summary.verdict_text(target)
     print(f"planned: {choice.program.name}, {choice.program.duration_s / 3600:.2f} h: {verdict}")
     print(outputs.table([choice.summary, *rows], targets, target))
     print(f"wrote {args.out}/{outputs.REPORT_MD}")

@@ -80,7 +80,7 @@ def choose(
         full = results + runner.map(make(program, range(len(results), draws)), f"Monte Carlo {program.name}")
         summary = summarise(program.name, program.duration_s, full, priors, target)
         if summary.meets(target):
-            tried.append((program, "meets the target: chosen"))
+            tried.append((program, f"target {summary.verdict_label(target)}: chosen"))
             return Choice(program, summary, tuple(tried))
         tried.append(
             (
@@ -98,5 +98,6 @@ def choose(
 
     program, results = max(screened, key=merit)
     full = results + runner.map(make(program, range(len(results), draws)), f"Monte Carlo {program.name}")
-    tried.append((program, "best within the limits (target not met): reported"))
-    return Choice(program, summarise(program.name, program.duration_s, full, priors, target), tuple(tried))
+    summary = summarise(program.name, program.duration_s, full, priors, target)
+    tried.append((program, f"best within the limits (target {summary.verdict_label(target)}): reported"))
+    return Choice(program, summary, tuple(tried))

@@ -19,7 +19,7 @@ from trainer.plan.limits import ChamberLimits
 from trainer.plan.montecarlo import CUBIC, PHYSICS, sensor
 from trainer.plan.priors import Prior
 from trainer.plan.programs import Program
-from trainer.plan.summary import CONFIDENCE, Summary, Target
+from trainer.plan.summary import Summary, Target, draws_text
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 
@@ -87,32 +87,11 @@ def table(summaries: Sequence[Summary], priors: Sequence[Prior], target: Target)
             f"{s.drift_left[PHYSICS]:.3g}",
             f"{s.drift_left[CUBIC]:.3g}",
             f"{s.ratio_median:.2f} (max {s.ratio_max:.2f})",
-            "met" if s.meets(target) else "not met",
+            s.verdict_label(target),
         ]
         for s in summaries
     ]
     return markdown_table(headers, rows)
-
-
-def draws_text(count: int) -> str:
-    return f"{count} draw{'' if count == 1 else 's'}"
-
-
-def verdict_text(choice: Choice, target: Target) -> str:
-    """What a met target shows, for the report and the terminal alike: the draws, and the one-sided
-    lower bound on the least identified effect's rate (1 draw of 1 shows 5 %, not the 80 % asked)."""
-    s = choice.summary
-    bound = s.lower_bound()
-    shown = (
-        f"on {draws_text(s.draws)} the least identified effect's rate has a one-sided {100 * CONFIDENCE:g} % lower "
-        f"bound of {100 * bound:.0f} %"
-    )
-    if bound < target.identify_rate:
-        return (
-            f"met in {draws_text(s.draws)}, too few to show the target: {shown}, below the "
-            f"{100 * target.identify_rate:g} % asked (more --draws)"
-        )
-    return f"meets the target in {draws_text(s.draws)}; {shown}"
 
 
 def report(
@@ -128,11 +107,6 @@ def report(
     channel: str | None = None,
 ) -> str:
     s = choice.summary
-    verdict = (
-        verdict_text(choice, target)
-        if choice.met(target)
-        else "does **not** meet the target; it cannot reach: " + "; ".join(s.short_of(target))
-    )
     lines = [
         "# Chamber program (`trainer plan`)",
         "",
@@ -146,7 +120,7 @@ def report(
         f"in >= {100 * target.identify_rate:g} % of draws, and `physics` leaving <= {target.vs_cubic:g}x the cubic "
         "(median over draws) on the validation profile.",
         "",
-        f"**Planned: {choice.program.name}, {choice.program.duration_s / 3600:.2f} h**: {verdict}.",
+        f"**Planned: {choice.program.name}, {choice.program.duration_s / 3600:.2f} h**: {s.verdict_text(target)}.",
         "",
         "Cells: identified in % of draws (median largest relative error of the checked parameters where "
         "named); drift left = RMS against the true drift on the validation profile, median over draws. "

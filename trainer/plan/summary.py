@@ -1,10 +1,12 @@
 """A profile's row of the table (identification rate, parameter error, drift left against the cubic)
-and whether it meets the target."""
+and the one judgement of it against the target (:meth:`Summary.verdict`), with every wording of that
+judgement: the table's target column, the candidate log and the headline of report and terminal."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -22,6 +24,18 @@ class Target:
     vs_cubic: float = 0.5
 
 
+class Verdict(Enum):
+    """A profile against the target: judged once (:meth:`Summary.verdict`), worded from here alone."""
+
+    MET = "met"  # the point estimates reach the target and the draws show the identification rate
+    TOO_FEW = "too few draws"  # the point estimates reach it, the rate's lower bound is below the asked
+    NOT_MET = "not met"  # a point estimate misses it
+
+
+def draws_text(count: int) -> str:
+    return f"{count} draw{'' if count == 1 else 's'}"
+
+
 @dataclass(frozen=True)
 class Summary:
     name: str
@@ -34,6 +48,8 @@ class Summary:
     ratio_max: float
 
     def meets(self, target: Target) -> bool:
+        """The point estimates reach the target (what the search asks of a candidate); whether the draws
+        show it is :meth:`verdict`'s to say."""
         return (
             all(v >= target.identify_rate for v in self.identified.values())
             and self.ratio_median <= target.vs_cubic
@@ -43,6 +59,40 @@ class Summary:
         """The :data:`CONFIDENCE` lower bound on the least identified effect's rate."""
         least = min(self.identified.values(), default=1.0)
         return rate_lower_bound(round(least * self.draws), self.draws)
+
+    def verdict(self, target: Target) -> Verdict:
+        """The judgement every output words (a point estimate met in too few draws is not called met)."""
+        if not self.meets(target):
+            return Verdict.NOT_MET
+        return Verdict.MET if self.lower_bound() >= target.identify_rate else Verdict.TOO_FEW
+
+    def verdict_label(self, target: Target) -> str:
+        """The judgement in a few words: the table's target column and the candidate log."""
+        verdict = self.verdict(target)
+        if verdict is Verdict.TOO_FEW:
+            return f"not shown, too few draws (lower bound {100 * self.lower_bound():.0f} %)"
+        return verdict.value
+
+    def verdict_text(self, target: Target) -> str:
+        """The judgement in a sentence, for the report and the terminal alike: with a met target, the draws
+        and the one-sided lower bound on the least identified effect's rate (1 draw of 1 shows 5 %, not
+        the 95 % asked); with too few draws, what was measured instead; else what it cannot reach."""
+        verdict = self.verdict(target)
+        if verdict is Verdict.NOT_MET:
+            return "does not meet the target; it cannot reach: " + "; ".join(self.short_of(target))
+        bound = f"a one-sided {100 * CONFIDENCE:g} % lower bound of {100 * self.lower_bound():.0f} %"
+        if verdict is Verdict.MET:
+            return (
+                f"meets the target in {draws_text(self.draws)}; on {draws_text(self.draws)} the least "
+                f"identified effect's rate has {bound}"
+            )
+        least = min(self.identified.values(), default=1.0)
+        return (
+            f"{draws_text(self.draws)}, too few to show the target: the least identified effect was "
+            f"identified in {100 * least:.0f} % of them and physics left {self.ratio_median:.2f}x the cubic "
+            f"(median), but on {draws_text(self.draws)} that rate has {bound}, below the "
+            f"{100 * target.identify_rate:g} % asked (more --draws)"
+        )
 
     def short_of(self, target: Target) -> list[str]:
         """What this profile does not reach (empty: the target is met)."""
