@@ -3,6 +3,7 @@ static drift-left scores, and a bad thresholds file is a one-line error with no 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +69,23 @@ def test_pass_and_fail_follow_the_thresholds(unit: dict[str, Path], tmp_path: Pa
         assert _report(unit, tmp_path / f"fail-{key}", below) == 1
         text = (tmp_path / f"fail-{key}" / "report.md").read_text()
         assert "## Verdict: FAIL" in text and f"`{key}`" in text
+
+
+def test_a_flash_threshold_is_not_measured_by_the_manifests_tables_alone(
+    unit: dict[str, Path], tmp_path: Path
+) -> None:
+    """Without --bench the module's flash is its manifest's const tables, not its code: shown, but a
+    flash threshold any module would meet on tables alone is not passed by it."""
+    manifest = json.loads((unit["module"] / "u_poly3.manifest.json").read_text())
+    tables = manifest["sizes"]["flash_table_bytes"]
+    generous = f"[thresholds]\nmax_flash_bytes = {100 * tables}\nmax_ram_bytes = 100000\n"
+    assert _report(unit, tmp_path / "r", generous, "--verify", str(unit["module"])) == 1
+    text = (tmp_path / "r" / "report.md").read_text()
+    flash_row = next(line for line in text.splitlines() if "`max_flash_bytes`" in line)
+    ram_row = next(line for line in text.splitlines() if "`max_ram_bytes`" in line)
+    assert "not measured" in flash_row and "FAIL" in flash_row, flash_row
+    assert "PASS" in ram_row, ram_row  # the state struct is the module's RAM: no heap, no globals
+    assert f"flash: {tables} B (manifest: const tables only)" in text
 
 
 def test_a_verified_module_decides_without_thresholds_as_the_fleet_does(

@@ -256,7 +256,7 @@ def _bench_entry(bench: Any, model_id: str, path: Path) -> dict[str, Any] | None
 
 
 def _cost(sizes: dict[str, Any] | None, bench: dict[str, Any] | None, bench_path: Path | None) -> Any:
-    from trainer.scoring.signoff import Cost
+    from trainer.scoring.signoff import TABLES_ONLY, Cost
 
     def number(entry: dict[str, Any] | None, key: str, source: str) -> tuple[float, str] | None:
         if entry is None or key not in entry:
@@ -270,7 +270,7 @@ def _cost(sizes: dict[str, Any] | None, bench: dict[str, Any] | None, bench_path
     manifest_src = "manifest"
     return Cost(
         number(bench, "flash_bytes", bench_src)
-        or _labelled(number(sizes, "flash_table_bytes", manifest_src), "manifest: const tables only"),
+        or _labelled(number(sizes, "flash_table_bytes", manifest_src), TABLES_ONLY),
         number(bench, "ram_bytes", bench_src)
         or _labelled(number(sizes, "ram_state_bytes", manifest_src), "manifest: one state struct"),
         number(bench, "instructions_per_sample", bench_src),
