@@ -53,13 +53,16 @@ def lag_bound(cubic: ChannelCubic, lo_c: float, hi_c: float, rate_c_per_min: flo
 
 
 def lag_bound_lines(channels: Sequence[ChannelCubic]) -> list[str]:
-    """One line per channel for the export's summary: :func:`lag_bound` over its set's clamp range."""
+    """One line per compensated channel for the export's summary: :func:`lag_bound` over its set's
+    clamp range."""
     lines = []
     for group in group_by_instance(channels):
         for cubic in group.axes.values():
             unit = UNIT_LABELS[cubic.channel.unit]
             slow = lag_bound(cubic, group.t_min_c, group.t_max_c)
             fast = lag_bound(cubic, group.t_min_c, group.t_max_c, FAST_RATE_C_PER_MIN)
+            if slow == 0.0 and fast == 0.0:  # the identity (or a constant): nothing lags
+                continue
             lines.append(
                 f"{cubic.name}: PX4 updates the applied offset after > {REPUBLISH_STEP_C:g} degC of change, checked "
                 f"at {1 / POLL_S:g} Hz: up to {slow:.3g} {unit} off the exact cubic (its steepest slope x "

@@ -284,8 +284,13 @@ def choose(cv: CrossValidation, refused: dict[str, str] | None = None) -> tuple[
         pooled = {x: cv.results[row_name(x)].cv_rms for x in safest}
         least = min(pooled.values())
         label = next(x for x in safest if pooled[x] <= least * (1.0 + POOLED_GAIN))
+        against = (
+            "the better of (cubic, uncompensated)"
+            if methods.CUBIC in cv.results
+            else "uncompensated (the cubic is not among --candidates)"
+        )
         reason = (
-            f"at worst {worst[label]:.3g}x the better of (cubic, uncompensated) on any of the {len(cv.segments)} "
+            f"at worst {worst[label]:.3g}x {against} on any of the {len(cv.segments)} "
             f"held-out segments, warm or cold (within {100 * TOLERANCE:g} % of the best such), and of those the "
             f"least drift cross-validated (the simplest that leaves at most {100 * POOLED_GAIN:g} % more)"
         )
@@ -318,11 +323,13 @@ def own_run_failure(
 ) -> str | None:
     """Why the chosen candidate, fitted on the whole run (its estimate ``drift``), is not shipped, or
     None: it must not leave more than no compensation (by more than :data:`TOLERANCE`, and above
-    the sign-off's noise margin) on any segment of its own run. Cross-validation scored the fits of the folds; the whole run can give the
-    physics finder another structure (the bundled run's gyro z, before weakly identified nuisance
-    terms were left out of the fit: a warm-up fitted beside the bias polynomial and not compensated,
-    0.102 deg/s left on the first cooling against 0.088 without compensation, where the fold's fit
-    left 0.037)."""
+    the sign-off's noise margin) anywhere :func:`own_run_figures` scores its own run: each segment,
+    the whole run and its heating and cooling rows. Cross-validation scored the fits of the folds,
+    each segment about its own constant; the whole run can give the physics finder another structure
+    (the bundled run's gyro z, before weakly identified nuisance terms were left out of the fit: a
+    warm-up fitted beside the bias polynomial and not compensated, 0.102 deg/s left on the first
+    cooling against 0.088 without compensation, where the fold's fit left 0.037), and a level the
+    model moves between segments is seen about the run's one constant only."""
     from trainer.data.smoothing import window_samples
     from trainer.scoring.static import noise_floor_mg
     from trainer.scoring.verdict import NOISE_MARGIN
@@ -336,12 +343,12 @@ def own_run_failure(
     # the part of the bundled run's accel y that starts at -4.8 degC: 0.37 against 0.34 mg, floor 0.33)
     window = window_samples(smoothing_s, rec.sample_rate_hz) if smoothing_s > 0 else 1
     floor = noise_floor_mg(np.asarray(rec.accel_mg), window)
-    for segment, m, r in zip(segments, mine, raw, strict=True):
+    for (where, m), (_, r) in zip(mine, raw, strict=True):
         if m > r * (1.0 + TOLERANCE) and not m <= NOISE_MARGIN * floor:
             unit = selection.cv.unit
             return (
                 f"{selection.chosen} fitted on the whole run left more than no compensation on its own "
-                f"{segment.name} ({m:.4g} against {r:.4g} {unit}): not the fit cross-validation scored"
+                f"{where} ({m:.4g} against {r:.4g} {unit}): not the fit cross-validation scored"
             )
     return None
 

@@ -284,6 +284,9 @@ def test_fit_auto_and_export_of_an_uncompensated_channel(
     )
     assert out.returncode == 0, out.stderr
     assert "gyro0_x is exported as the identity" in out.stdout
+    # PX4's republish lag bound is said of a compensated channel only (not "up to 0 deg/s" of the identity)
+    assert "gyro0_x: PX4 updates the applied offset" not in out.stdout
+    assert "accel0_z: PX4 updates the applied offset" in out.stdout
     assert "the model has no drift: the channel's level stays in the output" in fit.stdout  # not "the 0 mg"
     params = (tmp_path / "params" / "px4_thermal.params").read_text()
     # PX4's TC_G_ENABLE switches every gyro instance: an identity set leaves it alone (zero coefficients)

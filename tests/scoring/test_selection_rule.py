@@ -10,7 +10,15 @@ import pytest
 
 from trainer import methods
 from trainer.data.recording import Recording
-from trainer.scoring.crossval import UNCOMPENSATED, CrossValidation, FoldScore, MethodCV, Segment, folds_of
+from trainer.scoring.crossval import (
+    UNCOMPENSATED,
+    CrossValidation,
+    FoldScore,
+    MethodCV,
+    Segment,
+    folds_of,
+    own_run_figures,
+)
 from trainer.scoring.verdict import NOISE_MARGIN, REVIEW, verdict, worse_on_a_segment
 from trainer.selection import (
     FULL_CYCLE_SEGMENTS,
@@ -130,6 +138,14 @@ def test_never_a_choice_that_leaves_more_than_no_compensation_pooled() -> None:
     cv = table(CYCLE, figures)
     assert worst_ratio(cv, methods.PLA) == pytest.approx(3.0) and worst_ratio(cv, NONE) == pytest.approx(1.0)
     assert choose(cv)[0] == NONE
+    # the worst ratio's reference names what was tried: without the cubic it is no compensation alone
+    without_cubic = table(CYCLE, {UNCOMPENSATED: [4.0, 4.0, 4.0], methods.PLA: [2.0, 3.0, 1.0]})
+    label, reason = choose(without_cubic)
+    assert (
+        label == methods.PLA
+        and "at worst 0.75x uncompensated (the cubic is not among --candidates)" in reason
+    )
+    assert "better of (cubic" not in reason
     flat = {UNCOMPENSATED: [1.0, 1.0, 1.0], methods.CUBIC: [1.01, 0.99, 1.03]}
     label, reason = choose(table(CYCLE, flat))
     assert (
@@ -254,3 +270,12 @@ def test_a_fit_of_the_whole_run_that_loses_to_none_on_a_segment_of_it_is_refused
     assert (
         own_run_failure(Selection(selection.cv, NONE, ""), wrong, rec, 0.5) is None
     )  # none is never refused
+    # right within each segment, but a level moved between them: each segment about its own constant
+    # cannot see it, the run about its one constant does
+    moved = drift.copy()
+    moved[second.start :] -= 30.0
+    per_segment = own_run_figures(rec, moved, segments, 0.5)[: len(segments)]
+    none_per_segment = own_run_figures(rec, np.zeros(len(rec)), segments, 0.5)[: len(segments)]
+    assert all(m < r for (_, m), (_, r) in zip(per_segment, none_per_segment, strict=True))
+    why = own_run_failure(selection, moved, rec, 0.5)
+    assert why is not None and "about its one constant" in why, why
