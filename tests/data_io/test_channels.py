@@ -702,7 +702,20 @@ def test_a_mapped_gyroscope_or_barometer_needs_its_unit_given(
     ]
     source = tmp_path / "log.csv"
     source.write_text("\n".join(lines) + "\n")
-    argv = ["import", str(source), "--time", "t", "--temp", "T", "--accel", "ax", "--channel-map", mapped]
+    argv = [
+        "import",
+        str(source),
+        "--time",
+        "t",
+        "--temp",
+        "T",
+        "--accel",
+        "ax",
+        "--accel-unit",
+        "mg",
+        "--channel-map",
+        mapped,
+    ]
     assert run_cli(trainer_main, [*argv, *given, "--channels", "all", "-o", str(tmp_path / "rec.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and option in err and mapped.split("=")[0] in err

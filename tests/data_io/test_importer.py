@@ -118,7 +118,7 @@ def logger_file(tmp_path: Path, n: int = 20, delimiter: str = ",", name: str = "
     return write_foreign(tmp_path / name, ["t", "T", "az", "status", "n"], rows, delimiter)
 
 
-BASIC = ["--time", "t", "--temp", "T", "--accel", "az"]
+BASIC = ["--time", "t", "--temp", "T", "--accel", "az", "--accel-unit", "mg"]
 
 
 @pytest.mark.parametrize("delimiter", [",", "\t", ";"])
@@ -188,7 +188,7 @@ def test_accel_units(tmp_path: Path, unit: str, raw: float, expected_mg: float) 
 def test_time_units_shift_to_zero(tmp_path: Path, unit: str, start: int, step: float) -> None:
     rows = [[start + i * step, 30.0, 1.0] for i in range(50)]
     foreign = write_foreign(tmp_path / "f.csv", ["time", "temp", "acc"], rows)
-    rec = run_import(foreign, "--time", "time", "--time-unit", unit, "--temp", "temp", "--accel", "acc",
+    rec = run_import(foreign, "--time", "time", "--time-unit", unit, "--temp", "temp", "--accel", "acc", "--accel-unit", "mg",
                      "-o", tmp_path / "out.csv")  # fmt: skip
     np.testing.assert_allclose(rec.time_s, np.arange(50) * 0.005, atol=1e-6)
     assert rec.sample_rate_hz == pytest.approx(200.0, rel=1e-3)
@@ -197,7 +197,16 @@ def test_time_units_shift_to_zero(tmp_path: Path, unit: str, start: int, step: f
 def test_index_time_from_the_row_number(tmp_path: Path) -> None:
     index_time = ["--time-unit", "index", "--rate", "50"]
     rec = run_import(
-        logger_file(tmp_path), *index_time, "--temp", "T", "--accel", "az", "-o", tmp_path / "o.csv"
+        logger_file(tmp_path),
+        *index_time,
+        "--temp",
+        "T",
+        "--accel",
+        "az",
+        "--accel-unit",
+        "mg",
+        "-o",
+        tmp_path / "o.csv",
     )
     np.testing.assert_allclose(rec.time_s, np.arange(20) / 50)
     assert rec.meta["sample_rate_hz"] == "50"
@@ -207,13 +216,13 @@ def test_index_time_from_a_counter_column(tmp_path: Path) -> None:
     rows = [[100 + i, 20.0, 0.0] for i in range(10)]
     foreign = write_foreign(tmp_path / "f.csv", ["sample", "temp", "acc"], rows)
     rec = run_import(foreign, "--time", "sample", "--time-unit", "index", "--rate", "4", "--temp", "temp",
-                     "--accel", "acc", "-o", tmp_path / "out.csv")  # fmt: skip
+                     "--accel", "acc", "--accel-unit", "mg", "-o", tmp_path / "out.csv")  # fmt: skip
     np.testing.assert_allclose(rec.time_s, np.arange(10) / 4)
 
 
 def test_index_time_needs_a_rate(tmp_path: Path) -> None:
     message = import_error(tmp_path / "o.csv", logger_file(tmp_path), "--time-unit", "index", "--temp", "T",
-                           "--accel", "az")  # fmt: skip
+                           "--accel", "az", "--accel-unit", "mg")  # fmt: skip
     assert "--rate" in message
 
 
@@ -223,7 +232,7 @@ def test_rate_is_only_for_index_time(tmp_path: Path) -> None:
 
 def test_unknown_column_lists_the_available_ones(tmp_path: Path) -> None:
     message = import_error(tmp_path / "o.csv", logger_file(tmp_path), "--time", "t", "--temp", "temperature",
-                           "--accel", "az")  # fmt: skip
+                           "--accel", "az", "--accel-unit", "mg")  # fmt: skip
     assert "no column 'temperature'" in message
     assert "'t', 'T', 'az', 'status', 'n'" in message
     assert "line 1" in message
@@ -329,12 +338,17 @@ def test_metadata_records_the_origin(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
-        (["--temp", "T", "--accel", "az"], "--time"),
-        (["--time", "t", "--accel", "az"], "--temp"),
+        (["--temp", "T", "--accel", "az", "--accel-unit", "mg"], "--time"),
+        (["--time", "t", "--accel", "az", "--accel-unit", "mg"], "--temp"),
         ([*BASIC, "--resample", "fast"], "--resample"),
         ([*BASIC, "--extra-axes", "a,b"], "--extra-axes"),
         ([*BASIC, "--delimiter", "|"], "--delimiter"),
         ([*BASIC, "--preset", "nope"], "--preset"),
+        # no default unit: an axis in m/s^2 read as mg passes every range check, 100x too small
+        (
+            ["--time", "t", "--temp", "T", "--accel", "az"],
+            "--accel az: give its unit, --accel-unit m/s^2|g|mg",
+        ),
     ],
 )
 def test_bad_options(tmp_path: Path, args: list[str], fragment: str) -> None:
@@ -359,6 +373,8 @@ def test_cli_exit_code_and_one_line_message(tmp_path: Path, capsys: pytest.Captu
         "x",
         "--accel",
         "az",
+        "--accel-unit",
+        "mg",
         "-o",
         "o.csv",
     ]

@@ -38,7 +38,7 @@ def cli_error(*args: str | Path) -> str:
     return message
 
 
-IMPORT = ("--time", "t", "--temp", "T", "--accel", "a")
+IMPORT = ("--time", "t", "--temp", "T", "--accel", "a", "--accel-unit", "mg")
 
 
 # --------------------------------------------------------------------------- import

@@ -293,3 +293,88 @@ def test_a_gyroscope_report_names_its_statistics_in_deg_per_s(tmp_path: Path) ->
     assert "mean_residual_dps" in document and "mean_residual_mg" not in document
     text = (report / "report.md").read_text()
     assert "mean_residual_dps" in text and "mean_residual_mg" not in text
+
+
+def _imu_recording(path: Path) -> Path:
+    """An accelerometer and a gyroscope axis (200 samples at 0.05 Hz, a few seconds a channel) whose
+    metadata name the accelerometer's channel and sensor, as ``trainer import --channels all`` writes
+    them: the file's ``accel_mg`` is ``accel0_x``."""
+    rng = np.random.default_rng(4)
+    t_s = np.arange(0.0, 4000.0, 20.0)
+    temp_c = 25.0 + 20.0 * np.sin(t_s / 900.0)
+    accel = 1.0 + 0.1 * temp_c + 0.3 * rng.standard_normal(t_s.size)
+    columns = {
+        "time_s": t_s,
+        "temp_c": temp_c,
+        "accel_mg": accel,
+        "accel0_x_mg": accel,
+        "gyro0_x_dps": 0.2 - 0.01 * temp_c + 0.05 * rng.standard_normal(t_s.size),
+    }
+    meta = {"sample_rate_hz": "0.05", "sensor": "bench-accel-x", "channel": "accel0_x"}
+    write_recording(Recording(columns, meta, "imu"), path)
+    return path
+
+
+def test_a_channels_json_is_said_on_the_terminal_and_names_its_channel(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--channels accel0_x --json d.json`` writes ``d.accel0_x.json``: the terminal says so (it said
+    nothing), and the document names the channel (an accelerometer's had no ``channel``: ``null`` to
+    a reader; a gyroscope's had it)."""
+    path = _imu_recording(tmp_path / "imu.csv")
+    out = tmp_path / "d.json"
+    assert cli("diagnose", str(path), "--channels", "accel0_x", "--json", str(out), "--holdout", "0") == 0
+    printed = capsys.readouterr().out.splitlines()
+    written = tmp_path / "d.accel0_x.json"
+    assert [line for line in printed if line.startswith("JSON written")] == [f"JSON written to {written}"]
+    assert json.loads(written.read_text())["channel"] == {"name": "accel0_x", "unit": "mg", "label": "mg"}
+
+
+def test_each_channels_augmented_simulation_names_its_own_sensor(tmp_path: Path) -> None:
+    """The file's ``sensor`` metadata names the sensor of its ``accel_mg``, the channel its ``channel``
+    metadata names (recording-format.md), and every channel view copies it: the gyroscope's
+    augmented TOML said ``bench-accel-x``. It names its channel; the accelerometer keeps the file's
+    name (read from a CSV's comments and an .npz's meta array)."""
+    path = _imu_recording(tmp_path / "imu.csv")
+    report = tmp_path / "rep"
+    assert cli("diagnose", str(path), "--channels", "all", "--report", str(report), "--holdout", "0") == 0
+    sensors = [
+        load_config(report / name / "augmented.toml").recording.sensor for name in ("accel0_x", "gyro0_x")
+    ]
+    assert sensors == ["bench-accel-x", "gyro0_x"]
+    npz = _imu_recording(tmp_path / "imu.npz")
+    again = tmp_path / "again"
+    assert cli("diagnose", str(npz), "--channels", "accel0_x", "--report", str(again), "--holdout", "0") == 0
+    assert load_config(again / "accel0_x" / "augmented.toml").recording.sensor == "bench-accel-x"
+
+
+def test_swapped_arguments_are_one_line_that_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A TOML given as the recording, a recording (CSV or .npz, by its suffix or, renamed, its
+    contents) as --sim: one line that says the arguments look swapped, exit 2, nothing written (it
+    said ``r.csv: invalid TOML (Expected '=' after a key ...)``)."""
+    cfg = replace(
+        load_config(None),
+        recording=replace(load_config(None).recording, sample_rate_hz=1.0, duration_s=600.0),
+    )
+    rec = simulate(cfg, 1)
+    write_recording(rec, tmp_path / "r.csv")
+    write_recording(rec, tmp_path / "r.npz")
+    (tmp_path / "r.data").write_bytes((tmp_path / "r.npz").read_bytes())  # an .npz under another name
+    save_config(cfg, tmp_path / "u.toml")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    outputs = ("--json", str(tmp_path / "d.json"), "--report", str(tmp_path / "rep"))
+    for argv in (
+        ("u.toml", "--sim", "r.csv"),
+        ("u.toml", "--sim", "r.npz"),
+        ("u.toml", "--sim", "r.data", "--channels", "all"),
+        ("r.csv", "--sim", "r.npz"),
+        ("u.toml",),
+    ):
+        paths = [str(tmp_path / a) if not a.startswith("--") and a != "all" else a for a in argv]
+        assert cli("diagnose", *paths, *outputs) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and "swapped?" in err, (argv, err)
+        assert "invalid TOML" not in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.synthetic_chamber import BLOCKS, DURATION_S, FS_HZ, cycle_with_holds
+from tests.synthetic_chamber import BLOCKS, DURATION_S, FS_HZ, chamber_recording, cycle_with_holds
 from trainer.commands.diagnose_cmd import summary
 from trainer.data.channels import ALL, channel_view, select_channels
 from trainer.data.importer import import_foreign, options_with_preset
@@ -22,6 +22,8 @@ from trainer.diagnose.scenarios import make_scenario
 from trainer.physics.catalogue import PARAMETERS
 from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.physics.catalogue.stress_relaxation import DEFINITION as CREEP
+from trainer.physics.catalogue.thermal_lag import DEFINITION as LAG
+from trainer.physics.config import load_config
 from trainer.physics.effects import EffectConfig, effect_contribution
 
 BRANCH = BRANCH_OFFSET.identifier
@@ -130,3 +132,36 @@ def test_a_plausible_confounder_fitting_better_than_an_implausible_best_fit_is_n
         assert abs(offset.params[name] - value) <= 0.25 * value, (name, offset.params)
     assert not offset.flags
     assert all(a.implausible is None or a.implausible.effect != BRANCH for a in d.ambiguous)
+
+
+def test_the_simulations_implausible_and_unsupported_effects_are_on_the_terminal() -> None:
+    """--sim with a branch offset the recording holds at 30 mg (plausible up to 20) and a thermal lag
+    it does not hold: one terminal line per effect says which of the simulation's effects were
+    calibrated outside the plausible range and which the recording does not support, as the JSON
+    (``not_supported``, ``baseline_calibrated``, field names unchanged) and the report do. The
+    terminal said neither."""
+    _, amp_max = PARAMETERS[(BRANCH, "amp_mg")].plausible  # type: ignore[misc]
+    rec = chamber_recording([(BRANCH, {"amp_mg": 1.5 * amp_max, "width_c": 20.0})], seed=7)
+    base = load_config(None)
+    sim = replace(
+        base,
+        effects=(
+            *base.effects,
+            EffectConfig(LAG.identifier, {"tau_s": 200.0}),
+            EffectConfig(BRANCH, {"amp_mg": 1.0, "width_c": 10.0}),
+        ),
+    )
+    d = diagnose(rec, sim, holdout_fraction=0.0, max_blocks=BLOCKS)
+    doc = document(d)
+    assert doc["baseline_calibrated"][BRANCH]["amp_mg"] > amp_max  # premise: calibrated implausibly
+    assert [n["effect"] for n in doc["not_supported"]] == [LAG.identifier]  # premise: not needed
+    assert set(doc["not_supported"][0]) == {"effect", "delta_bic", "reason"}
+    lines = [line for line in summary(d).splitlines() if line.startswith("simulation: ")]
+    flagged = {line.split()[1]: line for line in lines if " calibrated implausibly [" in line}
+    assert len(flagged) == len(lines) - 1, lines  # one line per effect (the lag, at 3 s, is flagged too)
+    assert flagged[BRANCH].startswith(f"simulation: {BRANCH} calibrated implausibly [amp_mg=")
+    assert f"amp_mg = {doc['baseline_calibrated'][BRANCH]['amp_mg']:.4g} is outside" in flagged[BRANCH]
+    assert lines[-1] == f"simulation: {LAG.identifier} not supported ({doc['not_supported'][0]['reason']})"
+    report = markdown(d)
+    assert "## In the simulation, calibrated outside the plausible range" in report
+    assert "## In the simulation but not supported by the data" in report

@@ -46,7 +46,16 @@ def _refused(capsys: pytest.CaptureFixture[str], main: object, argv: list[str], 
     return lines[0]
 
 
-COLUMNS = ["--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg"]  # the simulated CSV's, for import
+COLUMNS = [
+    "--time",
+    "time_s",
+    "--temp",
+    "temp_c",
+    "--accel",
+    "accel_mg",
+    "--accel-unit",
+    "mg",
+]  # the simulated CSV's, for import
 DLSTM = ["fit", "--method", "dlstm", "--iterations", "2", "--cycles", "0", "--quiet"]
 
 

@@ -331,7 +331,7 @@ def _import_case() -> Case:
     return (
         "import",
         trainer_main,
-        lambda c, f, o: ["import", str(f), "--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg",
+        lambda c, f, o: ["import", str(f), "--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg",
                          "-o", str(o / "r.csv")],
     )  # fmt: skip
 

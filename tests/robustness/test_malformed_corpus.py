@@ -254,6 +254,8 @@ def test_the_valid_inputs_pass(corpus: dict[str, Path], tmp_path: Path) -> None:
         "temp_c",
         "--accel",
         "accel_mg",
+        "--accel-unit",
+        "mg",
     ]
     assert run_cli(trainer_main, [*argv, "-o", str(tmp_path / "r.csv")]) == 0
     for log in ("valid.ulg", "valid.bin"):

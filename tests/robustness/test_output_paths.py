@@ -11,7 +11,7 @@ from tests.cli_corpus import valid_lines
 from trainer.cli import main as trainer_main
 from trainer.errors import run_cli
 
-IMPORT = ["--temp", "temp_c", "--accel", "accel_mg", "--time", "time_s"]
+IMPORT = ["--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg", "--time", "time_s"]
 
 
 @pytest.mark.parametrize(

@@ -288,6 +288,10 @@ def channel_view(rec: Recording, channel: Channel) -> Recording:
         own_truth["true_temp_c"] = "true_temp_c"
     columns.update((view, rec.columns[column]) for view, column in own_truth.items())
     meta = dict(rec.meta)
+    if "sensor" in meta and meta.get("channel") != channel.name:
+        # the file's sensor name is its accel_mg's (the channel its metadata names): another channel's
+        # view is named by its channel (the bundled run's gyro0_x said "tofupilot-imu-acc-z")
+        meta["sensor"] = channel.name
     meta["channel"] = channel.name
     meta["unit"] = channel.unit
     return Recording(columns, meta, f"{rec.source}[{channel.name}]", rec.row_label, channel.column)

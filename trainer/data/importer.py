@@ -158,6 +158,11 @@ def options_with_preset(preset: str | None, **given: object) -> ImportOptions:
     for required in ("temp", "accel"):
         if values.get(required) is None:
             raise UserError(f"--{required} COLUMN is required (or use --preset)")
+    if values.get("accel_unit") is None:  # m/s^2 read as mg passes every range check: 100x too small
+        raise UserError(
+            f"--accel {values['accel']}: give its unit, --accel-unit {'|'.join(ACCEL_UNIT_TO_MG)} (an axis in "
+            "m/s^2 read as mg looks like a quiet one in mg, so the file cannot tell)"
+        )
     # a gyroscope's rad/s and deg/s (57x), a barometer's Pa and hPa (100x) both look plausible: a
     # channel the user maps takes its unit from the user (or the preset), never from a default
     mapped_by_user = [str(c) for c in given.get("channel_map") or {}]  # type: ignore[attr-defined]

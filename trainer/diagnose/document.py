@@ -244,18 +244,22 @@ def final_baseline(d: Diagnosis) -> list[EffectConfig]:
 def document(d: Diagnosis) -> dict[str, Any]:
     """The ``--json`` document (numbers rounded; NaN left for :func:`json_text`).
 
-    On a non-mg channel every key that names a quantity in mg names it in the channel's unit
-    (``amp_mg`` -> ``amp_dps``, ``rms_block_mg`` -> ``rms_block_dps``: the catalogue's one renaming,
-    :func:`~trainer.physics.catalogue.units.channel_param_name`), and ``channel`` says which.
+    ``channel`` names the channel diagnosed (``name``, ``unit``, ``label``; an accelerometer's too,
+    ``accel0_x`` of ``--channels accel0_x`` once had none); only a one-axis recording whose metadata
+    name no channel has none. On a non-mg channel every key that names a quantity in mg names it in
+    the channel's unit (``amp_mg`` -> ``amp_dps``, ``rms_block_mg`` -> ``rms_block_dps``: the
+    catalogue's one renaming, :func:`~trainer.physics.catalogue.units.channel_param_name`), and
+    ``channel`` adds the ``cubic_drift_span`` its amplitudes are judged against.
     """
     out = _document(d)
-    if d.unit == CATALOGUE_UNIT:
+    if d.unit != CATALOGUE_UNIT:
+        out = _renamed_keys(out, d.unit)
+    if d.channel is None and d.unit == CATALOGUE_UNIT:
         return out
-    renamed = _renamed_keys(out, d.unit)
     channel: dict[str, Any] = {"name": d.channel, "unit": d.unit, "label": UNIT_LABELS[d.unit]}
     if d.scale is not None:
         channel["cubic_drift_span"] = sig(d.scale.drift_span, 6)
-    return {"channel": channel, **renamed}
+    return {"channel": channel, **out}
 
 
 def _renamed_keys(value: Any, unit: str) -> Any:

@@ -147,7 +147,11 @@ def add_import_arguments(parser: argparse.ArgumentParser) -> None:
         "--decimal-comma", action="store_true", help="numbers are written 1,5 (tab or semicolon delimiter)"
     )
     parser.add_argument("--accel", metavar="COL", help="the axis to compensate (becomes accel_mg)")
-    parser.add_argument("--accel-unit", choices=list(ACCEL_UNIT_TO_MG), help="unit of the axes (default mg)")
+    parser.add_argument(
+        "--accel-unit",
+        choices=list(ACCEL_UNIT_TO_MG),
+        help="unit of the accelerometer columns: required without a --preset (no default: m/s^2 read as mg looks plausible)",
+    )
     parser.add_argument(
         "--extra-axes", type=_axes, metavar="X,Y,Z", help="columns for accel_x_mg, accel_y_mg, accel_z_mg"
     )

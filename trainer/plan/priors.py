@@ -236,9 +236,9 @@ def from_diagnosis(path: Path, unit: str = CATALOGUE_UNIT) -> tuple[Prior, ...]:
 
 
 def diagnosis_channel(path: Path) -> str | None:
-    """The channel a diagnosis document was made on, when it names one (a gyroscope's or barometer's
-    does; an accelerometer's leaves it out: the default channel). An unreadable document is
-    :func:`from_diagnosis`'s to refuse."""
+    """The channel a diagnosis document was made on, when it names one (every channel of a
+    multi-channel recording does; a one-axis recording whose metadata name none leaves it out: the
+    default channel). An unreadable document is :func:`from_diagnosis`'s to refuse."""
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
