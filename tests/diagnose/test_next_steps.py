@@ -12,11 +12,19 @@ import numpy as np
 
 from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.result import Ambiguity, Diagnosis
+from trainer.physics.effects import EffectConfig
 
 
 def _diagnosis(
-    named: list[str], ambiguous: list[Ambiguity], unit: str = "mg", profile: Any = None
+    named: list[str],
+    ambiguous: list[Ambiguity],
+    unit: str = "mg",
+    profile: Any = None,
+    simulated: tuple[list[str], list[str], list[str]] = ([], [], []),
 ) -> Diagnosis:
+    """``simulated``: the --sim's effects, those the recording does not support, those calibrated
+    implausibly."""
+    effects, unsupported, implausible = simulated
     residual = SimpleNamespace(residual_block=np.zeros(4))
     bare = SimpleNamespace(
         branch=np.zeros(4, dtype=int),
@@ -34,6 +42,9 @@ def _diagnosis(
         profile=bare if profile is None else profile,
         not_identifiable=[],
         signal=SimpleNamespace(label=unit),
+        baseline_effects=[EffectConfig(e, {}) for e in effects],
+        not_supported=[SimpleNamespace(effect=e) for e in unsupported],
+        implausible_baseline=lambda: [(EffectConfig(e, {}), ["outside"]) for e in implausible],
     )
     return cast(Diagnosis, fake)
 
@@ -114,3 +125,22 @@ def test_the_generic_profile_asks_only_for_what_the_run_lacks() -> None:
         holds_after_ramp_s=5400.0, ramp_rates=[0.5, 1.0], reversals=1, known_input_varies=True
     )
     assert everything.startswith("this run already has") and "second run" in everything
+
+
+def test_the_simulations_own_supported_effects_are_terms_of_the_compensator() -> None:
+    """With --sim holding the lag, the rate term and the branch offset, all calibrated, nothing is
+    left out and the advice said the bias polynomial alone: the simulation's compensable effects that
+    the recording supports, calibrated plausibly, are terms; an unsupported or implausible one and an
+    event (a step) are not."""
+    sim = (
+        ["thermal_lag", "temp_rate", "hysteresis_offset", "bias_step"],
+        ["temp_rate"],
+        ["hysteresis_offset"],
+    )
+    structure = next_steps(_diagnosis(["periodic"], [], simulated=sim)).structure
+    terms = structure.split(": ", 1)[1].split(" + ")
+    assert terms == ["bias_poly (bias polynomial) in the lagged (proof-mass) temperature", "thermal_lag"], (
+        terms
+    )
+    alone = next_steps(_diagnosis([], [])).structure.split(": ", 1)[1].split(" + ")
+    assert alone == ["bias_poly (bias polynomial) in the die temperature"]

@@ -199,7 +199,7 @@ def every_output(result: Diagnosis) -> str:
 def summary(result: Diagnosis) -> str:
     """A few lines for the terminal."""
     from trainer.diagnose.next_steps import next_steps, terminal_lines
-    from trainer.diagnose.report import limit_sizes, simulation_flags, value_text
+    from trainer.diagnose.report import limit_sizes, value_text
     from trainer.diagnose.select import MAX_ADDED, THRESHOLD
     from trainer.diagnose.shared import shared_text
     from trainer.diagnose.verdict import ambiguity_line
@@ -208,7 +208,7 @@ def summary(result: Diagnosis) -> str:
     before, after = result.before, result.after
     lines = [f"baseline: {', '.join(result.baseline.identifiers)}"]
     # the --sim's effects as calibrated (JSON baseline_calibrated) outside the plausible range, and not needed
-    for effect, flags in simulation_flags(result):
+    for effect, flags in result.implausible_baseline():
         params = ", ".join(f"{k}={value_text(v)}" for k, v in result.params(effect.params).items())
         lines.append(
             f"simulation: {effect.identifier} calibrated implausibly [{params}]{result.label} ({'; '.join(flags)})"

@@ -84,7 +84,15 @@ def compensable(identifier: str) -> bool:
 
 def next_steps(d: Diagnosis) -> NextSteps:
     named = [e.effect for e in d.left_out if e.peak_visible_mg is not None]
-    compensated = [e for e in named if compensable(e)]
+    # the --sim's own compensable effects the recording supports, calibrated plausibly, are terms too
+    # (with a simulation that already holds them the advice said the bias polynomial alone)
+    unsupported = {n.effect for n in d.not_supported} | {e.identifier for e, _ in d.implausible_baseline()}
+    simulated = [
+        e.identifier
+        for e in d.baseline_effects
+        if compensable(e.identifier) and e.identifier not in unsupported and e.identifier not in named
+    ]
+    compensated = list(dict.fromkeys([*simulated, *(e for e in named if compensable(e))]))
     lagged = any(EFFECTS[e].proof_mass is not None for e in compensated)
     temperature = "the lagged (proof-mass) temperature" if lagged else "the die temperature"
     terms = [f"{BACKBONE} (bias polynomial) in {temperature}", *compensated]

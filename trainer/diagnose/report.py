@@ -26,10 +26,8 @@ from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.shared import shared_text
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
-from trainer.physics.catalogue.plausibility import implausible
 from trainer.physics.catalogue.units import channel_param_name
 from trainer.physics.config import config_to_toml
-from trainer.physics.effects import EffectConfig
 from trainer.scoring.markdown import markdown_table
 from trainer.scoring.plots import new_figure, save_figure
 
@@ -80,17 +78,6 @@ def _left_out_lines(entry: LeftOut, d: Diagnosis) -> list[str]:
     if entry.advice:
         lines.append(f"  In practice: {entry.advice}.")
     return lines
-
-
-def simulation_flags(d: Diagnosis) -> list[tuple[EffectConfig, list[str]]]:
-    """The effects of the user's simulation (``--sim``) whose calibrated parameters (JSON
-    ``baseline_calibrated``) are outside the plausible range, each with its reasons: the rule the
-    finder applies to what it names (:func:`trainer.physics.catalogue.plausibility.implausible`)."""
-    out = []
-    for effect in d.baseline_effects:
-        if flags := list(implausible(effect.identifier, effect.params, d.scale).values()):
-            out.append((effect, flags))
-    return out
 
 
 def _percent(value: float | None) -> str:
@@ -148,7 +135,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     if d.not_supported:
         lines += ["", "## In the simulation but not supported by the data", ""]
         lines += [f"- {n.effect}{d.label}: {n.reason}" for n in d.not_supported]
-    if flagged := simulation_flags(d):
+    if flagged := d.implausible_baseline():
         lines += ["", "## In the simulation, calibrated outside the plausible range", ""]
         lines += [
             f"- {effect.identifier}{d.label}: {_fmt_params(d.params(effect.params))}; {'; '.join(flags)}."

@@ -142,6 +142,18 @@ class Diagnosis:
     unit: str = "mg"  # the unit suffix of the recording's values (mg, dps, pa): names every amplitude
     scale: ChannelScale | None = None  # what a non-mg channel's amplitudes were judged against
 
+    def implausible_baseline(self) -> list[tuple[EffectConfig, list[str]]]:
+        """The effects of the user's simulation (``--sim``) whose calibrated parameters (JSON
+        ``baseline_calibrated``) are outside the plausible range, each with its reasons: the rule the
+        finder applies to what it names (:func:`trainer.physics.catalogue.plausibility.implausible`)."""
+        from trainer.physics.catalogue.plausibility import implausible
+
+        out = []
+        for effect in self.baseline_effects:
+            if flags := list(implausible(effect.identifier, effect.params, self.scale).values()):
+                out.append((effect, flags))
+        return out
+
     def params(self, values: Mapping[str, float]) -> dict[str, float]:
         """Catalogue-named parameters as this channel names them (``amp_mg`` -> ``amp_dps``)."""
         return channel_params(values, self.unit)
