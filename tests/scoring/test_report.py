@@ -180,6 +180,7 @@ def test_a_held_out_threshold_is_not_passed_on_rows_the_model_was_trained_on(
     text = (tmp_path / "r" / "report.md").read_text()
     assert "held-out part, in-sample: the model was trained on it" in text and "| not measured |" in text
     assert "## Verdict: FAIL" in text
+    assert "the held-out part's maximum can exceed the whole recording's" in text  # each about its own mean
     # the guard's own line says its figures are in-sample, not only the note and the threshold row
     guard = next(line for line in text.splitlines() if "than uncompensated" in line or "noise floor:" in line)
     assert "held-out (100 % of it training rows, in-sample there)" in guard, guard

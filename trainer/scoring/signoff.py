@@ -483,6 +483,12 @@ def render(
             for c in all_checks
         ]
         lines += [markdown_table(["channel", "check", "measured", "threshold", "result"], rows, "llrrl"), ""]
+        if any(c.key.startswith("holdout_") for c in all_checks):
+            lines += [
+                "Each part is scored about its own mean (the drift a constant calibration leaves there): "
+                "the held-out part's maximum can exceed the whole recording's.",
+                "",
+            ]
     for r in reports:
         lines += _channel_section(r)
     lines += [
