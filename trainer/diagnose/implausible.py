@@ -166,7 +166,7 @@ def resolve_implausible(
             for alt in alternatives
         )
         reason = (
-            f"the best-fitting shape, {step.effect}, is implausible ({'; '.join(entry.flags)}); "
+            f"the shape the search chose, {step.effect}, is implausible ({'; '.join(entry.flags)}); "
             f"fitted in its place (BIC difference from it): {listed or 'nothing fits'}"
             + (f"; what would separate them: {'; '.join(separations)}" if separations else "")
         )

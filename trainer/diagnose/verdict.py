@@ -33,7 +33,7 @@ def ambiguity_line(a: Ambiguity, label: str = "") -> str:
         return f"ambiguous: {' vs '.join(a.effects)}{label} (BIC {a.delta_bic:+.1f})"
     shown = [f"{' + '.join(alt.effects)} {alt.delta_bic:+.1f}" for alt in a.alternatives if not alt.flags]
     return (
-        f"ambiguous (not named): {a.effects[0]}{label} fits best but implausibly "
+        f"ambiguous (not named): {a.effects[0]}{label}, the search's choice, fits implausibly "
         f"({'; '.join(a.implausible.flags)}); plausible in its place, BIC: "
         f"{', '.join(shown[:SHOWN_ALTERNATIVES]) or 'none'}"
     )
