@@ -95,11 +95,15 @@ def valid_flight_logs(root: Path) -> dict[str, bytes]:
     return {".ulg": ulog, ".bin": dataflash}
 
 
+# ``trainer import`` of a recording this tool wrote (its CSV columns, accel_mg in mg)
+IMPORT_OWN_CSV = ["--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg"]
+
+
 def recording_cases() -> list[Case]:
     """(command, main, argv(corpus, bad file, out dir)) of every command that reads a recording."""
     return [
-        ("import", trainer_main, lambda c, f, o: ["import", str(f), "--delimiter", "comma", "--time", "time_s",
-                                                  "--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg", "-o", str(o / "r.csv")]),
+        ("import", trainer_main, lambda c, f, o: ["import", str(f), "--delimiter", "comma", *IMPORT_OWN_CSV,
+                                                  "-o", str(o / "r.csv")]),
         ("fit", trainer_main, lambda c, f, o: ["fit", "--method", "poly3", str(f), "-o", str(o / "m.pt")]),
         ("fit --channels", trainer_main, lambda c, f, o: ["fit", "--method", "pla", str(f), "--channels", "all",
                                                           "-o", str(o / "fit")]),

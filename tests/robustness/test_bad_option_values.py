@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from codegen.cli import main as codegen_main
+from tests.cli_corpus import IMPORT_OWN_CSV
 from trainer.cli import main as trainer_main
 from trainer.errors import run_cli
 
@@ -46,16 +47,7 @@ def _refused(capsys: pytest.CaptureFixture[str], main: object, argv: list[str], 
     return lines[0]
 
 
-COLUMNS = [
-    "--time",
-    "time_s",
-    "--temp",
-    "temp_c",
-    "--accel",
-    "accel_mg",
-    "--accel-unit",
-    "mg",
-]  # the simulated CSV's, for import
+COLUMNS = IMPORT_OWN_CSV  # the simulated CSV's, for import
 DLSTM = ["fit", "--method", "dlstm", "--iterations", "2", "--cycles", "0", "--quiet"]
 
 

@@ -39,6 +39,7 @@ import torch
 
 from codegen.cli import main as codegen_main
 from tests.cli_corpus import (
+    IMPORT_OWN_CSV,
     Case,
     Main,
     config_cases,
@@ -331,7 +332,7 @@ def _import_case() -> Case:
     return (
         "import",
         trainer_main,
-        lambda c, f, o: ["import", str(f), "--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg",
+        lambda c, f, o: ["import", str(f), *IMPORT_OWN_CSV,
                          "-o", str(o / "r.csv")],
     )  # fmt: skip
 

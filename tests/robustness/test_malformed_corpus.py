@@ -22,6 +22,7 @@ import torch
 
 from codegen.cli import main as codegen_main
 from tests.cli_corpus import (
+    IMPORT_OWN_CSV,
     Main,
     config_cases,
     garbage,
@@ -245,18 +246,7 @@ def test_the_valid_inputs_pass(corpus: dict[str, Path], tmp_path: Path) -> None:
         == 0
     )
     shutil.copy(good, tmp_path / "copy.csv")
-    argv = [
-        "import",
-        str(tmp_path / "copy.csv"),
-        "--time",
-        "time_s",
-        "--temp",
-        "temp_c",
-        "--accel",
-        "accel_mg",
-        "--accel-unit",
-        "mg",
-    ]
+    argv = ["import", str(tmp_path / "copy.csv"), *IMPORT_OWN_CSV]
     assert run_cli(trainer_main, [*argv, "-o", str(tmp_path / "r.csv")]) == 0
     for log in ("valid.ulg", "valid.bin"):
         assert (

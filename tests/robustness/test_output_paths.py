@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from tests.cli_corpus import valid_lines
+from tests.cli_corpus import IMPORT_OWN_CSV, valid_lines
 from trainer.cli import main as trainer_main
 from trainer.errors import run_cli
 
-IMPORT = ["--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg", "--time", "time_s"]
+IMPORT = IMPORT_OWN_CSV
 
 
 @pytest.mark.parametrize(

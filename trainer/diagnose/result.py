@@ -66,7 +66,8 @@ class Ambiguity:
     preferred: str
     reason: str
     alternatives: tuple[Alternative, ...] = ()
-    implausible: LeftOut | None = None  # the shape the search chose, with its flags; not named (a pair may fit lower, implausibly too)
+    # the shape the search chose, with its flags; not named (a pair may fit lower, implausibly too)
+    implausible: LeftOut | None = None
     # effects[1]'s signature is absorbed by effects[0] on this profile: in its place it fits worse by
     # delta_bic, beside it it earns too little (trainer.diagnose.select, step 4), not a tie
     absorbed: bool = False
