@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trainer.options.channels import add_channels_option, run_per_channel
@@ -56,6 +54,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Refuse bad output paths before a long analysis."""
+    from pathlib import Path
+
     from trainer.atomic_dir import check_output_directory
     from trainer.data.recording_io import RECORDING_SUFFIXES
     from trainer.diagnose.report import check_report_target
@@ -77,88 +77,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_report_target(args.report)  # a directory of the user's files too
 
 
-ZIP_MAGIC = b"PK\x03\x04"  # how a zip archive (an .npz, a model checkpoint) starts
-HEAD_BYTES = 4096  # what is read of a file to tell a recording from a physics TOML
-TOML_LINE = re.compile(r"\[[^\]]+\]|[A-Za-z_][A-Za-z0-9_.\-]*\s*=")  # a table header or a key = value
-SWAPPED = "arguments swapped? the recording comes first: trainer diagnose RECORDING --sim CONFIG.toml"
-
-
-def _head(path: str) -> bytes:
-    """The first bytes of ``path``; empty when it cannot be read (reading it proper says why)."""
-    try:
-        with open(path, "rb") as handle:
-            return handle.read(HEAD_BYTES)
-    except OSError:
-        return b""
-
-
-def _first_line(head: bytes) -> str:
-    """The first line of ``head`` that is neither blank nor a ``#`` comment."""
-    for raw in head.decode("utf-8-sig", errors="replace").splitlines():
-        if (line := raw.strip()) and not line.startswith("#"):
-            return line
-    return ""
-
-
-def _is_npz(path: str) -> bool:
-    """A zip archive of ``.npy`` arrays (a model checkpoint is a zip archive too, of other members)."""
-    import zipfile
-
-    try:
-        with zipfile.ZipFile(path) as archive:
-            return any(name.endswith(".npy") for name in archive.namelist())
-    except (OSError, zipfile.BadZipFile):
-        return False
-
-
-def _is_recording(path: str) -> bool:
-    """``path`` is a recording by its suffix (.csv, .npz) or, under another name, by its first bytes:
-    an .npz archive or a header line that names ``time_s`` (a CSV)."""
-    from trainer.data.recording_io import RECORDING_SUFFIXES
-
-    if Path(path).suffix.lower() in RECORDING_SUFFIXES:
-        return True
-    head = _head(path)
-    if head.startswith(ZIP_MAGIC):
-        return _is_npz(path)
-    return "time_s" in re.split(r"\s*[,;\t]\s*", _first_line(head))
-
-
-def _is_toml(path: str) -> bool:
-    """``path`` is a physics TOML by its suffix or, unless named as a recording, by its first line."""
-    from trainer.data.recording_io import RECORDING_SUFFIXES
-
-    suffix = Path(path).suffix.lower()
-    if suffix == ".toml":
-        return True
-    if suffix in RECORDING_SUFFIXES:
-        return False
-    head = _head(path)
-    return not head.startswith(ZIP_MAGIC) and TOML_LINE.match(_first_line(head)) is not None
-
-
-def _refuse_swapped(args: argparse.Namespace) -> None:
-    """One line, before anything is read or written, when the recording is a TOML or --sim a recording
-    (``trainer diagnose u.toml --sim r.csv`` said ``r.csv: invalid TOML`` and nothing of a swap)."""
-    from trainer.errors import UserError
-
-    toml_given = _is_toml(args.recording)
-    recording_as_sim = args.sim is not None and _is_recording(args.sim)
-    if toml_given and recording_as_sim:
-        raise UserError(
-            f"{args.recording} is a physics TOML and --sim {args.sim} a recording: arguments swapped? "
-            f"trainer diagnose {args.sim} --sim {args.recording}"
-        )
-    if recording_as_sim:
-        raise UserError(f"--sim {args.sim}: a recording where a physics TOML is expected ({SWAPPED})")
-    if toml_given:
-        raise UserError(
-            f"{args.recording}: a physics TOML where the recording (.csv or .npz) is expected ({SWAPPED})"
-        )
-
-
 def run(args: argparse.Namespace) -> int:
-    _refuse_swapped(args)
     if args.channels is not None:
         return run_per_channel(
             args, run, recordings=("recording",), out_dirs=("report",), out_files=("json",)

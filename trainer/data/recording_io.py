@@ -33,6 +33,7 @@ from trainer.errors import UserError, atomic_output
 RecordingFormat = Literal["csv", "npz"]
 RECORDING_SUFFIXES: dict[str, RecordingFormat] = {".csv": "csv", ".npz": "npz"}
 MODEL_SUFFIX = ".pt"  # what trainer fit writes (named when one is given where a recording goes)
+CONFIG_SUFFIX = ".toml"  # a physics configuration (named when one is given where a recording goes)
 
 JITTER_LIMIT = 0.01  # largest accepted |step - nominal period| / nominal period
 TIME_DECIMALS = 6  # minimum decimals of time_s in CSV output
@@ -219,6 +220,11 @@ def recording_format(path: str | Path) -> RecordingFormat:
     if suffix == MODEL_SUFFIX:
         raise UserError(
             f"{path}: a model file ({MODEL_SUFFIX}) where a recording (.csv or .npz) is expected "
+            "(arguments swapped? see the command's --help for which comes where)"
+        )
+    if suffix == CONFIG_SUFFIX:
+        raise UserError(
+            f"{path}: a physics TOML where a recording (.csv or .npz) is expected "
             "(arguments swapped? see the command's --help for which comes where)"
         )
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")

@@ -471,6 +471,9 @@ def default_config_text() -> str:
     return resources.files("trainer.physics").joinpath(DEFAULT_CONFIG_NAME).read_text(encoding="utf-8")
 
 
+ZIP_MAGIC = b"PK\x03\x04"  # how a zip archive (an .npz, a model checkpoint) starts
+
+
 def load_config(path: str | Path | None = None) -> PhysicsConfig:
     """Load and validate ``path``; ``None`` loads the packaged ``default.toml``.
 
@@ -479,9 +482,22 @@ def load_config(path: str | Path | None = None) -> PhysicsConfig:
     """
     if path is None:
         return parse_config_text(default_config_text(), DEFAULT_CONFIG_NAME)
+    from trainer.data.recording_io import RECORDING_SUFFIXES
+
+    swapped = (
+        "where a physics TOML is expected (arguments swapped? see the command's --help for which comes where)"
+    )
+    if Path(path).suffix.lower() in RECORDING_SUFFIXES:
+        raise UserError(f"{path}: a recording {swapped}")
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read config: {exc}") from None
+    if data.startswith(ZIP_MAGIC):  # an .npz recording or a model file under another name
+        raise UserError(f"{path}: a zip archive (an .npz recording or a model) {swapped}")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise UserError(f"{path}: cannot read config: {exc}") from None
     return parse_config_text(text, str(path))
 
