@@ -34,6 +34,7 @@ RecordingFormat = Literal["csv", "npz"]
 RECORDING_SUFFIXES: dict[str, RecordingFormat] = {".csv": "csv", ".npz": "npz"}
 MODEL_SUFFIX = ".pt"  # what trainer fit writes (named when one is given where a recording goes)
 CONFIG_SUFFIX = ".toml"  # a physics configuration (named when one is given where a recording goes)
+SWAPPED_HINT = "arguments swapped? see the command's --help for which comes where"
 
 JITTER_LIMIT = 0.01  # largest accepted |step - nominal period| / nominal period
 TIME_DECIMALS = 6  # minimum decimals of time_s in CSV output
@@ -219,13 +220,11 @@ def recording_format(path: str | Path) -> RecordingFormat:
         raise UserError(f"{path}: a directory, not a recording (.csv or .npz)")
     if suffix == MODEL_SUFFIX:
         raise UserError(
-            f"{path}: a model file ({MODEL_SUFFIX}) where a recording (.csv or .npz) is expected "
-            "(arguments swapped? see the command's --help for which comes where)"
+            f"{path}: a model file ({MODEL_SUFFIX}) where a recording (.csv or .npz) is expected ({SWAPPED_HINT})"
         )
     if suffix == CONFIG_SUFFIX:
         raise UserError(
-            f"{path}: a physics TOML where a recording (.csv or .npz) is expected "
-            "(arguments swapped? see the command's --help for which comes where)"
+            f"{path}: a physics TOML where a recording (.csv or .npz) is expected ({SWAPPED_HINT})"
         )
     raise UserError(f"{path}: unsupported extension {suffix or '(none)'!r}; recordings are .csv or .npz")
 

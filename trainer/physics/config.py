@@ -482,11 +482,9 @@ def load_config(path: str | Path | None = None) -> PhysicsConfig:
     """
     if path is None:
         return parse_config_text(default_config_text(), DEFAULT_CONFIG_NAME)
-    from trainer.data.recording_io import RECORDING_SUFFIXES
+    from trainer.data.recording_io import RECORDING_SUFFIXES, SWAPPED_HINT
 
-    swapped = (
-        "where a physics TOML is expected (arguments swapped? see the command's --help for which comes where)"
-    )
+    swapped = f"where a physics TOML is expected ({SWAPPED_HINT})"
     if Path(path).suffix.lower() in RECORDING_SUFFIXES:
         raise UserError(f"{path}: a recording {swapped}")
     try:
