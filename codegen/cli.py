@@ -163,7 +163,7 @@ def _export_imu(args: argparse.Namespace) -> int:
 def _export_params(args: argparse.Namespace) -> int:
     """Flight-stack parameter files: one per command, all models' channels in it."""
     from codegen.export import write_files_atomically
-    from codegen.flightparams import NOTE, load_channel_cubic, render
+    from codegen.flightparams import NOTE, load_channel_cubics, render
     from codegen.render import validate_name
 
     per_sensor = args.device_id if isinstance(args.device_id, dict) else {}
@@ -178,7 +178,7 @@ def _export_params(args: argparse.Namespace) -> int:
         if args.name
         else ("px4_thermal" if args.format == "px4-params" else "ardupilot_tcal")
     )
-    channels = [load_channel_cubic(path, channel=args.channel, device_id=device_id) for path in args.model]
+    channels = load_channel_cubics(args.model, channel=args.channel, device_id=device_id)
     if per_sensor:
         import dataclasses
 
@@ -386,7 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     exp.set_defaults(func=_export)
 
     ver = sub.add_parser(
-        "verify", help="compile OUTDIR's C and compare it with the golden model on a recording"
+        "verify",
+        help="compile OUTDIR's C and compare it with the golden model on a recording",
     )
     ver.add_argument("model", help="the model.pt the module was exported from")
     ver.add_argument("out_dir", help="directory written by 'codegen export'")

@@ -2,14 +2,17 @@
 
 Everything is computed in memory first; the files are then written into a staging directory and
 swapped in as one set (trainer/atomic_dir.py), so a failure or a kill leaves no half-written output
-and never a mix of two exports.
+and never a mix of two exports. A file of the module's own (``module_files``: ``NAME.cal.bin`` of an
+export with ``--blob``) that an earlier export of NAME left and this one does not write is removed in
+the same swap; the folder's other files are kept.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Mapping
+import sys
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -216,16 +219,54 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
     return files
 
 
-def write_files_atomically(files: Mapping[str, str | bytes], out_dir: str | os.PathLike[str]) -> None:
+BLOB_SUFFIX = ".cal.bin"  # an IMU module's calibration blob (codegen/imu.py)
+# the files a C export of module NAME writes (NAME.h, NAME.c, NAME.manifest.json; NAME.cal.bin with
+# --blob): what a previous export of NAME into the same folder may have left and this one replaces
+MODULE_SUFFIXES = (".h", ".c", ".manifest.json", BLOB_SUFFIX)
+
+
+def module_files(name: str) -> tuple[str, ...]:
+    """Every file name a C export of module ``name`` can write (its kernel headers are shared by the
+    modules of a folder and are not its own)."""
+    return tuple(f"{name}{suffix}" for suffix in MODULE_SUFFIXES)
+
+
+def write_files_atomically(
+    files: Mapping[str, str | bytes],
+    out_dir: str | os.PathLike[str],
+    *,
+    owned: Collection[str] = (),
+) -> list[str]:
     """Write ``files`` into ``out_dir`` (created if absent, parent must exist) as one set: a reader
-    (or a kill) sees the old files or the new ones, never a mix (trainer/atomic_dir.py)."""
-    with atomic_directory(out_dir) as staging:
+    (or a kill) sees the old files or the new ones, never a mix (trainer/atomic_dir.py).
+
+    ``owned`` names the files the export owns (:func:`module_files`): those of them in ``out_dir``
+    that ``files`` does not hold were written by an earlier export of the same module and are removed
+    in the same replacement (a blob left beside a module that does not read it would be flashed with
+    it, and its module would accept it: the module id is the layout's); one ``note:`` line says so.
+    Other files of ``out_dir`` are kept. Returns the names removed."""
+    folder = Path(out_dir)
+    stale = sorted(n for n in set(owned) - set(files) if folder.is_dir() and (folder / n).is_file())
+    with atomic_directory(out_dir, drop=stale) as staging:
         for file_name, text in files.items():
             if isinstance(text, bytes):  # a calibration blob (codegen/imu.py)
                 (staging / file_name).write_bytes(text)
             else:
                 (staging / file_name).write_text(text, encoding="utf-8", newline="\n")
             os.chmod(staging / file_name, 0o644)
+    if stale:
+        why = (
+            " (left beside the module, it would be flashed and loaded: the module id is the layout's, not "
+            "the calibration's)"
+            if any(n.endswith(BLOB_SUFFIX) for n in stale)
+            else ""
+        )
+        print(
+            f"note: {out_dir}: removed {', '.join(stale)}, which an earlier export wrote and this one does "
+            f"not{why}",
+            file=sys.stderr,
+        )
+    return stale
 
 
 def export(
@@ -247,6 +288,7 @@ def export(
     model = load_for_codegen(model_path, raw_limits=raw_limits, rate_millihz=rate_millihz, schedule=schedule)
     clamps = family_of(model.quantised).input_clamps(model.quantised).signal_lsb is not None
     check_governed(raw_limits, [RawClamp(str(model_path), model.unit, model.name, clamps)], module=False)
-    files = generate(model, name or default_name(model.checkpoint.method))
-    write_files_atomically(files, out_dir)
+    module = name or default_name(model.checkpoint.method)
+    files = generate(model, module)
+    write_files_atomically(files, out_dir, owned=module_files(module))
     return model, files

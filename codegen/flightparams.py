@@ -101,9 +101,26 @@ class ChannelCubic:
         return not bool(np.any(self.coefficients))
 
 
-def _model_cubic(ckpt: Checkpoint, source: str, shown: str) -> tuple[np.ndarray, float, tuple[float, float]]:
+CUBIC_HINT = "use poly3, or pla with --intervals 1"  # what a flight-stack parameter file can hold
+
+
+class NotACubicError(UserError):
+    """A model that is not a cubic of the temperature (:func:`load_channel_cubics` names them all)."""
+
+    def __init__(self, source: str, shown: str, channel: str | None) -> None:
+        super().__init__(
+            f"{source}: method {shown!r} is not a cubic of the temperature; flight-stack parameters hold one "
+            f"({CUBIC_HINT})"
+        )
+        self.source, self.shown, self.channel = source, shown, channel
+
+
+def _model_cubic(
+    ckpt: Checkpoint, source: str, shown: str, channel: str | None = None
+) -> tuple[np.ndarray, float, tuple[float, float]]:
     """(c0..c3 in the model's unit, t_ref, clamp range) of a model that is a cubic of the temperature
-    (``shown``: its name as the user knows it, auto's candidate or the method)."""
+    (``shown``: its name as the user knows it, auto's candidate or the method; ``channel``: its
+    channel, for the refusal)."""
     model = ckpt.model
     if isinstance(model, Poly3Spec):
         return model.coefficients_mg.copy(), model.t_ref_c, model.temp_range_c
@@ -112,10 +129,7 @@ def _model_cubic(ckpt: Checkpoint, source: str, shown: str) -> tuple[np.ndarray,
         t_ref = 0.5 * (lo + hi)
         slope, intercept = float(model.slopes_mg_per_c[0]), float(model.intercepts_mg[0])
         return np.array([intercept + slope * t_ref, slope, 0.0, 0.0]), t_ref, (lo, hi)
-    raise UserError(
-        f"{source}: method {shown!r} is not a cubic of the temperature; flight-stack parameters hold one "
-        f"(use poly3, or pla with --intervals 1)"
-    )
+    raise NotACubicError(source, shown, channel)
 
 
 def load_channel_cubic(
@@ -133,7 +147,9 @@ def load_channel_cubic(
 
     ckpt = parse_checkpoint(raw, source)
     stats = TrainStats.of_checkpoint(raw)
-    coefficients, t_ref, (lo, hi) = _model_cubic(ckpt, source, shown_name(ckpt.method, stats))
+    coefficients, t_ref, (lo, hi) = _model_cubic(
+        ckpt, source, shown_name(ckpt.method, stats), channel or stats.channel
+    )
     name = channel or stats.channel
     if not isinstance(name, str):
         raise UserError(
@@ -173,6 +189,33 @@ def load_channel_cubic(
         offset,
         moved,
     )
+
+
+def load_channel_cubics(
+    paths: Sequence[str | os.PathLike[str]], *, channel: str | None = None, device_id: int | None = None
+) -> list[ChannelCubic]:
+    """:func:`load_channel_cubic` of each model; the models that are not a cubic are refused together,
+    in one line naming every one (a user fixes them all at once, not one per run)."""
+    cubics, refused = [], []
+    for path in paths:
+        try:
+            cubics.append(load_channel_cubic(path, channel=channel, device_id=device_id))
+        except NotACubicError as exc:
+            refused.append(exc)
+    if len(refused) == 1:
+        raise refused[0]
+    if refused:
+        named = ", ".join(
+            f"{e.channel} (method {e.shown!r}, {e.source})"
+            if e.channel
+            else f"{e.source} (method {e.shown!r})"
+            for e in refused
+        )
+        raise UserError(
+            f"{len(refused)} of the {len(paths)} models are not a cubic of the temperature, which flight-stack "
+            f"parameters hold ({CUBIC_HINT}): {named}"
+        )
+    return cubics
 
 
 @dataclass(frozen=True)
@@ -524,14 +567,10 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
                 "ArduPilot holds the correction at the edge value"
             )
             lo, hi = clamped
-        enabled = not all(c.identity for found in sensors.values() for c in found.axes.values())
-        if not enabled:
-            lines.append(
-                f"# {prefix} (accel{instance}, gyro{instance}): every model given is the identity "
-                "(no compensation): disabled"
-            )
+        if all(c.identity for found in sensors.values() for c in found.axes.values()):
+            lines.append(identity_set_note(prefix, instance))
         lines += [
-            f"{prefix}_ENABLE {int(enabled)}",
+            f"{prefix}_ENABLE 1",  # also for an identity set: its zeros must overwrite what the board holds
             f"{prefix}_TMIN {_number(lo)}",
             f"{prefix}_TMAX {_number(hi)}",
         ]
@@ -549,6 +588,21 @@ def render_ardupilot(channels: Sequence[ChannelCubic]) -> str:
                         value = float(shifted[order]) * ARDUPILOT_SCALE
                     lines.append(f"{prefix}_{short}{order}_{axis.upper()} {_number(value)}")
     return "\n".join(lines) + "\n"
+
+
+def identity_set_note(prefix: str, instance: int) -> str:
+    """The note of an INS_TCALn set whose every model is the identity. It is written with ENABLE 1 and
+    zero coefficients: with ENABLE 1 ArduPilot applies P = 0 (``correct_sensor`` subtracts P(T - 35)
+    and adds P(CALTEMP - 35), both 0: no correction), and the zeros overwrite the coefficients of an
+    earlier calibration. With ENABLE 0 (``correct_sensor`` returns at once) the set's other parameters
+    are hidden, so a file could not load its zeros: the earlier coefficients would stay on the board
+    and apply again whenever ENABLE is set to 1."""
+    return (
+        f"{NOTE}{prefix} (accel{instance}, gyro{instance}): every model given is the identity (no compensation): "
+        f"written as {prefix}_ENABLE 1 with zero coefficients, which ArduPilot applies as no correction; "
+        f"ENABLE 0 would hide the set, and the coefficients of an earlier calibration would stay on the board "
+        f"(and apply again once ENABLE is 1): load the file twice as above to overwrite them with the zeros"
+    )
 
 
 def render(fmt: str, channels: Sequence[ChannelCubic], *, keep_constant: bool = False) -> str:

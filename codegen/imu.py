@@ -40,7 +40,7 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.export import UNDETERMINED_WARNING, LoadedModel, load_for_codegen
+from codegen.export import BLOB_SUFFIX, UNDETERMINED_WARNING, LoadedModel, load_for_codegen, module_files
 from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
 from codegen.imu_record import ChannelTables, ImuPart
@@ -79,7 +79,6 @@ SENSOR_RECORD = struct.Struct("<ii")  # valid range lo, hi (mdegC)
 LSB_PER_UNIT = STEP_LSB_PER_UNIT  # 1/16000 of mg, deg/s or Pa (for mg: the one-channel modules' 1/16 ug)
 MANIFEST_FORMAT = "mems-tdc-imu-module"
 MANIFEST_FORMAT_VERSION = 2  # 2: each channel's input_limits
-BLOB_SUFFIX = ".cal.bin"
 
 
 @dataclass(frozen=True)
@@ -192,7 +191,7 @@ def load_imu(
     names = [c.name for c in channels]
     duplicate = next((n for n in names if names.count(n) > 1), None)
     if duplicate is not None:
-        raise UserError(f"channel {duplicate} is given twice")
+        raise UserError(f"two models for channel {duplicate} ({duplicate} given twice)")
     channels.sort(key=lambda c: sort_key(c.name))
     sensors = tuple(dict.fromkeys(c.sensor for c in channels))
     valid = []
@@ -541,6 +540,8 @@ def export_imu(
     files: dict[str, str | bytes] = {} if blob_only else dict(render_imu(imu, name, builtin=not blob))
     if blob or blob_only:
         files[f"{name}{BLOB_SUFFIX}"] = encode_blob(imu)
-    write_files_atomically(files, out_dir)  # all or nothing
+    # all or nothing; a module's set replaces the earlier export's whole (a blob it does not read is
+    # removed), a blob alone (the factory path) is one unit's calibration for the module beside it
+    write_files_atomically(files, out_dir, owned=() if blob_only else module_files(name))
     written = list(files)
     return imu, written

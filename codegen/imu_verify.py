@@ -19,8 +19,9 @@ import cffi
 import numpy as np
 
 from codegen import cortex_m as cm
+from codegen.export import BLOB_SUFFIX
 from codegen.hostbuild import cdef_from_header, compile_c
-from codegen.imu import BLOB_SUFFIX, MANIFEST_FORMAT, ImuModel, imu_golden, load_imu
+from codegen.imu import MANIFEST_FORMAT, ImuModel, imu_golden, load_imu
 from codegen.input_limits import raw_limits_of_clamps
 from codegen.render import _environment
 from codegen.verify import manifest_raw_clamp, to_step_units

@@ -109,7 +109,7 @@ class ScheduleCheck:
 @dataclass(frozen=True)
 class VerifyResult:
     name: str
-    method: str
+    method: str  # the model's name as the user knows it (LoadedModel.name: poly2, auto's choice)
     samples: int
     mismatches: int
     first_mismatch: int | None
@@ -489,13 +489,13 @@ def verify(
         )
         budget = dataclasses.replace(budget, clamped=clamped)
     tables = (
-        compare_table1(rec, model.checkpoint.method, float_out, step_out / ACCEL_PER_MG, float_on_ints)
+        compare_table1(rec, model.name, float_out, step_out / ACCEL_PER_MG, float_on_ints)
         if table1
         else (None, None)
     )
     return VerifyResult(
         name,
-        model.checkpoint.method,
+        model.name,  # as the header names it: auto's choice or the variant (poly2), not the class (poly3)
         int(accel.size),
         int(differ.size),
         int(differ[0]) if differ.size else None,

@@ -41,7 +41,13 @@ class UserError(Exception):
 
 
 class OneLineArgumentParser(argparse.ArgumentParser):
-    """argparse that reports usage errors as a one-line UserError instead of exiting itself."""
+    """argparse that reports usage errors as a one-line UserError instead of exiting itself, and
+    reads no prefix of an option as the option (``codegen verify --channel`` was read as
+    ``--channels``, an option it has, and failed on what followed)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise UserError(f"{self.prog}: {message}")

@@ -439,7 +439,7 @@ def identity_note(train_stats: TrainStats, source: str) -> str | None:
     channel = train_stats.channel or "the channel"
     return (
         f"{source}: {channel} is exported as the identity (C: zero correction; flight-stack parameters: zero "
-        f"coefficients, and ArduPilot's INS_TCALn_ENABLE 0 where the whole IMU is so): "
+        f"coefficients, which ArduPilot applies with INS_TCALn_ENABLE 1 as no correction): "
         f"{record.get('reason', 'auto chose none')}"
     )
 

@@ -43,11 +43,12 @@ static inline int32_t tdcp_hi_floor(int64_t x, unsigned s)
 }
 
 /* floor(x / 2^(32 + s) + 1/2) for 0 <= s <= 30 and |x| < 2^62: the high word, rounded half up
- * (an exact division of a multiple of 2^(32 + s): one add and an arithmetic shift of the high word). */
+ * (tdcp_hi_floor of x + 2^(31 + s): shifts only, so a shift s read from a table at run time, as in
+ * the IMU module, costs no 64-bit division; an exact division by 2^(32 + s) did, through
+ * __aeabi_ldivmod on Cortex-M). */
 static inline int32_t tdcp_hi_round(int64_t x, unsigned s)
 {
-    int64_t r = x + ((int64_t)1 << (31u + s));
-    return (int32_t)((r - (int64_t)((uint64_t)r & ((((uint64_t)1) << (32u + s)) - 1u))) / ((int64_t)1 << (32u + s)));
+    return tdcp_hi_floor(x + ((int64_t)1 << (31u + s)), s);
 }
 
 /* acc + floor(a b / 2^32 + 1/2), one Horner step: SMMLAR on a DSP core (gcc and clang have no

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from codegen import cortex_m as cm
 from codegen.cli import main as codegen_main
 from codegen.families.physics.quantise import QPhysics
 from codegen.hostbuild import (
@@ -230,6 +231,30 @@ def test_rate_option_rebuilds_the_physics_filters(fitted: dict[str, Path], tmp_p
     g_out, _, _ = imu_golden(imu, raw, temp)
     one_hz, _, _ = imu_golden(load_imu(_models(fitted)), raw, temp)
     assert np.any(g_out[:, 0] != one_hz[:, 0]) and np.array_equal(g_out[:, 1:], one_hz[:, 1:])
+
+
+# What GCC requires any freestanding environment to provide (its manual, "C Language Dialect
+# Options": memcpy, memmove, memset and memcmp): the only symbols the generated C may pull in.
+FREESTANDING = {"memcpy", "memmove", "memset", "memcmp"}
+
+
+def test_the_module_object_pulls_in_no_library_routine(fitted: dict[str, Path], tmp_path: Path) -> None:
+    """The physics channel's final rounding shifts by a per-channel amount read from the tables; as
+    an exact division by 2^(32 + s) it made gcc call __aeabi_ldivmod (a libgcc 64-bit division) on
+    every step of the Cortex-M4 object, which a -nostdlib build cannot link."""
+    if shutil.which("arm-none-eabi-gcc") is None or shutil.which("arm-none-eabi-nm") is None:
+        pytest.skip("Cortex-M toolchain unavailable")
+    out = tmp_path / "build"
+    subprocess.run(
+        ["make", "--no-print-directory", "-C", str(cm.FIRMWARE_DIR), f"MODULE_DIR={fitted['out']}",
+         f"NAME={NAME}", f"OUT={out}", "module"],
+        capture_output=True, check=True,
+    )  # fmt: skip
+    listed = subprocess.run(
+        ["arm-none-eabi-nm", "-u", str(out / f"{NAME}.o")], capture_output=True, text=True, check=True
+    ).stdout
+    undefined = {line.split()[-1] for line in listed.splitlines() if line.strip()}
+    assert undefined <= FREESTANDING, undefined
 
 
 def test_physics_channel_on_cortex_m4(fitted: dict[str, Path], tmp_path: Path) -> None:

@@ -127,9 +127,9 @@ def one_axis_left_out(rec: Recording, wanted: tuple[str, ...], channels: list[Ch
     if any(c.column in rec.columns and np.array_equal(rec.columns[c.column], data) for c in channels):
         return None
     return (
-        f"note: {rec.source}: --channels all compensates the named channels ({names_text([c.name for c in channels])}); "
+        f"note: {rec.source}: --channels all takes the named channels ({names_text([c.name for c in channels])}); "
         f"the file's own {ONE_AXIS_CHANNEL} column is none of them and is left out: run the command without "
-        "--channels to compensate it (or name it accel0_<axis>_mg)"
+        "--channels to take it (or name it accel0_<axis>_mg)"
     )
 
 
@@ -166,10 +166,14 @@ def parse_channels_option(text: str) -> tuple[str, ...]:
     directory), so that a wrong one is reported with the channels that are there."""
     if text.strip() == ALL:
         return (ALL,)
-    names = tuple(dict.fromkeys(name.strip() for name in text.split(",")))
-    if not all(names):
+    listed = [name.strip() for name in text.split(",")]
+    if not all(listed):
         raise UserError(f"--channels {text!r}: an empty name (all, or a list such as accel0_z,gyro0_x)")
-    return names
+    # a name twice is a typo for another channel, not a request (an IMU export of accel0_x,accel0_x
+    # wrote a module of one channel where two were asked for)
+    if repeated := [n for n in dict.fromkeys(listed) if listed.count(n) > 1]:
+        raise UserError(f"--channels {text!r}: {', '.join(repeated)} given twice: list each channel once")
+    return tuple(listed)
 
 
 def sort_key(name: str) -> tuple[int, str]:
