@@ -17,9 +17,9 @@ from trainer.data.recording import Recording
 from trainer.diagnose import diagnose
 from trainer.diagnose.document import document
 from trainer.diagnose.report import markdown
-from trainer.diagnose.result import Diagnosis
+from trainer.diagnose.result import Ambiguity, Diagnosis, Tested
 from trainer.diagnose.scenarios import make_scenario
-from trainer.physics.catalogue import PARAMETERS
+from trainer.physics.catalogue import EFFECTS, PARAMETERS
 from trainer.physics.catalogue.hysteresis_offset import DEFINITION as BRANCH_OFFSET
 from trainer.physics.catalogue.stress_relaxation import DEFINITION as CREEP
 from trainer.physics.catalogue.thermal_lag import DEFINITION as LAG
@@ -70,6 +70,29 @@ def test_summary_and_report(huge_creep: Diagnosis) -> None:
     report = markdown(huge_creep)
     assert report.rstrip().split("## ")[-1].startswith("What to do next")
     assert "as fitted (GLS" not in report and "| heating |" in report
+
+
+def test_a_weak_effect_of_an_ambiguity_is_tied_to_it_not_listed_as_a_second_finding(
+    huge_creep: Diagnosis,
+) -> None:
+    """The terminal's "weakly identifiable" line of an effect an ambiguity above already names says
+    which line (a walk-through read it as a second, separate finding); one outside them stays bare."""
+    named = huge_creep.ambiguous[0].effects[0]
+    free = [e for e in EFFECTS if all(e not in a.effects for a in huge_creep.ambiguous)]
+    absorber, absorbed, elsewhere = free[:3]
+    merged = Ambiguity((absorber, absorbed), 20.0, absorber, "absorbed on this profile", absorbed=True)
+    weak = [
+        Tested(e, note=f"weakly identifiable: reason of {e}; a test") for e in (named, absorbed, elsewhere)
+    ]
+    text = summary(replace(huge_creep, tested=weak, ambiguous=[*huge_creep.ambiguous, merged]))
+    lines = {
+        e: next(line for line in text.splitlines() if f"reason of {e}" in line)
+        for e in (named, absorbed, elsewhere)
+    }
+    assert lines[named].startswith(f"weakly identifiable: {named}, in the ambiguous line above: ")
+    assert lines[absorbed].startswith(f"weakly identifiable: {absorbed}, in the absorbed line above: ")
+    assert f"absorbed: {absorbed} by {absorber}" in text
+    assert lines[elsewhere].startswith(f"weakly identifiable: {elsewhere}: ")
 
 
 @pytest.mark.slow  # about 20 s alone, up to 45 s on a busy machine

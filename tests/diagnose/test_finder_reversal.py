@@ -14,6 +14,7 @@ Synthetic recordings: ``tests.synthetic_chamber`` on a cycle with an instant rev
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -62,6 +63,10 @@ def test_a_step_at_the_reversal_under_a_rate_term_is_said_to_be_absorbed(seed: i
     assert STEP in rate.absorbs and STEP not in rate.ambiguous_with
     assert STEP not in next_steps(d).structure
     assert ambiguity_line(absorbed[0]).startswith(f"absorbed: {STEP} by {RATE}")
+    # no step is named, so the absorbed one is not "another" (said only beside a named instance)
+    assert not absorbed[0].another
+    beside_a_named_step = replace(absorbed[0], another=True)
+    assert ambiguity_line(beside_a_named_step).startswith(f"absorbed: another {STEP} by {RATE}")
 
 
 @pytest.mark.parametrize(("tau_s", "seed"), [(20.0, 21), (60.0, 22)])

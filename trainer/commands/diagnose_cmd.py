@@ -146,14 +146,21 @@ def summary(result: Diagnosis) -> str:
             lines.append(f"left out: {e.effect} [{params}] BIC -{e.evidence.delta_bic_when_added:.1f}{extra}")
     else:
         lines.append("left out: nothing found beyond the simulation")
-    lines += [ambiguity_line(a, result.label) for a in result.ambiguous]
+    lines += [ambiguity_line(a, result.label, result.unit) for a in result.ambiguous]
     for n in result.not_identifiable:
         lines.append(f"not identifiable: {n.effect}{result.label} ({n.recommended_test or n.reason})")
+    # the first line above that names an effect: "absorbed: ..." or "ambiguous ...: ..."
+    listed: dict[str, str] = {}
+    for a in result.ambiguous:
+        for x in a.effects:
+            listed.setdefault(x, "absorbed" if a.absorbed else "ambiguous")
     for t in result.tested:
         if t.note.startswith("weakly identifiable"):
-            lines.append(
-                f"{t.note.replace('weakly identifiable', f'weakly identifiable: {t.effect}{result.label}', 1)}"
+            # one of an ambiguity above: the weakness is why it is ambiguous, not a second finding
+            which = f"{t.effect}{result.label}" + (
+                f", in the {listed[t.effect]} line above" if t.effect in listed else ""
             )
+            lines.append(f"{t.note.replace('weakly identifiable', f'weakly identifiable: {which}', 1)}")
     for u in result.undetected:
         amp = channel_param_name(u.amp_name, result.unit)
         lines.append(f"not named: {u.effect}{result.label}: this run names it from {amp} = {limit_sizes(u)}")

@@ -183,6 +183,12 @@ def ambiguity(a: Ambiguity) -> dict[str, Any]:
     }
     if a.absorbed:
         out["absorbed"] = True
+        if a.another:
+            out["another"] = True
+        out["moves_beside"] = [
+            {"effect": effect, "param": name, "value": value, "value_beside": beside}
+            for effect, name, value, beside in a.moves
+        ]
     if a.implausible is not None:  # the implausible best fit, kept with its flags, not named
         out["best_fit"] = left_out(a.implausible)
         out["alternatives"] = [

@@ -24,6 +24,7 @@ from trainer.diagnose.profile import Region
 from trainer.diagnose.result import Diagnosis, LeftOut, Suggestive
 from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.shared import shared_text
+from trainer.diagnose.verdict import moves_text
 from trainer.diagnose.where import AllanWhere
 from trainer.errors import UserError, atomic_output, raise_write_error
 from trainer.physics.catalogue.units import channel_param_name
@@ -116,6 +117,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
     lines += ["", "## Ambiguous", ""]
     lines += [
         f"- {' vs '.join(a.effects)}{d.label}{' (absorbed, not a tie)' if a.absorbed else ''}: {a.reason}"
+        + (f"{moves_text(a, d.unit)}." if a.moves else "")
         for a in d.ambiguous
     ] or ["None."]
     lines += ["", "## Not identifiable from this temperature profile", ""]

@@ -71,6 +71,12 @@ class Ambiguity:
     # effects[1]'s signature is absorbed by effects[0] on this profile: in its place it fits worse by
     # delta_bic, beside it it earns too little (trainer.diagnose.select, step 4), not a tie
     absorbed: bool = False
+    # absorbed only: (effect, parameter, value, value with effects[1] fitted beside) for each named
+    # parameter that moves by more than select.MOVED_FRACTION: it is not determined apart from it
+    moves: tuple[tuple[str, str, float, float], ...] = ()
+    # absorbed only: the model already names an instance of effects[1] (a multi-instance effect): the
+    # absorbed one is a further instance
+    another: bool = False
 
 
 @dataclass(frozen=True)

@@ -331,6 +331,8 @@ def _ambiguous(selection: Selection, implausible: list[Ambiguity]) -> list[Ambig
                 cast(str, a["preferred"]),
                 cast(str, a["reason"]),
                 absorbed=bool(a.get("absorbed")),
+                moves=tuple(cast(list[tuple[str, str, float, float]], a.get("moves", []))),
+                another=bool(a.get("another")),
             )
         )
     return out

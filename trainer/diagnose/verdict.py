@@ -9,6 +9,7 @@ calls implausible), so the two commands tell one story on the same recording.
 from __future__ import annotations
 
 from trainer.diagnose.result import Ambiguity, Diagnosis
+from trainer.physics.catalogue.units import CATALOGUE_UNIT, channel_param_name
 
 SHOWN_ALTERNATIVES = 3  # plausible stand-ins printed per implausible best fit
 
@@ -21,13 +22,29 @@ def implausible_effects(d: Diagnosis) -> dict[str, str]:
     return out
 
 
-def ambiguity_line(a: Ambiguity, label: str = "") -> str:
-    """One line for an ambiguity (``label``: the channel and unit on a non-mg channel)."""
+def moves_text(a: Ambiguity, unit: str = CATALOGUE_UNIT) -> str:
+    """What moves when an absorbed confounder is fitted beside the model ("" when nothing does):
+    the named values it would take part of, in the channel's parameter names (``unit``)."""
+    if not a.moves:
+        return ""
+    moved = ", ".join(
+        f"{effect}.{channel_param_name(name, unit)} {value:.4g} -> {beside:.4g} ({100 * (beside - value) / abs(value):+.0f} %)"
+        for effect, name, value, beside in a.moves
+    )
+    return (
+        f"; fitted beside, {a.effects[1]} moves {moved}: these values may carry part of a "
+        f"{a.effects[1]} in the data"
+    )
+
+
+def ambiguity_line(a: Ambiguity, label: str = "", unit: str = CATALOGUE_UNIT) -> str:
+    """One line for an ambiguity (``label``: the channel and unit on a non-mg channel; ``unit``: its
+    parameters' unit suffix)."""
     if a.absorbed:
         effect, other = a.effects
         return (
-            f"absorbed: {other}{label} by {effect} on this profile (in its place BIC {a.delta_bic:+.1f}, beside it "
-            "too little to name: a real one would be merged into the fitted term)"
+            f"absorbed: {'another ' if a.another else ''}{other}{label} by {effect} on this profile (in its place BIC {a.delta_bic:+.1f}, beside it "
+            f"too little to name: a real one would be merged into the fitted term{moves_text(a, unit)})"
         )
     if a.implausible is None:
         return f"ambiguous: {' vs '.join(a.effects)}{label} (BIC {a.delta_bic:+.1f})"

@@ -83,7 +83,7 @@ def auto(rec: Recording, *, warmup_allowed: bool, progress: bool = False) -> Str
     ]
     comp, nuisance = _split(found, warmup_allowed)
     # the finder's own lines (as `trainer diagnose` prints them): the fit adds its decisions after them
-    notes = [f"finder: {ambiguity_line(a, diagnosis.label)}" for a in diagnosis.ambiguous]
+    notes = [f"finder: {ambiguity_line(a, diagnosis.label, diagnosis.unit)}" for a in diagnosis.ambiguous]
     identifiability = diagnosis.profile.identifiability
     weak = {
         e.identifier: identifiability[e.identifier].reason

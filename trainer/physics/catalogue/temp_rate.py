@@ -129,7 +129,7 @@ DEFINITION = Effect(
             "the bias depends on dT/dt (thermal-gradient stress): a polynomial calibrated at one rate is off "
             "at another; add a dT/dt input or calibrate at the flight's heating rates"
         ),
-        confounders=("thermal_lag", "hysteresis", "stress_relaxation", "bias_step"),
+        confounders=("thermal_lag", "hysteresis", "stress_relaxation", "bias_step", "warmup"),
         separations={
             "bias_step": (
                 "at a ramp reversal a dT/dt offset jumps by k times the change of rate, as a step would; a "

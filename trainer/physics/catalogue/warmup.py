@@ -97,7 +97,17 @@ DEFINITION = Effect(
             "self-heating after power-on: the bias settles over the first minutes; let the board warm up "
             "(about 3 time constants) before calibration and before flight, or model the warm-up"
         ),
-        confounders=("stress_relaxation", "bias_step"),
+        # on a ramp that starts from a soak, a dT/dt offset (through the case's lag) rises as
+        # amp (1 - exp(-t / tau)): a warm-up's shape on the polynomial's constant (a walk-through named a
+        # warm-up in place of a concealed rate term there)
+        confounders=("stress_relaxation", "bias_step", "temp_rate"),
+        separations={
+            "temp_rate": (
+                "a ramp that starts from a soak lifts a dT/dt offset as a warm-up settles; a warm-up decays "
+                "from power-on whatever the temperature does, a dT/dt offset follows the rate (power on "
+                "and soak before ramping, or a second ramp at another rate)"
+            ),
+        },
     ),
     scenario=Scenario(
         draw=lambda rng, duration, sign: {
