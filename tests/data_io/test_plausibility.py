@@ -109,6 +109,11 @@ def test_decimal_comma_hint_and_option(tmp_path: Path) -> None:
         "import", src, *IMPORT, "--decimal-comma", "--delimiter", "comma", "-o", tmp_path / "x.csv"
     )
     assert "--decimal-comma needs a tab or semicolon delimiter" in message
+    # a file split by commas, --decimal-comma without --delimiter: the cause, not "pass --delimiter"
+    points = write_text(tmp_path / "en.csv", "t,T,a", [r.replace(",", ".").replace(";", ",") for r in rows])
+    message = cli_error("import", points, *IMPORT, "--decimal-comma", "-o", tmp_path / "y.csv")
+    assert "split alike by commas only" in message and "a comma cannot be both" in message
+    assert "drop --decimal-comma" in message
 
 
 def test_slow_temperature_channel_hint_and_fill_previous(tmp_path: Path) -> None:
@@ -164,6 +169,26 @@ def test_fit_refuses_an_accelerometer_in_g_read_as_mg(tmp_path: Path, capsys: py
     capsys.readouterr()
     argv = ["fit", "--method", "poly3", str(as_g), "--accept-implausible", "-o", str(tmp_path / "g.pt")]
     assert main(argv) == 0 and "warning:" in capsys.readouterr().err  # the user's word, with a warning
+
+
+@pytest.mark.parametrize("command", ["diagnose", "compare"])
+def test_the_scoring_commands_refuse_an_accelerometer_in_g_read_as_mg_as_fit_does(
+    tmp_path: Path, command: str
+) -> None:
+    """diagnose scored g read as mg and named a bias polynomial 1000x too small; compare ranked
+    compensators on it. Both refuse it as fit does, with the same cause, and write nothing."""
+    n = 2000
+    temp = np.linspace(-20.0, 40.0, n)
+    in_g = (-1000.0 + 25.0 * ((temp - 10.0) / 30.0) ** 2) / 1000.0
+    as_g = recording(tmp_path / "g.csv", temp=temp, accel=in_g)
+    out = tmp_path / "out"
+    argv = (
+        ("diagnose", as_g, "--report", out) if command == "diagnose" else ("compare", as_g, "--out-dir", out)
+    )
+    message = cli_error(*argv)
+    assert f"moves by only {float(np.ptp(in_g)):.3g} mg over a 60 degC run" in message
+    assert "--accel-unit g" in message and "trainer fit refuses it too" in message
+    assert not out.exists()
 
 
 def test_fit_refuses_a_span_too_small_for_the_cubic(tmp_path: Path) -> None:

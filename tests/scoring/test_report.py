@@ -12,7 +12,8 @@ import pytest
 from codegen.cli import main as codegen_main
 from trainer.checkpoint import load_model
 from trainer.cli import main as trainer_main
-from trainer.data.recording_io import read_recording
+from trainer.data.recording import Recording
+from trainer.data.recording_io import read_recording, write_recording
 from trainer.errors import run_cli
 
 SMOOTHING_S = 0.5
@@ -154,6 +155,49 @@ def test_a_model_that_carries_an_undetermined_parameter_asks_for_a_review(
     assert "## Verdict: REVIEW" in text
     assert all(line in text for line in flagged)
     assert "REVIEW" in capsys.readouterr().out
+
+
+# a 0 -> 60 degC ramp over 1200 s, then back to 0 over 600 s, at 10 Hz
+CYCLE_C = np.concatenate((np.linspace(0.0, 60.0, 12000), np.linspace(60.0, 0.0, 6001)[1:]))
+
+
+def _cycle(path: Path, output_mg: np.ndarray | None = None) -> tuple[Path, np.ndarray]:
+    """:data:`CYCLE_C` with a linear drift of 0.5 mg/degC unless ``output_mg`` is given, written to
+    ``path``. Returns the file and the output written."""
+    temp = CYCLE_C
+    out = 0.5 * temp if output_mg is None else output_mg
+    noisy = out + 0.01 * np.random.default_rng(5).standard_normal(temp.size)
+    rec = Recording({"time_s": np.arange(temp.size) / 10.0, "temp_c": temp, "accel_mg": noisy}, {})
+    write_recording(rec, path)
+    return path, noisy
+
+
+def test_a_model_worse_than_none_on_the_cooling_rows_alone_asks_for_a_review(tmp_path: Path) -> None:
+    """A cubic fitted where the drift follows the temperature both ways, scored on a unit whose
+    output follows it while heating and holds still while cooling (its loop): over the whole run it
+    leaves less than no compensation, so the guard passes, but on the cooling rows it adds the drift
+    it removes elsewhere. The sign-off asks for a review there and names the rows."""
+    trained, _ = _cycle(tmp_path / "a.csv")
+    temp = CYCLE_C
+    heating = np.arange(temp.size) < 12000
+    scored, raw = _cycle(tmp_path / "b.csv", np.where(heating, 0.5 * temp, 15.0))
+    model = tmp_path / "m.pt"
+    assert trainer_main(["fit", "--method", "poly3", str(trained), "-o", str(model)]) == 0
+    loaded, _ = load_model(model)
+    out = loaded.compensate(read_recording(scored).without_truth())
+    # independently: about the run's one constant, better overall, worse on the cooling rows
+    rms = lambda x, rows: float(np.sqrt(np.mean((x - x.mean())[rows] ** 2)))  # noqa: E731
+    every = np.ones(temp.size, dtype=bool)
+    assert rms(out, every) < rms(raw, every) and rms(out, ~heating) > 10 * rms(raw, ~heating)
+    (tmp_path / "loose.toml").write_text("[thresholds]\nresidual_rms_mg = 1000\n")
+    args = ["report", str(model), "--recording", str(scored), "-o", str(tmp_path / "r")]
+    assert run_cli(trainer_main, [*args, "--config", str(tmp_path / "loose.toml")]) == 0
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert "## Verdict: REVIEW" in text
+    assert (
+        "on the cooling rows of the scored part, all samples of a recording not trained on, it leaves" in text
+    )
+    assert "heating rows of the scored part" not in text
 
 
 def test_a_threshold_without_its_measurement_fails_as_not_measured(

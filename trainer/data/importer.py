@@ -209,6 +209,16 @@ def sniff_delimiter(path: str | Path, *, decimal_comma: bool = False) -> str:
         counts = {line.count(candidate) for line in lines}
         if len(counts) == 1 and (fields := counts.pop() + 1) > best_fields:
             best, best_fields = candidate, fields
+    if (
+        best is None
+        and decimal_comma
+        and len(commas := {line.count(",") for line in lines}) == 1
+        and commas.pop()
+    ):
+        raise UserError(
+            f"{path}: line 1 onwards: split alike by commas only, and --decimal-comma reads a comma as the "
+            "decimal mark (a comma cannot be both): drop --decimal-comma if the numbers use a point"
+        )
     if best is None:
         header = max(DELIMITER_NAMES, key=lambda c: lines[0].count(c))  # ties: the first declared
         fields = lines[0].count(header) + 1

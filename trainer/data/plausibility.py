@@ -252,7 +252,8 @@ def check_training(
 
 def check_scored(rec: Recording) -> Recording:
     """``rec`` unchanged when every sample is one its sensor can output and every temperature one a
-    sensor survives; else one line. A sample rate outside 0.1 Hz .. 100 kHz (a time unit read wrongly)
+    sensor survives, and an accelerometer is in mg (not g read as mg, not m/s^2 read as g); else one
+    line. A sample rate outside 0.1 Hz .. 100 kHz (a time unit read wrongly)
     is a warning line. For the commands that score, compare, diagnose or verify a
     recording (they take no ``--accept-implausible``): import and fit refuse such samples too, so
     no model of this tool was made from them without that option."""
@@ -266,6 +267,10 @@ def check_scored(rec: Recording) -> Recording:
     )
     # what fit refuses is not scored either (a constant channel's Allan figures are nan)
     Plausibility(way_past="trainer fit refuses it too; leave it out of --channels").output_varies(rec)
+    if rec.meta.get("unit", "mg") == "mg":  # an accelerometer read in the wrong unit: fit refuses it too
+        units = Plausibility(way_past="trainer fit refuses it too")
+        units.gravity_in_mg(rec.accel_mg, f"{rec.source}: column 'accel_mg'")
+        units.accel_moves(rec, f"{rec.source}: column {rec.file_column()!r}")
     # a warning, not an error: a decimated log may be slow, and these commands have no option to accept it
     time_base = Plausibility(accept=True)
     time_base.rate(rec.sample_rate_hz, f"{rec.source}: sample rate", at_import=False)

@@ -504,9 +504,9 @@ def segment_lines(segments: Sequence[Segment]) -> list[str]:
     return [
         f"- segment {i + 1}: {s.name}, {s.stop - s.start} samples, scored "
         + (
-            "cold (it starts the recording cross-validated)"
+            "cold (it starts the recording: held out, the model starts on it from power-on)"
             if s.start == 0
-            else "warm (the model runs from the start of the recording cross-validated)"
+            else "warm (the model runs from the start of the recording, through the segments before it)"
         )
         for i, s in enumerate(segments)
     ]

@@ -34,10 +34,12 @@ from trainer.scoring.unit_scores import PartScores, UnitScores, coverage
 from trainer.scoring.verdict import (
     NO_VERDICT,
     Figures,
+    SegmentFigures,
     Verdict,
     outside_trained_range,
     undetermined_reason,
     verdict,
+    worse_on_a_part,
     worse_on_a_segment,
     worse_than_uncompensated,
 )
@@ -155,22 +157,8 @@ class ChannelReport:
             from trainer.scoring.fit_holdout import held_out_figures
 
             return held_out_figures(self.fit_held_out, self.unit)
-        if self.scores.held_out is not None and self.held_out_training_share is not None:
-            basis = (
-                f"held-out ({100 * self.held_out_training_share:.0f} % of it training rows, in-sample there)"
-            )
-        elif self.scores.held_out is not None:
-            basis = "held-out"
-        elif self.training_row_share is not None and self.training_row_share >= 1.0:
-            basis = "all samples (in-sample)"
-        elif self.training_row_share is not None:  # a model fitted with --holdout, scored on the whole run
-            basis = (
-                f"all samples ({100 * self.training_row_share:.0f} % of them training rows, in-sample there)"
-            )
-        else:
-            basis = "all samples of a recording not trained on"
         return Figures(
-            basis,
+            self.part_basis,
             part.model.rms_mg,
             part.uncompensated.rms_mg,
             math.nan if part.model_in_range is None else part.model_in_range.rms_mg,
@@ -178,6 +166,23 @@ class ChannelReport:
             part.noise_floor_mg,
             self.unit,
         )
+
+    @property
+    def part_basis(self) -> str:
+        """What the headline part's rows are to the model: held out, or training rows (in-sample)."""
+        if self.scores.held_out is not None and self.held_out_training_share is not None:
+            return (
+                f"held-out ({100 * self.held_out_training_share:.0f} % of it training rows, in-sample there)"
+            )
+        if self.scores.held_out is not None:
+            return "held-out"
+        if self.training_row_share is not None and self.training_row_share >= 1.0:
+            return "all samples (in-sample)"
+        if self.training_row_share is not None:  # a model fitted with --holdout, scored on the whole run
+            return (
+                f"all samples ({100 * self.training_row_share:.0f} % of them training rows, in-sample there)"
+            )
+        return "all samples of a recording not trained on"
 
     @property
     def review(self) -> list[str]:
@@ -191,7 +196,20 @@ class ChannelReport:
             outside = outside_trained_range(self.label, coverage(self.scored_range_c, self.trained_range_c))
             reasons += [] if outside is None else [outside]
         if self.crossval is None:
-            return reasons
+            # a branch the model misplaces (a hysteresis, a lag) shows on the heating or cooling rows
+            # alone; auto refuses that for what it ships (trainer.selection.own_run_failure), a model
+            # fitted by name gets this look
+            part = self.scores.headline
+            branches = [
+                SegmentFigures(
+                    f"{b} rows of the scored part, {self.part_basis},",
+                    getattr(part.model, f"{b}_rms_mg"),
+                    getattr(part.uncompensated, f"{b}_rms_mg"),
+                )
+                for b in ("heating", "cooling")
+            ]
+            branch = worse_on_a_part(self.label, "", branches, part.noise_floor_mg, self.unit)
+            return reasons + ([] if branch is None else [branch])
         from trainer.selection import cross_validated_figures
 
         floor = self.scores.headline.noise_floor_mg

@@ -131,10 +131,11 @@ def worse_than_uncompensated(subject: str, figures: Figures) -> Guard:
 
 @dataclass(frozen=True)
 class SegmentFigures:
-    """One held-out segment of a cross-validation: the model's drift left there (at the segment's
-    natural start) beside the uncompensated output's, in the channel's unit."""
+    """One part of a scored run: a held-out segment of a cross-validation (at its natural start), or
+    the heating or cooling rows of a part; the model's drift left there beside the uncompensated
+    output's, in the channel's unit."""
 
-    name: str  # e.g. "cooling 3134-4245 s (73.9 -> 36.3 degC)"
+    name: str  # e.g. "cooling 3134-4245 s (73.9 -> 36.3 degC)", "cooling rows"
     model_rms: float
     uncompensated_rms: float
 
@@ -166,20 +167,28 @@ def outside_trained_range(label: str, coverage: float) -> str | None:
     )
 
 
-def worse_on_a_segment(
-    subject: str, segments: Sequence[SegmentFigures], noise_floor: float, unit: str
+def worse_on_a_part(
+    subject: str, where: str, parts: Sequence[SegmentFigures], noise_floor: float, unit: str
 ) -> str | None:
-    """A reason for a human look when the model leaves more than no compensation on one held-out
-    segment (beyond the noise), though not pooled (the guard's figure): a user meets one segment at a
-    time. None when no segment is worse."""
-    worse = [s for s in segments if _worse(s.model_rms, s.uncompensated_rms, noise_floor)]
+    """A reason for a human look when the model leaves more than no compensation (beyond the noise)
+    on one of ``parts`` of what it is scored on, though not over all of it (the guard's figure): a
+    user meets one part at a time. ``where`` prefixes the part's name ("held-out "). None when no
+    part is worse."""
+    worse = [s for s in parts if _worse(s.model_rms, s.uncompensated_rms, noise_floor)]
     if not worse:
         return None
     s = max(worse, key=lambda x: x.model_rms / x.uncompensated_rms)
     return (
-        f"{subject}: on the held-out {s.name} it leaves {s.model_rms:.4g} {unit}, "
+        f"{subject}: on the {where}{s.name} it leaves {s.model_rms:.4g} {unit}, "
         f"{s.model_rms / s.uncompensated_rms:.2f}x uncompensated ({s.uncompensated_rms:.4g} {unit})"
     )
+
+
+def worse_on_a_segment(
+    subject: str, segments: Sequence[SegmentFigures], noise_floor: float, unit: str
+) -> str | None:
+    """:func:`worse_on_a_part` over a cross-validation's held-out segments."""
+    return worse_on_a_part(subject, "held-out ", segments, noise_floor, unit)
 
 
 @dataclass(frozen=True)
