@@ -217,6 +217,89 @@ def test_damaged_ulog_is_one_line(
     assert not (tmp_path / "o.csv").exists()
 
 
+def test_a_ulog_damaged_in_the_middle_says_what_it_may_have_lost(tmp_path: Path) -> None:
+    """pyulog skips what it cannot read, which can be everything after the damage: a walk-through
+    lost half a log with nothing said but a metadata line. Where pyulog flags the corruption the
+    reader says so (``trainer import`` prints its notices), with the time the samples read span."""
+    n = 4000  # 200 s at 20 Hz
+    time_us = (2_000_000 + np.arange(n) * 50_000).astype(np.int64)
+    temp = np.linspace(-10.0, 70.0, n)
+    accel = np.column_stack([np.zeros(n), np.zeros(n), -9.80665 + 1e-3 * (temp - 30.0)])
+    topics = [
+        imu_topic("sensor_accel", 0, ACCEL_IDS[0], time_us, accel, temp),
+        imu_topic("sensor_gyro", 0, GYRO_IDS[0], time_us + 37, 1e-3 * accel, temp),  # its own time base
+    ]
+
+    def damaged(name: str, log: Path) -> Path:
+        data = log.read_bytes()
+        half = len(data) // 2
+        (tmp_path / name).write_bytes(data[:half] + np.random.default_rng(1).bytes(3000) + data[half:])
+        return tmp_path / name
+
+    log = write_ulog(tmp_path / "long.ulg", topics)
+    gap = damaged("gap.ulg", log)
+    whole, part = read_flight_log(log), read_flight_log(gap)
+    notes = [n for n in part.notices if "the file is damaged" in n]
+    assert not whole.notices and len(notes) == 1
+    assert notes[0].startswith(f"{gap}: the file is damaged and pyulog skipped what it could not read")
+    span_s = float(notes[0].split("the samples read span ")[1].split(" s")[0])
+    times = [c.time_us for c in part.channels.values()]
+    read = (max(t[-1] for t in times) - min(t[0] for t in times)) / 1e6
+    assert part.channels["accel0_z"].time_us.size < whole.channels["accel0_z"].time_us.size
+    assert span_s == pytest.approx(read, abs=0.05)
+    # one topic: the damage garbles a message pyulog keeps, and the refusal says it is the damage (it
+    # said "device id changes within the log", a fault of the logging)
+    garbled = damaged("garbled.ulg", write_ulog(tmp_path / "alone.ulg", topics[:1]))
+    message = import_error(tmp_path / "g.csv", garbled)
+    assert message.startswith(f"{garbled}: ") and "(the file is damaged: pyulog skipped" in message
+
+
+def test_a_flight_log_is_never_read_as_a_recording_nor_overwritten(
+    tmp_path: Path, ulog_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``trainer fit -o log.ulg`` overwrote a flight log with the model; a log given where a recording
+    is read said "unsupported extension" or, renamed .csv, "not UTF-8 text"."""
+    recording = tmp_path / "rec.csv"
+    run_import(ulog_path, "-o", recording)
+    victim = tmp_path / "victim.ulg"
+    victim.write_bytes(ulog_path.read_bytes())
+    renamed = tmp_path / "renamed.csv"
+    renamed.write_bytes(ulog_path.read_bytes())
+    fit = ["fit", "--method", "poly3"]
+    cases = [
+        (
+            [*fit, recording, "-o", victim],
+            f"{victim}: a PX4 ULog flight log: the output written there would destroy it",
+        ),
+        (
+            [*fit, recording, "-o", tmp_path / "new.ulg"],
+            "a PX4 ULog log's name for an output that would not be one",
+        ),
+        (
+            [*fit, victim, "-o", tmp_path / "m.pt"],
+            f"{victim}: a PX4 ULog flight log where a recording (.csv or .npz)",
+        ),
+        (
+            [*fit, renamed, "-o", tmp_path / "m.pt"],
+            f"convert it with 'trainer import {renamed} -o NAME.csv' first",
+        ),
+    ]
+    capsys.readouterr()
+    for argv, expected in cases:
+        assert run_cli(main, [str(a) for a in argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expected in err, err
+    assert victim.read_bytes() == ulog_path.read_bytes()
+    assert not (tmp_path / "new.ulg").exists() and not (tmp_path / "m.pt").exists()
+
+
+def test_a_channel_of_the_list_is_named_with_the_option_that_listed_it(
+    tmp_path: Path, ulog_path: Path
+) -> None:
+    message = import_error(tmp_path / "o.csv", ulog_path, "--channels", "accel0_z,gyro9_x")
+    assert message.startswith(f"{ulog_path}: --channels 'gyro9_x' is not in this log")
+
+
 # --------------------------------------------------------------------------- DataFlash
 
 

@@ -75,6 +75,7 @@ def add_parser(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from trainer.checkpoint import save_model
     from trainer.data.channels import channel_unit, other_channels_note
+    from trainer.data.flightlog import refuse_flight_log_output
     from trainer.data.plausibility import check_training
     from trainer.data.recording_io import RECORDING_SUFFIXES, read_recording
     from trainer.errors import UserError, check_output_path
@@ -107,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
 
         return fit_channels(args, options, policy)
     check_output_path(args.output, inputs=[args.train])  # fail before a long training run, not after it
+    refuse_flight_log_output(args.output)
     if Path(args.output).suffix.lower() in RECORDING_SUFFIXES:
         raise UserError(
             f"{args.output}: a recording's name ({Path(args.output).suffix}) for the model file; a model is "

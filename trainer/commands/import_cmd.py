@@ -12,7 +12,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from trainer.data.flightlog import KIND_NAMES, KIND_SUFFIXES, log_kind
+from trainer.data.flightlog import A_KIND, KIND_NAMES, KIND_SUFFIXES, log_kind
 from trainer.data.flightlog_import import LogImport, import_flight_log, log_output
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import import_foreign
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     named = KIND_SUFFIXES.get(Path(args.foreign).suffix.lower())  # a log's name on a file that is not one
     if kind is None and named is not None and Path(args.foreign).is_file():
         raise UserError(
-            f"{args.foreign}: named as a {KIND_NAMES[named]} log, but its first bytes are not that log's header "
+            f"{args.foreign}: named as {A_KIND[named]} log, but its first bytes are not that log's header "
             "(a damaged, truncated or renamed file?)"
         )
     if kind is None and what is not None:

@@ -41,6 +41,8 @@ DPS_PER_RADPS = 180.0 / np.pi
 # DataFlash: every message starts 0xA3 0x95 <type>, and a log starts with the FMT message (128).
 MAGIC: dict[str, bytes] = {"ulog": b"ULog\x01\x12\x35", "dataflash": b"\xa3\x95\x80"}
 KIND_NAMES = {"ulog": "PX4 ULog", "dataflash": "ArduPilot DataFlash"}
+# with its article, as a message reads it ("a PX4 ULog log", "an ArduPilot DataFlash log")
+A_KIND = {kind: f"{'an' if name[0] in 'AEIOU' else 'a'} {name}" for kind, name in KIND_NAMES.items()}
 KIND_SUFFIXES = {".ulg": "ulog", ".bin": "dataflash"}  # the names these logs are written under
 
 SENSOR_UNITS = {"accel": "mg", "gyro": "dps", "baro": "pa"}  # column unit suffix per sensor
@@ -155,15 +157,16 @@ class FlightLog:
     notices: list[str] = field(default_factory=list)  # what the reader changed, printed at import
     missing: str = ""  # why expected sensor data is not among the channels (e.g. sensor_combined only)
 
-    def channel(self, name: str) -> LogChannel:
-        """The channel ``name``; a one-line error listing the available ones otherwise."""
+    def channel(self, name: str, option: str = "--channel") -> LogChannel:
+        """The channel ``name``; a one-line error listing the available ones otherwise (``option``:
+        what the user gave it as, ``--channel`` or ``--channels``)."""
         if name not in self.channels:
             if not CHANNEL_NAME.fullmatch(name):
                 problem = "is not a channel name (accelN_x|y|z, gyroN_x|y|z, baroN)"
             else:
                 problem = "is not in this log"
             hint = f"; {self.missing}" if self.missing else ""
-            raise UserError(f"{self.source}: --channel {name!r} {problem}; available: {self.names()}{hint}")
+            raise UserError(f"{self.source}: {option} {name!r} {problem}; available: {self.names()}{hint}")
         return self.channels[name]
 
     def names(self) -> str:
@@ -215,6 +218,27 @@ def log_kind(path: str | Path) -> str | None:
     except OSError as exc:
         raise UserError(f"{path}: cannot read ({exc.strerror})") from None
     return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
+
+
+def flight_log_at(path: str | Path) -> str | None:
+    """The kind of flight log ``path`` is (an existing file, by its first bytes) or is named as (a
+    ``.ulg`` name), else None: where a recording or a model is read or written, such a path is never
+    one (``trainer fit -o log.ulg`` overwrote the log with the model)."""
+    target = Path(path)
+    if target.is_file():
+        return log_kind(target)
+    return "ulog" if target.suffix.lower() == ".ulg" else None
+
+
+def refuse_flight_log_output(path: str | Path) -> None:
+    """One line, before any work, when the output ``path`` is a flight log (:func:`flight_log_at`)."""
+    if (kind := flight_log_at(path)) is not None:
+        what = (
+            f"{A_KIND[kind]} flight log: the output written there would destroy it"
+            if Path(path).is_file()
+            else f"{A_KIND[kind]} log's name for an output that would not be one"
+        )
+        raise UserError(f"{path}: {what} (arguments swapped? see the command's --help for which comes where)")
 
 
 def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: list[str] | None = None) -> T:

@@ -106,7 +106,11 @@ def _log_groups(
         named = [requested or log.channel(DEFAULT_CHANNEL)]
         groups = [list(log.siblings(named[0]))]
     else:
-        picked = list(log.channels.values()) if everything else [log.channel(n) for n in options.channels]
+        picked = (
+            list(log.channels.values())
+            if everything
+            else [log.channel(n, "--channels") for n in options.channels]
+        )
         if requested is not None and requested not in picked:
             raise UserError(
                 f"{log.source}: --channel {requested.name!r} is not among --channels "

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from trainer.data.dataflash_reader import read_dataflash
-from trainer.data.flightlog import KIND_NAMES, FlightLog, log_kind
+from trainer.data.flightlog import A_KIND, FlightLog, log_kind
 from trainer.data.ulog_reader import read_ulog
 from trainer.errors import UserError
 
@@ -21,6 +21,6 @@ def read_flight_log(path: str | Path) -> FlightLog:
     if not log.channels:
         missing = log.missing or f"it has {READ[kind]}"
         raise UserError(
-            f"{path}: a {KIND_NAMES[kind]} log without accelerometer, gyroscope or barometer channels: {missing}"
+            f"{path}: {A_KIND[kind]} log without accelerometer, gyroscope or barometer channels: {missing}"
         )
     return log

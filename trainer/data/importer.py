@@ -26,8 +26,8 @@ import numpy as np
 from trainer.data.channels import ALL, DEFAULT_UNIT, names_text
 from trainer.data.csv_table import DELIMITER_NAMES, Table, read_table
 from trainer.data.flightlog import (
+    A_KIND,
     DPS_PER_RADPS,
-    KIND_NAMES,
     MG_PER_MPS2,
     SENSOR_UNITS,
     log_kind,
@@ -240,7 +240,7 @@ def _refuse_binary(path: str | Path) -> None:
     kind = log_kind(path)
     if kind is not None:
         raise UserError(
-            f"{path}: a {KIND_NAMES[kind]} log, not a delimited text file; import it with --channel NAME "
+            f"{path}: {A_KIND[kind]} log, not a delimited text file; import it with --channel NAME "
             f"(the column options do not apply)"
         )
     with open(path, "rb") as handle:

@@ -26,7 +26,7 @@ from scipy.optimize import minimize_scalar
 from trainer.budget import FLOAT_BYTES, check_memory
 from trainer.data.channels import channels_in, own_temp_column
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
-from trainer.data.flightlog import data_column
+from trainer.data.flightlog import A_KIND, data_column, flight_log_at
 from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
 from trainer.errors import UserError, atomic_output
 
@@ -212,6 +212,13 @@ def _declared_period(rec: Recording, meta_label: Callable[[str], str]) -> float 
 def recording_format(path: str | Path) -> RecordingFormat:
     """'csv' or 'npz' from the file extension (case-insensitive); anything else is a UserError."""
     suffix = Path(path).suffix.lower()
+    # a flight log, by its first bytes (one renamed .csv read as text said "not UTF-8 text"), or an
+    # output named .ulg: never a recording here, and never to be overwritten by one
+    if (kind := flight_log_at(path)) is not None:
+        raise UserError(
+            f"{path}: {A_KIND[kind]} flight log where a recording (.csv or .npz) is expected: convert it "
+            f"with 'trainer import {path} -o NAME.csv' first ({SWAPPED_HINT})"
+        )
     if suffix in RECORDING_SUFFIXES:
         return RECORDING_SUFFIXES[suffix]
     if not str(path).strip():  # Path("") is ".", a directory: the message named an empty path

@@ -61,16 +61,42 @@ def read_ulog(path: str | Path) -> FlightLog:
         sensor = TOPICS.get(dataset.name)
         if sensor is None:
             continue
-        channels.extend(
-            _topic_channels(source, dataset.name, sensor, int(dataset.multi_id), dataset.data, notes)
-        )
+        try:
+            channels.extend(
+                _topic_channels(source, dataset.name, sensor, int(dataset.multi_id), dataset.data, notes)
+            )
+        except UserError as error:
+            if not ulog.file_corruption:
+                raise
+            # what the damage made of the data, not a fault of the logging (a device id that "changes")
+            raise UserError(
+                f"{error} (the file is damaged: pyulog skipped what it could not read, and this is likely "
+                "what the damage left; not a readable PX4 ULog log)"
+            ) from None
     if ulog.file_corruption:
         notes["log_corruption"] = "pyulog detected file corruption; damaged messages were skipped"
+        reader_notices.append(corruption_notice(source, channels))
     imu = any(channel.sensor != "baro" for channel in channels)
     missing = (
         COMBINED_ONLY.format(topic=COMBINED, samples=combined_samples) if combined_samples and not imu else ""
     )
     return FlightLog(source, "ulog", sorted_channels(channels), notes, reader_notices, missing=missing)
+
+
+def corruption_notice(source: str, channels: list[LogChannel]) -> str:
+    """What a damaged ULog may have lost, said on the terminal: pyulog skips what it cannot read, and
+    a log damaged in the middle kept its first half only, with nothing said but a metadata line
+    (pyulog cannot tell how much followed the damage: the samples read end where it stopped)."""
+    read = [c.time_us for c in channels if c.time_us.size]
+    kept = (
+        f"the samples read span {(max(int(t[-1]) for t in read) - min(int(t[0]) for t in read)) / 1e6:.1f} s"
+        if read
+        else "no sample was read"
+    )
+    return (
+        f"{source}: the file is damaged and pyulog skipped what it could not read, which can be everything "
+        f"after the damage: {kept}; compare with the log's duration before using it"
+    )
 
 
 def _topic_channels(

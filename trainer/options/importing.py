@@ -10,7 +10,7 @@ import argparse
 import math
 
 from trainer.data.csv_table import DELIMITER_NAMES
-from trainer.data.flightlog import KIND_NAMES
+from trainer.data.flightlog import A_KIND
 from trainer.data.flightlog_import import DEFAULT_CHANNEL, LogImportOptions
 from trainer.data.importer import (
     ACCEL_UNIT_TO_MG,
@@ -200,7 +200,7 @@ def log_import_options(args: argparse.Namespace, kind: str) -> LogImportOptions:
         if getattr(args, name) not in (None, False):
             option = "--" + name.replace("_", "-")
             raise UserError(
-                f"{args.foreign}: {option} does not apply to a {KIND_NAMES[kind]} log (its channels carry "
+                f"{args.foreign}: {option} does not apply to {A_KIND[kind]} log (its channels carry "
                 f"their units and temperatures); choose the axis with --channel"
             )
     resample = None if args.resample == "none" else args.resample
