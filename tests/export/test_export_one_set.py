@@ -54,6 +54,12 @@ def _export(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, s
     return run_captured(codegen_main, capsys, "export", *args)
 
 
+def _module_with_blob(capsys: pytest.CaptureFixture[str], fitted: Path, out: Path) -> None:
+    """The IMU module of every channel fitted in ``fitted``, with its calibration blob, in ``out``."""
+    code, _, err = _export(capsys, str(fitted), "--channels", "all", "-o", str(out), "--name", NAME, "--blob")
+    assert code == 0, err
+
+
 def test_a_re_export_without_blob_removes_the_earlier_blob_and_keeps_foreign_files(
     fits: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -96,9 +102,7 @@ def test_a_one_channel_module_over_an_imu_module_with_blob_removes_the_blob(
     fits: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "one"
-    assert (
-        _export(capsys, str(fits["a"]), "--channels", "all", "-o", str(out), "--name", NAME, "--blob")[0] == 0
-    )
+    _module_with_blob(capsys, fits["a"], out)
     code, stdout, err = _export(capsys, str(fits["b"] / "accel0_z.pt"), "-o", str(out), "--name", NAME)
     assert code == 0, err
     assert not (out / BLOB).exists() and f"removed {BLOB}" in err
@@ -110,9 +114,7 @@ def test_a_blob_alone_replaces_the_blob_and_keeps_the_module_it_is_for(
 ) -> None:
     """The factory path: one data-only module, each unit's blob written beside it."""
     out = tmp_path / "factory"
-    assert (
-        _export(capsys, str(fits["a"]), "--channels", "all", "-o", str(out), "--name", NAME, "--blob")[0] == 0
-    )
+    _module_with_blob(capsys, fits["a"], out)
     module = {n: (out / n).read_bytes() for n in _own_files(out) - {BLOB}}
     old_blob = (out / BLOB).read_bytes()
     code, _, err = _export(
@@ -136,9 +138,7 @@ def test_a_refused_export_leaves_the_earlier_set_whole(
     fits: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "kept"
-    assert (
-        _export(capsys, str(fits["a"]), "--channels", "all", "-o", str(out), "--name", NAME, "--blob")[0] == 0
-    )
+    _module_with_blob(capsys, fits["a"], out)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     code, stdout, err = _export(
         capsys, str(fits["b"]), "--channels", "all", "-o", str(out), "--name", NAME, "--rate", "-1"
