@@ -55,3 +55,21 @@ def test_a_directory_as_the_training_recording_is_one_line(
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.endswith("a directory, not a recording (.csv or .npz)"), err
     assert not (tmp_path / "m.pt").exists()
+
+
+def test_import_says_what_a_model_or_a_recording_of_this_tool_is(
+    files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``trainer import m.pt`` and ``trainer import run.csv`` (a recording this tool wrote) said
+    "--temp COLUMN is required"; with its columns mapped a recording is imported again (to resample it)."""
+    model, recording = files
+    for given, expected in (
+        (model, f"{model}: a model file (.pt) where a logger's file or a flight log is expected"),
+        (recording, f"{recording}: already a recording of this tool's format"),
+    ):
+        assert run_cli(trainer_main, ["import", str(given), "-o", str(tmp_path / "out.csv")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: {expected}") and err.count("\n") == 1, err
+        assert not (tmp_path / "out.csv").exists()
+    mapped = ["--time", "time_s", "--temp", "temp_c", "--accel", "accel_mg", "--accel-unit", "mg"]
+    assert run_cli(trainer_main, ["import", str(recording), *mapped, "-o", str(tmp_path / "again.csv")]) == 0

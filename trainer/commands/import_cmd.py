@@ -17,8 +17,8 @@ from trainer.data.flightlog_import import LogImport, import_flight_log, log_outp
 from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import import_foreign
 from trainer.data.plausibility import Plausibility
-from trainer.data.recording import Recording
-from trainer.data.recording_io import recording_format, write_recording
+from trainer.data.recording import ONE_AXIS_COLUMNS, Recording
+from trainer.data.recording_io import MODEL_SUFFIX, SWAPPED_HINT, recording_format, write_recording
 from trainer.errors import UserError, check_output_path
 from trainer.options.importing import add_import_arguments, import_options, log_import_options
 
@@ -55,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
             f"{args.foreign}: {what} is not read by this tool; import the flight's PX4 ULog (.ulg) or ArduPilot "
             "DataFlash log (.bin), which log each IMU at its own rate with its temperature"
         )
+    if kind is None:
+        _refuse_own_files(args.foreign, columns_given=args.temp is not None or args.preset is not None)
     if args.list_channels:
         if kind is None:
             raise UserError(f"{args.foreign}: --list-channels applies to flight logs (ULog, DataFlash) only")
@@ -109,6 +111,36 @@ def _write_all(outputs: dict[Path, Recording], inputs: Sequence[str]) -> None:
 
 def _import_log(args: argparse.Namespace, kind: str, checks: Plausibility) -> LogImport:
     return import_flight_log(args.foreign, log_import_options(args, kind), checks)
+
+
+def _refuse_own_files(path: str, *, columns_given: bool) -> None:
+    """A model, or a recording this tool already wrote given without column options, to import: said
+    as what it is (it said "--temp COLUMN is required", the options being checked before the file).
+    A recording with its columns mapped is imported again (to resample it, say)."""
+    suffix = Path(path).suffix.lower()
+    if suffix == MODEL_SUFFIX:
+        raise UserError(
+            f"{path}: a model file ({MODEL_SUFFIX}) where a logger's file or a flight log is expected ({SWAPPED_HINT})"
+        )
+    if not columns_given and (suffix == ".npz" or (suffix == ".csv" and _starts_as_a_recording(path))):
+        raise UserError(
+            f"{path}: already a recording of this tool's format (time_s, {', '.join(ONE_AXIS_COLUMNS)} columns): "
+            "every command reads it as it is, no import needed (to resample it, map its columns: --time time_s "
+            "--temp temp_c --accel accel_mg --accel-unit mg)"
+        )
+
+
+def _starts_as_a_recording(path: str) -> bool:
+    """Whether the text file's header is the recording format's (``time_s``, ``temp_c`` and
+    ``accel_mg`` among its comma-separated columns, after its ``# key=value`` lines)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as handle:
+            for line in handle:
+                if not line.startswith("#"):
+                    return {"time_s", *ONE_AXIS_COLUMNS} <= {field.strip() for field in line.split(",")}
+    except OSError:
+        pass  # the reader names what is wrong with it
+    return False
 
 
 def _import_text(args: argparse.Namespace, checks: Plausibility) -> Recording:
