@@ -220,15 +220,13 @@ def generate(model: LoadedModel, name: str) -> dict[str, str]:
 
 
 BLOB_SUFFIX = ".cal.bin"  # an IMU module's calibration blob (codegen/imu.py)
-# the files a C export of module NAME writes (NAME.h, NAME.c, NAME.manifest.json; NAME.cal.bin with
-# --blob): what a previous export of NAME into the same folder may have left and this one replaces
-MODULE_SUFFIXES = (".h", ".c", ".manifest.json", BLOB_SUFFIX)
 
 
 def module_files(name: str) -> tuple[str, ...]:
-    """Every file name a C export of module ``name`` can write (its kernel headers are shared by the
-    modules of a folder and are not its own)."""
-    return tuple(f"{name}{suffix}" for suffix in MODULE_SUFFIXES)
+    """Every file name a C export of module ``name`` can write (NAME.h, NAME.c, its manifest; its blob
+    with --blob): what an earlier export of NAME into the same folder may have left and this one
+    replaces (its kernel headers are shared by the modules of a folder and are not its own)."""
+    return (f"{name}.h", f"{name}.c", manifest_name(name), f"{name}{BLOB_SUFFIX}")
 
 
 def write_files_atomically(

@@ -40,7 +40,14 @@ import jinja2
 import numpy as np
 
 from codegen import __version__
-from codegen.export import BLOB_SUFFIX, UNDETERMINED_WARNING, LoadedModel, load_for_codegen, module_files
+from codegen.export import (
+    BLOB_SUFFIX,
+    UNDETERMINED_WARNING,
+    LoadedModel,
+    load_for_codegen,
+    manifest_name,
+    module_files,
+)
 from codegen.family import CFamily, ImuForm, QuantModel, entries, family_of
 from codegen.golden_select import golden_for
 from codegen.imu_record import ChannelTables, ImuPart
@@ -470,7 +477,7 @@ def render_imu(imu: ImuModel, name: str, *, builtin: bool = True) -> dict[str, s
     }
     for path in imu.kernel_headers():
         files[path.name] = path.read_text(encoding="utf-8")
-    files[f"{name}.manifest.json"] = manifest_json(_manifest(imu, name, builtin))
+    files[manifest_name(name)] = manifest_json(_manifest(imu, name, builtin))
     return files
 
 

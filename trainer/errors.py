@@ -40,6 +40,10 @@ class UserError(Exception):
     """Bad input from the user; the message must name the file, row, column or field."""
 
 
+# the hint of a file of the wrong kind in an argument's place (a recording where a TOML goes, ...)
+SWAPPED_HINT = "arguments swapped? see the command's --help for which comes where"
+
+
 class OneLineArgumentParser(argparse.ArgumentParser):
     """argparse that reports usage errors as a one-line UserError instead of exiting itself, and
     reads no prefix of an option as the option (``codegen verify --channel`` was read as

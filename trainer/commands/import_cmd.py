@@ -18,8 +18,8 @@ from trainer.data.flightlog_io import read_flight_log
 from trainer.data.importer import import_foreign
 from trainer.data.plausibility import Plausibility
 from trainer.data.recording import ONE_AXIS_COLUMNS, Recording
-from trainer.data.recording_io import MODEL_SUFFIX, SWAPPED_HINT, recording_format, write_recording
-from trainer.errors import UserError, check_output_path
+from trainer.data.recording_io import MODEL_SUFFIX, RECORDING_SUFFIXES, recording_format, write_recording
+from trainer.errors import SWAPPED_HINT, UserError, check_output_path
 from trainer.options.importing import add_import_arguments, import_options, log_import_options
 
 
@@ -122,7 +122,10 @@ def _refuse_own_files(path: str, *, columns_given: bool) -> None:
         raise UserError(
             f"{path}: a model file ({MODEL_SUFFIX}) where a logger's file or a flight log is expected ({SWAPPED_HINT})"
         )
-    if not columns_given and (suffix == ".npz" or (suffix == ".csv" and _starts_as_a_recording(path))):
+    ours = suffix in RECORDING_SUFFIXES and (
+        RECORDING_SUFFIXES[suffix] != "csv" or _starts_as_a_recording(path)
+    )
+    if not columns_given and ours:
         raise UserError(
             f"{path}: already a recording of this tool's format (time_s, {', '.join(ONE_AXIS_COLUMNS)} columns): "
             "every command reads it as it is, no import needed (to resample it, map its columns: --time time_s "

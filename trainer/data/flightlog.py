@@ -29,7 +29,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from trainer.errors import UserError
+from trainer.errors import SWAPPED_HINT, UserError
 
 T = TypeVar("T")
 
@@ -238,7 +238,7 @@ def refuse_flight_log_output(path: str | Path) -> None:
             if Path(path).is_file()
             else f"{A_KIND[kind]} log's name for an output that would not be one"
         )
-        raise UserError(f"{path}: {what} (arguments swapped? see the command's --help for which comes where)")
+        raise UserError(f"{path}: {what} ({SWAPPED_HINT})")
 
 
 def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: list[str] | None = None) -> T:

@@ -28,13 +28,12 @@ from trainer.data.channels import channels_in, own_temp_column
 from trainer.data.csv_table import META_KEY, quote, read_table, write_table
 from trainer.data.flightlog import A_KIND, data_column, flight_log_at
 from trainer.data.recording import ONE_AXIS_COLUMNS, Recording, require_rows
-from trainer.errors import UserError, atomic_output
+from trainer.errors import SWAPPED_HINT, UserError, atomic_output
 
 RecordingFormat = Literal["csv", "npz"]
 RECORDING_SUFFIXES: dict[str, RecordingFormat] = {".csv": "csv", ".npz": "npz"}
 MODEL_SUFFIX = ".pt"  # what trainer fit writes (named when one is given where a recording goes)
 CONFIG_SUFFIX = ".toml"  # a physics configuration (named when one is given where a recording goes)
-SWAPPED_HINT = "arguments swapped? see the command's --help for which comes where"
 
 JITTER_LIMIT = 0.01  # largest accepted |step - nominal period| / nominal period
 TIME_DECIMALS = 6  # minimum decimals of time_s in CSV output

@@ -9,6 +9,8 @@ silently would simulate different physics from the one the user wrote down. ``lo
 from __future__ import annotations
 
 import hashlib
+import io
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -19,7 +21,7 @@ import tomli_w
 
 from trainer.data.channels import sort_key
 from trainer.data.flightlog import parse_channel
-from trainer.errors import UserError, atomic_output
+from trainer.errors import SWAPPED_HINT, UserError, atomic_output
 from trainer.fields import TableFields, parse_toml, show
 from trainer.physics.catalogue import EFFECT_PARAMETERS, EFFECTS, MULTI_INSTANCE, NOISE_PARAMETERS, excluded
 from trainer.physics.catalogue.base import Param
@@ -471,9 +473,6 @@ def default_config_text() -> str:
     return resources.files("trainer.physics").joinpath(DEFAULT_CONFIG_NAME).read_text(encoding="utf-8")
 
 
-ZIP_MAGIC = b"PK\x03\x04"  # how a zip archive (an .npz, a model checkpoint) starts
-
-
 def load_config(path: str | Path | None = None) -> PhysicsConfig:
     """Load and validate ``path``; ``None`` loads the packaged ``default.toml``.
 
@@ -482,7 +481,7 @@ def load_config(path: str | Path | None = None) -> PhysicsConfig:
     """
     if path is None:
         return parse_config_text(default_config_text(), DEFAULT_CONFIG_NAME)
-    from trainer.data.recording_io import RECORDING_SUFFIXES, SWAPPED_HINT
+    from trainer.data.recording_io import RECORDING_SUFFIXES
 
     swapped = f"where a physics TOML is expected ({SWAPPED_HINT})"
     if Path(path).suffix.lower() in RECORDING_SUFFIXES:
@@ -491,7 +490,7 @@ def load_config(path: str | Path | None = None) -> PhysicsConfig:
         data = Path(path).read_bytes()
     except OSError as exc:
         raise UserError(f"{path}: cannot read config: {exc}") from None
-    if data.startswith(ZIP_MAGIC):  # an .npz recording or a model file under another name
+    if zipfile.is_zipfile(io.BytesIO(data)):  # an .npz recording or a model file under another name
         raise UserError(f"{path}: a zip archive (an .npz recording or a model) {swapped}")
     try:
         text = data.decode("utf-8")
