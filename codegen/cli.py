@@ -386,8 +386,7 @@ def build_parser() -> argparse.ArgumentParser:
     exp.set_defaults(func=_export)
 
     ver = sub.add_parser(
-        "verify",
-        help="compile OUTDIR's C and compare it with the golden model on a recording",
+        "verify", help="compile OUTDIR's C and compare it with the golden model on a recording"
     )
     ver.add_argument("model", help="the model.pt the module was exported from")
     ver.add_argument("out_dir", help="directory written by 'codegen export'")
