@@ -153,7 +153,9 @@ def summary(result: Diagnosis) -> str:
     listed: dict[str, str] = {}
     for a in result.ambiguous:
         for x in a.effects:
-            listed.setdefault(x, "absorbed" if a.absorbed else "ambiguous")
+            listed.setdefault(
+                x, "absorbed" if a.absorbed else "undetermined" if a.undetermined else "ambiguous"
+            )
     for t in result.tested:
         if t.note.startswith("weakly identifiable"):
             # one of an ambiguity above: the weakness is why it is ambiguous, not a second finding

@@ -181,10 +181,13 @@ def ambiguity(a: Ambiguity) -> dict[str, Any]:
         "preferred": a.preferred,
         "reason": a.reason,
     }
+    if a.undetermined:
+        out["undetermined"] = True
     if a.absorbed:
         out["absorbed"] = True
         if a.another:
             out["another"] = True
+    if a.absorbed or a.undetermined:
         out["moves_beside"] = [
             {"effect": effect, "param": name, "value": value, "value_beside": beside}
             for effect, name, value, beside in a.moves

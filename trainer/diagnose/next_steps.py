@@ -111,7 +111,8 @@ def next_steps(d: Diagnosis) -> NextSteps:
             )
     alternatives: dict[str, list[str]] = {}
     for a in d.ambiguous:
-        if a.implausible is None and not a.absorbed:  # an absorbed confounder fits worse: no alternative
+        # an absorbed confounder fits worse, an undetermined one earns too little: no alternative
+        if a.implausible is None and not a.absorbed and not a.undetermined:
             alternatives.setdefault(a.preferred, []).extend(e for e in a.effects if e != a.preferred)
     for preferred, others in alternatives.items():
         either = f"{preferred} (or {' / '.join(dict.fromkeys(others))})"

@@ -21,7 +21,7 @@ from trainer.diagnose.document import json_text
 from trainer.diagnose.next_steps import markdown_lines as next_steps_lines
 from trainer.diagnose.next_steps import next_steps
 from trainer.diagnose.profile import Region
-from trainer.diagnose.result import Diagnosis, LeftOut, Suggestive
+from trainer.diagnose.result import Ambiguity, Diagnosis, LeftOut, Suggestive
 from trainer.diagnose.select import MAX_ADDED, SUGGESTIVE, THRESHOLD
 from trainer.diagnose.shared import shared_text
 from trainer.diagnose.verdict import moves_text
@@ -34,6 +34,13 @@ from trainer.scoring.plots import new_figure, save_figure
 
 REPORT_MARKER = "diagnosis.json"
 BRANCH_COLOURS = {1: ("tab:red", "heating"), -1: ("tab:blue", "cooling"), 0: ("0.55", "hold")}
+
+
+def _kind(a: Ambiguity) -> str:
+    """What kind of ambiguity a line of the report's list is, when it is not a tie."""
+    if a.absorbed:
+        return " (absorbed, not a tie)"
+    return " (undetermined by this run, not a tie)" if a.undetermined else ""
 
 
 def write_json(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
@@ -116,7 +123,7 @@ def markdown(diagnosis: Diagnosis, files: dict[str, str] | None = None) -> str:
         lines += _left_out_lines(entry, d)
     lines += ["", "## Ambiguous", ""]
     lines += [
-        f"- {' vs '.join(a.effects)}{d.label}{' (absorbed, not a tie)' if a.absorbed else ''}: {a.reason}"
+        f"- {' vs '.join(a.effects)}{d.label}{_kind(a)}: {a.reason}"
         + (f"{moves_text(a, d.unit)}." if a.moves else "")
         for a in d.ambiguous
     ] or ["None."]

@@ -71,12 +71,16 @@ class Ambiguity:
     # effects[1]'s signature is absorbed by effects[0] on this profile: in its place it fits worse by
     # delta_bic, beside it it earns too little (trainer.diagnose.select, step 4), not a tie
     absorbed: bool = False
-    # absorbed only: (effect, parameter, value, value with effects[1] fitted beside) for each named
-    # parameter that moves by more than select.MOVED_FRACTION: it is not determined apart from it
+    # absorbed or undetermined: (effect, parameter, value, value with effects[1] fitted beside) for each
+    # named parameter that moves by more than select.MOVED_FRACTION: it is not determined apart from it
     moves: tuple[tuple[str, str, float, float], ...] = ()
     # absorbed only: the model already names an instance of effects[1] (a multi-instance effect): the
     # absorbed one is a further instance
     another: bool = False
+    # effects[1] earns too little both in a named effect's place and beside the model (this run cannot
+    # determine it), yet fitted beside the model it moves named values (``moves``); delta_bic is its
+    # BIC change beside the model. Not a tie, not an alternative for the compensator
+    undetermined: bool = False
 
 
 @dataclass(frozen=True)

@@ -192,12 +192,12 @@ def _diagnose(
         implausible=implausible_term,
     )
     identifiable = {c for c in CANDIDATE_ORDER if ident.get(c) and ident[c].identifiable}
-    resolve(selection, data, identifiable, progress=progress)
+    resolve(selection, data, identifiable, progress=progress, implausible=implausible_term)
     # A report's search: an implausible term whose plausible confounder fits better in its place
     # gives way to it (the compensator's search offers such confounders to cross-validation instead).
     while report_search and (better := prefer_plausible(selection, data, identifiable, implausible_term)):
         selection = better
-        resolve(selection, data, identifiable, progress=progress)
+        resolve(selection, data, identifiable, progress=progress, implausible=implausible_term)
     stages.update()
 
     final = selection.final
@@ -333,6 +333,7 @@ def _ambiguous(selection: Selection, implausible: list[Ambiguity]) -> list[Ambig
                 absorbed=bool(a.get("absorbed")),
                 moves=tuple(cast(list[tuple[str, str, float, float]], a.get("moves", []))),
                 another=bool(a.get("another")),
+                undetermined=bool(a.get("undetermined")),
             )
         )
     return out
@@ -381,7 +382,11 @@ def _left_out(
             peak_visible = float(np.max(np.abs(visible)))
             flags = param_flags(effect)
         confounded = [a for a in selection.ambiguous if cast(list[str], a["effects"])[0] == step.effect]
-        ambiguous_with = [cast(list[str], a["effects"])[1] for a in confounded if not a.get("absorbed")]
+        ambiguous_with = [
+            cast(list[str], a["effects"])[1]
+            for a in confounded
+            if not a.get("absorbed") and not a.get("undetermined")
+        ]
         absorbs = [cast(list[str], a["effects"])[1] for a in confounded if a.get("absorbed")]
         out.append(
             LeftOut(

@@ -30,7 +30,10 @@ a branch offset for a huge one), so only models with their own noise compare fai
    costs more but the confounder, in the chosen effect's place, still earns ``THRESHOLD`` while
    beside it it earns less, its signature is absorbed by the chosen effect on this profile (the two
    shapes are nearly collinear: a real one would be merged into the other's fitted term); that is
-   reported as an ambiguity with its reason too, instead of silence.
+   reported as an ambiguity with its reason too, instead of silence. A confounder that earns less
+   than ``THRESHOLD`` both ways and costs less than ``AMBIGUOUS`` beside the model is undetermined by
+   the run; when, fitted beside it, it moves a named value by more than ``MOVED_FRACTION``, that
+   is reported too (``_undetermined``).
 5. Near misses: every candidate is scored once more beside the final model; one that earns between
    ``SUGGESTIVE`` (6, "strong" on the Kass-Raftery scale) and ``THRESHOLD`` is listed as suggestive,
    not named. A finding of a run can fall just below the criterion when another effect is added
@@ -43,6 +46,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 from tqdm import tqdm
 
@@ -579,9 +583,25 @@ def drop_term(final: ModelFit, index: int | None, effect: str, data: BlockData) 
     return fit_model(terms, final.noise.terms, data, start=final.noise)
 
 
-def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, progress: bool = False) -> None:
-    """Importance of each chosen effect (BIC lost when dropped) and ambiguity with confounders."""
+def resolve(
+    selection: Selection,
+    data: BlockData,
+    identifiable: set[str],
+    *,
+    progress: bool = False,
+    implausible: Callable[[ModelFit, int], bool] | None = None,
+) -> None:
+    """Importance of each chosen effect (BIC lost when dropped) and ambiguity with confounders
+    (step 4 of the module docstring; ``implausible`` judges a confounder fitted beside the model)."""
     final = selection.final
+    beside_fits: dict[str, ModelFit | None] = {}  # the final model plus each confounder's best version
+
+    def beside(alternative: str) -> ModelFit | None:
+        if alternative not in beside_fits:
+            beside_fits[alternative] = best_with(final, data, alternative)
+        return beside_fits[alternative]
+
+    undetermined: dict[str, list[str]] = {}  # confounder -> the named effects it was tested in place of
     indices = final_indices(selection)
     bar = progress_bar(
         list(indices.items()), progress=progress, desc="diagnose: confounders", unit="effect", leave=False
@@ -608,9 +628,11 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
                 continue
             gap = best.bic - final.bic
             if present or gap >= AMBIGUOUS:
-                absorbed = _absorbed(effect, alternative, final, reduced, best, data, another=present)
+                absorbed = _absorbed(effect, alternative, final, reduced, best, beside, another=present)
                 if absorbed is not None:
                     selection.ambiguous.append(absorbed)
+                elif not present and reduced.bic - best.bic < THRESHOLD:
+                    undetermined.setdefault(alternative, []).append(effect)
                 continue
             if gap < AMBIGUOUS:
                 selection.ambiguous.append(
@@ -628,6 +650,12 @@ def resolve(selection: Selection, data: BlockData, identifiable: set[str], *, pr
                     }
                 )
     bar.close()
+    listed = {e for a in selection.ambiguous for e in cast(list[str], a["effects"])}
+    for alternative, effects in undetermined.items():
+        if alternative not in listed and (
+            entry := _undetermined(effects, alternative, final, beside, implausible)
+        ):
+            selection.ambiguous.append(entry)
 
 
 def best_with(base: ModelFit, data: BlockData, effect: str) -> ModelFit | None:
@@ -644,7 +672,7 @@ def _absorbed(
     final: ModelFit,
     reduced: ModelFit,
     swapped: ModelFit,
-    data: BlockData,
+    beside_fit_of: Callable[[str], ModelFit | None],
     *,
     another: bool = False,
 ) -> dict[str, object] | None:
@@ -661,7 +689,7 @@ def _absorbed(
     alone = reduced.bic - swapped.bic
     if alone < THRESHOLD or catalogue.excluded(effect, alternative):
         return None
-    beside_fit = best_with(final, data, alternative)
+    beside_fit = beside_fit_of(alternative)
     beside = final.bic - beside_fit.bic if beside_fit is not None else 0.0
     if beside >= THRESHOLD:
         return None
@@ -679,6 +707,53 @@ def _absorbed(
             f"a BIC improvement of {alone:.1f}, beside it only {beside:.1f} (< {THRESHOLD:g}), so a "
             f"{alternative} present in the data would be merged into the fitted {effect} (replacing "
             f"{effect} by {alternative} costs {gap:+.1f}); what would separate them: "
+            + SEPARATING_SIGNATURE.get(frozenset({effect, alternative}), "a different test profile")
+        ),
+    }
+
+
+def _undetermined(
+    tested: list[str],
+    alternative: str,
+    final: ModelFit,
+    beside_fit_of: Callable[[str], ModelFit | None],
+    implausible: Callable[[ModelFit, int], bool] | None,
+) -> dict[str, object] | None:
+    """A confounder this run cannot determine (it earns less than ``THRESHOLD`` in a named effect's
+    place and beside the model) but which, fitted plausibly beside the model, moves a named value by
+    more than :data:`MOVED_FRACTION`: that value carries part of it if one is in the data. Only when
+    beside the model it costs less than ``AMBIGUOUS`` (the run cannot tell it apart from none). Said
+    rather than silent (a concealed rate term beside a lag and a hysteresis left the hysteresis at 3x
+    its amplitude with nothing said: the rate term fitted beside it came out within 4 % of its
+    true value, for 1.8 of BIC against it)."""
+    beside_fit = beside_fit_of(alternative)
+    if beside_fit is None or (implausible is not None and implausible(beside_fit, len(beside_fit.terms) - 1)):
+        return None
+    if beside_fit.bic - final.bic >= AMBIGUOUS:  # the run argues against one: not undetermined
+        return None
+    # an implausible best fit is not named (its ambiguity lists it): what moves in it is not said
+    unnamed = {
+        final.terms[k].identifier
+        for k in range(len(final.terms))
+        if implausible is not None and implausible(final, k)
+    }
+    moves = [move for move in moved_beside(final, beside_fit) if move[0] not in unnamed]
+    if not moves:
+        return None
+    gain = final.bic - beside_fit.bic
+    # the pair shown: the moved effect when it is a declared confounder, else the first one tested
+    effect = next((e for e, *_ in moves if confusable(e, alternative)), tested[0])
+    return {
+        "effects": [effect, alternative],
+        "delta_bic": round(-gain, 2),
+        "preferred": effect,
+        "undetermined": True,
+        "moves": moves,
+        "reason": (
+            f"{alternative} is not determined by this run (beside the model it changes the BIC by "
+            f"{-gain:+.1f}, in the place of {' or '.join(dict.fromkeys(tested))} it earns less than "
+            f"{THRESHOLD:g}), but fitted beside it moves a named value by more than "
+            f"{100 * MOVED_FRACTION:.0f} %; what would separate them: "
             + SEPARATING_SIGNATURE.get(frozenset({effect, alternative}), "a different test profile")
         ),
     }

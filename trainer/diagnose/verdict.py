@@ -40,6 +40,13 @@ def moves_text(a: Ambiguity, unit: str = CATALOGUE_UNIT) -> str:
 def ambiguity_line(a: Ambiguity, label: str = "", unit: str = CATALOGUE_UNIT) -> str:
     """One line for an ambiguity (``label``: the channel and unit on a non-mg channel; ``unit``: its
     parameters' unit suffix)."""
+    if a.undetermined:
+        effect, other = a.effects
+        return (
+            f"undetermined: {other}{label} beside {effect} on this profile (beside the model BIC "
+            f"{a.delta_bic:+.1f}, in its place too little to name: this run cannot tell whether one is "
+            f"present{moves_text(a, unit)})"
+        )
     if a.absorbed:
         effect, other = a.effects
         return (
