@@ -19,6 +19,7 @@ from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 from typing import Any, TextIO
 
+from trainer.log_kinds import A_KIND, existing_log_kind
 from trainer.stale_files import part_prefix, remove_stale_parts, report_removed
 
 EXIT_USER_ERROR = 2
@@ -177,11 +178,16 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
 
 
 def check_output_path(path: str | os.PathLike[str], *, inputs: Sequence[str | os.PathLike[str]] = ()) -> None:
-    """Fail early (before long work) when ``path`` cannot be written, is a directory, or is one of
-    the command's ``inputs`` (writing it would destroy what it is made from); creates nothing."""
+    """Fail early (before long work) when ``path`` cannot be written, is a directory, is one of
+    the command's ``inputs`` or is a flight log (writing it would destroy what it is made from, or a
+    log: ``diagnose --json log.ulg`` replaced one); creates nothing."""
     target = Path(path)
     if target.is_dir():
         raise UserError(f"{target}: a directory, not a file name for the output")
+    if target.is_file() and (kind := existing_log_kind(target)) is not None:
+        raise UserError(
+            f"{target}: {A_KIND[kind]} flight log: the output written there would destroy it ({SWAPPED_HINT})"
+        )
     for source in inputs:
         if _same_path(target, Path(source)):
             raise UserError(

@@ -293,6 +293,34 @@ def test_a_flight_log_is_never_read_as_a_recording_nor_overwritten(
     assert not (tmp_path / "new.ulg").exists() and not (tmp_path / "m.pt").exists()
 
 
+def test_no_output_of_any_command_is_written_over_a_flight_log(
+    tmp_path: Path, ulog_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A flight log is refused as the output of every command, whatever its name: ``trainer diagnose
+    --json log.ulg`` (and any output named like a recording or a report) replaced the log."""
+    recording = tmp_path / "rec.csv"
+    run_import(ulog_path, "-o", recording)
+    victims = {name: tmp_path / name for name in ("log.ulg", "log.json", "log.csv", "log.npz", "log.pt")}
+    for victim in victims.values():
+        victim.write_bytes(ulog_path.read_bytes())
+    cases = [
+        ["diagnose", recording, "--json", victims["log.ulg"]],
+        ["diagnose", recording, "--json", victims["log.json"]],
+        ["simulate", "--seed", "1", "--duration", "600", "-o", victims["log.csv"]],
+        ["import", ulog_path, "--channel", "accel0_z", "-o", victims["log.npz"]],
+        ["fit", "--method", "poly3", recording, "-o", victims["log.pt"]],
+    ]
+    capsys.readouterr()
+    for argv in cases:
+        assert run_cli(main, [str(a) for a in argv]) == 2, argv
+        err = capsys.readouterr().err
+        victim = str(argv[-1])
+        assert err.count("\n") == 1, err
+        assert err.startswith(f"error: {victim}: a PX4 ULog flight log"), err
+    for victim in victims.values():
+        assert victim.read_bytes() == ulog_path.read_bytes()
+
+
 def test_a_channel_of_the_list_is_named_with_the_option_that_listed_it(
     tmp_path: Path, ulog_path: Path
 ) -> None:

@@ -30,6 +30,7 @@ from typing import TypeVar
 import numpy as np
 
 from trainer.errors import SWAPPED_HINT, UserError
+from trainer.log_kinds import A_KIND, HEAD_BYTES, KIND_NAMES, kind_of_head
 
 T = TypeVar("T")
 
@@ -37,12 +38,6 @@ STANDARD_GRAVITY = 9.80665  # m/s^2 per g (CGPM 1901)
 MG_PER_MPS2 = 1000.0 / STANDARD_GRAVITY
 DPS_PER_RADPS = 180.0 / np.pi
 
-# File kind -> its first bytes. ULog: "ULog" 0x01 0x12 0x35 (ULog file format, PX4 docs).
-# DataFlash: every message starts 0xA3 0x95 <type>, and a log starts with the FMT message (128).
-MAGIC: dict[str, bytes] = {"ulog": b"ULog\x01\x12\x35", "dataflash": b"\xa3\x95\x80"}
-KIND_NAMES = {"ulog": "PX4 ULog", "dataflash": "ArduPilot DataFlash"}
-# with its article, as a message reads it ("a PX4 ULog log", "an ArduPilot DataFlash log")
-A_KIND = {kind: f"{'an' if name[0] in 'AEIOU' else 'a'} {name}" for kind, name in KIND_NAMES.items()}
 KIND_SUFFIXES = {".ulg": "ulog", ".bin": "dataflash"}  # the names these logs are written under
 
 SENSOR_UNITS = {"accel": "mg", "gyro": "dps", "baro": "pa"}  # column unit suffix per sensor
@@ -151,7 +146,7 @@ class FlightLog:
     """Every sensor channel of a log, in a stable order (sensor, instance, axis)."""
 
     source: str
-    kind: str  # a key of MAGIC
+    kind: str  # a key of trainer.log_kinds.MAGIC
     channels: dict[str, LogChannel]
     notes: dict[str, str] = field(default_factory=dict)  # metadata worth keeping (``key=value``)
     notices: list[str] = field(default_factory=list)  # what the reader changed, printed at import
@@ -210,14 +205,14 @@ def log_kind(path: str | Path) -> str | None:
     """'ulog', 'dataflash' or None (not a known binary log) from the file's first bytes."""
     try:
         with open(path, "rb") as handle:
-            head = handle.read(16)
+            head = handle.read(HEAD_BYTES)
     except FileNotFoundError:
         raise UserError(f"{path}: no such file") from None
     except IsADirectoryError:
         raise UserError(f"{path}: is a directory, not a file") from None
     except OSError as exc:
         raise UserError(f"{path}: cannot read ({exc.strerror})") from None
-    return next((kind for kind, magic in MAGIC.items() if head.startswith(magic)), None)
+    return kind_of_head(head)
 
 
 def flight_log_at(path: str | Path) -> str | None:
@@ -231,14 +226,12 @@ def flight_log_at(path: str | Path) -> str | None:
 
 
 def refuse_flight_log_output(path: str | Path) -> None:
-    """One line, before any work, when the output ``path`` is a flight log (:func:`flight_log_at`)."""
+    """One line, before any work, when the output ``path`` is named as a flight log (``.ulg``) and is
+    not one (an existing log is refused for every output by :func:`trainer.errors.check_output_path`)."""
     if (kind := flight_log_at(path)) is not None:
-        what = (
-            f"{A_KIND[kind]} flight log: the output written there would destroy it"
-            if Path(path).is_file()
-            else f"{A_KIND[kind]} log's name for an output that would not be one"
+        raise UserError(
+            f"{path}: {A_KIND[kind]} log's name for an output that would not be one ({SWAPPED_HINT})"
         )
-        raise UserError(f"{path}: {what} ({SWAPPED_HINT})")
 
 
 def quiet_library_call(source: str, kind: str, call: Callable[[], T], notices: list[str] | None = None) -> T:
